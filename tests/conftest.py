@@ -1,0 +1,36 @@
+"""Session-scoped simulated data shared by the tests."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from vivbench.synth import CampaignConfig, campaign_specs, generate_campaign, simulate_event  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def default_campaign_specs():
+    """Specs and seeds of the default 31-event campaign (nothing simulated)."""
+    return campaign_specs(CampaignConfig())
+
+
+@pytest.fixture(scope="session")
+def event1(default_campaign_specs):
+    """The default campaign's first event (paper-like event 1), simulated in memory."""
+    spec, seed = default_campaign_specs[0]
+    return spec, simulate_event(spec, CampaignConfig().generator, seed)
+
+
+@pytest.fixture(scope="session")
+def small_campaign(tmp_path_factory):
+    """A 4-event campaign of 6-9 min events written to disk (one of each scenario)."""
+    out = tmp_path_factory.mktemp("campaign")
+    result = generate_campaign(CampaignConfig(n_events=4, seed=11, duration=(360.0, 540.0)), out, workers=1)
+    assert not result.failures, result.failures
+    return result

@@ -1,0 +1,85 @@
+"""Overview figure of one event: wind, acceleration and (synthetic) truth regimes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+
+__all__ = ["event_figure"]
+
+_REGIME_COLOURS = {1: "#9e9e9e", 2: "#4c9be8", 3: "#f0a030", 4: "#d62728"}
+
+
+def event_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2") -> Path:
+    """Write a PNG with wind speed and direction, acceleration, amplitude and regime.
+
+    Parameters
+    ----------
+    tree : an event (DESIGN 4)
+    path : output PNG (written atomically)
+    section : which section's acceleration and amplitude to show
+
+    Returns
+    -------
+    Path of the figure.
+    """
+    wind = tree["wind"].ds
+    accel = tree["accel"].ds
+    truth = tree["truth"].ds if "truth" in tree.children else None
+    az = float(tree.attrs["span_azimuth_deg"])
+    tw = wind["time"].values
+    u = wind["u"].sel(section=section).values.astype(float)
+    v = wind["v"].sel(section=section).values.astype(float)
+    speed = np.hypot(u, v)
+    direction = np.mod(np.degrees(np.arctan2(-u, -v)), 360.0)
+    perp = speed * np.abs(np.sin(np.radians(direction - az)))
+    n_rows = 4 if truth is not None else 2
+    fig, axes = plt.subplots(n_rows, 1, figsize=(9, 2.1 * n_rows + 0.6), sharex=True, constrained_layout=True)
+    ax = axes[0]
+    step = max(1, tw.size // 20000)
+    ax.plot(tw[::step] / 60, perp[::step], lw=0.4, color="0.6", label="perpendicular component (32 Hz)")
+    if truth is not None:
+        ax.plot(truth["time"].values / 60, truth["U"].sel(section=section).values, color="k", lw=1.2, label="true mean U")
+    ax.axhspan(5.5, 10.5, color="#4c9be8", alpha=0.08, label="lock-in range (default)")
+    ax.set_ylabel("wind speed (m/s)")
+    ax.legend(loc="upper right", fontsize=7, ncol=3)
+    ax.set_title(f"event {tree.attrs['event_id']} ({tree.attrs.get('scenario', tree.attrs['source'])}), section {section}")
+    ax = axes[1]
+    ta = accel["time"].values
+    a = accel["acc"].sel(section=section).values.astype(float)
+    step = max(1, ta.size // 40000)
+    ax.plot(ta[::step] / 60, a[::step], lw=0.3, color="#1f4e79")
+    ax.set_ylabel("acceleration (m/s$^2$)")
+    if truth is not None:
+        tt = truth["time"].values / 60
+        ax = axes[2]
+        ax.plot(tt, truth["A"].sel(section=section).values, color="k")
+        ax.set_ylabel("true amplitude A (m)")
+        ax = axes[3]
+        reg = truth["regime"].sel(section=section).values
+        for k, colour in _REGIME_COLOURS.items():
+            mask = reg == k
+            ax.fill_between(tt, 0, 1, where=mask, color=colour, step="mid", label=f"regime {k}")
+        ax.set_yticks([])
+        ax.set_ylabel("true regime")
+        ax.legend(loc="upper right", fontsize=7, ncol=4)
+    axes[-1].set_xlabel("time since event start (min)")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}.png")
+    try:
+        # A fixed creation date keeps the PNG bytes deterministic.
+        fig.savefig(tmp, dpi=110, metadata={"Software": None})
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if tmp.exists():
+            tmp.unlink()
+    return path

@@ -1,0 +1,29 @@
+"""The synthetic bridge: wind, aeroelastic force, structure, sensors, truth, campaigns."""
+
+from vivbench.synth.aero import amplitude_polynomials, exact_coefficients, modal_coefficients, order_contributions
+from vivbench.synth.campaign import SCENARIOS, CampaignConfig, CampaignResult, campaign_specs, draw_script, generate_campaign
+from vivbench.synth.config import (
+    AeroConfig,
+    DefectConfig,
+    GeneratorConfig,
+    Polynomial,
+    SensorConfig,
+    StructureConfig,
+    WindConfig,
+    bell_polynomial,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+)
+from vivbench.synth.event import EventSpec, SimulatedEvent, generate_event, simulate_event
+from vivbench.synth.turbulence import TurbulenceConfig, davenport_coherence, kaimal_psd, simulate_turbulence
+from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
+
+__all__ = [
+    "AeroConfig", "CampaignConfig", "CampaignResult", "DefectConfig", "EventSpec", "GeneratorConfig",
+    "MeanWind", "Polynomial", "SCENARIOS", "SensorConfig", "SimulatedEvent", "StructureConfig",
+    "TurbulenceConfig", "WindConfig", "WindScript", "amplitude_polynomials", "anemometer_records",
+    "bell_polynomial", "campaign_specs", "config_from_dict", "config_to_dict", "davenport_coherence",
+    "draw_script", "exact_coefficients", "generate_campaign", "generate_event", "kaimal_psd", "load_config",
+    "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
+]

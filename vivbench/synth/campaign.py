@@ -1,0 +1,240 @@
+"""Campaigns: many events with one seed, written as event files plus a catalogue.
+
+Event seeds are ``SeedSequence(seed).spawn(n)`` (DESIGN 2.7), so the same seed
+gives the same files whatever the number of worker processes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import os
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import numpy as np
+
+from vivbench.io import write_event
+from vivbench.synth.config import GeneratorConfig
+from vivbench.synth.event import EventSpec, generate_event
+from vivbench.synth.wind import WindScript
+
+__all__ = ["SCENARIOS", "CampaignConfig", "draw_script", "campaign_specs", "generate_campaign", "CampaignResult"]
+
+# Scenario cycle: the first event is like the paper's event 1 (growth in lock-in,
+# a strongly self-excited plateau, decay as the wind leaves), and any four
+# consecutive events visit all four regimes.
+SCENARIOS = ("pass_high", "pass_low", "brief", "outside")
+_CYCLE = ("pass_high", "pass_low", "brief", "outside", "pass_high", "pass_low", "brief", "pass_high")
+# Fractions of the duration range each scenario uses (lock-in passes need time to grow).
+_DURATION_SHARE = {"pass_high": (0.4, 1.0), "pass_low": (0.4, 1.0), "brief": (0.0, 0.5), "outside": (0.0, 0.6)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class CampaignConfig:
+    """A campaign: how many events, how long, which seed, and the generator.
+
+    Attributes
+    ----------
+    n_events : number of events (default 31, as in the paper)
+    seed : campaign seed
+    duration : (min, max) event duration, s
+    start : ISO 8601 UTC date of the first event
+    generator : GeneratorConfig
+    """
+
+    n_events: int = 31
+    seed: int = 0
+    duration: tuple[float, float] = (1200.0, 3600.0)
+    start: str = "2026-01-01T00:00:00Z"
+    generator: GeneratorConfig = GeneratorConfig()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
+        if not 1 <= self.n_events <= 100000:
+            raise ValueError(f"n_events must be in 1..100000; got {self.n_events}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer; got {self.seed}")
+        lo, hi = self.duration
+        if not 120.0 <= lo <= hi <= 6 * 3600.0:
+            raise ValueError(f"duration must be (min, max) seconds with 120 <= min <= max <= 21600; got {self.duration}")
+        try:
+            datetime.fromisoformat(self.start.replace("Z", "+00:00"))
+        except ValueError:
+            raise ValueError(f"start must be an ISO 8601 date, e.g. 2026-01-01T00:00:00Z; got {self.start!r}") from None
+
+
+def draw_script(kind: str, duration: float, rng: np.random.Generator) -> WindScript:
+    """Draw a mean-wind script of a scenario.
+
+    - ``pass_high``: from outside lock-in to its upper centre (8.4-9.4 m/s: a
+      strongly self-excited plateau, regime 4) and out again;
+    - ``pass_low``: the same to the lower part of lock-in (6.7-7.1 m/s, regime 3);
+    - ``brief``: a short passage through lock-in: growth, no plateau, decay;
+    - ``outside``: wind that stays below or above lock-in (regime 1).
+    """
+    T = float(duration)
+    low = lambda: rng.uniform(3.8, 5.0)  # noqa: E731
+    high = lambda: rng.uniform(11.0, 12.2)  # noqa: E731
+    outside = lambda: low() if rng.random() < 0.7 else high()  # noqa: E731
+    side = int(rng.choice([-1, 1]))
+    yaw = float(rng.uniform(-12.0, 12.0))
+    if kind in ("pass_high", "pass_low"):
+        plateau = rng.uniform(8.4, 9.4) if kind == "pass_high" else rng.uniform(6.7, 7.1)
+        t1 = T * rng.uniform(0.04, 0.12)
+        t2 = t1 + T * rng.uniform(0.06, 0.10)
+        t3 = T * rng.uniform(0.68, 0.80)
+        t4 = t3 + T * rng.uniform(0.06, 0.10)
+        times = (0.0, t1, t2, t3, t4, T)
+        speeds = (outside(), None, plateau, plateau, outside(), None)
+        speeds = (speeds[0], speeds[0], plateau, plateau + rng.uniform(-0.2, 0.2), speeds[4], speeds[4])
+    elif kind == "brief":
+        peak = rng.uniform(7.6, 9.0)
+        t1 = T * rng.uniform(0.1, 0.2)
+        t2 = T * rng.uniform(0.35, 0.45)
+        t3 = T * rng.uniform(0.6, 0.7)
+        start = outside()
+        times = (0.0, t1, t2, t3, T)
+        speeds = (start, start, peak, outside(), None)
+        speeds = speeds[:4] + (speeds[3],)
+    elif kind == "outside":
+        base = outside()
+        n = 4
+        times = tuple(np.linspace(0.0, T, n))
+        spread = 0.6
+        speeds = tuple(float(np.clip(base + rng.uniform(-spread, spread), 3.0, 13.0)) for _ in range(n))
+        if base < 8:
+            speeds = tuple(min(s, 5.2) for s in speeds)
+        else:
+            speeds = tuple(max(s, 10.8) for s in speeds)
+    else:
+        raise ValueError(f"unknown scenario {kind!r}; allowed: {', '.join(SCENARIOS)}")
+    return WindScript(times=times, speeds=speeds, side=side, yaw_deg=yaw)
+
+
+def campaign_specs(campaign: CampaignConfig) -> list[tuple[EventSpec, np.random.SeedSequence]]:
+    """Event specifications and seeds of a campaign (cheap; nothing simulated)."""
+    root = np.random.SeedSequence(campaign.seed)
+    children = root.spawn(campaign.n_events)
+    start = datetime.fromisoformat(campaign.start.replace("Z", "+00:00")).astimezone(timezone.utc)
+    width = max(3, len(str(campaign.n_events)))
+    specs = []
+    lo, hi = campaign.duration
+    for i, child in enumerate(children):
+        # The script draws from its own stream, spawned from the event's seed.
+        rng = np.random.default_rng(np.random.SeedSequence(child.entropy, spawn_key=child.spawn_key + (1000,)))
+        kind = _CYCLE[i % len(_CYCLE)]
+        a, b = _DURATION_SHARE[kind]
+        duration = round(rng.uniform(lo + a * (hi - lo), lo + b * (hi - lo)))
+        begin = start + timedelta(days=i, hours=int(rng.integers(0, 20)), minutes=int(rng.integers(0, 60)))
+        spec = EventSpec(
+            event_id=f"E{i + 1:0{width}d}",
+            start_time=begin.strftime("%Y-%m-%dT%H:%M:%SZ"),
+            kind=kind,
+            script=draw_script(kind, duration, rng),
+        )
+        specs.append((spec, child))
+    return specs
+
+
+@dataclass(frozen=True)
+class CampaignResult:
+    """Paths written and the failures (event id -> one-line message)."""
+
+    files: list[Path]
+    catalogue: Path
+    failures: dict[str, str]
+
+
+def _catalogue_row(spec: EventSpec, path: Path, tree) -> dict:
+    truth = tree["truth"].ds
+    regime = truth["regime"].values
+    counts = [int(np.sum(regime == k)) for k in (1, 2, 3, 4)]
+    total = max(regime.size, 1)
+    return {
+        "event_id": spec.event_id,
+        "file": path.name,
+        "start_time": spec.start_time,
+        "scenario": spec.kind,
+        "duration_s": f"{spec.script.duration:.0f}",
+        "U_min": f"{float(truth['U'].min()):.2f}",
+        "U_max": f"{float(truth['U'].max()):.2f}",
+        "A_max_m": f"{float(truth['A'].max()):.4f}",
+        **{f"share_regime{k}": f"{c / total:.3f}" for k, c in zip((1, 2, 3, 4), counts)},
+    }
+
+
+def _make_one(spec: EventSpec, seed: np.random.SeedSequence, generator: GeneratorConfig, out_dir: str, campaign_seed: int) -> dict:
+    tree = generate_event(spec, generator, seed, campaign_seed=campaign_seed)
+    path = write_event(tree, Path(out_dir) / f"{spec.event_id}.nc")
+    return _catalogue_row(spec, Path(path), tree)
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        with open(tmp, "w", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def generate_campaign(campaign: CampaignConfig, out_dir: str | Path, *, workers: int = 1,
+                      progress: Callable[[str], None] | None = None) -> CampaignResult:
+    """Generate and write every event of a campaign, and ``catalogue.csv`` beside them.
+
+    Parameters
+    ----------
+    campaign : CampaignConfig
+    out_dir : directory for ``<event_id>.nc`` and ``catalogue.csv`` (created)
+    workers : number of worker processes (1: in this process). The files do not
+        depend on it.
+    progress : optional callback called with each finished event id
+
+    Returns
+    -------
+    CampaignResult
+        An event that fails is reported in ``failures`` and the others still
+        finish; the catalogue lists the events that were written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = campaign_specs(campaign)
+    rows: dict[str, dict] = {}
+    failures: dict[str, str] = {}
+
+    def done(spec, fn):
+        try:
+            rows[spec.event_id] = fn()
+        except Exception as exc:  # one bad event must not sink the campaign
+            failures[spec.event_id] = " ".join(f"{type(exc).__name__}: {exc}".split())
+        if progress is not None:
+            progress(spec.event_id)
+
+    if workers <= 1:
+        for spec, seed in specs:
+            done(spec, lambda: _make_one(spec, seed, campaign.generator, str(out), campaign.seed))
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(_make_one, spec, seed, campaign.generator, str(out), campaign.seed): spec
+                       for spec, seed in specs}
+            for fut in as_completed(futures):
+                done(futures[fut], fut.result)
+
+    ordered = [rows[s.event_id] for s, _ in specs if s.event_id in rows]
+    buf = _io.StringIO()
+    if ordered:
+        writer = csv.DictWriter(buf, fieldnames=list(ordered[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(ordered)
+    catalogue = out / "catalogue.csv"
+    _write_text_atomic(catalogue, buf.getvalue())
+    files = [out / r["file"] for r in ordered]
+    return CampaignResult(files=files, catalogue=catalogue, failures=failures)

@@ -1,0 +1,224 @@
+"""One synthetic event: wind, full aeroelastic simulation, sensors and truth."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import xarray as xr
+from scipy.integrate import cumulative_trapezoid
+
+from vivbench.io import build_event
+from vivbench.regime import classify_regime
+from vivbench.synth.aero import amplitude_polynomials, exact_coefficients, modal_coefficients, order_contributions
+from vivbench.synth.config import GeneratorConfig, config_to_dict
+from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
+from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
+from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
+from vivbench.terms import feature_names
+
+__all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class EventSpec:
+    """What distinguishes one event of a campaign.
+
+    Attributes
+    ----------
+    event_id : file stem, e.g. "E001"
+    start_time : ISO 8601 UTC
+    kind : name of the scenario the script was drawn from (informational)
+    script : the scripted mean wind
+    """
+
+    event_id: str
+    start_time: str
+    kind: str
+    script: WindScript
+
+
+@dataclass(frozen=True)
+class SimulatedEvent:
+    """Everything the generator computed for one event, before it becomes a file.
+
+    Arrays: ``wind_time`` (n_w,) s; ``u, v, w`` (n_w, 3) m/s float32; ``accel_time``
+    (n_a,) s; ``acc`` (n_a, 3) m/s^2 float32; ``acc_true`` (n_a, 3) m/s^2 noise-free;
+    ``q``, ``qd`` (n_a,) modal displacement (m) and velocity (m/s) at the accelerometer samples; ``truth_time``
+    (n_t,) s; ``U`` (n_t, 3) m/s; ``Q`` (n_t,) m averaged modal amplitude; ``r``
+    (n_t, 3, 4) m/s; ``regime`` (n_t, 3); ``coef`` (3, 69) or None; ``defects`` dict.
+    """
+
+    wind_time: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    accel_time: np.ndarray
+    acc: np.ndarray
+    acc_true: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    truth_time: np.ndarray
+    U: np.ndarray
+    Q: np.ndarray
+    r: np.ndarray
+    regime: np.ndarray
+    coef: np.ndarray | None
+    defects: dict
+
+
+_WIND_PAD = 64.0  # s
+
+
+def _interp_wind(mw: MeanWind, t: np.ndarray) -> np.ndarray:
+    return np.stack([np.interp(t, mw.t, mw.U[:, k]) for k in range(3)], axis=1)
+
+
+def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phase: np.ndarray,
+                    config: GeneratorConfig) -> np.ndarray:
+    """Buffeting plus unlocked Strouhal shedding, modal force per unit modal mass (m/s^2)."""
+    s, a = config.structure, config.aero
+    rho, D, m = s.air_density, s.depth, s.mass
+    beta = s.participation
+    U = _interp_wind(mw, t)
+    up = np.stack([np.interp(t, mw.t, turb[:, k, 0]) for k in range(3)], axis=1)
+    wp = np.stack([np.interp(t, mw.t, turb[:, k, 2]) for k in range(3)], axis=1)
+    phase = np.stack([np.interp(t, mw.t, shedding_phase[:, k]) for k in range(3)], axis=1)
+    buffet = rho * U * D * (a.buffeting_u * up + a.buffeting_w * wp)
+    detuning = a.strouhal * U / D - s.frequency
+    # Shedding near resonance is locked (counted in r0); the rest runs free and averages out.
+    gate = 1.0 - np.exp(-((detuning / a.lock_bandwidth) ** 2))
+    free = 0.5 * rho * D * U**2 * a.cl_unlocked * gate * np.sin(phase)
+    return ((buffet + free) * beta).sum(axis=1) / m
+
+
+def _modal_params(t: np.ndarray, mw: MeanWind, turb, shedding_phase, config: GeneratorConfig) -> np.ndarray:
+    c = modal_coefficients(_interp_wind(mw, t), config.structure, config.aero)
+    f_ext = _external_force(t, mw, turb, shedding_phase, config)
+    return np.stack([c["c_lin"], c["n1"], c["n2"], c["k_aero"], c["f_lock"], f_ext], axis=1)
+
+
+def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.SeedSequence | int) -> SimulatedEvent:
+    """Simulate one event (no file written).
+
+    Parameters
+    ----------
+    spec : EventSpec
+    config : GeneratorConfig
+    seed : SeedSequence or int
+        Independent child streams are drawn for the mean wind, the turbulence,
+        the shedding phases, the sensors and the defects, so switching on a
+        defect does not change the wind or the structure's response.
+    """
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    rng_mean, rng_turb, rng_shed, rng_sens, rng_def = (np.random.default_rng(c) for c in ss.spawn(5))
+    s, wcfg, sens = config.structure, config.wind, config.sensors
+    T = spec.script.duration
+    defects = sens.defects
+
+    # The anemometer grid doubles as the fine grid for the slowly varying inputs;
+    # it extends past the record so that a late accelerometer clock is covered.
+    accel_period = 1.0 / sens.rate
+    n_acc = sample_times(T, sens.rate).size
+    drift = 1.0 + defects.clock_drift_ppm * 1e-6
+    t_first = defects.clock_offset
+    # A fixed pad keeps the wind realisation independent of the clock defects
+    # (beyond it, np.interp holds the last value).
+    pad = _WIND_PAD
+    n_w = sample_times(T, wcfg.anemometer_rate).size
+    n_w_ext = int(np.ceil((T + pad) * wcfg.anemometer_rate))
+    t_w_ext = np.arange(n_w_ext) / wcfg.anemometer_rate
+    mw = mean_wind(spec.script, t_w_ext, wcfg, rng_mean)
+    u, v, w, turb = anemometer_records(mw, s, wcfg, rng_turb)
+    f_shed = config.aero.strouhal * mw.U / s.depth
+    shedding_phase = 2 * np.pi * cumulative_trapezoid(f_shed, mw.t, axis=0, initial=0.0) + rng_shed.uniform(0, 2 * np.pi, 3)
+
+    # Full simulation on the accelerometer's own (possibly offset and drifting) clock.
+    # The integration starts at (or just before) true time 0, so the bridge moves
+    # the same whatever the logger's clock; the samples are every `sub`-th step.
+    sub = max(1, int(round(accel_period / config.integration_step)))
+    h = accel_period * drift / sub
+    lead = int(np.ceil(max(t_first, 0.0) / h - 1e-9))
+    n_steps = lead + (n_acc - 1) * sub
+    t_grid = t_first - lead * h + h * np.arange(n_steps + 1)
+    params_mid = _modal_params(t_grid[:-1] + h / 2, mw, turb, shedding_phase, config)
+    x = simulate_modal((config.initial_amplitude, 0.0), params_mid, h, s.omega, s.damping_ratio)[lead::sub]
+    t_acc_true = t_grid[lead::sub]
+    qdd = modal_acceleration(x, _modal_params(t_acc_true, mw, turb, shedding_phase, config), s.omega, s.damping_ratio)
+    phi = np.array(s.mode_shape)
+    acc_true = qdd[:, None] * phi[None, :]
+    acc = accelerometer(acc_true, sens, rng_sens)
+
+    # Averaged truth on its own grid, integrated with 5 RK4 substeps per truth step.
+    truth_time = np.arange(int(np.floor(T / config.truth_step + 1e-9)) + 1) * config.truth_step
+    n_sub = 5
+    ht = config.truth_step / n_sub
+    t_mid = ht * (np.arange((truth_time.size - 1) * n_sub) + 0.5)
+    poly = amplitude_polynomials(s, config.aero)
+    U_mid = _interp_wind(mw, t_mid)
+    coefs = np.stack([sum(np.polynomial.polynomial.polyval(U_mid[:, k], poly[k, i]) for k in range(3))
+                      for i in range(4)], axis=1)
+    coefs[:, 1] -= s.damping_ratio * s.omega
+    Q = simulate_amplitude(config.initial_amplitude, coefs, ht)[::n_sub]
+    U_truth = _interp_wind(mw, truth_time)
+    r_modal = order_contributions(Q, U_truth, s, config.aero)  # (n_t, 4)
+    r = phi[None, :, None] * r_modal[:, None, :]
+    A_truth = Q[:, None] * phi[None, :]
+    regime = classify_regime(r[None], A_truth[None], tau=config.tau, axis=0)
+
+    wind_time = t_w_ext[:n_w]
+    u, v, w = u[:n_w], v[:n_w], w[:n_w]
+    info = {"wind_dropouts": [], "accel_dropouts": [], "wind_spikes": 0, "accel_spikes": 0}
+    if defects.any:
+        wind = np.stack([u, v, w])
+        wind_nan, info["wind_dropouts"] = add_dropouts(np.moveaxis(wind, 0, 1), wcfg.anemometer_rate, defects, rng_def)
+        u, v, w = (np.ascontiguousarray(c) for c in np.moveaxis(wind_nan, 1, 0))
+        acc, info["accel_dropouts"] = add_dropouts(acc, sens.rate, defects, rng_def)
+        acc, info["accel_spikes"] = add_spikes(acc, sens.rate, defects, rng_def)
+        spiked = [add_spikes(c, wcfg.anemometer_rate, defects, rng_def) for c in (u, v, w)]
+        (u, n1), (v, n2), (w, n3) = spiked
+        info["wind_spikes"] = n1 + n2 + n3
+
+    return SimulatedEvent(
+        wind_time=wind_time, u=u, v=v, w=w,
+        accel_time=np.arange(n_acc) * accel_period, acc=acc, acc_true=acc_true, q=x[:, 0], qd=x[:, 1],
+        truth_time=truth_time, U=U_truth, Q=Q, r=r, regime=regime,
+        coef=exact_coefficients(s, config.aero), defects=info,
+    )
+
+
+def _script_dict(spec: EventSpec) -> dict:
+    return json.loads(json.dumps(asdict(spec)))
+
+
+def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.SeedSequence | int,
+                   *, campaign_seed: int | None = None) -> xr.DataTree:
+    """Simulate one event and assemble it in the event file format (DESIGN 4).
+
+    The generator configuration, the event's script and its seed are stored as
+    JSON in the ``/truth`` attribute ``config_json`` so that the file says how
+    it was made.
+    """
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ev = simulate_event(spec, config, ss)
+    meta = {
+        "generator": config_to_dict(config),
+        "event": _script_dict(spec),
+        "seed": {"entropy": str(ss.entropy), "spawn_key": list(ss.spawn_key), "campaign_seed": campaign_seed},
+        "defects": ev.defects,
+    }
+    truth = {
+        "time": ev.truth_time, "U": ev.U, "A": ev.Q[:, None] * np.array(config.structure.mode_shape)[None, :],
+        "r": ev.r, "regime": ev.regime, "config": json.dumps(meta, sort_keys=True), "tau": config.tau,
+    }
+    if ev.coef is not None:
+        truth["coef"] = ev.coef
+        truth["feature"] = feature_names(3)
+    return build_event(
+        event_id=spec.event_id, start_time=spec.start_time, source="synthetic",
+        span_azimuth_deg=config.wind.span_azimuth_deg,
+        wind_time=ev.wind_time, u=ev.u, v=ev.v, w=ev.w,
+        accel_time=ev.accel_time, acc=ev.acc, truth=truth,
+        attrs={"scenario": spec.kind, "generator": "vivbench.synth"},
+    )
