@@ -41,7 +41,9 @@ def event_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2") ->
     direction = np.mod(np.degrees(np.arctan2(-u, -v)), 360.0)
     perp = speed * np.abs(np.sin(np.radians(direction - az)))
     n_rows = 4 if truth is not None else 2
-    fig, axes = plt.subplots(n_rows, 1, figsize=(9, 2.1 * n_rows + 0.6), sharex=True, constrained_layout=True)
+    ratios = [3, 3, 2, 1][:n_rows]
+    fig, axes = plt.subplots(n_rows, 1, figsize=(9, 1.9 * n_rows + 0.8), sharex=True, constrained_layout=True,
+                             gridspec_kw={"height_ratios": ratios})
     ax = axes[0]
     step = max(1, tw.size // 20000)
     ax.plot(tw[::step] / 60, perp[::step], lw=0.4, color="0.6", label="perpendicular component (32 Hz)")
@@ -68,8 +70,8 @@ def event_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2") ->
             mask = reg == k
             ax.fill_between(tt, 0, 1, where=mask, color=colour, step="mid", label=f"regime {k}")
         ax.set_yticks([])
-        ax.set_ylabel("true regime")
-        ax.legend(loc="upper right", fontsize=7, ncol=4)
+        ax.set_ylabel("regime")
+        ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, ncol=1, frameon=False)
     axes[-1].set_xlabel("time since event start (min)")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
