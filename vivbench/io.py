@@ -53,6 +53,7 @@ __all__ = [
     "read_event",
     "event_arrays",
     "list_events",
+    "write_netcdf_atomic",
 ]
 
 FORMAT = "vivbench-event"
@@ -578,6 +579,17 @@ def write_event(tree: xr.DataTree, path) -> Path:
     """
     path = Path(path)
     validate_event(tree, name=str(path))
+    return write_netcdf_atomic(tree, path)
+
+
+def write_netcdf_atomic(data: xr.Dataset | xr.DataTree, path) -> Path:
+    """Write a Dataset or DataTree as NetCDF-4 atomically (temporary file, fsync, rename).
+
+    Used for event files and for results (``*.identify.nc``); on any failure
+    the temporary file is removed and an existing file at ``path`` is untouched.
+    """
+    path = Path(path)
+    tree = data if isinstance(data, xr.DataTree) else xr.DataTree(dataset=data)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}"
     try:
