@@ -57,6 +57,8 @@ def classify_regime(r: np.ndarray, A: np.ndarray, tau: float = DEFAULT_TAU, axis
     A = np.asarray(A, dtype=float)
     if r.shape[:-1] != A.shape or r.shape[-1] != 4:
         raise ValueError(f"r must have shape A.shape + (4,); got r {r.shape}, A {A.shape}")
+    # A negative axis counts from A's end; r has the extra order axis last.
+    axis = axis % A.ndim if A.ndim else 0
     R = order_rms(r, axis=axis)
     M = R.max(axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -1,0 +1,30 @@
+"""The identification chain: preprocessing, derivatives, library, windowed SINDy, regimes."""
+
+from vivbench.identify.derivative import DERIVATIVE_METHODS, Derivative, TVDerivativeResult, estimate_noise_std, tv_derivative
+from vivbench.identify.engine import DEFAULT_THRESHOLDS, SOLVERS, StlsqPath, StlsqSettings, WindowedSINDy, aicc, stlsq_path, window_bounds
+from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
+from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
+from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, result_path
+from vivbench.identify.preprocess import (
+    Preprocessed,
+    PreprocessConfig,
+    common_grid,
+    displacement,
+    envelope,
+    mean_wind,
+    modal_frequency,
+    perpendicular_speed,
+    preprocess_arrays,
+    segments,
+    to_grid,
+    wind_speed_direction,
+)
+
+__all__ = [
+    "DEFAULT_THRESHOLDS", "DERIVATIVE_METHODS", "Derivative", "IdentifyConfig", "PreprocessConfig", "Preprocessed",
+    "SCALINGS", "SOLVERS", "StlsqPath", "StlsqSettings", "TVDerivativeResult", "WindowLibrary", "WindowedSINDy",
+    "aicc", "basis_orders", "common_grid", "condition_number", "displacement", "envelope", "estimate_noise_std",
+    "identify_event", "identify_files", "library_cond", "mean_wind", "modal_frequency", "order_contributions_basis",
+    "perpendicular_speed", "preprocess_arrays", "result_path", "segments", "stlsq_path", "to_grid", "tv_derivative",
+    "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
+]

@@ -825,6 +825,13 @@ class WindowedSINDy:
     raw_cond : bool
         Also compute the condition number of the physical library (one more
         SVD per window).
+    tau : float
+        Regime threshold of DESIGN 2.5.
+    identifiability_margin : float or None
+        AICc margin within which competing models count as equally good
+        (None: no identifiability test, every fitted window flagged identifiable).
+    order_deletion : bool
+        Also compete with the best model without each order of A present.
 
     Attributes
     ----------
@@ -860,6 +867,17 @@ class WindowedSINDy:
     path_n_terms_, n_iter_ : ndarray of int, shape (W, S, T)
     converged_, path_lower_bound_ : ndarray of bool, shape (W, S, T)
         See :class:`StlsqPath` (``converged``, ``lower_bound``).
+    regime_ : ndarray of int8, shape (W, S)
+        Regime (DESIGN 2.5) of each selected model over its window; 0 where none.
+    identifiable_ : ndarray of bool, shape (W, S)
+        Whether every equally good competing model has the same regime
+        (:mod:`vivbench.identify.identifiability`).
+    regimes_seen_ : ndarray of int8, shape (W, S)
+        Bit mask of the regimes among the equally good models (bit k-1: regime k).
+    n_equivalent_ : ndarray of int, shape (W, S)
+        Number of equally good competitors found.
+    order_rms_ : ndarray, shape (W, S, 4), m/s
+        RMS over the window of each order's contribution to dA/dt.
     feature_names_ : list of str
     n_sections_ : int
     solves_ : dict
@@ -883,6 +901,10 @@ class WindowedSINDy:
         chunk_size: int = 128,
         keep_path: bool = True,
         raw_cond: bool = False,
+        tau: float = 0.2,
+        identifiability_margin: float | None = 2.0,
+        order_deletion: bool = True,
+        fit_tolerance: float = 0.1,
     ):
         self.window = window
         self.step = step
@@ -898,6 +920,10 @@ class WindowedSINDy:
         self.chunk_size = chunk_size
         self.keep_path = keep_path
         self.raw_cond = raw_cond
+        self.tau = tau
+        self.identifiability_margin = identifiability_margin
+        self.order_deletion = order_deletion
+        self.fit_tolerance = fit_tolerance
 
     _PARAMS = (
         "window",
@@ -914,6 +940,10 @@ class WindowedSINDy:
         "chunk_size",
         "keep_path",
         "raw_cond",
+        "tau",
+        "identifiability_margin",
+        "order_deletion",
+        "fit_tolerance",
     )
 
     def get_params(self, deep: bool = True) -> dict:
@@ -964,6 +994,8 @@ class WindowedSINDy:
         -------
         self
         """
+        from vivbench.identify.identifiability import window_regimes  # it builds on stlsq_path
+
         settings = self.settings()
         if self.scaling not in SCALINGS:
             raise ValueError(f"scaling must be one of {SCALINGS}; got {self.scaling!r}")
@@ -1005,6 +1037,11 @@ class WindowedSINDy:
             "u_ref_": np.ones((W, S)),
             "col_scale_": np.ones((W, p)),
             "y_scale_": np.ones((W, S)),
+            "regime_": np.zeros((W, S), dtype=np.int8),
+            "identifiable_": np.zeros((W, S), dtype=bool),
+            "regimes_seen_": np.zeros((W, S), dtype=np.int8),
+            "n_equivalent_": np.zeros((W, S), dtype=int),
+            "order_rms_": np.full((W, S, 4), np.nan),
         }
         if self.keep_path:
             res.update(
@@ -1070,6 +1107,11 @@ class WindowedSINDy:
                 res["path_lower_bound_"][ch] = path.lower_bound
             if self.raw_cond:
                 cond_raw[ch] = library_cond(Aw, Uw, scaling="raw", valid=valid)
+            reg = window_regimes(lib.theta, y, ys, Aw, valid, path, settings, tau=self.tau,
+                                 margin=self.identifiability_margin, order_deletion=self.order_deletion,
+                                 fit_tolerance=self.fit_tolerance)
+            for key in ("regime", "identifiable", "regimes_seen", "n_equivalent", "order_rms"):
+                res[f"{key}_"][ch] = reg[key]
 
         path_names = ("path_support_", "path_aicc_", "path_rss_", "path_n_terms_", "n_iter_", "converged_")
         for name in path_names + ("path_lower_bound_",):

@@ -1,0 +1,182 @@
+"""Regimes of window models and whether the data can tell them apart (DESIGN 2.5).
+
+Inside a 50 s window U is nearly constant and, on a plateau, so is A: the
+library's orders (A^0 ... A^3 times powers of U) then mimic one another, and
+many sparse models fit the window equally well while splitting the dynamics
+between the orders differently. The regime of the selected model is then an
+accident of the selection, not a property of the data.
+
+The flag used here is a model-selection uncertainty test (Burnham and
+Anderson's rule that models within 2 of the best AICc have substantial support;
+Mangan et al. 2017 use the same rule for SINDy): a window's regime counts as
+identifiable when every competing sparse model with AICc <= best + margin
+gives the same regime. The competitors are
+
+- the models along the STLSQ threshold path, and
+- for each order of A present in the selected model, the best model on the
+  library without that order (re-run over the same threshold path): if the
+  data can be explained as well without, say, the A^3 terms, the A^3 share of
+  the dynamics is not identifiable.
+
+Not a proof: the competitors are the models the method itself finds, so an
+equally good model that no threshold reaches is not seen. The flag is
+checked on windows whose truth is known to be unidentifiable (plateaus) and on
+windows that are (strong growth), see ``tests/test_identify.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from vivbench.identify.engine import StlsqSettings, stlsq_path
+from vivbench.regime import classify_regime
+from vivbench.terms import section_exponents
+
+__all__ = ["basis_orders", "order_contributions_basis", "window_regimes"]
+
+
+def basis_orders(n_sections: int = 3) -> np.ndarray:
+    """Power of A of every library column (the same in the scaled basis), shape (23 n_sections,)."""
+    return np.tile(section_exponents()[:, 0], n_sections)
+
+
+def order_contributions_basis(theta: np.ndarray, coef: np.ndarray, orders: np.ndarray) -> np.ndarray:
+    """Contributions of the orders of A to the prediction ``theta @ coef``.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (W, n, p)
+    coef : ndarray, shape (W, ..., p); any models per window
+    orders : ndarray of int, shape (p,)
+
+    Returns
+    -------
+    r : ndarray, shape (W, ..., n, 4), in the units of ``theta @ coef``
+    """
+    theta = np.nan_to_num(theta)
+    coef = np.nan_to_num(coef)
+    W, n, p = theta.shape
+    mid = coef.shape[1:-1]
+    c2 = coef.reshape(W, -1, p)
+    out = np.empty((W, c2.shape[1], n, 4))
+    for i in range(4):  # four orders, each a batched matrix product
+        cols = orders == i
+        out[..., i] = np.einsum("wnc,wmc->wmn", theta[..., cols], c2[..., cols], optimize=True)
+    return out.reshape((W,) + mid + (n, 4))
+
+
+def _regimes(r: np.ndarray, A: np.ndarray, valid: np.ndarray, tau: float) -> np.ndarray:
+    """Regime per model: r (W, S, M, n, 4), A (W, n, S), valid (W, n) -> (W, S, M)."""
+    Aw = np.where(valid[..., None], A, np.nan)  # invalid rows drop out of the c1 mean
+    Aw = np.moveaxis(Aw, 2, 1)[:, :, None, :]  # (W, S, 1, n)
+    Aw = np.broadcast_to(Aw, r.shape[:-1])
+    # Invalid rows contribute zeros to every order's RMS alike; ratios are unchanged.
+    r = np.where(valid[:, None, None, :, None], r, 0.0)
+    return classify_regime(r, Aw, tau=tau, axis=-1)
+
+
+def window_regimes(
+    theta: np.ndarray,
+    y: np.ndarray,
+    y_scale: np.ndarray,
+    A: np.ndarray,
+    valid: np.ndarray,
+    path,
+    settings: StlsqSettings,
+    *,
+    tau: float = 0.2,
+    margin: float | None = 2.0,
+    order_deletion: bool = True,
+    fit_tolerance: float = 0.1,
+) -> dict:
+    """Regime of each selected window model and its identifiability flag.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (W, n, p)
+        Window libraries in the regression basis (powers of A as in the physical library).
+    y : ndarray, shape (W, n, S)
+        Standardised targets the path was fitted to.
+    y_scale : ndarray, shape (W, S), m/s
+        Factors back to dA/dt.
+    A : ndarray, shape (W, n, S), m
+    valid : ndarray of bool, shape (W, n)
+    path : StlsqPath of ``theta`` against ``y``
+    settings : the path's settings (reused for the order-deletion refits)
+    tau : regime threshold of DESIGN 2.5
+    margin : AICc margin of "equally good"; None skips the test (all flagged identifiable)
+    order_deletion : also try the best model without each present order
+
+    Returns
+    -------
+    dict of ndarray
+        ``regime`` (W, S) int8 (0 where no model); ``identifiable`` (W, S) bool;
+        ``regimes_seen`` (W, S) int8 bit mask (bit k-1 set if regime k occurs
+        among the equally good models); ``n_equivalent`` (W, S) int, equally
+        good distinct models besides the selected one; ``order_rms`` (W, S, 4)
+        m/s, RMS over the window of each order's contribution to dA/dt.
+    """
+    W, n, p = theta.shape
+    S = y.shape[-1]
+    orders = basis_orders(p // 23)
+    best = path.best_coef  # (W, S, p)
+    has_model = path.selected >= 0
+    r_best = order_contributions_basis(theta, best, orders) * y_scale[:, :, None, None]  # (W, S, n, 4)
+    reg_best = _regimes(r_best[:, :, None], A, valid, tau)[:, :, 0]
+    nv = np.maximum(valid.sum(axis=1), 1)
+    order_rms = np.sqrt((np.where(valid[:, None, :, None], r_best, 0.0) ** 2).sum(axis=2) / nv[:, None, None])
+    regime = np.where(has_model, reg_best, 0).astype(np.int8)
+    seen = np.where(has_model, 1 << (regime.astype(int) - 1), 0)
+    n_equiv = np.zeros((W, S), dtype=int)
+    if margin is None:
+        return {"regime": regime, "identifiable": has_model.copy(), "regimes_seen": seen.astype(np.int8),
+                "n_equivalent": n_equiv, "order_rms": order_rms}
+
+    best_aicc = np.where(has_model, path.best_aicc, np.inf)
+    # 1) competitors along the threshold path (distinct supports only)
+    T = path.aicc.shape[2]
+    near = np.isfinite(path.aicc) & (path.aicc <= best_aicc[:, :, None] + margin)
+    near &= np.arange(T)[None, None, :] != np.maximum(path.selected, 0)[:, :, None]
+    same_support = (path.support == path.best_support[:, :, None, :]).all(axis=-1)
+    near &= ~same_support
+    if near.any():
+        r_path = order_contributions_basis(theta, path.coef, orders)  # (W, S, T, n, 4)
+        reg_path = _regimes(r_path, A, valid, tau)
+        seen |= np.bitwise_or.reduce(np.where(near, 1 << (reg_path.astype(int) - 1), 0), axis=2)
+        n_equiv += near.sum(axis=2)
+    # 2) competitors restricted to a subset of the orders of A. A competitor
+    #    counts when its residual RMS is within (1 + fit_tolerance) of the
+    #    selected model's: that residual is the data's own noise level, and
+    #    derivative errors are smooth and correlated, so AICc's
+    #    independent-residual arithmetic would call competitors significantly
+    #    worse that the data cannot reject.
+    if order_deletion:
+        present = np.stack([(best[..., orders == i] != 0).any(axis=-1) for i in range(4)], axis=-1)  # (W,S,4)
+        subsets = []
+        for mask in range(1, 15):  # every proper, non-empty subset of the orders 0..3
+            allowed = np.array([(mask >> i) & 1 for i in range(4)], dtype=bool)
+            # a restriction only matters where the selected model uses a removed order
+            subsets.append((allowed[orders], present[..., ~allowed].any(axis=-1)))
+        rss_best = np.where(has_model, path.best_rss, np.nan)
+        rss_equal = (1.0 + fit_tolerance) ** 2 * rss_best
+        # Competitors need not reproduce pysindy's truncated refit to the last digit.
+        alt_settings = dataclasses.replace(settings, refit_rcond=None)
+        for keep, applies in subsets:
+            if not applies.any():
+                continue
+            alt = stlsq_path(theta[..., keep], y, alt_settings)
+            with np.errstate(invalid="ignore"):
+                ok = applies & (alt.selected >= 0) & (alt.best_rss <= rss_equal)
+            if not ok.any():
+                continue
+            coef_alt = np.zeros((W, S, p))
+            coef_alt[..., keep] = np.nan_to_num(alt.best_coef)
+            r_alt = order_contributions_basis(theta, coef_alt, orders)
+            reg_alt = _regimes(r_alt[:, :, None], A, valid, tau)[:, :, 0]
+            seen |= np.where(ok, 1 << (reg_alt.astype(int) - 1), 0)
+            n_equiv += ok
+    identifiable = has_model & (seen == np.where(has_model, 1 << (regime.astype(int) - 1), 0))
+    return {"regime": regime, "identifiable": identifiable, "regimes_seen": seen.astype(np.int8),
+            "n_equivalent": n_equiv, "order_rms": order_rms}

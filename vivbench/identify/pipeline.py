@@ -1,0 +1,233 @@
+"""The identification chain of one event: preprocess, differentiate, windowed SINDy, regimes.
+
+Results go to ``<event_id>.identify.nc`` (NetCDF-4): per window and equation
+the selected model in physical units, its AICc, RSS, threshold, regime and
+identifiability flag; per window the library's condition number; and the
+preprocessed series (A, U, dA/dt on the common grid) so that later stages
+(clustering, simulation, forecasting) need not preprocess again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+import vivbench
+from vivbench.identify.derivative import Derivative
+from vivbench.identify.engine import DEFAULT_THRESHOLDS, WindowedSINDy
+from vivbench.identify.preprocess import PreprocessConfig, preprocess_arrays
+from vivbench.io import event_arrays, read_event, write_netcdf_atomic
+
+__all__ = ["IdentifyConfig", "identify_event", "identify_files", "result_path"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class IdentifyConfig:
+    """Settings of the identification chain.
+
+    Attributes
+    ----------
+    preprocess : PreprocessConfig
+    derivative : Derivative (default: total-variation regularised, Chartrand 2011)
+    window, step : s (the paper: 50 s and 25 s)
+    thresholds : STLSQ threshold path on standardised coefficients (None: the engine's default)
+    alpha : ridge parameter of STLSQ
+    scaling : library basis, "scaled" (centred and scaled U), "normalized" or "raw"
+    tau : regime threshold (DESIGN 2.5)
+    aicc_margin : models within this AICc of the best count as competitors
+    fit_tolerance : relative RMS residual within which an order-restricted model fits equally well
+    """
+
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    derivative: Derivative = field(default_factory=lambda: Derivative(method="tv"))
+    window: float = 50.0
+    step: float = 25.0
+    thresholds: tuple[float, ...] = DEFAULT_THRESHOLDS
+    alpha: float = 0.05
+    scaling: str = "scaled"
+    tau: float = 0.2
+    aicc_margin: float = 2.0
+    fit_tolerance: float = 0.1
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "thresholds", tuple(float(x) for x in self.thresholds))
+        if not (self.window > 0 and self.step > 0):
+            raise ValueError(f"window and step must be positive seconds; got window={self.window}, step={self.step}")
+        if not 0 < self.tau < 1:
+            raise ValueError(f"tau must be in (0, 1); got {self.tau}")
+        if self.aicc_margin < 0 or self.fit_tolerance < 0:
+            raise ValueError("aicc_margin and fit_tolerance must be >= 0")
+        # the estimator validates the rest (thresholds, alpha, scaling) when it is built
+        self.estimator()
+
+    def estimator(self) -> WindowedSINDy:
+        est = WindowedSINDy(window=self.window, step=self.step, thresholds=self.thresholds, alpha=self.alpha,
+                            scaling=self.scaling, tau=self.tau, identifiability_margin=self.aicc_margin,
+                            fit_tolerance=self.fit_tolerance, keep_path=False)
+        est.settings()
+        return est
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), sort_keys=True, default=float)
+
+
+_WINDOW_VARS = {
+    # name: (fitted attribute, dims, units, long name)
+    "coef": ("coef_", ("window", "equation", "feature"), "1/s * m^(1-i) (m/s)^(-j)", "selected model on the physical library A_l^i U_l^j"),
+    "threshold": ("threshold_", ("window", "equation"), "1", "STLSQ threshold of the selected model (standardised coefficients)"),
+    "aicc": ("aicc_", ("window", "equation"), "1", "AICc of the selected model"),
+    "rss": ("rss_", ("window", "equation"), "m^2/s^2", "residual sum of squares"),
+    "n_terms": ("n_terms_", ("window", "equation"), "1", "number of terms in the regression basis"),
+    "regime": ("regime_", ("window", "equation"), "1", "regime of the selected model (DESIGN 2.5); 0: no model"),
+    "identifiable": ("identifiable_", ("window", "equation"), "1", "every equally good competing model has the same regime"),
+    "regimes_seen": ("regimes_seen_", ("window", "equation"), "1", "bit mask of regimes among equally good models (bit k-1: regime k)"),
+    "n_equivalent": ("n_equivalent_", ("window", "equation"), "1", "equally good competing models found"),
+    "order_rms": ("order_rms_", ("window", "equation", "order"), "m/s", "RMS over the window of each order's contribution to dA/dt"),
+    "cond": ("cond_", ("window",), "1", "condition number of the window's regression library"),
+    "n_samples": ("n_samples_", ("window",), "1", "valid samples in the window"),
+}
+
+
+def _empty_fit(n_sections: int) -> dict:
+    p = 23 * n_sections
+    shapes = {"coef": (0, n_sections, p), "order_rms": (0, n_sections, 4), "cond": (0,), "n_samples": (0,)}
+    return {name: np.zeros(shapes.get(name, (0, n_sections))) for name in _WINDOW_VARS}
+
+
+def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, source: str = "") -> xr.Dataset:
+    """Run the identification chain on one event.
+
+    Parameters
+    ----------
+    tree : an event (DESIGN 4), synthetic or field
+    config : IdentifyConfig
+    source : file name recorded in the result
+
+    Returns
+    -------
+    xarray.Dataset
+        The result (see module docstring); coordinates ``window``, ``equation``,
+        ``feature``, ``order`` and ``time`` (the preprocessing grid).
+
+    Raises
+    ------
+    ValueError
+        When no segment of the record is long enough for one window.
+    """
+    config = config or IdentifyConfig()
+    arr = event_arrays(tree)
+    sections = list(arr["sections"])
+    pre = preprocess_arrays(wind_time=arr["wind_time"], u=arr["u"], v=arr["v"], accel_time=arr["accel_time"],
+                            acc=arr["acc"], span_azimuth_deg=float(tree.attrs["span_azimuth_deg"]),
+                            config=config.preprocess)
+    dA = np.full_like(pre.A, np.nan)
+    parts, starts, ends, segs = [], [], [], []
+    est = config.estimator()
+    for seg in np.unique(pre.segment[pre.segment >= 0]):
+        sel = pre.segment == seg
+        t = pre.t[sel]
+        if t.size < 2 or t[-1] - t[0] < config.window:
+            continue
+        dA[sel] = config.derivative.differentiate(pre.A[sel], t)
+        est.fit(t, pre.A[sel], pre.U[sel], dA[sel])
+        parts.append({name: getattr(est, attr) for name, (attr, *_rest) in _WINDOW_VARS.items()})
+        starts.append(est.window_start_)
+        ends.append(est.window_end_)
+        segs.append(np.full(est.window_start_.size, seg))
+    if not parts:
+        longest = max((float(np.ptp(pre.t[pre.segment == s])) for s in np.unique(pre.segment[pre.segment >= 0])), default=0.0)
+        raise ValueError(f"no valid segment is as long as one window ({config.window:g} s); the longest is {longest:.0f} s")
+    fit = {name: np.concatenate([p[name] for p in parts], axis=0) for name in _WINDOW_VARS}
+    n_w = fit["cond"].shape[0]
+    data = {}
+    for name, (_attr, dims, units, long_name) in _WINDOW_VARS.items():
+        values = fit[name]
+        if name in ("regime", "regimes_seen"):
+            values = values.astype(np.int8)
+        elif name == "identifiable":
+            values = values.astype(np.int8)  # NetCDF has no boolean type
+        data[name] = (dims, values, {"units": units, "long_name": long_name})
+    data["window_start"] = (("window",), np.concatenate(starts), {"units": "s", "long_name": "window start since event start"})
+    data["window_end"] = (("window",), np.concatenate(ends), {"units": "s", "long_name": "window end since event start"})
+    data["window_segment"] = (("window",), np.concatenate(segs).astype(np.int32), {"units": "1", "long_name": "preprocessing segment of the window"})
+    data["A"] = (("time", "section"), pre.A, {"units": "m", "long_name": "vibration amplitude (Hilbert envelope)"})
+    data["U"] = (("time", "section"), pre.U, {"units": "m/s", "long_name": "mean wind speed perpendicular to the span"})
+    data["dA"] = (("time", "section"), dA, {"units": "m/s", "long_name": f"dA/dt ({config.derivative.method})"})
+    data["segment"] = (("time",), pre.segment.astype(np.int32), {"units": "1", "long_name": "contiguous segment (-1: excluded)"})
+    ok = fit["regime"] > 0
+    coverage = float(fit["identifiable"][ok].mean()) if ok.any() else float("nan")
+    attrs = {
+        "format": "vivbench-identify",
+        "format_version": 1,
+        "event_id": str(tree.attrs["event_id"]),
+        "source_file": source,
+        "event_source": str(tree.attrs["source"]),
+        "f_mode_hz": float(pre.f_mode_hz),
+        "f_mode_source": pre.f_mode_source,
+        "edge_s": float(pre.edge_s),
+        "span_azimuth_deg": float(pre.span_azimuth_deg),
+        "coverage": coverage,
+        "identify_config_json": config.to_json(),
+        "vivbench_version": vivbench.__version__,
+    }
+    coords = {
+        "window": np.arange(n_w),
+        "equation": sections,
+        "feature": est.feature_names_ if n_w else [],
+        "order": np.arange(4),
+        "time": ("time", pre.t, {"units": "s", "long_name": "time since event start"}),
+        "section": sections,
+    }
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def result_path(out_dir: str | Path, event_id: str) -> Path:
+    return Path(out_dir) / f"{event_id}.identify.nc"
+
+
+def _identify_one(path: str, out_dir: str, config: IdentifyConfig) -> str:
+    tree = read_event(path)
+    ds = identify_event(tree, config, source=Path(path).name)
+    return str(write_netcdf_atomic(ds, result_path(out_dir, ds.attrs["event_id"])))
+
+
+def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: IdentifyConfig | None = None, *,
+                   workers: int = 1, progress: Callable[[str], None] | None = None) -> tuple[list[Path], dict[str, str]]:
+    """Identify every event file; a failing file is reported and the others finish.
+
+    Returns
+    -------
+    written : result files, in the order of ``paths``
+    failures : file -> one-line message
+    """
+    config = config or IdentifyConfig()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+    failures: dict[str, str] = {}
+
+    def record(path, fn):
+        try:
+            written[str(path)] = Path(fn())
+        except Exception as exc:  # one bad event must not stop the others
+            msg = " ".join(str(exc).split())
+            failures[str(path)] = msg if msg.startswith(str(path)) else f"{path}: {msg}"
+        if progress is not None:
+            progress(str(path))
+
+    if workers <= 1:
+        for p in paths:
+            record(p, lambda p=p: _identify_one(str(p), str(out), config))
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futs = {pool.submit(_identify_one, str(p), str(out), config): p for p in paths}
+            for fut in as_completed(futs):
+                record(futs[fut], fut.result)
+    return [written[str(p)] for p in paths if str(p) in written], failures
