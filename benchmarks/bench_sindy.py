@@ -109,7 +109,8 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
     if events is None:
         events = make_campaign()
     thresholds = np.asarray(DEFAULT_THRESHOLDS)
-    est = dict(alpha=alpha, max_iter=max_iter, thresholds=thresholds)
+    # Regression and AICc only, like the pysindy loop: no identifiability competitors.
+    est = dict(alpha=alpha, max_iter=max_iter, thresholds=thresholds, identifiability_margin=None)
 
     WindowedSINDy(**est).fit(*events[0])  # warm-up (imports, LAPACK workspaces)
     models = []

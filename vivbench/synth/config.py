@@ -210,6 +210,10 @@ class WindConfig:
     direction_wander_deg : rms of the slow random direction change, degrees
     direction_offset_deg : (min, max) of the event's mean yaw from perpendicular, degrees
     min_speed : lower bound of every scripted mean perpendicular speed, m/s
+    felt_cutoff_hz : Hz; turbulence slower than this acts on the deck as part of its
+        mean wind: the aeroelastic force and the truth use the scripted mean plus
+        the turbulence low-passed here (zero-phase Butterworth), the same time
+        scale as the identification's mean-wind filter (1/60 Hz by default)
     turbulence : the turbulence field (spectral representation)
     anemometer_rate : Hz; resolution, m/s; noise : relative rms error
     """
@@ -222,6 +226,7 @@ class WindConfig:
     direction_wander_deg: float = 4.0
     direction_offset_deg: tuple[float, float] = (-15.0, 15.0)
     min_speed: float = 2.5
+    felt_cutoff_hz: float = 1.0 / 60.0
     turbulence: TurbulenceConfig = field(default_factory=TurbulenceConfig)
     anemometer_rate: float = 32.0
     resolution: float = 0.01
@@ -241,6 +246,8 @@ class WindConfig:
             _check(getattr(self, name) >= 0, f"{name} must be >= 0; got {getattr(self, name)}")
         _check(self.min_speed > 0, f"min_speed must be positive; got {self.min_speed}")
         _check(self.anemometer_rate > 0, f"anemometer_rate must be positive; got {self.anemometer_rate}")
+        _check(0 < self.felt_cutoff_hz < self.anemometer_rate / 2,
+               f"felt_cutoff_hz must be in (0, anemometer_rate/2) Hz; got {self.felt_cutoff_hz}")
         _check(self.resolution >= 0, f"resolution must be >= 0; got {self.resolution}")
 
 

@@ -15,7 +15,7 @@ from vivbench.synth.aero import amplitude_polynomials, exact_coefficients, modal
 from vivbench.synth.config import GeneratorConfig, config_to_dict
 from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
-from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
+from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, felt_mean_wind, mean_wind
 from vivbench.terms import feature_names
 
 __all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event"]
@@ -131,6 +131,7 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     t_w_ext = np.arange(n_w_ext) / wcfg.anemometer_rate
     mw = mean_wind(spec.script, t_w_ext, wcfg, rng_mean)
     u, v, w, turb = anemometer_records(mw, s, wcfg, rng_turb)
+    mw = felt_mean_wind(mw, turb, wcfg)
     f_shed = config.aero.strouhal * mw.U / s.depth
     shedding_phase = 2 * np.pi * cumulative_trapezoid(f_shed, mw.t, axis=0, initial=0.0) + rng_shed.uniform(0, 2 * np.pi, 3)
 

@@ -13,11 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
+from scipy.signal import butter, sosfiltfilt
 
 from vivbench.synth.config import StructureConfig, WindConfig
 from vivbench.synth.turbulence import simulate_turbulence
 
-__all__ = ["WindScript", "MeanWind", "mean_wind", "slow_process", "anemometer_records"]
+__all__ = ["WindScript", "MeanWind", "mean_wind", "slow_process", "anemometer_records", "felt_mean_wind"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -142,3 +143,34 @@ def anemometer_records(mw: MeanWind, structure: StructureConfig, wind: WindConfi
             comp = np.round(comp / wind.resolution) * wind.resolution
         out.append(comp.astype(np.float32))
     return out[0], out[1], out[2], turb
+
+
+def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind:
+    """The mean wind the deck feels: scripted mean plus the slow part of the turbulence.
+
+    Turbulence slower than ``wind.felt_cutoff_hz`` changes the wind over the
+    time scale of the aeroelastic dynamics (minutes), so the deck responds to it
+    as to a change of the mean; it is also what a low-pass filter of the
+    measured wind keeps. The perpendicular component of the slow horizontal wind
+    vector becomes the new ``U``.
+
+    Parameters
+    ----------
+    mw : MeanWind on the uniform anemometer grid
+    turb : ndarray, shape (n, 3, 3), m/s; along-wind, lateral, vertical turbulence
+
+    Returns
+    -------
+    MeanWind with ``U`` and ``V`` replaced (``direction`` stays the scripted one).
+    """
+    sos = butter(4, wind.felt_cutoff_hz, fs=wind.anemometer_rate, output="sos")
+    slow = sosfiltfilt(sos, turb[:, :, :2], axis=0)
+    d = np.radians(mw.direction)[:, None]
+    along = np.stack([-np.sin(d), -np.cos(d)], axis=-1)  # (n, 1, 2) east, north
+    lateral = np.stack([np.cos(d), -np.sin(d)], axis=-1)
+    vec = (mw.V + slow[:, :, 0])[..., None] * along + slow[:, :, 1][..., None] * lateral
+    az = np.radians(wind.span_azimuth_deg)
+    span = np.array([np.sin(az), np.cos(az)])
+    U = np.abs(vec[..., 0] * span[1] - vec[..., 1] * span[0])
+    U = np.maximum(U, wind.min_speed)
+    return MeanWind(t=mw.t, U=U, V=np.hypot(vec[..., 0], vec[..., 1]), direction=mw.direction)

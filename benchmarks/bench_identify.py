@@ -1,0 +1,134 @@
+"""The identification chain on synthetic campaigns: speed and recovery of the truth.
+
+Run: ``.venv/bin/python benchmarks/bench_identify.py [n_events]`` (default 31).
+
+1. Speed: the whole chain (read, preprocess, TV derivative, windowed SINDy
+   with AICc and the identifiability competitors, write) over the default
+   campaign with 1 and 2 workers; and the regressions alone against the loop a
+   user would write with pysindy (``benchmarks/bench_sindy.py`` on the
+   campaign's own windows and threshold path).
+2. Recovery (DESIGN 2.5, issue 3): regime accuracy on identifiable windows,
+   coverage, accuracy on the rest, and the median relative RMS error of the
+   identified dA/dt against the true averaged dynamics, on a noise-free,
+   defect-free campaign with slowly varying wind and on the default (realistic)
+   campaign.
+
+Nothing is asserted; the figures are printed and returned.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import importlib.util  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+
+from vivbench.identify import identify_files  # noqa: E402
+from vivbench.io import read_event  # noqa: E402
+from vivbench.synth import (  # noqa: E402
+    AeroConfig,
+    CampaignConfig,
+    GeneratorConfig,
+    SensorConfig,
+    TurbulenceConfig,
+    WindConfig,
+    generate_campaign,
+)
+from vivbench.terms import evaluate_library  # noqa: E402
+from vivbench.validate import regime_scores, rhs_relative_error, truth_window_regimes  # noqa: E402
+
+CLEAN = GeneratorConfig(
+    aero=AeroConfig(cl_unlocked=0.0, buffeting_w=0.0),
+    wind=WindConfig(turbulence=TurbulenceConfig(intensity=0.0), noise=0.0, resolution=0.0),
+    sensors=SensorConfig(noise_density=0.0, bits=0),
+)
+
+
+def recovery(event_files, result_files) -> dict:
+    """Regime scores and right-hand-side errors of a campaign's results against its truth."""
+    regimes, truths, flags, errs, errs_active = [], [], [], [], []
+    for ev_path, res_path in zip(event_files, result_files):
+        truth = read_event(ev_path)["truth"].ds
+        with xr.open_dataset(res_path, engine="h5netcdf") as res:
+            res = res.load()
+        start, end = res["window_start"].values, res["window_end"].values
+        regimes.append(res["regime"].values)
+        truths.append(truth_window_regimes(truth, start, end))
+        flags.append(res["identifiable"].values.astype(bool))
+        coef_true = truth["coef"].values
+        t = res["time"].values
+        scale = np.sqrt(np.mean((truth["r"].values.sum(-1)) ** 2, axis=0))  # event RMS of the true dA/dt
+        for w in range(start.size):
+            sel = (t >= start[w]) & (t < end[w])
+            e = rhs_relative_error(res["coef"].values[w], coef_true, res["A"].values[sel], res["U"].values[sel])
+            errs.append(e)
+            # windows whose true dynamics carry at least 10 % of the event's RMS dA/dt
+            ft = evaluate_library(res["A"].values[sel], res["U"].values[sel]) @ coef_true.T
+            active = np.sqrt(np.mean(ft**2, axis=0)) >= 0.1 * scale
+            errs_active.append(np.where(active, e, np.nan))
+    scores = regime_scores(np.concatenate(regimes), np.concatenate(truths), np.concatenate(flags))
+    errs = np.concatenate(errs)
+    errs_active = np.concatenate(errs_active)
+    scores["rhs_median_rel_error"] = float(np.nanmedian(errs))
+    scores["rhs_median_rel_error_active"] = float(np.nanmedian(errs_active))
+    scores["active_share"] = float(np.mean(np.isfinite(errs_active)))
+    truth_all = np.concatenate(truths).ravel()
+    scores["truth_regime_shares"] = {k: float(np.mean(truth_all == k)) for k in (1, 2, 3, 4)}
+    return scores
+
+
+def main(n_events: int = 31) -> dict:
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for name, gen in (("clean", CLEAN), ("default", GeneratorConfig())):
+            camp = generate_campaign(CampaignConfig(n_events=n_events, generator=gen), tmp / name / "events", workers=2)
+            timings = {}
+            for workers in ((1, 2) if name == "default" else (2,)):
+                t0 = time.perf_counter()
+                results, failures = identify_files(camp.files, tmp / name / f"results{workers}", workers=workers)
+                timings[f"chain_s_{workers}_workers"] = time.perf_counter() - t0
+                if failures:
+                    print("failures:", failures)
+            rec = recovery(camp.files, results)
+            out[name] = {**timings, **rec}
+            print(f"\n[{name} campaign, {n_events} events]")
+            for k, v in timings.items():
+                print(f"  whole chain: {v:.1f} s ({k})")
+            print(f"  windows x equations scored: {rec['n']}; true regime shares: "
+                  + ", ".join(f"{k}: {v:.2f}" for k, v in rec["truth_regime_shares"].items()))
+            print(f"  coverage (identifiable): {rec['coverage']:.3f}")
+            print(f"  regime accuracy, identifiable windows: {rec['accuracy_identifiable']:.3f}")
+            print(f"  regime accuracy, not identifiable:     {rec['accuracy_not_identifiable']:.3f}")
+            print(f"  regime accuracy, all windows:          {rec['accuracy_all']:.3f}")
+            print(f"  median relative RMS error of dA/dt, all windows: {rec['rhs_median_rel_error']:.4f}")
+            print(f"  same, windows with true |dA/dt| >= 10 % of the event RMS ({rec['active_share']:.2f} of them): "
+                  f"{rec['rhs_median_rel_error_active']:.4f}")
+
+        # The regressions alone against the pysindy loop, on the default campaign's own windows.
+        ev_arrays = []
+        for path in sorted((tmp / "default" / "results2").glob("*.identify.nc")):
+            with xr.open_dataset(path, engine="h5netcdf") as res:
+                seg = res["segment"].values
+                keep = seg == 0
+                ev_arrays.append((res["time"].values[keep], res["A"].values[keep], res["U"].values[keep],
+                                  res["dA"].values[keep]))
+    spec = importlib.util.spec_from_file_location("bench_sindy", Path(__file__).with_name("bench_sindy.py"))
+    bench_sindy = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench_sindy)
+    print("\n[regressions only, default campaign windows, vs pysindy]")
+    out["engine_vs_pysindy"] = bench_sindy.main(events=ev_arrays)
+    return out
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 31)
