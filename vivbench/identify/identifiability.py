@@ -114,8 +114,9 @@ def window_regimes(
     dict of ndarray
         ``regime`` (W, S) int8 (0 where no model); ``identifiable`` (W, S) bool;
         ``regimes_seen`` (W, S) int8 bit mask (bit k-1 set if regime k occurs
-        among the equally good models); ``n_equivalent`` (W, S) int, equally
-        good distinct models besides the selected one; ``order_rms`` (W, S, 4)
+        among the equally good models found); ``n_equivalent`` (W, S) int,
+        equally good competitors found (the order-restricted search stops for a
+        window and equation once a competitor with another regime is found); ``order_rms`` (W, S, 4)
         m/s, RMS over the window of each order's contribution to dA/dt.
     """
     W, n, p = theta.shape
@@ -154,29 +155,34 @@ def window_regimes(
     #    worse that the data cannot reject.
     if order_deletion:
         present = np.stack([(best[..., orders == i] != 0).any(axis=-1) for i in range(4)], axis=-1)  # (W,S,4)
-        subsets = []
-        for mask in range(1, 15):  # every proper, non-empty subset of the orders 0..3
-            allowed = np.array([(mask >> i) & 1 for i in range(4)], dtype=bool)
-            # a restriction only matters where the selected model uses a removed order
-            subsets.append((allowed[orders], present[..., ~allowed].any(axis=-1)))
+        # Every proper, non-empty subset of the orders 0..3, single orders first:
+        # in practice they are the ones that settle the verdict soonest.
+        masks = sorted(range(1, 15), key=lambda mk: (bin(mk).count("1"), mk))
         rss_best = np.where(has_model, path.best_rss, np.nan)
         rss_equal = (1.0 + fit_tolerance) ** 2 * rss_best
         # Competitors need not reproduce pysindy's truncated refit to the last digit.
         alt_settings = dataclasses.replace(settings, refit_rcond=None)
-        for keep, applies in subsets:
-            if not applies.any():
+        own = np.where(has_model, 1 << (regime.astype(int) - 1), 0)
+        for mk in masks:
+            allowed = np.array([(mk >> i) & 1 for i in range(4)], dtype=bool)
+            keep = allowed[orders]
+            # A restriction only matters where the selected model uses a removed
+            # order, and only windows whose verdict is still open are refitted.
+            applies = present[..., ~allowed].any(axis=-1) & (seen == own) & has_model
+            rows = np.flatnonzero(applies.any(axis=1))
+            if rows.size == 0:
                 continue
-            alt = stlsq_path(theta[..., keep], y, alt_settings)
+            alt = stlsq_path(theta[rows][..., keep], y[rows], alt_settings)
             with np.errstate(invalid="ignore"):
-                ok = applies & (alt.selected >= 0) & (alt.best_rss <= rss_equal)
+                ok = applies[rows] & (alt.selected >= 0) & (alt.best_rss <= rss_equal[rows])
             if not ok.any():
                 continue
-            coef_alt = np.zeros((W, S, p))
+            coef_alt = np.zeros((rows.size, S, p))
             coef_alt[..., keep] = np.nan_to_num(alt.best_coef)
-            r_alt = order_contributions_basis(theta, coef_alt, orders)
-            reg_alt = _regimes(r_alt[:, :, None], A, valid, tau)[:, :, 0]
-            seen |= np.where(ok, 1 << (reg_alt.astype(int) - 1), 0)
-            n_equiv += ok
+            r_alt = order_contributions_basis(theta[rows], coef_alt, orders)
+            reg_alt = _regimes(r_alt[:, :, None], A[rows], valid[rows], tau)[:, :, 0]
+            seen[rows] |= np.where(ok, 1 << (reg_alt.astype(int) - 1), 0)
+            n_equiv[rows] += ok
     identifiable = has_model & (seen == np.where(has_model, 1 << (regime.astype(int) - 1), 0))
     return {"regime": regime, "identifiable": identifiable, "regimes_seen": seen.astype(np.int8),
             "n_equivalent": n_equiv, "order_rms": order_rms}
