@@ -29,11 +29,9 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
 from vivbench.identify import identify_files  # noqa: E402
-from vivbench.io import read_event  # noqa: E402
 from vivbench.synth import (  # noqa: E402
     AeroConfig,
     CampaignConfig,
@@ -43,47 +41,13 @@ from vivbench.synth import (  # noqa: E402
     WindConfig,
     generate_campaign,
 )
-from vivbench.terms import evaluate_library  # noqa: E402
-from vivbench.validate import regime_scores, rhs_relative_error, truth_window_regimes  # noqa: E402
+from vivbench.validate import campaign_recovery  # noqa: E402
 
 CLEAN = GeneratorConfig(
     aero=AeroConfig(cl_unlocked=0.0, buffeting_w=0.0),
     wind=WindConfig(turbulence=TurbulenceConfig(intensity=0.0), noise=0.0, resolution=0.0),
     sensors=SensorConfig(noise_density=0.0, bits=0),
 )
-
-
-def recovery(event_files, result_files) -> dict:
-    """Regime scores and right-hand-side errors of a campaign's results against its truth."""
-    regimes, truths, flags, errs, errs_active = [], [], [], [], []
-    for ev_path, res_path in zip(event_files, result_files):
-        truth = read_event(ev_path)["truth"].ds
-        with xr.open_dataset(res_path, engine="h5netcdf") as res:
-            res = res.load()
-        start, end = res["window_start"].values, res["window_end"].values
-        regimes.append(res["regime"].values)
-        truths.append(truth_window_regimes(truth, start, end))
-        flags.append(res["identifiable"].values.astype(bool))
-        coef_true = truth["coef"].values
-        t = res["time"].values
-        scale = np.sqrt(np.mean((truth["r"].values.sum(-1)) ** 2, axis=0))  # event RMS of the true dA/dt
-        for w in range(start.size):
-            sel = (t >= start[w]) & (t < end[w])
-            e = rhs_relative_error(res["coef"].values[w], coef_true, res["A"].values[sel], res["U"].values[sel])
-            errs.append(e)
-            # windows whose true dynamics carry at least 10 % of the event's RMS dA/dt
-            ft = evaluate_library(res["A"].values[sel], res["U"].values[sel]) @ coef_true.T
-            active = np.sqrt(np.mean(ft**2, axis=0)) >= 0.1 * scale
-            errs_active.append(np.where(active, e, np.nan))
-    scores = regime_scores(np.concatenate(regimes), np.concatenate(truths), np.concatenate(flags))
-    errs = np.concatenate(errs)
-    errs_active = np.concatenate(errs_active)
-    scores["rhs_median_rel_error"] = float(np.nanmedian(errs))
-    scores["rhs_median_rel_error_active"] = float(np.nanmedian(errs_active))
-    scores["active_share"] = float(np.mean(np.isfinite(errs_active)))
-    truth_all = np.concatenate(truths).ravel()
-    scores["truth_regime_shares"] = {k: float(np.mean(truth_all == k)) for k in (1, 2, 3, 4)}
-    return scores
 
 
 def main(n_events: int = 31) -> dict:
@@ -99,7 +63,7 @@ def main(n_events: int = 31) -> dict:
                 timings[f"chain_s_{workers}_workers"] = time.perf_counter() - t0
                 if failures:
                     print("failures:", failures)
-            rec = recovery(camp.files, results)
+            rec = campaign_recovery(camp.files, results)
             out[name] = {**timings, **rec}
             print(f"\n[{name} campaign, {n_events} events]")
             for k, v in timings.items():

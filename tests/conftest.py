@@ -8,7 +8,6 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from vivbench.synth import CampaignConfig, campaign_specs, generate_campaign, simulate_event  # noqa: E402

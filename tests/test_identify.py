@@ -14,7 +14,6 @@ from vivbench.identify import IdentifyConfig, WindowedSINDy, identify_event, ide
 from vivbench.io import read_event, write_event
 from vivbench.synth import (
     AeroConfig,
-    CampaignConfig,
     DefectConfig,
     EventSpec,
     GeneratorConfig,
@@ -202,3 +201,12 @@ def test_preprocessing_recovers_the_truth_it_is_scored_against(default_campaign_
     assert u_err < 0.05, f"mean wind off the truth by {u_err:.3f} m/s RMS"
     # 2 %: the envelope also carries the buffeting response, which the averaged truth omits (seen: 0.4 %)
     assert a_err < 0.02, f"amplitude off the truth by {a_err:.2%} RMS"
+
+
+def test_cli_demo_small(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "vivbench.cli", "demo", "--out", str(tmp_path), "--events", "2",
+                          "--duration", "8", "--workers", "1"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "recovery:" in run.stdout and "coverage" in run.stdout
+    assert (tmp_path / "event_E001.png").stat().st_size > 10000
+    assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == ["E001.identify.nc", "E002.identify.nc"]

@@ -7,6 +7,8 @@ order matters); 4, strong (the A^3 order matters).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 __all__ = ["DEFAULT_TAU", "classify_regime", "order_rms"]
@@ -61,7 +63,9 @@ def classify_regime(r: np.ndarray, A: np.ndarray, tau: float = DEFAULT_TAU, axis
     axis = axis % A.ndim if A.ndim else 0
     R = order_rms(r, axis=axis)
     M = R.max(axis=-1)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
+        # a window without a positive amplitude has no linear coefficient (NaN: not > 0)
+        warnings.simplefilter("ignore", RuntimeWarning)
         c1 = np.nanmean(np.where(A > 0, r[..., 1] / A, np.nan), axis=axis)
     regime = np.where(c1 > 0, 2, 1).astype(np.int8)
     regime = np.where(R[..., 2] >= tau * M, 3, regime)

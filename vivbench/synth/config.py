@@ -168,7 +168,7 @@ class AeroConfig:
     e1: Polynomial = _linear(E1, -0.12, 8.0)
     e2: Polynomial = _linear(E2, 0.12, 8.0)
     Y2: Polynomial = Polynomial(coefficients=(0.5,))
-    C_L: Polynomial = bell_polynomial(0.04, 8.0, 6.0)
+    C_L: Polynomial = bell_polynomial(0.04, 8.0, 8.0)
     strouhal: float = 0.143
     cl_unlocked: float = 0.05
     lock_bandwidth: float = 0.03

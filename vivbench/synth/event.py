@@ -162,6 +162,12 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
                       for i in range(4)], axis=1)
     coefs[:, 1] -= s.damping_ratio * s.omega
     Q = simulate_amplitude(config.initial_amplitude, coefs, ht)[::n_sub]
+    if not np.all(Q > 0):
+        bad = float(np.min(U_mid[np.argmax(coefs[:, 0] < 0)])) if np.any(coefs[:, 0] < 0) else float("nan")
+        raise ValueError(
+            f"event {spec.event_id}: the averaged amplitude reached zero or below at t = "
+            f"{truth_time[np.argmax(Q <= 0)]:.0f} s; the locked lift C_L(U) must stay >= 0 over the wind "
+            f"range (it is negative near U = {bad:.2f} m/s)")
     U_truth = _interp_wind(mw, truth_time)
     r_modal = order_contributions(Q, U_truth, s, config.aero)  # (n_t, 4)
     r = phi[None, :, None] * r_modal[:, None, :]

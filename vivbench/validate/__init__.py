@@ -1,5 +1,5 @@
 """How well the identification chain recovers the truth of synthetic campaigns."""
 
-from vivbench.validate.recovery import regime_scores, rhs_relative_error, truth_window_regimes
+from vivbench.validate.recovery import campaign_recovery, regime_scores, rhs_relative_error, truth_window_regimes
 
-__all__ = ["regime_scores", "rhs_relative_error", "truth_window_regimes"]
+__all__ = ["campaign_recovery", "regime_scores", "rhs_relative_error", "truth_window_regimes"]

@@ -14,7 +14,7 @@ import xarray as xr
 from vivbench.regime import classify_regime
 from vivbench.terms import evaluate_library
 
-__all__ = ["truth_window_regimes", "rhs_relative_error", "regime_scores"]
+__all__ = ["truth_window_regimes", "rhs_relative_error", "regime_scores", "campaign_recovery"]
 
 
 def truth_window_regimes(truth: xr.Dataset, window_start: np.ndarray, window_end: np.ndarray, tau: float = 0.2) -> np.ndarray:
@@ -94,3 +94,53 @@ def regime_scores(identified: np.ndarray, truth: np.ndarray, identifiable: np.nd
         "accuracy_not_identifiable": acc(~ok),
         "accuracy_all": acc(np.ones_like(ok)),
     }
+
+
+def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -> dict:
+    """Regime scores and right-hand-side errors of a campaign's results against its truth.
+
+    Parameters
+    ----------
+    event_files : synthetic event files (with ``/truth`` and its ``coef``)
+    result_files : the matching ``<event_id>.identify.nc``, same order
+    active_share : a window counts as active when the RMS of its true dA/dt is at
+        least this share of the event's RMS true dA/dt (relative errors on windows
+        with almost no dynamics say little)
+
+    Returns
+    -------
+    dict
+        :func:`regime_scores` plus ``rhs_median_rel_error`` (all windows),
+        ``rhs_median_rel_error_active``, ``active_share`` (share of active
+        window-equations) and ``truth_regime_shares``.
+    """
+    from vivbench.io import read_event
+
+    regimes, truths, flags, errs, errs_active = [], [], [], [], []
+    for ev_path, res_path in zip(event_files, result_files):
+        truth = read_event(ev_path)["truth"].ds
+        with xr.open_dataset(res_path, engine="h5netcdf") as res:
+            res = res.load()
+        start, end = res["window_start"].values, res["window_end"].values
+        regimes.append(res["regime"].values)
+        truths.append(truth_window_regimes(truth, start, end))
+        flags.append(res["identifiable"].values.astype(bool))
+        coef_true = truth["coef"].values
+        scale = np.sqrt(np.mean(truth["r"].values.sum(-1) ** 2, axis=0))
+        t = res["time"].values
+        A, U, coef = res["A"].values, res["U"].values, res["coef"].values
+        for w in range(start.size):
+            sel = (t >= start[w]) & (t < end[w])
+            e = rhs_relative_error(coef[w], coef_true, A[sel], U[sel])
+            f_true = evaluate_library(A[sel], U[sel]) @ coef_true.T
+            active = np.sqrt(np.mean(f_true**2, axis=0)) >= active_share * scale
+            errs.append(e)
+            errs_active.append(np.where(active, e, np.nan))
+    scores = regime_scores(np.concatenate(regimes), np.concatenate(truths), np.concatenate(flags))
+    errs_active = np.concatenate(errs_active)
+    scores["rhs_median_rel_error"] = float(np.nanmedian(np.concatenate(errs)))
+    scores["rhs_median_rel_error_active"] = float(np.nanmedian(errs_active))
+    scores["active_share"] = float(np.mean(np.isfinite(errs_active)))
+    truth_all = np.concatenate(truths).ravel()
+    scores["truth_regime_shares"] = {k: float(np.mean(truth_all == k)) for k in (1, 2, 3, 4)}
+    return scores
