@@ -75,10 +75,13 @@ random; with the floor, the correct model with the fewest terms wins.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg.lapack import dgeqrf as _dgeqrf
+from scipy.linalg.lapack import dgelsd as _dgelsd
+from scipy.linalg.lapack import dgelsd_lwork as _dgelsd_lwork
 from scipy.linalg.lapack import dtrcon as _dtrcon
 from scipy.linalg.lapack import dtrtrs as _dtrtrs
 
@@ -313,6 +316,14 @@ def _qr_r(At: np.ndarray) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=None)
+def _gelsd_work(shape: tuple[int, int]) -> tuple[int, int]:
+    lwork, iwork, info = _dgelsd_lwork(shape[0], shape[1], 1, -1.0)
+    if info:
+        raise RuntimeError(f"LAPACK dgelsd workspace query failed (info={info})")
+    return int(lwork), int(iwork)
+
+
 class _Factors:
     """Per-window reductions shared by all thresholds, iterations and targets."""
 
@@ -459,29 +470,20 @@ class _Factors:
         return ill
 
     def truncated_lstsq(self, w, e, masks, rcond):
-        """Minimum-norm least squares discarding singular values of X_S at or
-        below ``rcond`` times the largest, as ``scipy.linalg.lstsq(X_S, y,
-        cond=rcond)`` (LAPACK gelsd) computes it, from R_S (which has the
-        singular values of X_S). Problems with the same number of columns are
-        solved together by one batched SVD."""
+        """Minimum-norm least squares discarding singular values of X_S below
+        ``rcond`` times the largest, as ``scipy.linalg.lstsq(X_S, y,
+        cond=rcond)`` (LAPACK gelsd on R_S, which has the singular values of
+        X_S). One problem at a time: only used for the few refits that can
+        change the AICc selection."""
         out = np.zeros(masks.shape)
-        sizes = masks.sum(axis=1)
-        for k in np.unique(sizes):  # a handful of distinct support sizes
-            idx = np.flatnonzero(sizes == k)
-            if k == 0:
-                continue
-            cols = np.nonzero(masks[idx])[1].reshape(idx.size, k)
-            Rw = self.R[w[idx]]  # (g, p, p)
-            A = np.take_along_axis(Rw, cols[:, None, :], axis=2)  # (g, p, k)
-            b = self.Z[w[idx], :, e[idx]]  # (g, p)
-            Us, sv, Vt = np.linalg.svd(A, full_matrices=False)
-            keep = sv > rcond * sv[:, :1]
-            coef_u = np.einsum("gpk,gp->gk", Us, b)
-            coef_u = np.where(keep, coef_u / np.where(keep, sv, 1.0), 0.0)
-            x = np.einsum("gkj,gk->gj", Vt, coef_u)
-            rows = np.repeat(idx, k)
-            out[rows, cols.ravel()] = x.ravel()
-            self.counts["svd"] += idx.size
+        for i in range(w.size):
+            cols = np.flatnonzero(masks[i])
+            A = np.asfortranarray(self.R[w[i]][:, cols])
+            b = self.Z[w[i], :, e[i]].reshape(-1, 1)
+            lwork, iwork = _gelsd_work(A.shape)
+            x, _, _, info = _dgelsd(A, b, lwork, iwork, rcond)
+            out[i, cols] = x[: cols.size, 0] if info == 0 else np.nan
+            self.counts["svd"] += 1
         return out
 
     def _cholesky_bucket(self, cw, cols, K, local, slot, e, km, alpha):
