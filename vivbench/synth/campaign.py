@@ -88,18 +88,18 @@ def draw_script(kind: str, duration: float, rng: np.random.Generator) -> WindScr
         t2 = t1 + T * rng.uniform(0.06, 0.10)
         t3 = T * rng.uniform(0.68, 0.80)
         t4 = t3 + T * rng.uniform(0.06, 0.10)
+        start, end = outside(), outside()
+        drift = rng.uniform(-0.2, 0.2)
         times = (0.0, t1, t2, t3, t4, T)
-        speeds = (outside(), None, plateau, plateau, outside(), None)
-        speeds = (speeds[0], speeds[0], plateau, plateau + rng.uniform(-0.2, 0.2), speeds[4], speeds[4])
+        speeds = (start, start, plateau, plateau + drift, end, end)
     elif kind == "brief":
         peak = rng.uniform(7.6, 9.0)
         t1 = T * rng.uniform(0.1, 0.2)
         t2 = T * rng.uniform(0.35, 0.45)
         t3 = T * rng.uniform(0.6, 0.7)
-        start = outside()
+        start, end = outside(), outside()
         times = (0.0, t1, t2, t3, T)
-        speeds = (start, start, peak, outside(), None)
-        speeds = speeds[:4] + (speeds[3],)
+        speeds = (start, start, peak, end, end)
     elif kind == "outside":
         base = outside()
         n = 4
