@@ -1,6 +1,6 @@
 """The synthetic bridge: wind, aeroelastic force, structure, sensors, truth, campaigns."""
 
-from vivbench.synth.aero import amplitude_polynomials, exact_coefficients, modal_coefficients, order_contributions
+from vivbench.synth.aero import amplitude_coefficients, amplitude_polynomials, exact_coefficients, modal_coefficients, order_contributions
 from vivbench.synth.campaign import SCENARIOS, CampaignConfig, CampaignResult, campaign_specs, draw_script, generate_campaign
 from vivbench.synth.config import (
     AeroConfig,
@@ -20,7 +20,7 @@ from vivbench.synth.turbulence import TurbulenceConfig, davenport_coherence, kai
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
 
 __all__ = [
-    "AeroConfig", "CampaignConfig", "CampaignResult", "DefectConfig", "EventSpec", "GeneratorConfig",
+    "AeroConfig", "CampaignConfig", "amplitude_coefficients", "CampaignResult", "DefectConfig", "EventSpec", "GeneratorConfig",
     "MeanWind", "Polynomial", "SCENARIOS", "SensorConfig", "SimulatedEvent", "StructureConfig",
     "TurbulenceConfig", "WindConfig", "WindScript", "amplitude_polynomials", "anemometer_records",
     "bell_polynomial", "campaign_specs", "config_from_dict", "config_to_dict", "davenport_coherence",

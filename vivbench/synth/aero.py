@@ -24,6 +24,7 @@ from vivbench.terms import feature_exponents
 __all__ = [
     "modal_coefficients",
     "amplitude_polynomials",
+    "amplitude_coefficients",
     "order_contributions",
     "exact_coefficients",
 ]
@@ -92,6 +93,26 @@ def amplitude_polynomials(structure: StructureConfig, aero: AeroConfig) -> np.nd
     return out
 
 
+def amplitude_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConfig) -> np.ndarray:
+    """Coefficients p_i of the averaged amplitude equation Q' = sum_i p_i Q^i.
+
+    Parameters
+    ----------
+    U : ndarray, shape (n, 3), m/s
+
+    Returns
+    -------
+    p : ndarray, shape (n, 4)
+        Units m/s, 1/s, 1/(m s), 1/(m^2 s); p_1 includes the structural damping -zeta w.
+    """
+    U = np.asarray(U, dtype=float)
+    poly = amplitude_polynomials(structure, aero)
+    # every section's polynomial at its own wind speed, summed over the sections
+    coef = np.stack([sum(P.polyval(U[:, k], poly[k, i]) for k in range(poly.shape[0])) for i in range(4)], axis=1)
+    coef[:, 1] -= structure.damping_ratio * structure.omega
+    return coef
+
+
 def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig, aero: AeroConfig) -> np.ndarray:
     """Order contributions r_0..r_3 to dQ/dt of the averaged model.
 
@@ -108,13 +129,7 @@ def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig
         section k's contributions to dA_k/dt.
     """
     Q = np.asarray(Q, dtype=float)
-    U = np.asarray(U, dtype=float)
-    poly = amplitude_polynomials(structure, aero)
-    # (n, 3, 4): every section polynomial at its own wind speed
-    vals = np.stack([np.stack([P.polyval(U[:, k], poly[k, i]) for i in range(4)], axis=-1) for k in range(3)], axis=1)
-    coef = vals.sum(axis=1)  # (n, 4)
-    coef[:, 1] -= structure.damping_ratio * structure.omega
-    return coef * Q[:, None] ** np.arange(4)
+    return amplitude_coefficients(U, structure, aero) * Q[:, None] ** np.arange(4)
 
 
 def exact_coefficients(structure: StructureConfig, aero: AeroConfig) -> np.ndarray | None:

@@ -11,7 +11,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from vivbench.io import build_event
 from vivbench.regime import classify_regime
-from vivbench.synth.aero import amplitude_polynomials, exact_coefficients, modal_coefficients, order_contributions
+from vivbench.synth.aero import amplitude_coefficients, exact_coefficients, modal_coefficients, order_contributions
 from vivbench.synth.config import GeneratorConfig, config_to_dict
 from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
@@ -156,11 +156,8 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     n_sub = 5
     ht = config.truth_step / n_sub
     t_mid = ht * (np.arange((truth_time.size - 1) * n_sub) + 0.5)
-    poly = amplitude_polynomials(s, config.aero)
     U_mid = _interp_wind(mw, t_mid)
-    coefs = np.stack([sum(np.polynomial.polynomial.polyval(U_mid[:, k], poly[k, i]) for k in range(3))
-                      for i in range(4)], axis=1)
-    coefs[:, 1] -= s.damping_ratio * s.omega
+    coefs = amplitude_coefficients(U_mid, s, config.aero)
     Q = simulate_amplitude(config.initial_amplitude, coefs, ht)[::n_sub]
     if not np.all(Q > 0):
         bad = float(np.min(U_mid[np.argmax(coefs[:, 0] < 0)])) if np.any(coefs[:, 0] < 0) else float("nan")
