@@ -34,6 +34,7 @@ import os
 import re
 import secrets
 from collections.abc import Mapping, Sequence
+from contextlib import contextmanager
 from datetime import datetime, timedelta
 from pathlib import Path
 
@@ -54,6 +55,7 @@ __all__ = [
     "event_arrays",
     "list_events",
     "write_netcdf_atomic",
+    "atomic_path",
 ]
 
 FORMAT = "vivbench-event"
@@ -582,18 +584,21 @@ def write_event(tree: xr.DataTree, path) -> Path:
     return write_netcdf_atomic(tree, path)
 
 
-def write_netcdf_atomic(data: xr.Dataset | xr.DataTree, path) -> Path:
-    """Write a Dataset or DataTree as NetCDF-4 atomically (temporary file, fsync, rename).
+@contextmanager
+def atomic_path(path, suffix: str = ""):
+    """Yield a temporary path beside ``path``; on success it replaces ``path``.
 
-    Used for event files and for results (``*.identify.nc``); on any failure
-    the temporary file is removed and an existing file at ``path`` is untouched.
+    The temporary file is fsynced before the rename and the directory after
+    it; on any failure it is removed and an existing file at ``path`` is
+    untouched. Its name starts with a dot and does not end in ``.nc``, so
+    globbing for event files never sees it. ``suffix`` keeps writers that
+    choose a format by extension (matplotlib) happy.
     """
     path = Path(path)
-    tree = data if isinstance(data, xr.DataTree) else xr.DataTree(dataset=data)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}"
+    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}{suffix}"
     try:
-        tree.to_netcdf(tmp, mode="w", engine="h5netcdf", encoding=_encoding(tree))
+        yield tmp
         fd = os.open(tmp, os.O_RDONLY)
         try:
             os.fsync(fd)
@@ -604,6 +609,17 @@ def write_netcdf_atomic(data: xr.Dataset | xr.DataTree, path) -> Path:
         tmp.unlink(missing_ok=True)
         raise
     _fsync_directory(path.parent)
+
+
+def write_netcdf_atomic(data: xr.Dataset | xr.DataTree, path) -> Path:
+    """Write a Dataset or DataTree as NetCDF-4 atomically (see :func:`atomic_path`).
+
+    Used for event files and for results (``*.identify.nc``).
+    """
+    path = Path(path)
+    tree = data if isinstance(data, xr.DataTree) else xr.DataTree(dataset=data)
+    with atomic_path(path) as tmp:
+        tree.to_netcdf(tmp, mode="w", engine="h5netcdf", encoding=_encoding(tree))
     return path
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
@@ -11,6 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
+
+from vivbench.io import atomic_path  # noqa: E402
 
 __all__ = ["event_figure"]
 
@@ -74,14 +75,10 @@ def event_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2") ->
         ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, ncol=1, frameon=False)
     axes[-1].set_xlabel("time since event start (min)")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}.png")
     try:
-        # A fixed creation date keeps the PNG bytes deterministic.
-        fig.savefig(tmp, dpi=110, metadata={"Software": None})
-        os.replace(tmp, path)
+        with atomic_path(path, suffix=".png") as tmp:
+            # No software tag or date in the PNG: the same event gives the same bytes.
+            fig.savefig(tmp, dpi=110, metadata={"Software": None})
     finally:
         plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()
     return path

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import io as _io
-import os
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -17,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vivbench.io import write_event
+from vivbench.io import atomic_path, write_event
 from vivbench.synth.config import GeneratorConfig
 from vivbench.synth.event import EventSpec, generate_event
 from vivbench.synth.wind import WindScript
@@ -173,19 +172,6 @@ def _make_one(spec: EventSpec, seed: np.random.SeedSequence, generator: Generato
     return _catalogue_row(spec, Path(path), tree)
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        with open(tmp, "w", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
 def generate_campaign(campaign: CampaignConfig, out_dir: str | Path, *, workers: int = 1,
                       progress: Callable[[str], None] | None = None) -> CampaignResult:
     """Generate and write every event of a campaign, and ``catalogue.csv`` beside them.
@@ -235,6 +221,7 @@ def generate_campaign(campaign: CampaignConfig, out_dir: str | Path, *, workers:
         writer.writeheader()
         writer.writerows(ordered)
     catalogue = out / "catalogue.csv"
-    _write_text_atomic(catalogue, buf.getvalue())
+    with atomic_path(catalogue) as tmp:
+        tmp.write_text(buf.getvalue())
     files = [out / r["file"] for r in ordered]
     return CampaignResult(files=files, catalogue=catalogue, failures=failures)
