@@ -2,6 +2,7 @@
 
 from vivbench.identify.derivative import DERIVATIVE_METHODS, Derivative, TVDerivativeResult, estimate_noise_std, tv_derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, SOLVERS, StlsqPath, StlsqSettings, WindowedSINDy, aicc, stlsq_path, window_bounds
+from vivbench.identify.forecast import Simulation, forecast, forecast_coefficients, forecast_table, nmse, simulate_identified, window_in_force
 from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, result_path
@@ -27,4 +28,5 @@ __all__ = [
     "identify_event", "identify_files", "library_cond", "mean_wind", "modal_frequency", "order_contributions_basis",
     "perpendicular_speed", "preprocess_arrays", "result_path", "segments", "stlsq_path", "to_grid", "tv_derivative",
     "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
+    "Simulation", "forecast", "forecast_coefficients", "forecast_table", "nmse", "simulate_identified", "window_in_force",
 ]
