@@ -1,5 +1,6 @@
 """The identification chain: preprocessing, derivatives, library, windowed SINDy, regimes."""
 
+from vivbench.identify.clustering import KERNELS, DensityPeaks, coefficient_features, decision_graph, order_features
 from vivbench.identify.derivative import DERIVATIVE_METHODS, Derivative, TVDerivativeResult, estimate_noise_std, tv_derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, SOLVERS, StlsqPath, StlsqSettings, WindowedSINDy, aicc, stlsq_path, window_bounds
 from vivbench.identify.forecast import Simulation, forecast, forecast_coefficients, forecast_table, nmse, simulate_identified, window_in_force
@@ -28,5 +29,6 @@ __all__ = [
     "identify_event", "identify_files", "library_cond", "mean_wind", "modal_frequency", "order_contributions_basis",
     "perpendicular_speed", "preprocess_arrays", "result_path", "segments", "stlsq_path", "to_grid", "tv_derivative",
     "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
+    "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features",
     "Simulation", "forecast", "forecast_coefficients", "forecast_table", "nmse", "simulate_identified", "window_in_force",
 ]
