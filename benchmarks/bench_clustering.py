@@ -15,7 +15,11 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import time  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_timing.py
+from _timing import best_of  # noqa: E402
 
 import numpy as np  # noqa: E402
 from sklearn.metrics import adjusted_rand_score  # noqa: E402
@@ -33,13 +37,6 @@ def _blobs(seed: int = 0):
     return X, np.repeat(np.arange(K), N_PER)
 
 
-def _best_of(fn, repeats: int = 3):
-    best, out = np.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def main() -> dict:
@@ -52,9 +49,9 @@ def main() -> dict:
         clu.assign(min_density=0.0, min_delta=np.sort(clu.delta)[-K - 1] * (1 + 1e-12))
         return clu
 
-    t_ref, ref = _best_of(run_ref)
-    t_ours, ours = _best_of(lambda: DensityPeaks(kernel="gaussian", neighbor_fraction=FRACTION, n_centers=K).fit(X))
-    t_auto, auto = _best_of(lambda: DensityPeaks(kernel="cutoff", neighbor_fraction=FRACTION).fit(X))
+    t_ref, ref = best_of(run_ref)
+    t_ours, ours = best_of(lambda: DensityPeaks(kernel="gaussian", neighbor_fraction=FRACTION, n_centers=K).fit(X))
+    t_auto, auto = best_of(lambda: DensityPeaks(kernel="cutoff", neighbor_fraction=FRACTION).fit(X))
 
     same_centres = bool(np.array_equal(np.sort(ours.centers_), np.sort(ref.clusters)))
     res = {

@@ -26,7 +26,11 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import time  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_timing.py
+from _timing import best_of  # noqa: E402
 import warnings  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -94,13 +98,6 @@ def _reference(x: np.ndarray, gamma: float, iterations: int) -> np.ndarray:
     return out.reshape(x.shape)
 
 
-def _best_time(fn, repeats: int) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def main(seed: int = 20190101, ref_repeats: int = 1, our_repeats: int = 5) -> dict:
@@ -129,9 +126,9 @@ def main(seed: int = 20190101, ref_repeats: int = 1, our_repeats: int = 5) -> di
         err_default = _rel_rms(Derivative().differentiate(x, t), truth, inner)
         err_ref = _rel_rms(_reference(x, *ref_best), truth, inner)
         err_fd = _rel_rms(np.gradient(x, DT, axis=0), truth, inner)
-        t_ours = _best_time(lambda: _ours(x, t, *ours_best), our_repeats)
-        t_exact = _best_time(lambda: _ours(x, t, *exact_best), our_repeats)
-        t_ref = _best_time(lambda: _reference(x, *ref_best), ref_repeats)
+        t_ours, _ = best_of(lambda: _ours(x, t, *ours_best), our_repeats)
+        t_exact, _ = best_of(lambda: _ours(x, t, *exact_best), our_repeats)
+        t_ref, _ = best_of(lambda: _reference(x, *ref_best), ref_repeats)
         rows.append(
             {
                 "event": name,

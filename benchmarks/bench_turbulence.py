@@ -22,7 +22,11 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
-import time  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_timing.py
+from _timing import best_of  # noqa: E402
 import warnings  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -37,13 +41,6 @@ SEED = 2024
 NF_CHUNKS = (1024, 4096, 16384, 57601)  # 57601 = all frequencies of 1 h at 32 Hz in one chunk
 
 
-def _best_time(func, repeats: int) -> tuple[float, object]:
-    best, result = np.inf, None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        result = func()
-        best = min(best, time.perf_counter() - t0)
-    return best, result
 
 
 def _pyconturb_runner(config: TurbulenceConfig, nf_chunk: int):
@@ -93,14 +90,14 @@ def main(repeats: int = 3, nf_chunks: tuple[int, ...] = NF_CHUNKS) -> dict:
         return lambda: simulate_turbulence(POSITIONS, MEAN_SPEED, DURATION, FS, cfg, np.random.default_rng(SEED))
 
     ours(True)()  # warm-up (imports, FFT plans)
-    t_ours, x_ours = _best_time(ours(True), max(10, repeats))
-    t_single, x_single = _best_time(ours(False), max(10, repeats))
+    t_ours, x_ours = best_of(ours(True), max(10, repeats))
+    t_single, x_single = best_of(ours(False), max(10, repeats))
 
     scan = {}
     for nf_chunk in nf_chunks:
-        scan[nf_chunk], _ = _best_time(_pyconturb_runner(config, nf_chunk), 1)
+        scan[nf_chunk], _ = best_of(_pyconturb_runner(config, nf_chunk), 1)
     best_chunk = min(scan, key=scan.get)
-    t_pct, x_pct = _best_time(_pyconturb_runner(config, best_chunk), repeats)
+    t_pct, x_pct = best_of(_pyconturb_runner(config, best_chunk), repeats)
 
     def sigma_error(x: np.ndarray) -> np.ndarray:
         return x.std(axis=0) / target - 1.0  # (n_points, 3)
