@@ -1,0 +1,5 @@
+import sys
+
+from vivbench.cli import main
+
+sys.exit(main())

@@ -1,0 +1,47 @@
+"""Helpers shared by the subcommands: argument types, progress bars, event paths."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+DEFAULT_WORKERS = min(2, os.cpu_count() or 1)
+
+
+def duration(text: str) -> tuple[float, float]:
+    """'40' or '20-60' (minutes) -> (min, max) seconds."""
+    try:
+        parts = [float(p) for p in text.split("-")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"duration must be MINUTES or MIN-MAX minutes, e.g. 40 or 20-60; got {text!r}") from None
+    if len(parts) == 1:
+        parts = parts * 2
+    if len(parts) != 2 or parts[0] <= 0 or parts[1] < parts[0]:
+        raise argparse.ArgumentTypeError(f"duration must be MINUTES or MIN-MAX minutes with 0 < MIN <= MAX; got {text!r}")
+    return parts[0] * 60.0, parts[1] * 60.0
+
+
+def progress(total: int, desc: str, unit: str = "event"):
+    """A tqdm bar on stderr (silent when stderr is not a terminal and tqdm decides so)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=None)
+
+
+def event_paths(inputs: list[str]) -> list[Path]:
+    """Expand campaign directories into their event files; keep files as given."""
+    from vivbench.io import list_events
+
+    paths: list[Path] = []
+    for item in inputs:
+        p = Path(item)
+        if p.is_dir():
+            found = list_events(p)
+            if not found:
+                raise ValueError(f"{p}: no event files (<event_id>.nc) in this directory")
+            paths.extend(found)
+        else:
+            paths.append(p)
+    return paths

@@ -1,0 +1,20 @@
+"""``vivbench plot-event``: overview figure of one event file."""
+
+from __future__ import annotations
+
+
+def run(args) -> int:
+    from vivbench.io import read_event
+    from vivbench.report import event_figure
+
+    out = event_figure(read_event(args.event), args.out, section=args.section)
+    print(f"wrote {out}")
+    return 0
+
+
+def register(sub) -> None:
+    s = sub.add_parser("plot-event", help="overview figure of one event file")
+    s.add_argument("event", help="event file (.nc)")
+    s.add_argument("--out", required=True, help="output PNG")
+    s.add_argument("--section", default="S2", choices=("S1", "S2", "S3"))
+    s.set_defaults(func=run)

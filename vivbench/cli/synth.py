@@ -1,0 +1,35 @@
+"""``vivbench synth``: generate a synthetic campaign."""
+
+from __future__ import annotations
+
+import sys
+
+from vivbench.cli._common import DEFAULT_WORKERS, duration, progress
+
+
+def run(args) -> int:
+    from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign, load_config
+
+    generator = load_config(args.config) if args.config else GeneratorConfig()
+    campaign = CampaignConfig(n_events=args.events, seed=args.seed, duration=args.duration, generator=generator)
+    bar = progress(campaign.n_events, "synth")
+    try:
+        result = generate_campaign(campaign, args.out, workers=args.workers, progress=lambda _id: bar.update())
+    finally:
+        bar.close()
+    for event_id, message in sorted(result.failures.items()):
+        print(f"vivbench synth: {event_id}: {message}", file=sys.stderr)
+    print(f"wrote {len(result.files)} events and {result.catalogue}")
+    return 1 if result.failures else 0
+
+
+def register(sub) -> None:
+    s = sub.add_parser("synth", help="generate a synthetic campaign (event files + catalogue.csv)")
+    s.add_argument("--events", type=int, default=31, help="number of events (default 31)")
+    s.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--duration", type=duration, default=(1200.0, 3600.0),
+                   help="event duration in minutes: N or MIN-MAX (default 20-60)")
+    s.add_argument("--config", help="generator configuration (TOML); defaults otherwise")
+    s.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help="worker processes (files do not depend on it)")
+    s.set_defaults(func=run)
