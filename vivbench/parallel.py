@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+import logging
 from dataclasses import dataclass
 from typing import Any
 
@@ -57,7 +58,8 @@ def _local_processes(func, tasks, workers) -> Iterator[Outcome]:
             except Exception as exc:  # one failing task must not sink the others
                 yield Outcome(i, error=_one_line(exc))
         return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers)
+    try:
         futures = {pool.submit(func, task): i for i, task in enumerate(tasks)}
         for fut in as_completed(futures):
             i = futures[fut]
@@ -65,6 +67,22 @@ def _local_processes(func, tasks, workers) -> Iterator[Outcome]:
                 yield Outcome(i, value=fut.result())
             except Exception as exc:
                 yield Outcome(i, error=_one_line(exc))
+    finally:
+        # A consumer that stops early (an interrupt, a closed generator) must not
+        # wait for the queued tasks to run: cancel them, let the running ones end.
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _guarded(func, task):
+    """Run on a dask worker: a task's exception comes back as a value.
+
+    The worker would otherwise log every failing task with its traceback
+    ("Compute Failed") to its stderr; failures are reported once, as Outcomes.
+    """
+    try:
+        return True, func(task)
+    except Exception as exc:
+        return False, _one_line(exc)
 
 
 def _dask(func, tasks, kind, arg) -> Iterator[Outcome]:
@@ -73,24 +91,31 @@ def _dask(func, tasks, kind, arg) -> Iterator[Outcome]:
     except ImportError as exc:  # pragma: no cover - dask is in the test extra
         raise ValueError("dask.distributed is not installed: pip install 'vivbench[dask]'") from exc
     cluster = None
+    futures = []
     if kind == "local":
         # Worker processes with one thread each, on loopback, so nothing leaves the machine.
         cluster = LocalCluster(n_workers=arg, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None)
+                               dashboard_address=None, silence_logs=logging.CRITICAL)
         client = Client(cluster)
     else:
         client = Client(arg, timeout="10s")
     try:
-        futures = [client.submit(func, task, pure=False) for task in tasks]
+        futures = [client.submit(_guarded, func, task, pure=False) for task in tasks]
         index = {f.key: i for i, f in enumerate(futures)}
         for fut in dask_completed(futures):
             i = index[fut.key]
             try:
-                yield Outcome(i, value=fut.result())
-            except Exception as exc:
+                ok, value = fut.result()
+            except Exception as exc:  # the task never ran to an answer (e.g. its worker died)
                 yield Outcome(i, error=_one_line(exc))
+            else:
+                yield Outcome(i, value=value) if ok else Outcome(i, error=value)
             fut.release()
     finally:
+        # On an early stop the scheduler must not run what nobody will collect.
+        pending = [f for f in futures if not f.done()]
+        if pending:
+            client.cancel(pending)
         client.close()
         if cluster is not None:
             cluster.close()

@@ -1,0 +1,98 @@
+"""The journal of a sweep: one JSON line per finished task, and the table rebuilt from it.
+
+Lines are appended and flushed to disk as tasks finish, so a sweep killed at
+any moment leaves every finished task on disk and at most one half-written
+last line. On start the journal is read back: lines that are not complete,
+valid records (the half-written line of a kill, anything corrupt) and failed
+tasks are dropped, and the journal is rewritten without them before anything
+is appended, so a new line never continues a broken one.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from vivbench.io import atomic_path
+
+__all__ = ["load", "append", "write_table", "format_value"]
+
+
+def _valid(record: Any, n_tasks: int, columns) -> bool:
+    if not isinstance(record, dict) or record.get("ok") not in (True, False):
+        return False
+    task_id = record.get("task_id")
+    if isinstance(task_id, bool) or not isinstance(task_id, int) or not 0 <= task_id < n_tasks:
+        return False
+    row = record.get("row")
+    return isinstance(row, dict) and set(columns) <= set(row) and row.get("task_id") == task_id
+
+
+def load(path: Path, *, n_tasks: int, columns) -> tuple[dict[int, dict], int]:
+    """Finished tasks of a journal, repairing it on disk when needed.
+
+    Returns
+    -------
+    rows : task id -> table row, for the tasks that finished without error
+    dropped : number of corrupt or half-written lines dropped
+    """
+    if not path.exists():
+        return {}, 0
+    data = path.read_bytes()
+    lines = data.split(b"\n")
+    # Everything after the last newline is a line the writer did not finish.
+    complete, tail = lines[:-1], lines[-1]
+    dropped = 1 if tail.strip() else 0
+    rows: dict[int, dict] = {}
+    keep: list[bytes] = []
+    for line in complete:
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            dropped += 1
+            continue
+        if not _valid(record, n_tasks, columns):
+            dropped += 1
+            continue
+        if record["ok"] and record["task_id"] not in rows:
+            rows[record["task_id"]] = record["row"]
+            keep.append(line)
+    if len(keep) != len(complete) or tail:
+        # Failed tasks are retried, so their lines go too; rewrite before appending.
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(b"".join(line + b"\n" for line in keep))
+    return rows, dropped
+
+
+def append(path: Path, task_id: int, ok: bool, row: dict) -> None:
+    """Append one record and push it to disk before returning."""
+    line = json.dumps({"task_id": task_id, "ok": ok, "row": row}, sort_keys=True, allow_nan=True) + "\n"
+    with path.open("a", encoding="utf-8") as fh:
+        fh.write(line)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def format_value(value: Any) -> str:
+    """Table text of a value: floats to 6 significant digits (NaN as ``nan``), the rest as is."""
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else format(value, ".6g")
+    return str(value)
+
+
+def write_table(path: Path, rows: dict[int, dict], columns) -> None:
+    """Write the rows sorted by task id as CSV, atomically."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(columns)
+    for task_id in sorted(rows):
+        writer.writerow([format_value(rows[task_id].get(c, "")) for c in columns])
+    with atomic_path(path) as tmp:
+        tmp.write_text(buf.getvalue(), encoding="utf-8")

@@ -1,0 +1,669 @@
+"""Monte-Carlo recovery sweeps: many synthetic campaigns, each generated, identified and scored.
+
+A sweep varies the measurement noise, the turbulence and structural or
+aerodynamic parameters of the synthetic bridge over a grid (every combination)
+and/or ranges (drawn per campaign), and records for every campaign how well
+the identification chain recovers the truth (:func:`campaign_recovery`).
+
+One task is one campaign. Its seeds are fixed by the sweep configuration
+alone (``numpy.random.SeedSequence``), so a task gives the same numbers
+wherever and in whatever order it runs: in this process, in local worker
+processes or on a dask cluster (:func:`vivbench.parallel.run_tasks`).
+Replicate ``r`` uses the same campaign seed at every grid point (common random
+numbers): the wind scripts and noise draws are paired across grid points, so
+differences between points come from the parameters, not from the draws.
+
+Results are journalled (``OUT/sweep.jsonl``, one line per finished task,
+flushed to disk) and ``OUT/sweep.csv`` is rebuilt from the journal, sorted by
+task id, after each task: a sweep stopped part-way (Ctrl-C, a kill, a crash)
+resumes where it stopped, and a half-written last line is dropped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import json
+import math
+import shutil
+import tempfile
+from collections.abc import Callable
+from contextlib import closing, contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vivbench.identify.derivative import Derivative
+from vivbench.identify.pipeline import IdentifyConfig, identify_files
+from vivbench.identify.preprocess import PreprocessConfig
+from vivbench.io import atomic_path
+from vivbench.parallel import parse_scheduler, run_tasks
+from vivbench.synth.campaign import CampaignConfig, generate_campaign
+from vivbench.synth.config import GeneratorConfig, Polynomial, config_from_dict, config_to_dict
+from vivbench.validate import _journal
+from vivbench.validate.recovery import campaign_recovery
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+__all__ = [
+    "SWEEP_PARAMETERS",
+    "METRIC_COLUMNS",
+    "SweepConfig",
+    "SweepTask",
+    "SweepResult",
+    "load_sweep_config",
+    "sweep_config_from_dict",
+    "sweep_tasks",
+    "run_sweep_task",
+    "run_sweep",
+]
+
+
+# ----------------------------------------------------------------- parameters
+
+
+def _y1_peak(gen: GeneratorConfig) -> float:
+    """Peak of a bell-shaped (downward quadratic) Y1(U); NaN for any other form."""
+    c = gen.aero.Y1.coefficients
+    if len(c) != 3 or not c[2] < 0:
+        return float("nan")
+    return float(c[0] - c[1] ** 2 / (4.0 * c[2]))
+
+
+def _set_y1_peak(gen: GeneratorConfig, value: float) -> GeneratorConfig:
+    peak = _y1_peak(gen)
+    if not peak > 0:
+        raise ValueError("y1_peak needs the base generator's aero.Y1 to be a bell (a quadratic in U with a positive "
+                         f"peak); got coefficients {gen.aero.Y1.coefficients}")
+    if not value >= 0:
+        raise ValueError(f"y1_peak must be >= 0 (the height of the Y1 bell; 0 removes self-excitation); got {value}")
+    # Scaling the whole bell keeps its centre and its zero crossings (the lock-in range).
+    y1 = Polynomial(coefficients=tuple(value / peak * c for c in gen.aero.Y1.coefficients))
+    return dataclasses.replace(gen, aero=dataclasses.replace(gen.aero, Y1=y1))
+
+
+@dataclass(frozen=True)
+class _Parameter:
+    description: str
+    axis_label: str
+    read: Callable[[GeneratorConfig], float]
+    apply: Callable[[GeneratorConfig, float], GeneratorConfig]
+
+
+def _replace_in(section: str, name: str):
+    def apply(gen: GeneratorConfig, value: float) -> GeneratorConfig:
+        sub = dataclasses.replace(getattr(gen, section), **{name: value})
+        return dataclasses.replace(gen, **{section: sub})
+    return apply
+
+
+def _set_turbulence(gen: GeneratorConfig, value: float) -> GeneratorConfig:
+    turb = dataclasses.replace(gen.wind.turbulence, intensity=value)
+    return dataclasses.replace(gen, wind=dataclasses.replace(gen.wind, turbulence=turb))
+
+
+_PARAMETERS: dict[str, _Parameter] = {
+    "noise_density": _Parameter(
+        "accelerometer noise floor, micro-g/sqrt(Hz) (sensors.noise_density)",
+        "accelerometer noise floor (µg/√Hz)",
+        lambda g: g.sensors.noise_density, _replace_in("sensors", "noise_density")),
+    "anemometer_noise": _Parameter(
+        "anemometer rms error relative to the wind speed, 1 (wind.noise)",
+        "anemometer rms error (fraction of wind speed)",
+        lambda g: g.wind.noise, _replace_in("wind", "noise")),
+    "turbulence_intensity": _Parameter(
+        "longitudinal turbulence intensity sigma_u / U, 1 (wind.turbulence.intensity)",
+        "turbulence intensity σ_u/U (-)",
+        lambda g: g.wind.turbulence.intensity, _set_turbulence),
+    "damping_ratio": _Parameter(
+        "structural damping ratio zeta, 1 (structure.damping_ratio)",
+        "structural damping ratio ζ (-)",
+        lambda g: g.structure.damping_ratio, _replace_in("structure", "damping_ratio")),
+    "y1_peak": _Parameter(
+        "peak of the bell-shaped aerodynamic damping derivative Y1(U), 1 (aero.Y1 scaled as a whole)",
+        "peak of Y1(U) (-)",
+        _y1_peak, _set_y1_peak),
+}
+
+#: Parameters a sweep can vary: name -> what it sets, with its unit.
+SWEEP_PARAMETERS: dict[str, str] = {name: p.description for name, p in _PARAMETERS.items()}
+
+#: Per-campaign metrics of the sweep table (see :func:`campaign_recovery`).
+METRIC_COLUMNS = (
+    "events_failed",
+    "n_window_equations",
+    "coverage",
+    "accuracy_all",
+    "accuracy_identifiable",
+    "accuracy_not_identifiable",
+    "truth_majority_share",
+    "rhs_median_rel_error",
+    "rhs_median_rel_error_active",
+    "active_share",
+    "truth_share_regime1",
+    "truth_share_regime2",
+    "truth_share_regime3",
+    "truth_share_regime4",
+)
+_ID_COLUMNS = ("task_id", "point", "replicate", "campaign_seed", "n_events")
+COLUMNS = (*_ID_COLUMNS, *_PARAMETERS, *METRIC_COLUMNS, "error")
+
+
+def _number(value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{what} must be a number; got {value!r}")
+    out = float(value)
+    if not math.isfinite(out):
+        raise ValueError(f"{what} must be finite; got {value!r}")
+    return out
+
+
+def _apply(gen: GeneratorConfig, values: dict[str, float], where: str) -> GeneratorConfig:
+    for name, value in values.items():
+        try:
+            gen = _PARAMETERS[name].apply(gen, value)
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{where} {name} = {value!r}: {exc}") from None
+    return gen
+
+
+# --------------------------------------------------------------------- config
+
+
+@dataclass(frozen=True, kw_only=True)
+class SweepConfig:
+    """A Monte-Carlo recovery sweep.
+
+    Attributes
+    ----------
+    seed : base seed of the sweep (campaign seeds and range draws derive from it)
+    n_campaigns : campaigns (replicates) per grid point; default 1, or ``len(seeds)``
+    seeds : explicit campaign seeds, one per replicate (instead of deriving them from ``seed``)
+    n_events : events per campaign
+    duration : (min, max) event duration, s
+    grid : parameter -> values; every combination is a grid point (``SWEEP_PARAMETERS``)
+    ranges : parameter -> (low, high); each campaign draws a value uniformly from its own stream
+    generator : base generator configuration that the grid and ranges modify
+    identify : identification settings
+    """
+
+    seed: int = 0
+    n_campaigns: int | None = None
+    seeds: tuple[int, ...] | None = None
+    n_events: int = 2
+    duration: tuple[float, float] = (1200.0, 1200.0)
+    grid: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    ranges: tuple[tuple[str, tuple[float, float]], ...] = ()
+    generator: GeneratorConfig = field(default_factory=GeneratorConfig)
+    identify: IdentifyConfig = field(default_factory=IdentifyConfig)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer; got {self.seed!r}")
+        if self.seeds is not None:
+            seeds = tuple(self.seeds)
+            if not seeds or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0 for s in seeds):
+                raise ValueError(f"seeds must be a non-empty list of non-negative integers; got {self.seeds!r}")
+            if len(set(seeds)) != len(seeds):
+                raise ValueError(f"seeds must be distinct (a repeated seed repeats a campaign); got {list(seeds)}")
+            if self.n_campaigns is not None and self.n_campaigns != len(seeds):
+                raise ValueError(f"n_campaigns ({self.n_campaigns}) disagrees with the {len(seeds)} seeds given; "
+                                 "give one of them")
+            object.__setattr__(self, "seeds", tuple(int(s) for s in seeds))
+            object.__setattr__(self, "n_campaigns", len(seeds))
+        elif self.n_campaigns is None:
+            object.__setattr__(self, "n_campaigns", 1)
+        n = self.n_campaigns
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 100000:
+            raise ValueError(f"n_campaigns (campaigns per grid point) must be an integer in 1..100000; got {n!r}")
+        # The campaign's own checks give the messages for n_events and duration.
+        CampaignConfig(n_events=self.n_events, seed=0, duration=self.duration)
+        object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
+        for name in ("generator", "identify"):
+            expected = GeneratorConfig if name == "generator" else IdentifyConfig
+            if not isinstance(getattr(self, name), expected):
+                raise ValueError(f"{name} must be a {expected.__name__}; got {type(getattr(self, name)).__name__}")
+        object.__setattr__(self, "grid", self._axes(self.grid, "grid"))
+        object.__setattr__(self, "ranges", self._axes(self.ranges, "ranges"))
+        both = set(dict(self.grid)) & set(dict(self.ranges))
+        if both:
+            raise ValueError(f"{sorted(both)} in both [grid] and [ranges]; a parameter is either a grid axis or a range")
+        if self.n_tasks > 100000:
+            raise ValueError(f"the sweep has {self.n_tasks} campaigns (grid points x n_campaigns); at most 100000")
+        self._check_values()
+        self._check_duration()
+
+    @staticmethod
+    def _axes(axes, kind: str) -> tuple:
+        items = axes.items() if isinstance(axes, dict) else axes
+        out = []
+        for item in items:
+            try:
+                name, values = item
+            except (TypeError, ValueError):
+                raise ValueError(f"[{kind}] must map parameter names to values; got {item!r}") from None
+            if name not in _PARAMETERS:
+                raise ValueError(f"[{kind}] unknown parameter {name!r}; allowed: {', '.join(_PARAMETERS)}")
+            if isinstance(values, (str, bytes)) or not hasattr(values, "__len__"):
+                raise ValueError(f"[{kind}] {name} must be a list of numbers; got {values!r}")
+            vals = tuple(_number(v, f"[{kind}] {name} value") for v in values)
+            if kind == "grid":
+                if not vals:
+                    raise ValueError(f"[grid] {name} needs at least one value")
+                if len(set(vals)) != len(vals):
+                    raise ValueError(f"[grid] {name} values must be distinct; got {list(vals)}")
+            elif len(vals) != 2 or not vals[0] <= vals[1]:
+                raise ValueError(f"[ranges] {name} must be [low, high] with low <= high; got {list(vals)}")
+            out.append((name, vals))
+        return tuple(out)
+
+    def _check_values(self) -> None:
+        for name, values in self.grid:
+            for v in values:
+                _apply(self.generator, {name: v}, "[grid]")
+        for name, (lo, hi) in self.ranges:
+            for v in (lo, hi):
+                _apply(self.generator, {name: v}, "[ranges]")
+
+    def _check_duration(self) -> None:
+        pre = self.identify.preprocess
+        f_mode = pre.modal_frequency_hz or self.generator.structure.frequency
+        edge = pre.settling_s(f_mode)
+        need = 2.0 * edge + max(self.identify.window, pre.min_segment_s)
+        if not self.duration[0] > need:
+            raise ValueError(f"duration: events of {self.duration[0]:g} s hold no identification window once "
+                             f"{edge:g} s are dropped at each end; the shortest event must be longer than {need:g} s")
+
+    @property
+    def n_points(self) -> int:
+        """Number of grid points (1 without a grid)."""
+        return int(np.prod([len(v) for _, v in self.grid], dtype=np.int64)) if self.grid else 1
+
+    @property
+    def n_tasks(self) -> int:
+        """Number of campaigns in the sweep."""
+        return self.n_points * int(self.n_campaigns)
+
+    @property
+    def varied(self) -> tuple[str, ...]:
+        """Parameters that take more than one value, in registry order."""
+        names = {n for n, v in self.grid if len(v) > 1} | {n for n, (lo, hi) in self.ranges if hi > lo}
+        return tuple(n for n in _PARAMETERS if n in names)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-data form (JSON-ready); its hash identifies the sweep in its output directory."""
+        return {
+            "seed": int(self.seed),
+            "n_campaigns": int(self.n_campaigns),
+            "seeds": list(self.seeds) if self.seeds is not None else None,
+            "n_events": int(self.n_events),
+            "duration": list(self.duration),
+            "grid": [[name, list(values)] for name, values in self.grid],
+            "ranges": [[name, list(values)] for name, values in self.ranges],
+            "generator": config_to_dict(self.generator),
+            "identify": json.loads(self.identify.to_json()),
+        }
+
+    def fingerprint(self) -> str:
+        """SHA-256 of :meth:`to_dict` (canonical JSON)."""
+        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()
+
+
+_TOP_KEYS = ("seed", "n_campaigns", "seeds", "n_events", "duration", "grid", "ranges", "generator", "identify")
+_IDENTIFY_KEYS = ("window", "step", "alpha", "scaling", "tau", "aicc_margin", "fit_tolerance", "thresholds",
+                  "derivative", "preprocess")
+
+
+def _identify_from_dict(data: dict) -> IdentifyConfig:
+    if not isinstance(data, dict):
+        raise ValueError(f"[identify] must be a table; got {data!r}")
+    unknown = set(data) - set(_IDENTIFY_KEYS)
+    if unknown:
+        raise ValueError(f"unknown keys {sorted(unknown)} in [identify]; allowed: {', '.join(_IDENTIFY_KEYS)}")
+    kwargs = dict(data)
+    if "derivative" in kwargs:
+        d = kwargs["derivative"]
+        kwargs["derivative"] = Derivative(method=d) if isinstance(d, str) else Derivative(**d)
+    if "preprocess" in kwargs:
+        p = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs["preprocess"].items()}
+        kwargs["preprocess"] = PreprocessConfig(**p)
+    return IdentifyConfig(**kwargs)
+
+
+def sweep_config_from_dict(data: dict[str, Any]) -> SweepConfig:
+    """A :class:`SweepConfig` from plain data (the TOML layout of :func:`load_sweep_config`)."""
+    if not isinstance(data, dict):
+        raise ValueError(f"a sweep configuration is a table; got {type(data).__name__}")
+    unknown = set(data) - set(_TOP_KEYS)
+    if unknown:
+        raise ValueError(f"unknown keys {sorted(unknown)}; allowed: {', '.join(_TOP_KEYS)}")
+    kwargs = {k: v for k, v in data.items() if k not in ("generator", "identify", "grid", "ranges")}
+    for key in ("grid", "ranges"):
+        if key in data:
+            if not isinstance(data[key], dict):
+                raise ValueError(f"[{key}] must be a table of parameter = [values]; got {data[key]!r}")
+            kwargs[key] = tuple(data[key].items())
+    if "duration" in kwargs:
+        d = kwargs["duration"]
+        if isinstance(d, (int, float)) and not isinstance(d, bool):
+            d = (d, d)
+        if not isinstance(d, (list, tuple)) or len(d) != 2:
+            raise ValueError(f"duration must be [min, max] seconds (or one number); got {kwargs['duration']!r}")
+        kwargs["duration"] = tuple(_number(x, "duration") for x in d)
+    if "seeds" in kwargs and not isinstance(kwargs["seeds"], (list, tuple)):
+        raise ValueError(f"seeds must be a list of non-negative integers; got {kwargs['seeds']!r}")
+    try:
+        if "generator" in data:
+            if not isinstance(data["generator"], dict):
+                raise ValueError("[generator] must be a table")
+            kwargs["generator"] = config_from_dict(data["generator"])
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"[generator]: {exc}") from None
+    try:
+        if "identify" in data:
+            kwargs["identify"] = _identify_from_dict(data["identify"])
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"[identify]: {exc}") from None
+    return SweepConfig(**kwargs)
+
+
+def load_sweep_config(path: str | Path) -> SweepConfig:
+    """Read a sweep from TOML; errors name the file.
+
+    Layout (every key optional)::
+
+        seed = 0                      # base seed
+        n_campaigns = 2               # campaigns per grid point (or seeds = [3, 7])
+        n_events = 2                  # events per campaign
+        duration = [240.0, 240.0]     # event duration (min, max), s
+        [grid]                        # every combination is a grid point
+        noise_density = [30.0, 300.0]
+        [ranges]                      # drawn per campaign, uniformly
+        turbulence_intensity = [0.04, 0.12]
+        [identify]                    # IdentifyConfig: window, step, alpha, derivative = "tv", [identify.preprocess] ...
+        window = 50.0
+        [generator]                   # base generator configuration, as `vivbench synth --config`
+        integration_step = 0.02
+
+    Parameters of ``[grid]`` and ``[ranges]``: see ``SWEEP_PARAMETERS``.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+        return sweep_config_from_dict(data)
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such sweep file") from None
+    except (tomllib.TOMLDecodeError, ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: {' '.join(str(exc).split())}") from None
+
+
+# ---------------------------------------------------------------------- tasks
+
+
+@dataclass(frozen=True, kw_only=True)
+class SweepTask:
+    """One campaign of a sweep: everything a worker needs, seeds included.
+
+    Attributes
+    ----------
+    task_id, point, replicate : position in the sweep (task_id = point * n_campaigns + replicate)
+    campaign_seed : the campaign's seed (its events' seeds are spawned from it)
+    params : value of every sweep parameter in this campaign (name, value), registry order
+    campaign : CampaignConfig (its generator has the parameters applied)
+    identify : IdentifyConfig
+    work_root : directory for the temporary campaign (None: the system's temporary directory)
+    keep_dir : when set, the campaign and its results are written here and kept
+    """
+
+    task_id: int
+    point: int
+    replicate: int
+    campaign_seed: int
+    params: tuple[tuple[str, float], ...]
+    campaign: CampaignConfig
+    identify: IdentifyConfig
+    work_root: str | None = None
+    keep_dir: str | None = None
+
+    def describe(self) -> dict[str, Any]:
+        """The task's columns of the sweep table."""
+        return {"task_id": self.task_id, "point": self.point, "replicate": self.replicate,
+                "campaign_seed": self.campaign_seed, "n_events": self.campaign.n_events, **dict(self.params)}
+
+
+def _campaign_seed(config: SweepConfig, replicate: int) -> int:
+    if config.seeds is not None:
+        return config.seeds[replicate]
+    ss = np.random.SeedSequence(config.seed, spawn_key=(0, replicate))
+    return int(ss.generate_state(1, dtype=np.uint32)[0])
+
+
+def sweep_tasks(config: SweepConfig) -> list[SweepTask]:
+    """Every task of a sweep, in task-id order (grid points outer, replicates inner). Cheap: nothing runs."""
+    names = [n for n, _ in config.grid]
+    points = list(itertools.product(*(v for _, v in config.grid))) if config.grid else [()]
+    tasks = []
+    for p, values in enumerate(points):
+        for r in range(config.n_campaigns):
+            chosen = dict(zip(names, values))
+            if config.ranges:
+                # Each campaign draws its ranges from its own stream, keyed by its position.
+                rng = np.random.default_rng(np.random.SeedSequence(config.seed, spawn_key=(1, p, r)))
+                for name, (lo, hi) in config.ranges:
+                    u = float(rng.random())
+                    chosen[name] = lo + u * (hi - lo)
+            gen = _apply(config.generator, chosen, "sweep parameter")
+            params = tuple((name, float(p_.read(gen))) for name, p_ in _PARAMETERS.items())
+            seed = _campaign_seed(config, r)
+            campaign = CampaignConfig(n_events=config.n_events, seed=seed, duration=config.duration, generator=gen)
+            tasks.append(SweepTask(task_id=p * config.n_campaigns + r, point=p, replicate=r, campaign_seed=seed,
+                                   params=params, campaign=campaign, identify=config.identify))
+    return tasks
+
+
+def _flatten_scores(scores: dict) -> dict[str, float]:
+    shares = scores.get("truth_regime_shares", {})
+    out = {
+        "n_window_equations": int(scores["n"]),
+        "coverage": scores["coverage"],
+        "accuracy_all": scores["accuracy_all"],
+        "accuracy_identifiable": scores["accuracy_identifiable"],
+        "accuracy_not_identifiable": scores["accuracy_not_identifiable"],
+        "truth_majority_share": max(shares.values()) if shares else float("nan"),
+        "rhs_median_rel_error": scores["rhs_median_rel_error"],
+        "rhs_median_rel_error_active": scores["rhs_median_rel_error_active"],
+        "active_share": scores["active_share"],
+    }
+    for k in (1, 2, 3, 4):
+        out[f"truth_share_regime{k}"] = shares.get(k, float("nan"))
+    return {k: (int(v) if k == "n_window_equations" else float(v)) for k, v in out.items()}
+
+
+class CampaignFailed(Exception):
+    """A sweep task's campaign could not be generated, identified or scored (message: the cause)."""
+
+
+def run_sweep_task(task: SweepTask) -> dict[str, Any]:
+    """Generate, identify and score one campaign; return its metrics (``METRIC_COLUMNS``).
+
+    Runs in a worker. The campaign lives in a temporary directory that is
+    removed afterwards, unless ``task.keep_dir`` is set. Events that fail to
+    generate or identify are counted in ``events_failed`` and the others are
+    scored; a campaign with no identified event raises ValueError.
+    """
+    if task.keep_dir is not None:
+        root = Path(task.keep_dir)
+        root.mkdir(parents=True, exist_ok=True)
+    else:
+        if task.work_root is not None:
+            Path(task.work_root).mkdir(parents=True, exist_ok=True)
+        root = Path(tempfile.mkdtemp(prefix=f"t{task.task_id:05d}-", dir=task.work_root))
+    try:
+        made = generate_campaign(task.campaign, root / "campaign", workers=1)
+        written, failures = identify_files(made.files, root / "identify", task.identify, workers=1)
+        n_failed = len(made.failures) + len(failures)
+        if not written:
+            reasons = list(made.failures.values()) + list(failures.values())
+            first = reasons[0] if reasons else "nothing to identify"
+            raise ValueError(f"no event of campaign seed {task.campaign_seed} could be identified ({first})")
+        identified = {p.name.removesuffix(".identify.nc") for p in written}
+        events = [f for f in made.files if f.stem in identified]
+        results = sorted(written, key=lambda p: p.name)
+        events = sorted(events, key=lambda p: p.name)
+        metrics = _flatten_scores(campaign_recovery(events, results))
+    except Exception as exc:
+        # Temporary paths differ from run to run; the table must not.
+        message = " ".join(f"{type(exc).__name__}: {exc}".split()).replace(str(root), "<campaign>")
+        raise CampaignFailed(message) from None
+    finally:
+        if task.keep_dir is None:
+            shutil.rmtree(root, ignore_errors=True)
+    return {"events_failed": n_failed, **metrics}
+
+
+# ----------------------------------------------------------------------- run
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """What a call of :func:`run_sweep` did.
+
+    Attributes
+    ----------
+    table : ``OUT/sweep.csv``, one row per task, sorted by task id
+    summary : ``OUT/summary.json``
+    figures : the recovery figures written
+    n_tasks : tasks in the sweep
+    computed : task ids computed by this call
+    resumed : task ids found finished in the journal and not recomputed
+    failures : task id -> one-line error (these tasks are retried by the next call)
+    repaired_lines : corrupt or half-written journal lines dropped on start
+    """
+
+    table: Path
+    summary: Path
+    figures: tuple[Path, ...]
+    n_tasks: int
+    computed: tuple[int, ...]
+    resumed: tuple[int, ...]
+    failures: dict[int, str]
+    repaired_lines: int
+
+
+@contextmanager
+def _exclusive(out: Path):
+    """Hold ``OUT/.sweep.lock``: two sweeps writing one journal would interleave their lines."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX: no lock
+        yield
+        return
+    fh = (out / ".sweep.lock").open("a")
+    try:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise ValueError(f"{out}: another sweep is writing to this directory") from None
+        yield
+    finally:
+        fh.close()
+
+
+def _check_config_record(out: Path, config: SweepConfig) -> None:
+    record = out / "sweep_config.json"
+    text = json.dumps({"fingerprint": config.fingerprint(), "config": config.to_dict()}, indent=1, sort_keys=True) + "\n"
+    if record.exists():
+        try:
+            old = json.loads(record.read_text()).get("fingerprint")
+        except (json.JSONDecodeError, AttributeError):
+            old = None
+        if old != config.fingerprint():
+            raise ValueError(f"{record}: this directory holds the results of a different sweep configuration; "
+                             "use another --out (or delete the directory to start over)")
+        return
+    with atomic_path(record) as tmp:
+        tmp.write_text(text)
+
+
+def run_sweep(config: SweepConfig, out_dir: str | Path, *, workers: int = 1, scheduler: str | None = None,
+              keep_files: bool = False, progress: Callable[[int, int], None] | None = None) -> SweepResult:
+    """Run (or resume) a sweep and write its table, figures and summary.
+
+    Parameters
+    ----------
+    config : SweepConfig
+    out_dir : output directory. It holds ``sweep_config.json`` (the sweep it
+        belongs to: another configuration is refused), the journal
+        ``sweep.jsonl``, ``sweep.csv``, ``recovery_vs_noise.png``,
+        ``recovery_vs_turbulence.png`` and ``summary.json``.
+    workers : local worker processes (1: this process), when ``scheduler`` is None
+    scheduler : None, ``"local:N"`` (a dask LocalCluster) or a dask scheduler address
+    keep_files : keep each campaign and its identification results under
+        ``OUT/files/t<task_id>/`` (with a remote cluster: a path the workers share)
+    progress : optional ``progress(n_done, n_total)``, called once on start
+        (with the tasks found finished) and after every task
+
+    Returns
+    -------
+    SweepResult
+        The numbers in the table do not depend on ``workers``, ``scheduler``
+        or on how often the sweep was interrupted and resumed.
+    """
+    from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kind, _ = parse_scheduler(scheduler)
+    with _exclusive(out):
+        _check_config_record(out, config)
+        journal = out / "sweep.jsonl"
+        tasks = sweep_tasks(config)
+        done, repaired = _journal.load(journal, n_tasks=len(tasks), columns=COLUMNS)
+        work = out / ".work"
+        shutil.rmtree(work, ignore_errors=True)  # temporary campaigns of a run that was killed
+        # Workers of a remote cluster may not see OUT: they use their own temporary directory.
+        work_root = str(work) if kind != "address" else None
+        pending = [dataclasses.replace(t, work_root=work_root,
+                                       keep_dir=str(out / "files" / f"t{t.task_id:05d}") if keep_files else None)
+                   for t in tasks if t.task_id not in done]
+        resumed = tuple(sorted(done))
+        table = out / "sweep.csv"
+        _journal.write_table(table, done, COLUMNS)
+        if progress is not None:
+            progress(len(done), len(tasks))
+        computed, failures = [], {}
+        # closing(): an interrupt must cancel the queued tasks now, not when the traceback is freed.
+        with closing(run_tasks(run_sweep_task, pending, workers=workers, scheduler=scheduler)) as outcomes:
+            for outcome in outcomes:
+                task = pending[outcome.index]
+                row = {**task.describe(), **{c: float("nan") for c in METRIC_COLUMNS}, "error": ""}
+                if outcome.ok:
+                    row.update(outcome.value)
+                else:
+                    row["error"] = outcome.error
+                    failures[task.task_id] = outcome.error
+                _journal.append(journal, task.task_id, outcome.ok, row)
+                done[task.task_id] = row
+                computed.append(task.task_id)
+                _journal.write_table(table, done, COLUMNS)
+                if progress is not None:
+                    progress(len(done), len(tasks))
+        shutil.rmtree(work, ignore_errors=True)
+        rows = [done[i] for i in sorted(done)]
+        figures = (
+            plot_recovery(rows, [p for p in ("noise_density", "anemometer_noise") if p in config.varied]
+                          or ["noise_density"], out / "recovery_vs_noise.png", varied=config.varied),
+            plot_recovery(rows, ["turbulence_intensity"], out / "recovery_vs_turbulence.png", varied=config.varied),
+        )
+        summary = out / "summary.json"
+        with atomic_path(summary) as tmp:
+            tmp.write_text(json.dumps(sweep_summary(rows, config.varied, len(tasks)), indent=1) + "\n")
+    return SweepResult(table=table, summary=summary, figures=figures, n_tasks=len(tasks), computed=tuple(computed),
+                       resumed=resumed, failures=failures, repaired_lines=repaired)
