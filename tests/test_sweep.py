@@ -316,6 +316,22 @@ def test_killed_cli_sweep_resumes_to_the_same_table(tmp_path):
     assert not (out / ".work").exists()
 
 
+def _sleep_and_mark(path):
+    time.sleep(0.2)
+    Path(path).touch()
+    return path
+
+
+def test_stopping_early_cancels_queued_local_tasks(tmp_path):
+    paths = [str(tmp_path / f"m{i}") for i in range(24)]
+    outcomes = run_tasks(_sleep_and_mark, paths, workers=2)
+    first = next(outcomes)
+    assert first.ok
+    outcomes.close()  # what an interrupt of the consumer does
+    # The running tasks and the few already handed to the workers finish; the rest never start.
+    assert len(list(tmp_path.iterdir())) <= 8
+
+
 def test_cli_bad_grid_exits_2(tmp_path):
     from vivbench.cli import main
 

@@ -460,7 +460,9 @@ def sweep_tasks(config: SweepConfig) -> list[SweepTask]:
                     u = float(rng.random())
                     chosen[name] = lo + u * (hi - lo)
             gen = _apply(config.generator, chosen, "sweep parameter")
-            params = tuple((name, float(p_.read(gen))) for name, p_ in _PARAMETERS.items())
+            # Chosen values as given (reading Y1's peak back would add rounding); the others as in effect.
+            params = tuple((name, float(chosen[name]) if name in chosen else float(p_.read(gen)))
+                           for name, p_ in _PARAMETERS.items())
             seed = _campaign_seed(config, r)
             campaign = CampaignConfig(n_events=config.n_events, seed=seed, duration=config.duration, generator=gen)
             tasks.append(SweepTask(task_id=p * config.n_campaigns + r, point=p, replicate=r, campaign_seed=seed,
