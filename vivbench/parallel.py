@@ -140,6 +140,8 @@ def run_tasks(func: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int 
     kind, arg = parse_scheduler(scheduler)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    if len(tasks) == 0:
+        return  # no worker processes or cluster for nothing (a resumed run that is complete)
     if kind == "processes":
         yield from _local_processes(func, tasks, workers)
     else:

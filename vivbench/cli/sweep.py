@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from vivbench.cli._common import DEFAULT_WORKERS, progress
 
@@ -19,6 +20,11 @@ def run(args) -> int:
     try:
         result = run_sweep(config, args.out, workers=args.workers, scheduler=args.scheduler,
                            keep_files=args.keep_files, progress=advance)
+    except KeyboardInterrupt:
+        bar.close()
+        print(f"vivbench sweep: interrupted; {bar.n} of {config.n_tasks} campaigns are saved in "
+              f"{Path(args.out) / 'sweep.jsonl'}: run the same command again to resume", file=sys.stderr)
+        return 130
     finally:
         bar.close()
     for task_id, message in sorted(result.failures.items()):
