@@ -174,7 +174,7 @@ def test_table_figures_and_summary(reference, tiny_config):
     rows = [dict(zip(header, line.split(","))) for line in lines[1:]]
     assert all(r["error"] == "" and int(r["n_window_equations"]) > 0 for r in rows)
     summary = json.loads(result.summary.read_text())
-    assert summary["n_campaigns"] == 2 and summary["n_campaigns_finished"] == 2
+    assert summary["campaigns_total"] == 2 and summary["campaigns_finished"] == 2
     assert summary["varied_parameters"] == "noise_density,turbulence_intensity"
     expected = float(np.median([float(r["coverage"]) for r in rows]))
     assert summary["median_coverage"] == pytest.approx(expected, rel=1e-5)
@@ -202,6 +202,7 @@ def test_interrupted_sweep_resumes_without_recomputing(tiny_config, reference, t
         run_sweep(tiny_config, out, workers=1, progress=stop_after_first)
     first = (out / "sweep.jsonl").read_text().splitlines()
     assert len(first) == 1 and json.loads(first[0])["task_id"] == 0
+    assert not (out / ".work").exists(), "temporary campaigns left behind by the interrupted run"
     result = run_sweep(tiny_config, out, workers=1)
     assert result.resumed == (0,) and result.computed == (1,)
     assert result.table.read_bytes() == ref.table.read_bytes()
@@ -271,7 +272,7 @@ def test_failed_task_is_reported_then_retried(tiny_config, reference, replay, tm
     assert result.failures == {1: "RuntimeError: worker lost"}
     row = result.table.read_text().splitlines()[2]
     assert row.endswith(",RuntimeError: worker lost") and ",nan," in row
-    assert json.loads(result.summary.read_text())["n_campaigns_failed"] == 1
+    assert json.loads(result.summary.read_text())["campaigns_failed"] == 1
     monkeypatch.setattr(sweep_module, "run_sweep_task", replayed)
     again = run_sweep(tiny_config, out, workers=1)
     assert again.resumed == (0,) and again.computed == (1,) and not again.failures

@@ -22,8 +22,8 @@ def run(args) -> int:
                            keep_files=args.keep_files, progress=advance)
     except KeyboardInterrupt:
         bar.close()
-        print(f"vivbench sweep: interrupted; {bar.n} of {config.n_tasks} campaigns are saved in "
-              f"{Path(args.out) / 'sweep.jsonl'}: run the same command again to resume", file=sys.stderr)
+        print(f"vivbench sweep: interrupted; the finished campaigns are saved in {Path(args.out) / 'sweep.jsonl'}: "
+              "run the same command again to resume", file=sys.stderr)
         return 130
     finally:
         bar.close()

@@ -641,23 +641,26 @@ def run_sweep(config: SweepConfig, out_dir: str | Path, *, workers: int = 1, sch
         if progress is not None:
             progress(len(done), len(tasks))
         computed, failures = [], {}
-        # closing(): an interrupt must cancel the queued tasks now, not when the traceback is freed.
-        with closing(run_tasks(run_sweep_task, pending, workers=workers, scheduler=scheduler)) as outcomes:
-            for outcome in outcomes:
-                task = pending[outcome.index]
-                row = {**task.describe(), **{c: float("nan") for c in METRIC_COLUMNS}, "error": ""}
-                if outcome.ok:
-                    row.update(outcome.value)
-                else:
-                    row["error"] = outcome.error
-                    failures[task.task_id] = outcome.error
-                _journal.append(journal, task.task_id, outcome.ok, row)
-                done[task.task_id] = row
-                computed.append(task.task_id)
-                _journal.write_table(table, done, COLUMNS)
-                if progress is not None:
-                    progress(len(done), len(tasks))
-        shutil.rmtree(work, ignore_errors=True)
+        try:
+            # closing(): an interrupt must cancel the queued tasks now, not when the traceback is freed.
+            with closing(run_tasks(run_sweep_task, pending, workers=workers, scheduler=scheduler)) as outcomes:
+                for outcome in outcomes:
+                    task = pending[outcome.index]
+                    row = {**task.describe(), **{c: float("nan") for c in METRIC_COLUMNS}, "error": ""}
+                    if outcome.ok:
+                        row.update(outcome.value)
+                    else:
+                        row["error"] = outcome.error
+                        failures[task.task_id] = outcome.error
+                    _journal.append(journal, task.task_id, outcome.ok, row)
+                    done[task.task_id] = row
+                    computed.append(task.task_id)
+                    _journal.write_table(table, done, COLUMNS)
+                    if progress is not None:
+                        progress(len(done), len(tasks))
+        finally:
+            # After closing the runner no task of this run is still writing here.
+            shutil.rmtree(work, ignore_errors=True)
         rows = [done[i] for i in sorted(done)]
         figures = (
             plot_recovery(rows, [p for p in ("noise_density", "anemometer_noise") if p in config.varied]

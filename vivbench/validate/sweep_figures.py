@@ -133,9 +133,9 @@ def sweep_summary(rows: Sequence[dict], varied: Sequence[str], n_tasks: int) -> 
     """
     ok_rows = [r for r in rows if not r.get("error")]
     out: dict[str, object] = {
-        "n_campaigns": int(n_tasks),
-        "n_campaigns_finished": len(ok_rows),
-        "n_campaigns_failed": len(rows) - len(ok_rows),
+        "campaigns_total": int(n_tasks),
+        "campaigns_finished": len(ok_rows),
+        "campaigns_failed": len(rows) - len(ok_rows),
         "varied_parameters": ",".join(varied),
         "n_window_equations": int(np.nansum(_column(ok_rows, "n_window_equations"))) if ok_rows else 0,
     }
