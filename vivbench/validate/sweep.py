@@ -222,7 +222,9 @@ class SweepConfig:
         n = self.n_campaigns
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 100000:
             raise ValueError(f"n_campaigns (campaigns per grid point) must be an integer in 1..100000; got {n!r}")
-        # The campaign's own checks give the messages for n_events and duration.
+        if isinstance(self.n_events, bool) or not isinstance(self.n_events, (int, np.integer)):
+            raise ValueError(f"n_events (events per campaign) must be an integer; got {self.n_events!r}")
+        # The campaign's own checks give the messages for the ranges of n_events and duration.
         CampaignConfig(n_events=self.n_events, seed=0, duration=self.duration)
         object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
         for name in ("generator", "identify"):
@@ -283,7 +285,7 @@ class SweepConfig:
     @property
     def n_points(self) -> int:
         """Number of grid points (1 without a grid)."""
-        return int(np.prod([len(v) for _, v in self.grid], dtype=np.int64)) if self.grid else 1
+        return math.prod(len(v) for _, v in self.grid)
 
     @property
     def n_tasks(self) -> int:
