@@ -111,6 +111,16 @@ def test_support_one_extra_term(xi_true):
     assert_close(s["pooled_terms"]["precision"], kp / (kp + 1))
 
 
+def test_support_dense_model_scores_the_chance_level(xi_true):
+    k = int(support_mask(xi_true).sum())
+    s = support_scores(np.ones_like(xi_true), xi_true)
+    assert s["terms"]["recall"] == 1.0 and s["mean_terms_per_model"] == 69
+    assert_close(s["terms"]["precision"], k / xi_true.size)
+    assert s["terms"]["precision"] == s["terms"]["precision_dense_model"]
+    # the truth holds every order in every equation: order precision cannot fail, and the notes say so
+    assert s["orders"]["precision"] == 1.0 and any("says nothing" in n for n in s["notes"])
+
+
 def test_support_one_missing_term(xi_true):
     k = int(support_mask(xi_true).sum())
     model = xi_true.copy()
@@ -147,7 +157,9 @@ def test_order_support_and_per_order_recall():
     s = support_scores(model, truth)
     assert s["order_recall"][1] == 0.5 and s["order_recall"][3] == 0.0
     assert math.isnan(s["order_recall"][0]) and s["order_precision"][2] == 0.0
-    assert s["orders"] == {"tp": 1, "fp": 1, "fn": 3, "precision": 0.5, "recall": 0.25}
+    assert {k: s["orders"][k] for k in ("tp", "fp", "fn", "precision", "recall")} == {
+        "tp": 1, "fp": 1, "fn": 3, "precision": 0.5, "recall": 0.25}
+    assert s["orders"]["precision_dense_model"] == 0.5 and not any("says nothing" in n for n in s["notes"])
 
 
 def test_support_skips_missing_models_and_merges_counts(xi_true):

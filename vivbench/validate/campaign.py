@@ -252,9 +252,11 @@ def _summary(v: dict) -> dict:
                    rhs_active_share=v["rhs"]["active_share"])
     if v["support"] is not None:
         s = v["support"]["all"]
+        out["support_mean_terms_per_model"] = s["mean_terms_per_model"]
         for level in ("terms", "pooled_terms", "orders"):
             out[f"support_precision_{level}"] = s[level]["precision"]
             out[f"support_recall_{level}"] = s[level]["recall"]
+            out[f"support_precision_{level}_dense_model"] = s[level]["precision_dense_model"]
         for i in range(4):
             out[f"order_recall_A{i}"] = s["order_recall"][i]
     for row in v["clusters"] or []:

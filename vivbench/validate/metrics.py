@@ -235,9 +235,12 @@ def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: 
     Returns
     -------
     dict
-        ``n`` (models scored); ``terms`` (the 23 * n_sections columns),
+        ``n`` (models scored), ``n_terms_identified``, ``n_terms_true``,
+        ``mean_terms_per_model``; ``terms`` (the 23 * n_sections columns),
         ``pooled_terms`` (the 23 section-pooled A^i U^j) and ``orders`` (orders
-        of A), each ``{"tp", "fp", "fn", "precision", "recall"}``;
+        of A), each ``{"tp", "fp", "fn", "precision", "recall",
+        "n_candidates", "precision_dense_model"}`` (the last: the precision
+        of a model holding every candidate, the chance level to beat);
         ``order_counts`` (list of 4 such dicts, orders 0..3, counted over
         models); ``order_recall`` and ``order_precision`` (lists of 4, NaN
         where undefined); ``notes``.
@@ -257,9 +260,11 @@ def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: 
         "pooled_terms": (pooled_support(sid, n_sections), pooled_support(strue, n_sections)),
         "orders": (order_support(sid, n_sections), order_support(strue, n_sections)),
     }
-    out = {"n": int(valid.sum())}
+    out = {"n": int(valid.sum()), "n_terms_identified": int(sid.sum()), "n_terms_true": int(strue.sum())}
     for name, (a, b) in levels.items():
         out[name] = _pr(*support_counts(a, b))
+        # a model with every candidate term scores recall 1 and this precision: the chance level
+        out[name]["n_candidates"] = int(b.size)
     oi, ot = levels["orders"]
     # per order: counts over models (axis 0), one column per order
     out["order_counts"] = [_pr(*support_counts(oi[:, i:i + 1], ot[:, i:i + 1])) for i in range(4)]
@@ -267,9 +272,17 @@ def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: 
 
 
 def _finish_support(out: dict) -> dict:
+    for level in ("terms", "pooled_terms", "orders"):
+        c = out[level]
+        c["precision_dense_model"] = _nan_ratio(c["tp"] + c["fn"], c["n_candidates"])
+    out["mean_terms_per_model"] = _nan_ratio(out["n_terms_identified"], out["n"])
     out["order_recall"] = [c["recall"] for c in out["order_counts"]]
     out["order_precision"] = [c["precision"] for c in out["order_counts"]]
     out["notes"] = list(SUPPORT_NOTES)
+    if out["orders"]["n_candidates"] and out["orders"]["tp"] + out["orders"]["fn"] == out["orders"]["n_candidates"]:
+        out["notes"].append("Every scored true model holds all four orders of A, so order-level precision is 1 for "
+                            "any model and says nothing; compare precisions with precision_dense_model (a model "
+                            "with every candidate term).")
     return out
 
 
@@ -280,9 +293,10 @@ def merge_support_scores(parts: list[dict]) -> dict:
     -------
     dict, as :func:`support_scores`, with counts summed and ratios recomputed
     """
-    out = {"n": int(sum(p["n"] for p in parts))}
+    out = {k: int(sum(p[k] for p in parts)) for k in ("n", "n_terms_identified", "n_terms_true")}
     for level in ("terms", "pooled_terms", "orders"):
         out[level] = _pr(*(sum(p[level][k] for p in parts) for k in ("tp", "fp", "fn")))
+        out[level]["n_candidates"] = int(sum(p[level]["n_candidates"] for p in parts))
     out["order_counts"] = [_pr(*(sum(p["order_counts"][i][k] for p in parts) for k in ("tp", "fp", "fn")))
                            for i in range(4)]
     return _finish_support(out)
