@@ -9,7 +9,8 @@ import sys
 def run(args) -> int:
     from vivbench.validate import validate_campaign, write_validation
 
-    v = validate_campaign(args.campaign, args.results, clusters_csv=args.clusters, tau=args.tau,
+    v = validate_campaign(args.campaign, args.results, clusters_csv=args.clusters,
+                          forecasts_dir=args.forecasts, tau=args.tau,
                           active_share=args.active_share)
     for path, reason in sorted(v["skipped"].items()):
         print(f"vivbench validate: {path}: {reason}", file=sys.stderr)
@@ -35,6 +36,8 @@ def register(sub) -> None:
     s.add_argument("results", metavar="RESULTS_DIR", help="directory of <event_id>.identify.nc results")
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--clusters", default=None, metavar="CSV", help="cluster_labels.csv of vivbench cluster (optional)")
+    s.add_argument("--forecasts", default=None, metavar="DIR",
+                   help="directory of forecast_<event_id>.csv of vivbench forecast (optional; stopped runs counted apart)")
     s.add_argument("--tau", type=float, default=0.2, help="regime threshold for the truth (DESIGN 2.5)")
     s.add_argument("--active-share", type=float, default=0.1,
                    help="a window has dynamics when its true dA/dt RMS is at least this share of the event's (default 0.1)")

@@ -1,6 +1,6 @@
 """How well the identification chain recovers the truth of synthetic campaigns."""
 
-from vivbench.validate.campaign import read_cluster_labels, validate_campaign, write_validation
+from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
 from vivbench.validate.metrics import (
     REGIMES,
     SUPPORT_NOTES,
@@ -37,6 +37,7 @@ __all__ = [
     "order_support",
     "pooled_support",
     "read_cluster_labels",
+    "read_forecast_tables",
     "regime_report",
     "regime_scores",
     "rhs_error_summary",

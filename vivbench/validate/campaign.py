@@ -24,6 +24,7 @@ from vivbench.validate.metrics import (
     REGIMES,
     SUPPORT_NOTES,
     cluster_agreement,
+    forecast_summary,
     merge_support_scores,
     regime_report,
     rhs_error_summary,
@@ -31,7 +32,7 @@ from vivbench.validate.metrics import (
 )
 from vivbench.validate.recovery import truth_window_regimes, window_rhs_errors
 
-__all__ = ["validate_campaign", "write_validation", "read_cluster_labels"]
+__all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables"]
 
 _NOTES = (
     "Regime accuracy is reported for identifiable window-equations apart from the others, with coverage "
@@ -82,6 +83,41 @@ def read_cluster_labels(path) -> list[dict]:
     return rows
 
 
+def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """NMSE rows of every ``forecast_<event_id>.csv`` in a directory (``vivbench forecast``).
+
+    Each file needs the columns ``d`` (s), ``nmse`` and ``stopped`` (as written
+    from :func:`vivbench.identify.forecast_table`); other columns are ignored.
+
+    Returns
+    -------
+    nmse, stopped, d : ndarray, shape (n_rows,)
+    event_ids : list of str, one per row
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise ValueError(f"{directory}: no such forecast directory")
+    files = sorted(directory.glob("forecast_*.csv"))
+    if not files:
+        raise ValueError(f"{directory}: no forecast tables (forecast_<event_id>.csv) in this directory")
+    nmse, stopped, d, ids = [], [], [], []
+    for f in files:
+        with f.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            missing = [c for c in ("d", "nmse", "stopped") if c not in (reader.fieldnames or [])]
+            if missing:
+                raise ValueError(f"{f}: missing columns {missing}; a forecast table needs d, nmse and stopped")
+            for k, row in enumerate(reader, start=2):
+                try:
+                    d.append(float(row["d"]))
+                    nmse.append(float(row["nmse"]) if row["nmse"].strip() else math.nan)
+                except ValueError as exc:
+                    raise ValueError(f"{f}: line {k}: {exc}") from None
+                stopped.append(row["stopped"].strip().lower() in ("1", "true", "yes"))
+                ids.append(f.stem[len("forecast_"):])
+    return np.array(nmse, dtype=float), np.array(stopped, dtype=bool), np.array(d, dtype=float), ids
+
+
 def _cluster_tables(rows: list[dict], truth_regimes: dict) -> list[dict]:
     """Cluster agreement per feature set, with and without the halo points."""
     out = []
@@ -98,7 +134,7 @@ def _cluster_tables(rows: list[dict], truth_regimes: dict) -> list[dict]:
     return out
 
 
-def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, tau: float = DEFAULT_TAU,
+def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts_dir=None, tau: float = DEFAULT_TAU,
                       active_share: float = 0.1) -> dict:
     """Score every identification result of a campaign against the truth.
 
@@ -107,6 +143,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, tau: floa
     campaign_dir : directory of ``<event_id>.nc`` event files
     results_dir : directory of ``<event_id>.identify.nc`` results
     clusters_csv : optional ``cluster_labels.csv`` of ``vivbench cluster``
+    forecasts_dir : optional directory of ``forecast_<event_id>.csv`` (``vivbench forecast``);
+        see :func:`read_forecast_tables`
     tau : regime threshold for the truth's window regimes (DESIGN 2.5)
     active_share : see :func:`vivbench.validate.window_rhs_errors`
 
@@ -117,7 +155,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, tau: floa
         (rows group, true regime, counts per identified regime), ``rhs``
         (:func:`rhs_error_summary`), ``support`` (:func:`support_scores` for all
         models and for identifiable ones), ``support_table`` (rows), ``per_event``
-        (rows), ``clusters`` (rows, or None), ``truth_regime_shares``,
+        (rows), ``clusters`` (rows, or None), ``forecast`` (rows of
+        :func:`forecast_summary` per d, or None), ``truth_regime_shares``,
         ``skipped`` (event file -> reason), ``notes``, ``settings``, ``summary``
         (flat headline numbers).
 
@@ -129,6 +168,10 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, tau: floa
     """
     from vivbench.io import read_event
 
+    if not 0.0 <= active_share < 1.0:
+        raise ValueError(f"active_share must lie in [0, 1); got {active_share}")
+    if not 0.0 < tau < 1.0:
+        raise ValueError(f"tau must lie strictly between 0 and 1; got {tau}")
     campaign_dir, results_dir = Path(campaign_dir), Path(results_dir)
     for d, what in ((campaign_dir, "campaign"), (results_dir, "results")):
         if not d.is_dir():
@@ -213,6 +256,10 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, tau: floa
     if clusters_csv is not None:
         clusters = _cluster_tables(read_cluster_labels(clusters_csv), truth_by_key)
 
+    forecast = None
+    if forecasts_dir is not None:
+        forecast = forecast_summary(*read_forecast_tables(forecasts_dir)[:3])
+
     truth_all = tru.ravel()
     out = {
         "regime": regime,
@@ -222,11 +269,13 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, tau: floa
         "support_table": support_rows,
         "per_event": per_event,
         "clusters": clusters,
+        "forecast": forecast,
         "truth_regime_shares": {str(k): float(np.mean(truth_all == k)) for k in REGIMES},
         "skipped": skipped,
         "notes": list(_NOTES),
         "settings": {"tau": float(tau), "active_share": float(active_share), "campaign_dir": str(campaign_dir),
-                     "results_dir": str(results_dir), "clusters_csv": None if clusters_csv is None else str(clusters_csv)},
+                     "results_dir": str(results_dir), "clusters_csv": None if clusters_csv is None else str(clusters_csv),
+                     "forecasts_dir": None if forecasts_dir is None else str(forecasts_dir)},
     }
     out["summary"] = _summary(out)
     return out
@@ -264,6 +313,10 @@ def _summary(v: dict) -> dict:
         out[f"ari_{tag}"] = row["ari"]
         out[f"purity_{tag}"] = row["purity"]
         out[f"n_clusters_{tag}"] = row["n_clusters"]
+    for row in v["forecast"] or []:
+        tag = f"d{row['d_s']:g}s"
+        out[f"forecast_median_nmse_{tag}"] = row["median"]
+        out[f"forecast_stopped_share_{tag}"] = row["stopped_share"]
     return out
 
 
@@ -303,7 +356,8 @@ def write_validation(v: dict, out_dir) -> list[Path]:
     """Write :func:`validate_campaign`'s tables atomically.
 
     Files: ``regime_confusion.csv``, ``per_event.csv``, ``support.csv``,
-    ``clusters.csv`` (when cluster labels were given), ``metrics.json``
+    ``clusters.csv`` (when cluster labels were given), ``forecast_nmse.csv``
+    (when forecast tables were given), ``metrics.json``
     (everything, NaN as null) and ``summary.json`` (flat headline numbers).
 
     Returns
@@ -318,6 +372,8 @@ def write_validation(v: dict, out_dir) -> list[Path]:
              "support.csv": _csv_text(v["support_table"])}
     if v["clusters"] is not None:
         texts["clusters.csv"] = _csv_text(v["clusters"])
+    if v["forecast"] is not None:
+        texts["forecast_nmse.csv"] = _csv_text(v["forecast"])
     texts["metrics.json"] = json.dumps(_json_safe(v), indent=2, sort_keys=True) + "\n"
     texts["summary.json"] = json.dumps(_json_safe(v["summary"]), indent=2) + "\n"
     written = []
