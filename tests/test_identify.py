@@ -209,4 +209,4 @@ def test_cli_demo_small(tmp_path):
     assert run.returncode == 0, run.stderr
     assert "recovery:" in run.stdout and "coverage" in run.stdout
     assert (tmp_path / "event_E001.png").stat().st_size > 10000
-    assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == ["E001.identify.nc", "E002.identify.nc"]
+    assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == ["E001.identify.nc", "E002.identify.nc", "campaign.pooled.nc"]
