@@ -450,7 +450,7 @@ def coefficient_map_figure(result: xr.Dataset, path: str | Path, *, equation: st
         ax.set_ylabel("library term (section: power of A, powers of U)")
         ax.set_title(f"(a) event {result.attrs['event_id']}: model of dA/dt at {equation}, "
                      r"coefficient $\times$ RMS of its term", fontsize=10, loc="left")
-        cb = fig.colorbar(mesh, ax=ax, pad=0.01)
+        cb = fig.colorbar(mesh, ax=ax, pad=0.01, ticks=_symlog_ticks(linthresh, vmax))
         cb.set_label(r"$\xi_j\,\mathrm{rms}(\theta_j)$ (m/s); symlog, linear below " + f"{linthresh:.1e} m/s")
         ax = axes[1]
         reg = result["regime"].values[:, e]
@@ -458,8 +458,9 @@ def coefficient_map_figure(result: xr.Dataset, path: str | Path, *, equation: st
         for w in range(reg.size):
             if reg[w] == 0:
                 continue
-            ax.axvspan(edges_t[w], edges_t[w + 1], color=REGIME_COLOURS[int(reg[w])], lw=0,
-                       hatch=None if ident[w] else "////", fill=True, alpha=0.9)
+            ax.axvspan(edges_t[w], edges_t[w + 1], facecolor=REGIME_COLOURS[int(reg[w])], lw=0,
+                       edgecolor="k" if not ident[w] else REGIME_COLOURS[int(reg[w])],
+                       hatch=None if ident[w] else "////")
         ax.set_yticks([])
         ax.set_ylabel("regime", rotation=0, ha="right", va="center", fontsize=8)
         handles = [Patch(color=c, label=f"regime {r}") for r, c in REGIME_COLOURS.items()]
@@ -484,6 +485,17 @@ def coefficient_map_figure(result: xr.Dataset, path: str | Path, *, equation: st
         ax.set_xlabel("time since event start (min)")
         ax.set_xlim(edges_t[0], edges_t[-1])
     return Path(path)
+
+
+def _symlog_ticks(linthresh: float, vmax: float, per_side: int = 4) -> list[float]:
+    """0 and at most ``per_side`` decades on each side, from just above ``linthresh`` to ``vmax``."""
+    lo = int(np.ceil(np.log10(linthresh))) + 1
+    hi = int(np.floor(np.log10(vmax)))
+    if hi < lo:
+        return [-vmax, 0.0, vmax]
+    step = max(1, int(np.ceil((hi - lo + 1) / per_side)))
+    decades = [10.0**k for k in range(hi, lo - 1, -step)]
+    return [-d for d in decades] + [0.0] + decades[::-1]
 
 
 # ---------------------------------------------------- Fig. 6: regime timelines
@@ -594,11 +606,13 @@ def decision_graph_figure(rho, delta, labels, centers, path: str | Path, *, embe
         ax.scatter(rho, delta, s=8, c=[colours[lab] for lab in labels], alpha=0.6, lw=0)
         ax.scatter(rho[centers], delta[centers], s=60, facecolor="none", edgecolor="k", lw=1.2, label="centres")
         for i, c in enumerate(centers):
-            ax.annotate(str(labels[c]), (rho[c], delta[c]), textcoords="offset points", xytext=(5, 3), fontsize=8)
+            ax.annotate(str(labels[c]), (rho[c], delta[c]), textcoords="offset points", xytext=(-6, 4), fontsize=8,
+                        ha="right")
         ax.set_xlabel(r"local density $\rho$ (1)")
         ax.set_ylabel(r"distance to nearest denser point $\delta$ (feature units)")
         ax.set_title(f"(a) decision graph, {k} cluster{'s' if k != 1 else ''}", fontsize=10, loc="left")
-        ax.legend(loc="upper right", fontsize=8)
+        ax.margins(0.1)
+        ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=8, frameon=False, borderaxespad=0.1)
         if embedding is not None:
             emb = np.asarray(embedding, dtype=float)
             ax = axes.pop(0)
