@@ -33,7 +33,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
-from matplotlib.colors import ListedColormap, SymLogNorm  # noqa: E402
+from matplotlib.colors import SymLogNorm  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from scipy import signal  # noqa: E402
 
@@ -708,7 +708,7 @@ def forecast_figure(result: xr.Dataset, path: str | Path, *, t0: float | None = 
         ax2.plot(result["time"].values[sel], result["A"].values[sel, e], lw=2.0, color="k", label=f"measured {equation}")
         for n_run, (d, fc) in enumerate(runs):
             c = cmap(n_run / max(len(runs) - 1, 1) * 0.9)
-            what = f"fixed at t0 (window in force)" if d == 0 else f"mean over [t0, t0+{d:g} s] ({fc.windows.size} windows)"
+            what = "fixed at t0 (window in force)" if d == 0 else f"mean over [t0, t0+{d:g} s] ({fc.windows.size} windows)"
             if not fc.stopped:
                 status = f"NMSE {fc.nmse[e]:.3g}"
             elif np.isfinite(fc.nmse[e]):

@@ -111,6 +111,26 @@ def _load_result(path: Path) -> xr.Dataset:
         return ds.load()
 
 
+def _event_info(eid: str, event_path: Path, result_path: Path) -> dict:
+    """What the report needs of one event, read once: attributes, truth, duration, seed and the result.
+
+    Only the small groups are loaded (the 32 Hz and 50 Hz records stay on disk).
+    """
+    try:
+        with xr.open_datatree(event_path, engine="h5netcdf", decode_times=False) as tree:
+            attrs = dict(tree.attrs)
+            truth = tree["truth"].to_dataset().load() if "truth" in tree.children else None
+            t_acc = tree["accel"]["time"].values
+    except Exception as exc:  # noqa: BLE001 - any reader failure: not an event file
+        raise ValueError(f"{event_path}: cannot be read as an event file ({type(exc).__name__}: {exc})") from exc
+    seed = None
+    if truth is not None and "config_json" in truth.attrs:
+        seed = json.loads(truth.attrs["config_json"]).get("seed", {}).get("campaign_seed")
+    return {"event_id": eid, "event": event_path, "result": result_path, "attrs": attrs, "truth": truth,
+            "duration": float(t_acc[-1] - t_acc[0]) if t_acc.size else 0.0, "seed": seed,
+            "res": _load_result(result_path)}
+
+
 def _catalogue(campaign_dir: Path) -> dict[str, dict]:
     path = Path(campaign_dir) / "catalogue.csv"
     if not path.exists():
@@ -198,9 +218,11 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
     command = _report_command(name, campaign_dir, results_dir, Path(out_root), extra_dirs)
     say = progress or (lambda _label: None)
 
+    info = [_event_info(eid, ev, res) for eid, ev, res in pairs]
+    say("read")
     trees = {e: read_event(by_id[e][0]) for e in events}
-    results = {e: _load_result(by_id[e][1]) for e in events}
-    has_truth = all("truth" in t.children for t in trees.values())
+    results = {i["event_id"]: i["res"] for i in info}
+    has_truth = all(i["truth"] is not None for i in info)
 
     md: list[str] = [f"# vivbench report: {name}", ""]
     md += [
@@ -212,7 +234,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         _produced_by(command, "(this whole report, its figures and the recovery tables)"),
         "",
     ]
-    md += _what_was_run(campaign_dir, results_dir, pairs, missing, command)
+    md += _what_was_run(campaign_dir, results_dir, info, missing, command)
     say("summary")
 
     written: list[str] = []
@@ -300,7 +322,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                                               timeline_truth or [None] * len(events), p),
            "regime_timeline_figure")
 
-    cluster_inputs = _cluster_inputs([r for _e, _ev, r in pairs], [ev for _e, ev, _r in pairs] if has_truth else None)
+    cluster_inputs = _cluster_inputs(info, with_truth=has_truth)
     for kind, label in (("coef", "standardised coefficients (207 per window)"),
                         ("order", "shares of the order contributions (12 per window)")):
         figure(f"fig08_decision_graph_{kind}.png", f"Fig. 8-10: decision graph and clusters ({kind} features)",
@@ -323,7 +345,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
            "there and marked x.",
            lambda p: F.forecast_figure(res0, p), "forecast_figure")
 
-    md += _recovery_section(pairs, campaign_dir, command)
+    md += _recovery_section(info, command)
     say("recovery")
 
     for step in step_names:
@@ -346,23 +368,20 @@ def _report_command(name, campaign_dir, results_dir, out_root, extra_dirs) -> st
     return " ".join(parts)
 
 
-def _what_was_run(campaign_dir, results_dir, pairs, missing, command) -> list[str]:
+def _what_was_run(campaign_dir, results_dir, info, missing, command) -> list[str]:
     cat = _catalogue(campaign_dir)
-    n_events = len(pairs) + len(missing)
+    n_events = len(info) + len(missing)
     seeds, durations, configs, versions, rows = set(), [], {}, set(), []
-    for eid, ev, res_path in pairs:
-        res = _load_result(res_path)
-        tree = read_event(ev)
-        if "truth" in tree.children and "config_json" in tree["truth"].attrs:
-            seed = json.loads(tree["truth"].attrs["config_json"]).get("seed", {})
-            if "campaign_seed" in seed:
-                seeds.add(int(seed["campaign_seed"]))
-        duration = float(tree["accel"]["time"].values[-1] - tree["accel"]["time"].values[0])
+    for item in info:
+        eid, res, attrs = item["event_id"], item["res"], item["attrs"]
+        if item["seed"] is not None:
+            seeds.add(int(item["seed"]))
+        duration = item["duration"]
         durations.append(duration)
         configs.setdefault(res.attrs.get("identify_config_json", "{}"), []).append(eid)
         versions.add(str(res.attrs.get("vivbench_version", "unknown")))
         c = cat.get(eid, {})
-        rows.append([eid, tree.attrs.get("source", ""), c.get("scenario", tree.attrs.get("scenario", "")),
+        rows.append([eid, attrs.get("source", ""), c.get("scenario", attrs.get("scenario", "")),
                      f"{duration / 60:.1f}", c.get("U_min", ""), c.get("U_max", ""), c.get("A_max_m", ""),
                      f"{float(res.attrs['f_mode_hz']):.4f} ({res.attrs.get('f_mode_source', '')})",
                      int(res.sizes["window"])])
@@ -370,7 +389,7 @@ def _what_was_run(campaign_dir, results_dir, pairs, missing, command) -> list[st
     out.append(f"- Campaign: `{campaign_dir}`, {n_events} event files"
                + (f", seed {', '.join(str(s) for s in sorted(seeds))}" if seeds else ", seed not recorded (field data?)")
                + f"; durations {min(durations) / 60:.1f}-{max(durations) / 60:.1f} min.")
-    out.append(f"- Identification results: `{results_dir}`, {len(pairs)} of {n_events} events"
+    out.append(f"- Identification results: `{results_dir}`, {len(info)} of {n_events} events"
                + (f"; **no result for {', '.join(missing)}** (identification failed or was not run)." if missing else "."))
     out.append(f"- vivbench version of the results: {', '.join(sorted(versions))}; of this report: {vivbench.__version__}.")
     if len(configs) == 1:
@@ -420,19 +439,19 @@ def _settings_table(cfg: dict) -> str:
 # ------------------------------------------------------------------- clusters
 
 
-def _cluster_inputs(result_files: Sequence[Path], event_files: Sequence[Path] | None) -> dict:
+def _cluster_inputs(info: Sequence[dict], *, with_truth: bool) -> dict:
     """Window features, true regimes (S2) and a deterministic subsample for the decision graphs."""
+    from vivbench.validate import truth_window_regimes
+
     coefs, orders, truths = [], [], []
-    for i, res_path in enumerate(result_files):
-        res = _load_result(res_path)
+    for item in info:
+        res = item["res"]
         coef = res["coef"].values
         fitted = np.all(np.isfinite(coef), axis=(1, 2))
         coefs.append(coef[fitted])
         orders.append(res["order_rms"].values[fitted])
-        if event_files is not None:
-            from vivbench.validate import truth_window_regimes
-
-            truth = read_event(event_files[i])["truth"].ds
+        if with_truth:
+            truth = item["truth"]
             tau = json.loads(res.attrs["identify_config_json"])["tau"]
             tw = truth_window_regimes(truth, res["window_start"].values, res["window_end"].values, tau=tau)
             names = [str(s) for s in res["equation"].values.tolist()]
@@ -468,11 +487,12 @@ def _cluster_figure(inputs: dict, kind: str, path: Path) -> None:
 # ------------------------------------------------------------------- recovery
 
 
-def _recovery_section(pairs, campaign_dir, command) -> list[str]:
+def _recovery_section(info, command) -> list[str]:
     from vivbench.validate import campaign_recovery
 
     out = ["## Recovery of the truth", ""]
-    truth_pairs = [(eid, ev, res) for eid, ev, res in pairs if "truth" in read_event(ev).children]
+    truth_pairs = [(i["event_id"], i["event"], i["result"]) for i in info if i["truth"] is not None]
+    results = {i["event_id"]: i["res"] for i in info}
     if not truth_pairs:
         return out + ["No event has a truth (field data): recovery is not scored.", ""]
     rows = []
@@ -490,8 +510,8 @@ def _recovery_section(pairs, campaign_dir, command) -> list[str]:
                      f"{top}: {_fmt(shares[top])}", _fmt(s["rhs_median_rel_error"]),
                      _fmt(s["rhs_median_rel_error_active"]), _fmt(s["active_share"])])
         ident = []
-        for _e, _ev, res in subset:
-            r = _load_result(res)
+        for eid, _ev, _res in subset:
+            r = results[eid]
             ident.append((r["regime"].values, r["identifiable"].values.astype(bool)))
         reg = np.concatenate([a.ravel() for a, _ in ident])
         ok = np.concatenate([b.ravel() for _, b in ident])
@@ -560,7 +580,7 @@ def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, 
     csvs = sorted(directory.glob("*.csv"))
     pngs = sorted(directory.glob("*.png"))
     if summary is None and not csvs and not pngs:
-        return out + [f"The directory holds no `summary.json`, `*.csv` or `*.png`: nothing to show.", ""]
+        return out + ["The directory holds no `summary.json`, `*.csv` or `*.png`: nothing to show.", ""]
     if summary is not None:
         rows = [[k, _fmt(v) if isinstance(v, (int, float, bool)) or v is None else json.dumps(v)]
                 for k, v in summary.items() if k != "command"]
