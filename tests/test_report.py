@@ -7,6 +7,7 @@ import hashlib
 import json
 import re
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 import pytest
@@ -72,7 +73,7 @@ def test_report_links_resolve(report):
     assert len(images) >= 10, images
     for target in links:
         assert not target.startswith(("/", "http")), f"{target}: links must be relative"
-        assert (path.parent / target).is_file(), f"{target} is linked but missing"
+        assert (path.parent / unquote(target)).is_file(), f"{target} is linked but missing"
     # the report directory holds exactly what report.md shows
     pngs = {p.name for p in path.parent.glob("*.png")}
     assert pngs == set(images)

@@ -22,6 +22,7 @@ forecast_figure            Figs. 11-12 (simulation and forecasts)
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from contextlib import contextmanager
@@ -327,7 +328,8 @@ def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path,
     section : section of panel (a)
     """
     cfg = json.loads(result.attrs["identify_config_json"])["preprocess"]
-    pcfg = PreprocessConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items()})
+    known = {f.name for f in dataclasses.fields(PreprocessConfig)}
+    pcfg = PreprocessConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items() if k in known})
     f_mode = float(result.attrs["f_mode_hz"])
     edge = float(result.attrs["edge_s"])
     accel = tree["accel"].ds
@@ -350,7 +352,7 @@ def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path,
         for lo, hi in ((t[0], t[0] + edge), (t[-1] - edge, t[-1])):
             ax.axvspan(lo / 60.0, hi / 60.0, color="#f0a030", alpha=0.2, lw=0)
         ax.set_ylabel("displacement (m)")
-        ax.set_title(f"(a) {section}: y and A; band {f_mode:.3f} Hz +- {pcfg.half_width_hz(f_mode):.3f} Hz; "
+        ax.set_title(f"(a) {section}: y and A; band {f_mode:.3f} ± {pcfg.half_width_hz(f_mode):.3f} Hz; "
                      f"shaded: {edge:.0f} s edges dropped", fontsize=10, loc="left")
         ax.legend(loc="upper left", fontsize=8, ncol=1)
         ax = axes[1]

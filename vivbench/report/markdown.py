@@ -19,6 +19,7 @@ import re
 import shutil
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 import xarray as xr
@@ -249,7 +250,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
             md.append("")
             return
         written.append(fname)
-        md.append(f"![{title}]({fname})")
+        md.append(f"![{title}]({quote(fname)})")
         md.append("")
         md.append(caption)
         md.append("")
@@ -600,7 +601,7 @@ def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, 
         with atomic_path(out_dir / fname, suffix=".png") as tmp:
             shutil.copyfile(path, tmp)
         written.append(fname)
-        out += [f"![{step}: {path.stem}]({fname})", "", f"*{path.name}* from `{directory}`. "
+        out += [f"![{step}: {path.stem}]({quote(fname)})", "", f"*{path.name}* from `{directory}`. "
                 + _produced_by(cmd, how), ""]
     others = sorted(p.name for p in directory.iterdir() if p.is_file() and p.suffix not in (".csv", ".png")
                     and p.name not in ("summary.json", "command.txt") and not p.name.startswith("."))

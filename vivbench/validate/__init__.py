@@ -1,5 +1,54 @@
 """How well the identification chain recovers the truth of synthetic campaigns."""
 
-from vivbench.validate.recovery import campaign_recovery, regime_scores, rhs_relative_error, truth_window_regimes
+from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
+from vivbench.validate.metrics import (
+    REGIMES,
+    SUPPORT_NOTES,
+    cluster_agreement,
+    cluster_purity,
+    confusion_matrix,
+    forecast_summary,
+    merge_support_scores,
+    order_support,
+    pooled_support,
+    regime_report,
+    rhs_error_summary,
+    support_counts,
+    support_mask,
+    support_scores,
+)
+from vivbench.validate.pooled import pooled_recovery
+from vivbench.validate.recovery import (
+    campaign_recovery,
+    regime_scores,
+    rhs_relative_error,
+    truth_window_regimes,
+    window_rhs_errors,
+)
 
-__all__ = ["campaign_recovery", "regime_scores", "rhs_relative_error", "truth_window_regimes"]
+__all__ = [
+    "REGIMES",
+    "SUPPORT_NOTES",
+    "campaign_recovery",
+    "cluster_agreement",
+    "cluster_purity",
+    "confusion_matrix",
+    "forecast_summary",
+    "merge_support_scores",
+    "order_support",
+    "pooled_recovery",
+    "pooled_support",
+    "read_cluster_labels",
+    "read_forecast_tables",
+    "regime_report",
+    "regime_scores",
+    "rhs_error_summary",
+    "rhs_relative_error",
+    "support_counts",
+    "support_mask",
+    "support_scores",
+    "truth_window_regimes",
+    "validate_campaign",
+    "window_rhs_errors",
+    "write_validation",
+]
