@@ -140,6 +140,18 @@ def _catalogue(campaign_dir: Path) -> dict[str, dict]:
         return {row["event_id"]: row for row in csv.DictReader(f)}
 
 
+_FLOAT_TEXT = re.compile(r"[-+]?(\d+\.\d*|\.\d+|\d+)([eE][-+]?\d+)?")
+
+
+def _short(cell: str) -> str:
+    """A CSV cell for display: decimals with many digits to 4 significant digits; other text as is."""
+    if _FLOAT_TEXT.fullmatch(cell) and ("." in cell or "e" in cell.lower()):
+        digits = len(re.sub(r"[^0-9]", "", cell.split("e")[0].split("E")[0]).lstrip("0"))
+        if digits > 4:
+            return f"{float(cell):.4g}"
+    return cell
+
+
 def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
     with open(path, newline="") as f:
         rows = list(csv.reader(f))
@@ -590,9 +602,11 @@ def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, 
     for path in csvs:
         header, rows = _read_csv(path)
         out.append(f"**{path.name}**" + (f" (first {max_rows} of {len(rows)} rows; full table in `{path}`)"
-                                         if len(rows) > max_rows else f" ({len(rows)} rows)"))
+                                         if len(rows) > max_rows else f" ({len(rows)} rows)")
+                   + "; decimals shown to 4 significant digits")
         out.append("")
-        out.append(_table(header, rows[:max_rows]) if header else "(empty file)")
+        out.append(_table(header, [[_short(c) for c in row] for row in rows[:max_rows]]) if header
+                   else "(empty file)")
         out.append("")
         out.append(_produced_by(cmd, how))
         out.append("")
