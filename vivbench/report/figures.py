@@ -177,7 +177,7 @@ def sensor_layout_figure(tree: xr.DataTree, path: str | Path) -> Path:
             ax2.set_ylim(min(-0.1, ys.min() - 0.1), ys.max() * 1.35)
             ax2.legend(loc="upper right", fontsize=7, frameon=False)
         else:
-            ax2.text(0.5, 0.5, "no mode shape in this event file (field data)", ha="center", va="center",
+            ax2.text(0.5, 0.5, "no generator configuration in this event file: mode shape unknown", ha="center", va="center",
                      transform=ax2.transAxes)
         ax2.set_ylabel(r"$\phi$ (normalised, 1)")
         ax2.set_xlabel(f"position along the main span ({unit})")
