@@ -83,7 +83,7 @@ def test_pooled_model_recovers_the_true_regimes(event1):
     """Exact averaged dynamics of the paper-like event: every window labelled as the truth, and identifiable."""
     _spec, sim = event1
     (t, A, U, dA), truth_ds = _truth(sim)
-    model = PooledSINDy(n_bootstrap=20, seed=1).fit([(t, A, U, dA)])
+    model = PooledSINDy(n_bootstrap=20, block_s=100.0, seed=1).fit([(t, A, U, dA)])
     start = np.arange(t[0], t[-1] - 50.0, 25.0)
     end = start + 50.0
     out = model.window_regimes(t, A, U, start, end)
@@ -124,3 +124,48 @@ def test_same_seed_same_model_and_validation():
         PooledSINDy(agreement=1.5).fit([(t, A, U, dA)])
     with pytest.raises(ValueError, match="block_s"):
         PooledSINDy(block_s=0.0).fit([(t, A, U, dA)])
+
+
+def test_cli_pool_and_validation_of_the_campaign_model(small_results, tmp_path):
+    """`vivbench pool` writes the campaign model; `vivbench validate` scores it beside the windows, as pooled_recovery does."""
+    import shutil
+
+    from vivbench.cli import main
+    from vivbench.identify import POOLED_NAME
+    from vivbench.validate import pooled_recovery, validate_campaign
+
+    camp, res_dir, results = small_results
+    res = tmp_path / "res"
+    shutil.copytree(res_dir, res)
+    assert main(["pool", str(res), "--bootstrap", "10", "--block", "20"]) == 0
+    assert (res / POOLED_NAME).is_file() and not list(res.glob("*.tmp*"))
+    v = validate_campaign(camp.files[0].parent, res)
+    direct = pooled_recovery(camp.files[:2], res / POOLED_NAME, sorted(res.glob("*.identify.nc")))
+    assert v["pooled"]["regime"]["n"] == direct["n"]
+    assert_close(v["summary"]["pooled_regime_accuracy_all"], direct["accuracy_all"])
+    assert_close(v["summary"]["pooled_regime_coverage"], direct["coverage"])
+    assert_close(v["summary"]["pooled_median_rhs_rel_error_active"], direct["rhs_median_rel_error_active"])
+    assert {r["group"] for r in v["regime_confusion"]} >= {"pooled_identifiable", "pooled_all"}
+
+
+def test_cli_pool_bad_input(tmp_path, capsys):
+    from vivbench.cli import main
+
+    assert main(["pool", str(tmp_path / "none")]) == 2
+    (tmp_path / "empty").mkdir()
+    assert main(["pool", str(tmp_path / "empty")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.startswith("vivbench pool:") for line in err)
+
+
+def test_too_little_data_gives_no_verdict():
+    rng = np.random.default_rng(2)
+    n = 2000
+    t = np.arange(n) * 0.25
+    A = 0.05 + 0.1 * (t / t[-1])[:, None] * np.array([0.7, 1.0, 0.7])
+    U = 8.0 + np.sin(t / 80.0)[:, None] + np.array([0.0, 0.1, 0.2])
+    dA = 0.01 * A - 0.2 * A**3 + 1e-6 * rng.standard_normal((n, 3))
+    model = PooledSINDy(n_bootstrap=10, block_s=300.0, min_blocks=20).fit([(t, A, U, dA)])
+    assert not model.enough_data_ and model.n_blocks_ == 2
+    out = model.window_regimes(t, A, U, np.array([0.0, 100.0]), np.array([50.0, 150.0]))
+    assert not out["identifiable"].any()

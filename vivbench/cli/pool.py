@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 
@@ -18,6 +19,8 @@ def run(args) -> int:
                         seed=args.seed)
     ds = pool_results(files, model)
     out = write_pooled(ds, args.out or results_dir)
+    if ds.attrs.get("note"):
+        print(f"vivbench pool: {ds.attrs['note']}", file=sys.stderr)
     print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, terms per equation "
           f"{', '.join(str(int(k)) for k in ds['n_terms'].values)}, regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
     return 0

@@ -24,8 +24,12 @@ def run(args) -> int:
     print(f"validate: {s['n_events']} events, {s['n_window_equations']} window-equations; regime coverage "
           f"{f('regime_coverage')}, accuracy {f('regime_accuracy_identifiable')} identifiable / "
           f"{f('regime_accuracy_all')} all; median RHS rel. error {f('median_rhs_rel_error_active')} (active); "
-          f"support recall {f('support_recall_terms')} terms / {f('support_recall_pooled_terms')} pooled / "
+          f"support recall {f('support_recall_terms')} terms / {f('support_recall_pooled_terms')} section-pooled / "
           f"{f('support_recall_orders')} orders")
+    if "pooled_regime_coverage" in s:
+        print(f"campaign model (vivbench pool): regime coverage {f('pooled_regime_coverage')}, accuracy "
+              f"{f('pooled_regime_accuracy_identifiable')} identifiable / {f('pooled_regime_accuracy_all')} all; "
+              f"median RHS rel. error {f('pooled_median_rhs_rel_error_active')} (active)")
     print(f"wrote {len(written)} files to {args.out}")
     return 0
 

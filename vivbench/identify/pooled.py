@@ -167,6 +167,10 @@ class PooledSINDy:
     agreement : float
         Share of replicates that must give a window the pooled model's regime
         for the window to count as identifiable.
+    min_blocks : int
+        Fewer bootstrap blocks than this (too little data: the resamples
+        cannot show how the selection varies) and no window is flagged
+        identifiable; ``enough_data_`` says so.
     confidence : float
         Level of the joint confidence region of the coefficients (chi-square
         in p dimensions, residual variance inflated by the residuals'
@@ -191,7 +195,7 @@ class PooledSINDy:
 
     def __init__(self, *, thresholds: Sequence[float] = DEFAULT_THRESHOLDS, alpha: float = 0.05,
                  scaling: str = "scaled", n_bootstrap: int = 100, block_s: float = 300.0,
-                 agreement: float = 0.9, confidence: float = 0.95, tau: float = DEFAULT_TAU, seed: int = 0,
+                 agreement: float = 0.9, confidence: float = 0.95, min_blocks: int = 20, tau: float = DEFAULT_TAU, seed: int = 0,
                  chunk_size: int = 16):
         self.thresholds = thresholds
         self.alpha = alpha
@@ -200,13 +204,14 @@ class PooledSINDy:
         self.block_s = block_s
         self.agreement = agreement
         self.confidence = confidence
+        self.min_blocks = min_blocks
         self.tau = tau
         self.seed = seed
         self.chunk_size = chunk_size
 
     def get_params(self, deep: bool = True) -> dict:
         return {k: getattr(self, k) for k in ("thresholds", "alpha", "scaling", "n_bootstrap", "block_s",
-                                                "agreement", "confidence", "tau", "seed", "chunk_size")}
+                                                "agreement", "confidence", "min_blocks", "tau", "seed", "chunk_size")}
 
     def to_json(self) -> str:
         params = self.get_params()
@@ -220,6 +225,8 @@ class PooledSINDy:
             raise ValueError(f"block_s must be a positive number of seconds; got {self.block_s!r}")
         if not 0.0 < self.agreement <= 1.0:
             raise ValueError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
+        if isinstance(self.min_blocks, bool) or not isinstance(self.min_blocks, (int, np.integer)) or self.min_blocks < 1:
+            raise ValueError(f"min_blocks must be an integer >= 1; got {self.min_blocks!r}")
         if not 0.0 < self.confidence < 1.0:
             raise ValueError(f"confidence must lie strictly between 0 and 1; got {self.confidence!r}")
         if not 0.0 < self.tau < 1.0:
@@ -287,6 +294,7 @@ class PooledSINDy:
         self.aicc_ = best_aicc[0] + n * np.log(ys**2)
         self.n_samples_ = int(n)
         self.n_blocks_ = int(offset)
+        self.enough_data_ = bool(offset >= self.min_blocks)
         self.cond_ = float(np.linalg.cond(lib.theta[0]))
         self.y_scale_ = ys
         R = factors[0]
@@ -324,7 +332,7 @@ class PooledSINDy:
         point = reg[0]
         dR, dc1 = self._margins(t, A, U, window_start, window_end)
         robust = _regime_is_determined(R[0], dR, c1[0], dc1, self.tau) & (point > 0)
-        if models.shape[0] > 1:
+        if models.shape[0] > 1 and self.enough_data_:
             agree = (reg[1:] == point[None]).mean(axis=0)
             identifiable = robust & (agree >= self.agreement)
         else:
@@ -537,6 +545,10 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
         "n_samples": model.n_samples_,
         "n_blocks": model.n_blocks_,
         "cond": model.cond_,
+        "enough_data": int(model.enough_data_),
+        "note": ("" if model.enough_data_ else
+                 f"only {model.n_blocks_} bootstrap blocks of {model.block_s:g} s (fewer than {model.min_blocks}): "
+                 "too little data for an identifiability verdict, no window is flagged identifiable"),
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
         "pooled_config_json": model.to_json(),
         "vivbench_version": vivbench.__version__,

@@ -157,6 +157,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         models and for identifiable ones), ``support_table`` (rows), ``per_event``
         (rows), ``clusters`` (rows, or None), ``forecast`` (rows of
         :func:`forecast_summary` per d, or None), ``truth_regime_shares``,
+        ``pooled`` (regime report and RHS errors of the campaign model in
+        ``results_dir/campaign.pooled.nc`` when present, else None),
         ``skipped`` (event file -> reason), ``notes``, ``settings``, ``summary``
         (flat headline numbers).
 
@@ -190,6 +192,15 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     regimes, truths, flags, errs, actives, per_event = [], [], [], [], [], []
     sup_all, sup_ok = [], []
     skipped, truth_by_key = {}, {}
+    # The campaign model of ``vivbench pool``, scored beside the window models when present.
+    from vivbench.identify.pooled import POOLED_NAME
+
+    pooled_path = results_dir / POOLED_NAME
+    pooled = None
+    if pooled_path.is_file():
+        with xr.open_dataset(pooled_path, engine="h5netcdf") as ds:
+            pooled = ds.load()
+    p_reg, p_ok, p_errs, p_act = [], [], [], []
     for event_id, ep, rp in pairs:
         tree = read_event(ep)
         if "truth" not in tree.children:
@@ -211,6 +222,18 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         regimes.append(reg)
         truths.append(tru)
         flags.append(ok)
+        if pooled is not None:
+            sel = pooled["event_id"].values.astype(str) == event_id
+            if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
+                raise ValueError(f"{pooled_path}: its windows of {event_id} differ from {rp}; re-run vivbench pool")
+            p_reg.append(pooled["regime"].values[sel].astype(int))
+            p_ok.append(pooled["identifiable"].values[sel].astype(bool))
+            if "coef" in truth.data_vars:
+                pres = res.copy()
+                pres["coef"] = (res["coef"].dims, np.broadcast_to(pooled["coef"].values, res["coef"].shape).copy())
+                pe, pact = window_rhs_errors(pres, truth["coef"].values, truth["r"].values, active_share=active_share)
+                p_errs.append(pe.ravel())
+                p_act.append(pact.ravel())
         if "coef" in truth.data_vars:
             coef_true = truth["coef"].values
             e, act = window_rhs_errors(res, coef_true, truth["r"].values, active_share=active_share)
@@ -227,6 +250,11 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         else:
             skipped[str(ep)] = "truth has no exact coefficient matrix (coef): support and RHS error not scored"
         per_event.append(row)
+    pooled_out = None
+    if pooled is not None and p_reg:
+        pr = regime_report(np.concatenate(p_reg), np.concatenate(truths), np.concatenate(p_ok))
+        pooled_out = {"regime": pr, "rhs": rhs_error_summary(np.concatenate(p_errs), np.concatenate(p_act)) if p_errs else None,
+                      "file": str(pooled_path), "n_terms": [int(k) for k in pooled["n_terms"].values]}
     if not regimes:
         raise ValueError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
                          "validation needs synthetic events")
@@ -234,8 +262,11 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     reg, tru, ok = (np.concatenate(x) for x in (regimes, truths, flags))
     regime = regime_report(reg, tru, ok)
     confusion_rows = []
-    for g in ("identifiable", "not_identifiable", "all"):
-        cm = regime["groups"][g]["confusion"]
+    groups = [(g, regime) for g in ("identifiable", "not_identifiable", "all")]
+    if pooled_out is not None:
+        groups += [(f"pooled_{g}", pooled_out["regime"]) for g in ("identifiable", "not_identifiable", "all")]
+    for g, rep in groups:
+        cm = rep["groups"][g.removeprefix("pooled_")]["confusion"]
         for a in REGIMES:
             confusion_rows.append({"group": g, "truth_regime": a, **{f"identified_{b}": cm[a - 1][b - 1] for b in REGIMES},
                                    "n": int(sum(cm[a - 1]))})
@@ -270,6 +301,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         "per_event": per_event,
         "clusters": clusters,
         "forecast": forecast,
+        "pooled": pooled_out,
         "truth_regime_shares": {str(k): float(np.mean(truth_all == k)) for k in REGIMES},
         "skipped": skipped,
         "notes": list(_NOTES),
@@ -308,6 +340,14 @@ def _summary(v: dict) -> dict:
             out[f"support_precision_{level}_dense_model"] = s[level]["precision_dense_model"]
         for i in range(4):
             out[f"order_recall_A{i}"] = s["order_recall"][i]
+    if v.get("pooled") is not None:
+        pg = v["pooled"]["regime"]["groups"]
+        out.update(pooled_regime_coverage=v["pooled"]["regime"]["coverage"],
+                   pooled_regime_accuracy_identifiable=pg["identifiable"]["accuracy"],
+                   pooled_regime_accuracy_not_identifiable=pg["not_identifiable"]["accuracy"],
+                   pooled_regime_accuracy_all=pg["all"]["accuracy"])
+        if v["pooled"]["rhs"] is not None:
+            out["pooled_median_rhs_rel_error_active"] = v["pooled"]["rhs"]["active"]["median"]
     for row in v["clusters"] or []:
         tag = f"{row['feature_set']}{'_no_halo' if row['halo_ignored'] else ''}"
         out[f"ari_{tag}"] = row["ari"]
