@@ -14,7 +14,7 @@ import pytest
 import xarray as xr
 
 from vivbench.cli import main
-from vivbench.identify import forecast_table, identify_files
+from vivbench.identify import forecast_table
 from vivbench.io import read_event
 from vivbench.report import EXTRA_STEPS, forecast_figure, sensor_layout_figure, write_report
 
@@ -22,12 +22,10 @@ _LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
 
 
 @pytest.fixture(scope="module")
-def identified(small_campaign, tmp_path_factory):
-    """The session's small campaign identified with the default configuration."""
-    out = tmp_path_factory.mktemp("identify")
-    written, failures = identify_files(small_campaign.files, out)
-    assert not failures, failures
-    return Path(small_campaign.files[0]).parent, out, written
+def identified(small_results):
+    """The session's small campaign, of which the first two events are identified."""
+    campaign, out, written = small_results
+    return Path(campaign.files[0]).parent, out, written
 
 
 @pytest.fixture(scope="module")
@@ -94,8 +92,13 @@ def test_report_sections_and_tables(report, forecast_dir):
     assert f"first 5 of {len(rows)} rows" in text
     assert "forecast_forecast_E001.png" in text
     assert "median_nmse" in text
-    # recovery table: one row per event plus the campaign
-    n_events = len(list(Path(campaign).glob("E*.nc")))
+    # events without a result are named, not silently dropped
+    identified_ids = {p.name.split(".")[0] for p in Path(results).glob("*.identify.nc")}
+    missing = sorted(p.stem for p in Path(campaign).glob("E*.nc") if p.stem not in identified_ids)
+    assert missing, "the fixture should leave some events unidentified"
+    assert f"**no result for {', '.join(missing)}**" in text
+    # recovery table: one row per identified event plus the campaign
+    n_events = len(identified_ids)
     recovery = text.split("## Recovery of the truth", 1)[1].split("\n## ", 1)[0]
     assert len(re.findall(r"^\| E\d{3} \|", recovery, flags=re.M)) == 2 * n_events
     assert "| **all** |" in recovery
