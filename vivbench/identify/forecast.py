@@ -52,7 +52,7 @@ from scipy.interpolate import make_interp_spline
 
 from vivbench.terms import feature_exponents
 
-__all__ = ["CLIP_MODES", "Simulation", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
+__all__ = ["CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
            "window_in_force"]
 
 _METHODS = ("rk4",)
@@ -240,6 +240,31 @@ def _polynomials(coef: np.ndarray) -> np.ndarray:
     P = np.zeros(coef.shape[:2] + (3, 4, 6))
     P[:, :, ex[:, 0], ex[:, 1], ex[:, 2]] = coef
     return P
+
+
+def model_jacobian(coef, A, U) -> np.ndarray:
+    """Jacobian d(dA/dt)/dA of a model on the physical library at one state.
+
+    Parameters
+    ----------
+    coef : ndarray, shape (3, 69)
+        Coefficients on :func:`vivbench.terms.evaluate_library`.
+    A, U : ndarray, shape (3,), m and m/s
+
+    Returns
+    -------
+    ndarray, shape (3, 3), 1/s
+        J[m, k] = d f_m / d A_k. Its largest real eigenvalue is the growth rate
+        of small deviations of A from the trajectory (the true VIV dynamics
+        have rates of order 1e-3..1e-2 1/s).
+    """
+    P = _polynomials(np.asarray(coef, dtype=float)[None])[0]  # (m, k, i, j)
+    A = np.asarray(A, dtype=float)
+    U = np.asarray(U, dtype=float)
+    i = np.arange(4)
+    dApow = i[None, :] * np.where(i[None, :] >= 1, A[:, None] ** np.maximum(i - 1, 0)[None, :], 0.0)  # (k, i)
+    Upow = U[:, None] ** np.arange(6)[None, :]  # (k, j)
+    return np.einsum("mkij,ki,kj->mk", P, dApow, Upow)
 
 
 def _grid(result: xr.Dataset, t0: float, t1: float):
