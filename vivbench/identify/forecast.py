@@ -34,6 +34,31 @@ stopped, not propagated: the step that produces a non-finite A, an A above
 ``-negative_tolerance`` times it ends the simulation; the samples from there
 on are NaN, and the NMSE covers only the valid part.
 
+Why window models blow up, and what was tried (``clip``). In a 50 s window
+A is nearly constant and A_1 : A_2 : A_3 is fixed by the mode shape, so the
+data fix dA/dt along the measured path but not how it changes when A leaves
+it: the Jacobian d(dA/dt)/dA of an identified model (:func:`model_jacobian`)
+is not identified. On the default campaign its largest real eigenvalue at the
+forecast start is 0.05-1 1/s for single windows and up to ~60 1/s for
+coefficients averaged over several windows (each window's large, cancelling
+coefficients average to a model that fits none of them), against about
++-0.006 1/s for the true averaged dynamics (``vivbench forecast`` reports both).
+Any deviation of the simulated A from the measurement then grows by e within
+seconds. Remedies tried: (1) float64 cancellation is not the cause: the
+largest physical term of a window is ~1e8 times dA/dt (8 of 16 digits), and
+evaluating the models in their windows' scaled basis instead gives the same
+right-hand side to 0.5 % at states within +-10 % of the measured A and the
+same Jacobian eigenvalues to 1e-5 (checked on event E001 of the default
+campaign);
+(2) ``clip="u"``, each model sees U only within the range of its window
+("a model is only valid on the data it saw"): no effect, the runs stop
+before U leaves the range; (3) ``clip="au"``, A clipped too: the runs last
+longer but the NMSE does not improve, since a model frozen at its window's
+edge only extrapolates dA/dt as a function of U; (4) a single model refitted
+by the engine on the pooled data of [t0, t0 + d] (explored, not kept): also
+stopped within 10-60 s. The paper's method (``clip="none"``) stays the
+default and the comparison.
+
 NMSE, per section s, over the compared samples (valid simulation and finite
 measurement)::
 
