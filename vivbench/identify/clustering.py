@@ -327,6 +327,10 @@ def decision_graph(rho, delta, centers, path) -> None:
     ax.scatter(rho[centers], delta[centers], s=40, color="tab:red", label="centres")
     for label, i in enumerate(centers):
         ax.annotate(str(label), (rho[i], delta[i]), textcoords="offset points", xytext=(4, 4))
+    pos = delta[delta > 0]
+    if pos.size and pos.max() > 1e3 * np.median(pos):
+        # isolated points sit orders of magnitude above the rest: a linear axis hides the centres
+        ax.set_yscale("log")
     ax.set_xlabel(r"local density $\rho$")
     ax.set_ylabel(r"distance to nearest denser point $\delta$")
     ax.legend(loc="best")
