@@ -3,7 +3,19 @@
 from vivbench.identify.clustering import KERNELS, DensityPeaks, coefficient_features, decision_graph, order_features
 from vivbench.identify.derivative import DERIVATIVE_METHODS, Derivative, TVDerivativeResult, estimate_noise_std, tv_derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, SOLVERS, StlsqPath, StlsqSettings, WindowedSINDy, aicc, stlsq_path, window_bounds
-from vivbench.identify.forecast import Simulation, forecast, forecast_coefficients, forecast_table, nmse, simulate_identified, window_in_force
+from vivbench.identify.forecast import CLIP_MODES, Simulation, forecast, forecast_coefficients, forecast_table, nmse, simulate_identified, window_in_force, window_ranges
+from vivbench.identify.interpret import (
+    FEATURE_SETS,
+    CampaignWindows,
+    ClusterConfig,
+    ClusterResult,
+    campaign_windows,
+    cluster_scores,
+    cluster_windows,
+    read_result,
+    standardized_coefficients,
+    summarize_clusters,
+)
 from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pooled import POOLED_NAME, PooledSINDy, pool_results, pooled_window_stats, write_pooled
@@ -32,5 +44,8 @@ __all__ = [
     "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
     "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features",
     "POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "write_pooled",
-    "Simulation", "forecast", "forecast_coefficients", "forecast_table", "nmse", "simulate_identified", "window_in_force",
+    "CLIP_MODES", "Simulation", "forecast", "forecast_coefficients", "forecast_table", "nmse", "simulate_identified",
+    "window_in_force", "window_ranges",
+    "FEATURE_SETS", "CampaignWindows", "ClusterConfig", "ClusterResult", "campaign_windows", "cluster_scores",
+    "cluster_windows", "read_result", "standardized_coefficients", "summarize_clusters",
 ]

@@ -17,6 +17,7 @@ from vivbench.validate.metrics import (
     support_mask,
     support_scores,
 )
+from vivbench.validate.plateau import Plateau, clearest_plateau, measured_plateau, truth_plateau
 from vivbench.validate.pooled import pooled_recovery
 from vivbench.validate.recovery import (
     campaign_recovery,
@@ -27,6 +28,10 @@ from vivbench.validate.recovery import (
 )
 
 __all__ = [
+    "Plateau",
+    "clearest_plateau",
+    "measured_plateau",
+    "truth_plateau",
     "REGIMES",
     "SUPPORT_NOTES",
     "campaign_recovery",
