@@ -67,7 +67,7 @@ def _truth_growth(args, result, t0):
     return float(np.linalg.eigvals(J).real.max())
 
 
-def _figure(path, event_id, sim, fcs, t0, horizon):
+def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -80,8 +80,12 @@ def _figure(path, event_id, sim, fcs, t0, horizon):
         ax0.plot(sim.t, sim.A_sim[:, s], color=colors[s], lw=1.0, label=f"simulated S{s + 1}")
     if sim.stopped:
         ax0.axvline(sim.stopped_at, color="k", ls=":", lw=1, label=f"stopped at {sim.stopped_at:.0f} s")
+    if campaign is not None:
+        ax0.plot(campaign[0].t, campaign[0].A_sim[:, 1], color="tab:red", lw=1.0, ls="--",
+                 label=f"campaign model S2, NMSE {campaign[0].nmse[1]:.3g}")
     ax0.axvspan(t0, t0 + horizon, color="0.9", zorder=0)
-    ax0.set_title(f"{event_id}: whole event with the time-varying window models")
+    ax0.set_title(f"{event_id}: whole event with the time-varying window models"
+                  + (" and the campaign model" if campaign is not None else ""))
     ax0.set_xlabel("time since event start (s)")
     ax0.set_ylabel("amplitude A (m)")
     ax0.legend(loc="best", fontsize=7)
@@ -96,6 +100,10 @@ def _figure(path, event_id, sim, fcs, t0, horizon):
             last = np.flatnonzero(np.isfinite(fc.A_sim[:, 1]))
             if last.size:
                 ax1.plot(fc.t[last[-1]], fc.A_sim[last[-1], 1], "x", color=c, ms=8)
+    if campaign is not None:
+        cf = campaign[1]
+        ax1.plot(cf.t, cf.A_sim[:, 1], color="tab:red", lw=1.2, ls="--",
+                 label=f"campaign model (vivbench pool), NMSE {cf.nmse[1]:.3g}" + (" (stopped)" if cf.stopped else ""))
     lo, hi = np.nanmin(first.A_meas[:, 1]), np.nanmax(first.A_meas[:, 1])
     pad = 0.5 * (hi - lo) + 1e-6
     ax1.set_ylim(lo - pad, hi + pad)  # forecasts that leave this range were stopped or are off scale
@@ -109,7 +117,9 @@ def _figure(path, event_id, sim, fcs, t0, horizon):
 
 
 def run(args) -> int:
-    from vivbench.identify import CLIP_MODES, forecast, read_result, simulate_identified
+    import xarray as xr
+
+    from vivbench.identify import POOLED_NAME, CLIP_MODES, forecast, read_result, simulate_identified, with_campaign_model
     from vivbench.identify.forecast import model_jacobian
     from vivbench.io import atomic_path
 
@@ -151,6 +161,25 @@ def run(args) -> int:
             if clip == "none":
                 summary[f"growth_rate_per_s_d{d:g}"] = growth
                 paper.append((d, fc))
+    campaign = None
+    pooled_path = Path(args.pooled) if args.pooled else Path(args.result).with_name(POOLED_NAME)
+    if args.pooled and not pooled_path.is_file():
+        raise ValueError(f"{pooled_path}: no such campaign model file")
+    if pooled_path.is_file():
+        # The campaign model of ``vivbench pool``: one model for all windows, so d plays no role.
+        with xr.open_dataset(pooled_path, engine="h5netcdf") as ds:
+            cm = with_campaign_model(result, ds.load())
+        csim = simulate_identified(cm)
+        cfc = forecast(cm, t0, horizon)
+        for kind, run_ in (("campaign_model_simulation", csim), ("campaign_model_forecast", cfc)):
+            for s, name in enumerate(sections):
+                rows.append({"kind": kind, "clip": "none", "d_s": "", "section": name, "nmse": run_.nmse[s],
+                             "stopped": run_.stopped, "stopped_at_s": run_.stopped_at, "covered": run_.covered,
+                             "n_windows": 1, "growth_rate_per_s": None, "reason": run_.reason})
+        summary["campaign_model_simulation_nmse_S2"] = float(csim.nmse[1])
+        summary["campaign_model_forecast_nmse_S2"] = float(cfc.nmse[1])
+        summary["campaign_model_forecast_stopped"] = bool(cfc.stopped)
+        campaign = (csim, cfc)
     truth_growth = _truth_growth(args, result, t0)
     if truth_growth is not None:
         summary["growth_rate_per_s_truth"] = truth_growth
@@ -174,10 +203,13 @@ def run(args) -> int:
             w.writeheader()
             w.writerows({k: _fmt(v) for k, v in r.items()} for r in rows)
     with atomic_path(out / f"forecast_{event_id}.png", suffix=".png") as tmp:
-        _figure(tmp, event_id, whole, paper, t0, horizon)
+        _figure(tmp, event_id, whole, paper, t0, horizon, campaign)
     with atomic_path(out / "summary.json") as tmp:
         clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in summary.items()}
         tmp.write_text(json.dumps(clean, indent=1, sort_keys=True) + "\n")
+    if campaign is not None:
+        print(f"{event_id}: campaign model: whole-event NMSE(S2) {campaign[0].nmse[1]:.3g}, forecast NMSE(S2) "
+              f"{campaign[1].nmse[1]:.3g}" + (" (stopped)" if campaign[1].stopped else ""))
     print(f"{event_id}: forecasts from t0 = {t0:.0f} s ({t0_source}) over {horizon:.0f} s written to {out}; "
           + ", ".join(f"d={d:g} s NMSE(S2) {fc.nmse[1]:.3g}" + (" (stopped)" if fc.stopped else "") for d, fc in paper))
     return 0
@@ -193,5 +225,7 @@ def register(sub) -> None:
     s.add_argument("--horizon", type=float, default=300.0, help="forecast length, s (default 300, as the paper)")
     s.add_argument("--d", type=_ds, default=(0.0, 50.0, 150.0, 300.0),
                    help="averaging durations, s, comma-separated (default 0,50,150,300)")
+    s.add_argument("--pooled", default=None,
+                   help="campaign model file of vivbench pool (default: campaign.pooled.nc beside the result, if any)")
     s.add_argument("--campaign", default=None, help="campaign directory with the event file (truth: t0, growth rate)")
     s.set_defaults(func=run)

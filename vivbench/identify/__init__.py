@@ -18,7 +18,7 @@ from vivbench.identify.interpret import (
 )
 from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
-from vivbench.identify.pooled import POOLED_NAME, PooledSINDy, pool_results, pooled_window_stats, write_pooled
+from vivbench.identify.pooled import POOLED_NAME, PooledSINDy, pool_results, pooled_window_stats, with_campaign_model, write_pooled
 from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, result_path
 from vivbench.identify.preprocess import (
     Preprocessed,
@@ -43,7 +43,7 @@ __all__ = [
     "perpendicular_speed", "preprocess_arrays", "result_path", "segments", "stlsq_path", "to_grid", "tv_derivative",
     "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
     "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features",
-    "POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "write_pooled",
+    "POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "with_campaign_model", "write_pooled",
     "CLIP_MODES", "Simulation", "forecast", "forecast_coefficients", "forecast_table", "nmse", "simulate_identified",
     "window_in_force", "window_ranges",
     "FEATURE_SETS", "CampaignWindows", "ClusterConfig", "ClusterResult", "campaign_windows", "cluster_scores",

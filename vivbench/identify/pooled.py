@@ -41,7 +41,7 @@ from vivbench.identify.library import window_library
 from vivbench.regime import DEFAULT_TAU, regime_rule
 from vivbench.terms import evaluate_library, feature_names, section_exponents
 
-__all__ = ["POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "write_pooled"]
+__all__ = ["POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "with_campaign_model", "write_pooled"]
 
 
 def _blocks(t: np.ndarray, ok: np.ndarray, block_s: float) -> np.ndarray:
@@ -566,3 +566,22 @@ def write_pooled(ds, out_dir) -> "Path":
     from vivbench.io import write_netcdf_atomic
 
     return Path(write_netcdf_atomic(ds, Path(out_dir) / POOLED_NAME))
+
+
+def with_campaign_model(result, pooled):
+    """A copy of an identification result whose every window holds the campaign model's coefficients.
+
+    With it the simulation and forecasting functions of ``vivbench.identify.forecast``
+    run the pooled model (a forecast with it does not depend on d).
+
+    Parameters
+    ----------
+    result : xarray.Dataset, an ``<event_id>.identify.nc``
+    pooled : xarray.Dataset, a ``campaign.pooled.nc`` with the same equations and features
+    """
+    if [str(x) for x in pooled["feature"].values] != [str(x) for x in result["feature"].values]:
+        raise ValueError("the campaign model's features differ from the result's")
+    out = result.copy()
+    out["coef"] = (result["coef"].dims, np.broadcast_to(pooled["coef"].values, result["coef"].shape).copy(),
+                   result["coef"].attrs)
+    return out
