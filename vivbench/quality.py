@@ -19,8 +19,8 @@ Repairs
 
 Refusals
 --------
-- Acceleration whose magnitude no bridge deck reaches (RMS above
-  :data:`MAX_ACC_RMS`), or whose mean is 1 g in another unit (gravity seen by
+- Acceleration whose magnitude no bridge deck reaches (robust RMS, 1.4826
+  MAD, above :data:`MAX_ACC_RMS`), or whose median is 1 g in another unit (gravity seen by
   an accelerometer that reports in g, milli-g or mm/s^2): the hint names the
   unit it looks like. Acceleration in g WITHOUT a gravity offset is 9.8 times
   too small but otherwise plausible and cannot be told from a quiet deck by
@@ -153,17 +153,24 @@ def despike(x, rate_hz: float, *, threshold: float = 8.0, block_s: float = 10.0,
     return x2.reshape(shape), int(spike.sum()), n_bridged
 
 
-def _stats(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _robust_stats(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Median and robust standard deviation (1.4826 MAD) of each column, ignoring NaN and inf.
+
+    Robust so that a few spikes cannot make a record look like another unit.
+    """
+    x = np.where(np.isfinite(values), values, np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        mean = np.nanmean(values, axis=0)
-        std = np.nanstd(values, axis=0)
-        rms = np.sqrt(np.nanmean(values**2, axis=0))
-    return np.atleast_1d(mean), np.atleast_1d(std), np.atleast_1d(rms)
+        med = np.nanmedian(x, axis=0)
+        scale = _MAD_TO_SIGMA * np.nanmedian(np.abs(x - med), axis=0)
+    return np.atleast_1d(med), np.atleast_1d(scale)
 
 
 def check_acc_magnitude(acc, units: str = "m/s^2", *, where: str = "acc", labels=None, fix: str = "in the mapping") -> None:
     """Refuse acceleration whose magnitude betrays the wrong unit.
+
+    The level is the median and the spread the robust standard deviation
+    (1.4826 MAD) of each column, so that spikes do not count.
 
     Parameters
     ----------
@@ -186,27 +193,29 @@ def check_acc_magnitude(acc, units: str = "m/s^2", *, where: str = "acc", labels
     factor = ACC_UNITS[units]
     raw = np.asarray(acc, dtype=np.float64).reshape(np.shape(acc)[0], -1)
     labels = list(labels) if labels is not None else [str(j) for j in range(raw.shape[1])]
-    mean, std, rms = _stats(raw)
+    med, spread = _robust_stats(raw)
     for j, label in enumerate(labels):
-        if not np.isfinite(rms[j]):
+        if not np.isfinite(med[j]):
             continue
-        mean_si, std_si = mean[j] * factor, std[j] * factor
+        level = f"acc median {med[j]:.3g}, robust RMS {spread[j]:.3g}"
+        mean_si, std_si = med[j] * factor, spread[j] * factor
         if abs(abs(mean_si) / G - 1.0) <= _GRAVITY_TOLERANCE and std_si <= MAX_ACC_RMS:
             continue  # gravity in the declared unit: a static offset the band filter removes
-        gravity_in = [u for u, f in ACC_UNITS.items() if u in _ACC_CANONICAL and f != factor
-                      and abs(abs(mean[j]) * f / G - 1.0) <= _GRAVITY_TOLERANCE]
+        gravity_in = [u for u in _ACC_CANONICAL if ACC_UNITS[u] != factor
+                      and abs(abs(med[j]) * ACC_UNITS[u] / G - 1.0) <= _GRAVITY_TOLERANCE]
         if gravity_in:
             cand = gravity_in[0]
             raise ValueError(
-                f"{where} {label}: acc RMS {rms[j]:.3g} (mean {mean[j]:.3g}) looks like {cand} including gravity; "
-                f'set units = "{cand}" {fix} (declared {units!r})'
+                f"{where} {label}: {level} (declared {units}) looks like {cand} including gravity; "
+                f'set units = "{cand}" {fix}'
             )
         if std_si > MAX_ACC_RMS:
-            cands = [u for u in _ACC_CANONICAL if std[j] * ACC_UNITS[u] <= MAX_ACC_RMS and ACC_UNITS[u] < factor]
+            cands = [u for u in _ACC_CANONICAL if spread[j] * ACC_UNITS[u] <= MAX_ACC_RMS and ACC_UNITS[u] < factor]
             hint = " or ".join(f'"{u}"' for u in cands) if cands else "a smaller unit"
+            si = f" = {std_si:.3g} m/s^2" if factor != 1.0 else ""
             raise ValueError(
-                f"{where} {label}: acc RMS {rms[j]:.3g} {units} is {std_si:.3g} m/s^2 about its mean, implausible for "
-                f"a bridge deck (limit {MAX_ACC_RMS:g} m/s^2); it looks like {hint}: set units = {hint} {fix}"
+                f"{where} {label}: {level} {units}{si} is implausible for a bridge deck (limit {MAX_ACC_RMS:g} m/s^2); "
+                f"it looks like {hint}: set units = {hint} {fix}"
             )
 
 
@@ -226,6 +235,7 @@ def check_wind_magnitude(u, v, units: str = "m/s", *, where: str = "wind", label
     factor = WIND_UNITS[units]
     u = np.asarray(u, dtype=np.float64)
     speed = np.hypot(u, np.asarray(v, dtype=np.float64)).reshape(u.shape[0], -1)
+    speed = np.where(np.isfinite(speed), speed, np.nan)
     labels = list(labels) if labels is not None else [str(j) for j in range(speed.shape[1])]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -256,9 +266,11 @@ def check_wind_varies(U_tilde, *, where: str = "wind", labels=None) -> None:
         the constant term (a singular library).
     """
     x = np.asarray(U_tilde, dtype=np.float64)
-    x = x.reshape(x.shape[0], -1)
+    x = np.where(np.isfinite(x), x, np.nan).reshape(x.shape[0], -1)
     labels = list(labels) if labels is not None else [str(j) for j in range(x.shape[1])]
-    _, std, _ = _stats(x)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        std = np.atleast_1d(np.nanstd(x, axis=0))
     flat = [lab for lab, s in zip(labels, std) if np.isfinite(s) and s < MIN_WIND_STD]
     if flat:
         raise ValueError(
