@@ -26,10 +26,13 @@ from vivbench.cli import main
 from vivbench.identify import IdentifyConfig, PreprocessConfig, identify_files
 from vivbench.io import write_netcdf_atomic
 from vivbench.quality import G
+from vivbench.synth import CampaignConfig, campaign_specs, generate_event
 
-# A small configuration for the 4 min event: 30 s windows, 30 s edges.
-CONFIG = IdentifyConfig(window=30.0, step=15.0,
-                        preprocess=PreprocessConfig(edge_s=30.0, min_segment_s=30.0, welch_segment_s=100.0))
+# A small configuration for a 150 s event: 20 s windows, 20 s edges (the edge actually
+# dropped is 28.6 s, three time constants of the band filter), 100 s Welch sections.
+DURATION = 150.0
+CONFIG = IdentifyConfig(window=20.0, step=10.0,
+                        preprocess=PreprocessConfig(edge_s=20.0, min_segment_s=20.0, welch_segment_s=100.0))
 
 # The documented refusals (vivbench.io, vivbench.quality, preprocessing, pipeline).
 DOCUMENTED = {
@@ -46,9 +49,11 @@ ANY_DOCUMENTED = "|".join(f"(?:{p})" for p in DOCUMENTED.values())
 
 
 @pytest.fixture(scope="module")
-def base_file(short_event, tmp_path_factory):
-    """The short event without its truth, as a field file would be."""
-    tree = short_event.copy()
+def base_file(tmp_path_factory):
+    """A 150 s synthetic event without its truth, as a field file would be."""
+    campaign = CampaignConfig(n_events=1, seed=3, duration=(DURATION, DURATION))
+    spec, seed = campaign_specs(campaign)[0]
+    tree = generate_event(spec, campaign.generator, seed).copy()
     del tree["truth"]
     path = tmp_path_factory.mktemp("base") / "E001.nc"
     write_netcdf_atomic(tree, path)
@@ -103,7 +108,7 @@ def corruptions(draw):
     var = draw(st.sampled_from(["u", "v"])) if group == "wind" else "acc"
     cols = draw(st.lists(st.integers(0, 2), min_size=1, max_size=3, unique=True))
     rate = 32.0 if group == "wind" else 50.0
-    n = int(240 * rate)
+    n = int(DURATION * rate)
     if kind == "nan_block":
         start = draw(st.integers(0, n - 1))
         length = draw(st.integers(1, n))
@@ -166,7 +171,7 @@ def corruptions(draw):
     if kind == "extra_var":
         return "extra /wind/T", _xarray(_extra_variable), "ok"
     if kind == "truncate":
-        seconds = draw(st.floats(0.0, 240.0))
+        seconds = draw(st.floats(0.0, DURATION))
         return f"truncate to {seconds:.3g} s", _xarray(_truncate(seconds)), "either"
     junk = draw(st.binary(min_size=0, max_size=256))
     return f"{len(junk)} bytes of junk", lambda path, base: path.write_bytes(junk), "unreadable"
@@ -212,7 +217,10 @@ def test_corrupted_event_is_identified_with_quality_flags_or_refused(base_file, 
         _check_outcome(path, out, label, expected, written, failures)
 
 
-def test_cli_reports_one_line_per_bad_file_and_finishes_the_good_ones(base_file, tmp_path, capsys):
+def test_cli_reports_one_line_per_bad_file_and_finishes_the_good_ones(short_event, tmp_path, capsys):
+    # the 4 min event: the CLI keeps the default 60 s edges
+    base_file = tmp_path / "base.nc"
+    write_netcdf_atomic(short_event, base_file)
     good = tmp_path / "in" / "E001.nc"
     good.parent.mkdir()
     shutil.copyfile(base_file, good)
@@ -260,3 +268,13 @@ def test_spikes_are_repaired_close_to_the_clean_result(base_file, tmp_path):
     err_raw = float(np.abs(c["A"] - a["A"]).max() / a["A"].max())
     assert err_fixed < 0.01 < err_raw, (err_fixed, err_raw)
     assert float(np.abs(b["U"] - a["U"]).max()) < 0.01 * float(a["U"].max())
+
+
+def test_two_events_with_one_id_do_not_overwrite_each_other(short_event, tmp_path):
+    a, b = tmp_path / "a" / "E001.nc", tmp_path / "b" / "E001.nc"
+    for p in (a, b):
+        write_netcdf_atomic(short_event, p)
+    written, failures = identify_files([a, b], tmp_path / "out", IdentifyConfig(window=30.0, step=15.0))
+    assert [p.name for p in written] == ["E001.identify.nc"]
+    assert failures == {str(b): f"{b}: event_id 'E001' is also that of {a}; their results would overwrite each other "
+                                "(give one of them another event_id)"}

@@ -462,8 +462,8 @@ def _repair_time(t: np.ndarray, name: str):
     if back.size > max(1, _MAX_REORDER_FRACTION * n):
         i = back[0] + 1
         raise ValueError(
-            f"{name}: time goes back {back.size} times, first at line {i + 2} (from {t[i - 1]!r} s to {t[i]!r} s "
-            f"after start); sort the file or fix the clock (up to 1 % of rows out of order are sorted)"
+            f"{name}: time goes back {back.size} times, first at line {i + 2} (from {float(t[i - 1])!r} s to "
+            f"{float(t[i])!r} s after start); sort the file or fix the clock (up to 1 % of rows out of order are sorted)"
         )
     order = np.argsort(t, kind="stable")
     n_reordered = int(np.sum(order != np.arange(n)))
@@ -515,9 +515,9 @@ def _write_text(path: Path, text: str) -> None:
         tmp.write_text(text)
 
 
-def _mapping_text(tree, *, groups: dict) -> str:
+def _mapping_text(tree, *, groups: dict, event_id: str | None = None) -> str:
     lines = [
-        f"event_id = {_toml_value(str(tree.attrs['event_id']))}",
+        f"event_id = {_toml_value(event_id or str(tree.attrs['event_id']))}",
         f"start_time = {_toml_value(str(tree.attrs['start_time']))}",
         f"span_azimuth_deg = {_toml_value(float(tree.attrs['span_azimuth_deg']))}",
         "",
@@ -540,7 +540,7 @@ def _time_strings(t: np.ndarray, start_time: str) -> np.ndarray:
 
 
 def export_csv(tree, out_dir, *, layout: str = "per_section", wind_units: str = "m/s", acc_units: str = "m/s^2",
-               time_format: str = "seconds"):
+               time_format: str = "seconds", event_id: str | None = None):
     """Write an event as CSV files plus a mapping that imports them back.
 
     Parameters
@@ -557,6 +557,8 @@ def export_csv(tree, out_dir, *, layout: str = "per_section", wind_units: str = 
         Units written (keys of ``vivbench.quality.WIND_UNITS`` / ``ACC_UNITS``).
     time_format : {"seconds", "iso8601"}
         Times as seconds since start_time or as ISO 8601 UTC timestamps (microseconds).
+    event_id : str, optional
+        Event id written in the mapping (default: the event's own).
 
     Returns
     -------
@@ -601,7 +603,7 @@ def export_csv(tree, out_dir, *, layout: str = "per_section", wind_units: str = 
                 sec_entries[sec] = {"file": json.dumps(fname), **{var: json.dumps(var) for var in variables}}
         groups[group] = (settings, sec_entries)
     mapping = out / "mapping.toml"
-    _write_text(mapping, _mapping_text(tree, groups=groups))
+    _write_text(mapping, _mapping_text(tree, groups=groups, event_id=event_id))
     return mapping
 
 

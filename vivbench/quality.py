@@ -245,8 +245,9 @@ def check_wind_magnitude(u, v, units: str = "m/s", *, where: str = "wind", label
             cands = [w for w in _WIND_CANONICAL if WIND_UNITS[w] < factor and med[j] * WIND_UNITS[w] <= MAX_WIND_SPEED]
             hint = " or ".join(f'"{w}"' for w in cands) if cands else "another unit"
             raise ValueError(
-                f"{where} {label}: median horizontal wind speed {med[j]:.3g} {units} is {med[j] * factor:.3g} m/s, "
-                f"beyond any storm (limit {MAX_WIND_SPEED:g} m/s); it looks like {hint}: set units = {hint} {fix}"
+                f"{where} {label}: median horizontal wind speed {med[j]:.3g} {units}"
+                + (f" = {med[j] * factor:.3g} m/s" if factor != 1.0 else "")
+                + f" is beyond any storm (limit {MAX_WIND_SPEED:g} m/s); it looks like {hint}: set units = {hint} {fix}"
             )
 
 

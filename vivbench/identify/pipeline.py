@@ -16,6 +16,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import h5py
 import numpy as np
 import xarray as xr
 
@@ -258,6 +259,18 @@ def _identify_one(path: str, out_dir: str, config: IdentifyConfig) -> str:
     return str(write_netcdf_atomic(ds, result_path(out_dir, ds.attrs["event_id"])))
 
 
+def _peek_event_id(path) -> str | None:
+    """The root attribute event_id, read cheaply; None when unreadable (read_event then says why)."""
+    try:
+        with h5py.File(path, "r") as f:
+            eid = f.attrs.get("event_id")
+    except Exception:  # noqa: BLE001 - any failure is reported by read_event later
+        return None
+    if isinstance(eid, bytes):
+        eid = eid.decode("utf-8", "replace")
+    return eid if isinstance(eid, str) else None
+
+
 def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: IdentifyConfig | None = None, *,
                    workers: int = 1, progress: Callable[[str], None] | None = None) -> tuple[list[Path], dict[str, str]]:
     """Identify every event file; a failing file is reported and the others finish.
@@ -284,12 +297,24 @@ def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: Ide
         if progress is not None:
             progress(str(path))
 
+    # Two events with one id would write one result file over the other.
+    first_with: dict[str, str] = {}
+    for p in paths:
+        eid = _peek_event_id(p)
+        if eid is not None and eid in first_with:
+            failures[str(p)] = (f"{p}: event_id {eid!r} is also that of {first_with[eid]}; their results would "
+                                f"overwrite each other (give one of them another event_id)")
+            if progress is not None:
+                progress(str(p))
+        elif eid is not None:
+            first_with[eid] = str(p)
+    todo = [p for p in paths if str(p) not in failures]
     if workers <= 1:
-        for p in paths:
+        for p in todo:
             record(p, lambda p=p: _identify_one(str(p), str(out), config))
     else:
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futs = {pool.submit(_identify_one, str(p), str(out), config): p for p in paths}
+            futs = {pool.submit(_identify_one, str(p), str(out), config): p for p in todo}
             for fut in as_completed(futs):
                 record(futs[fut], fut.result)
     return [written[str(p)] for p in paths if str(p) in written], failures
