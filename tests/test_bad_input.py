@@ -28,9 +28,9 @@ from vivbench.io import write_netcdf_atomic
 from vivbench.quality import G
 from vivbench.synth import CampaignConfig, campaign_specs, generate_event
 
-# A small configuration for a 150 s event: 20 s windows, 20 s edges (the edge actually
+# A small configuration for a 120 s event: 20 s windows, 20 s edges (the edge actually
 # dropped is 28.6 s, three time constants of the band filter), 100 s Welch sections.
-DURATION = 150.0
+DURATION = 120.0
 CONFIG = IdentifyConfig(window=20.0, step=10.0,
                         preprocess=PreprocessConfig(edge_s=20.0, min_segment_s=20.0, welch_segment_s=100.0))
 
@@ -50,7 +50,7 @@ ANY_DOCUMENTED = "|".join(f"(?:{p})" for p in DOCUMENTED.values())
 
 @pytest.fixture(scope="module")
 def base_file(tmp_path_factory):
-    """A 150 s synthetic event without its truth, as a field file would be."""
+    """A 120 s synthetic event without its truth, as a field file would be."""
     campaign = CampaignConfig(n_events=1, seed=3, duration=(DURATION, DURATION))
     spec, seed = campaign_specs(campaign)[0]
     tree = generate_event(spec, campaign.generator, seed).copy()
@@ -97,13 +97,16 @@ def _extra_variable(tree):
     return tree
 
 
+# Corruptions of the layout, the clock or the units: refused, mostly while reading (cheap).
+FILE_KINDS = ["dup_time", "back_time", "nan_time", "rate", "units_scale", "units_attr", "constant_wind", "drop", "garbage"]
+# Corruptions of the data: mostly repaired, so each runs the whole identification (dearer).
+DATA_KINDS = ["nan_block", "all_nan", "spikes", "inf", "extra_var", "truncate"]
+
+
 @st.composite
-def corruptions(draw):
-    """(label, apply(path, base), expected): expected is "ok", "either" or a DOCUMENTED key."""
-    kind = draw(st.sampled_from([
-        "nan_block", "all_nan", "spikes", "inf", "dup_time", "back_time", "nan_time", "rate", "units_scale",
-        "units_attr", "constant_wind", "drop", "extra_var", "truncate", "garbage",
-    ]))
+def corruptions(draw, kinds):
+    """(label, apply(path, base), expected): expected is "ok", "either", ("spikes", group, n) or a DOCUMENTED key."""
+    kind = draw(st.sampled_from(kinds))
     group = draw(st.sampled_from(["wind", "accel"]))
     var = draw(st.sampled_from(["u", "v"])) if group == "wind" else "acc"
     cols = draw(st.lists(st.integers(0, 2), min_size=1, max_size=3, unique=True))
@@ -204,10 +207,7 @@ def _check_outcome(path: Path, out: Path, label: str, expected, written, failure
     assert re.search(pattern, message), (label, expected, message)
 
 
-@settings(max_examples=200, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-@given(corruption=corruptions())
-def test_corrupted_event_is_identified_with_quality_flags_or_refused(base_file, corruption):
+def _run(base_file, corruption):
     label, apply, expected = corruption
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "E001.nc"
@@ -215,6 +215,22 @@ def test_corrupted_event_is_identified_with_quality_flags_or_refused(base_file, 
         out = Path(d) / "out"
         written, failures = identify_files([path], out, CONFIG)
         _check_outcome(path, out, label, expected, written, failures)
+
+
+# 150 + 60 examples; derandomized so that CI runs the same examples every time.
+_SETTINGS = dict(deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+
+
+@settings(max_examples=150, **_SETTINGS)
+@given(corruption=corruptions(FILE_KINDS))
+def test_corrupted_layout_clock_or_units_is_refused_in_one_line(base_file, corruption):
+    _run(base_file, corruption)
+
+
+@settings(max_examples=60, **_SETTINGS)
+@given(corruption=corruptions(DATA_KINDS))
+def test_corrupted_data_is_repaired_with_quality_flags_or_refused(base_file, corruption):
+    _run(base_file, corruption)
 
 
 def test_cli_reports_one_line_per_bad_file_and_finishes_the_good_ones(short_event, tmp_path, capsys):
@@ -225,10 +241,12 @@ def test_cli_reports_one_line_per_bad_file_and_finishes_the_good_ones(short_even
     good.parent.mkdir()
     shutil.copyfile(base_file, good)
     bad = tmp_path / "in" / "E002.nc"
-    _values("wind", "time", lambda t: t * 2)(bad, base_file)
+    _h5(lambda f: (f.attrs.__setitem__("event_id", "E002"), f["wind/time"].__setitem__(Ellipsis, f["wind/time"][()] * 2)))(
+        bad, base_file)
     flat = tmp_path / "in" / "E003.nc"
-    _h5(lambda f: [f[f"wind/{c}"].__setitem__(Ellipsis, np.full(f[f"wind/{c}"].shape, 5.0 if c == "u" else 0.0))
-                   for c in ("u", "v")])(flat, base_file)
+    _h5(lambda f: [f.attrs.__setitem__("event_id", "E003")] + [
+        f[f"wind/{c}"].__setitem__(Ellipsis, np.full(f[f"wind/{c}"].shape, 5.0 if c == "u" else 0.0)) for c in ("u", "v")
+    ])(flat, base_file)
     out = tmp_path / "out"
     code = main(["identify", str(good), str(bad), str(flat), "--out", str(out), "--workers", "1",
                  "--window", "30", "--step", "15"])
@@ -278,3 +296,20 @@ def test_two_events_with_one_id_do_not_overwrite_each_other(short_event, tmp_pat
     assert [p.name for p in written] == ["E001.identify.nc"]
     assert failures == {str(b): f"{b}: event_id 'E001' is also that of {a}; their results would overwrite each other "
                                 "(give one of them another event_id)"}
+
+
+def test_despike_finds_short_spikes_not_gusts_and_keeps_gaps():
+    from vivbench.quality import despike
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((3200, 2))
+    x[1600:, 1] += 10.0                      # a gust: a step that lasts, not a spike
+    x[[5, 100, 101, 2000], 0] += 50.0         # three isolated spikes and a pair
+    x[300, 0] = np.inf
+    x[400:410, 0] = np.nan                    # a dropout stays a gap
+    y, n, n_bridged = despike(x, 32.0, bridge_s=0.1)
+    assert (n, n_bridged) == (5, 5)
+    assert np.flatnonzero(np.isnan(y[:, 0])).tolist() == list(range(400, 410))
+    np.testing.assert_array_equal(y[:, 1], x[:, 1])
+    y, n, n_bridged = despike(x, 32.0)       # without bridging the spikes become NaN
+    assert (n, n_bridged) == (5, 0) and np.isnan(y[[5, 100, 101, 300, 2000], 0]).all()

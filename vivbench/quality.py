@@ -10,7 +10,9 @@ Repairs
 -------
 - Spikes: a sample further than ``threshold`` robust standard deviations
   (1.4826 x the median absolute deviation, MAD) from the median of its block
-  of ``block_s`` seconds is replaced by NaN. Blocks are short (10 s, about
+  of ``block_s`` seconds, and as far from the median of its 7 nearest
+  samples, is replaced by NaN (runs up to 0.1 s are bridged linearly by the
+  identification). Blocks are short (10 s, about
   three cycles of a 0.3 Hz VIV mode) so that the growth of a vibration is not
   mistaken for spikes; a sinusoid's peaks lie about one robust standard
   deviation from its median, far below the default of 8.
@@ -37,6 +39,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from scipy import ndimage
 
 __all__ = [
     "G",
@@ -77,6 +80,8 @@ WIND_UNITS = {
 _GRAVITY_TOLERANCE = 0.1
 # Robust scale of a normal sample from its MAD.
 _MAD_TO_SIGMA = 1.4826
+# Samples of the short median a spike must also stand out from: runs of up to 3 samples are spikes.
+_SHORT_WINDOW = 7
 
 
 def despike(x, rate_hz: float, *, threshold: float = 8.0, block_s: float = 10.0, floor: float = 0.0,
@@ -91,7 +96,10 @@ def despike(x, rate_hz: float, *, threshold: float = 8.0, block_s: float = 10.0,
         Sampling rate, Hz (sets the block length).
     threshold : float
         Spike when ``|x - median| > threshold * 1.4826 * max(MAD, floor)``
-        within the sample's block.
+        within the sample's block AND the sample is that far from the median
+        of its 7 nearest samples (a spike is short: runs of up to 3 samples;
+        a gust whose neighbours are as high is not a spike). Infinite values
+        are always spikes.
     block_s : float
         Block length, s.
     floor : float
@@ -131,7 +139,17 @@ def despike(x, rate_hz: float, *, threshold: float = 8.0, block_s: float = 10.0,
         mad = np.nanmedian(np.abs(blocks - med), axis=1, keepdims=True)
     limit = threshold * _MAD_TO_SIGMA * np.maximum(mad, floor)
     with np.errstate(invalid="ignore"):
-        spike = (np.abs(blocks - med) > limit).reshape(-1, k)[:n]
+        far = np.abs(blocks - med) > limit
+        limit_rows = np.broadcast_to(limit, blocks.shape).reshape(-1, k)[:n]
+    # A spike is also short: it stands out from the median of its 7 nearest samples,
+    # which a gust or the growth of a vibration (neighbours as high) does not.
+    # Missing samples count as the block median there (NaN-aware medians are slow).
+    med_rows = np.broadcast_to(med, blocks.shape).reshape(-1, k)[:n]
+    filled = np.where(np.isfinite(x2), x2, np.nan_to_num(med_rows))
+    local = ndimage.median_filter(filled, size=(_SHORT_WINDOW, 1), mode="mirror")
+    with np.errstate(invalid="ignore"):
+        spike = far.reshape(-1, k)[:n] & (np.abs(x2 - local) > limit_rows)
+    spike |= np.isinf(x2)
     x2[spike] = np.nan
     max_run = int(np.floor(bridge_s * rate_hz + 1e-9))
     n_bridged = 0
