@@ -10,6 +10,7 @@ write_event's checks, and identified in-process with ``identify_files``.
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import shutil
 import tempfile
@@ -277,7 +278,7 @@ def test_spikes_are_repaired_close_to_the_clean_result(base_file, tmp_path):
 
     _h5(edit)(dirty, base_file)
     (fixed,), _ = identify_files([dirty], dirty_out, CONFIG)
-    (raw,), _ = identify_files([dirty], raw_out, IdentifyConfig(**{**CONFIG.__dict__, "spike_mad": None}))
+    (raw,), _ = identify_files([dirty], raw_out, dataclasses.replace(CONFIG, spike_mad=None))
     a, b, c = (xr.load_dataset(p) for p in (clean, fixed, raw))
     assert b.attrs["quality_spikes_wind"] == 240 and b.attrs["quality_spikes_accel"] == 120
     assert b.attrs["quality_spikes_bridged_accel"] == 120 and a.attrs["quality_spikes_accel"] == 0

@@ -9,6 +9,7 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
+import xarray as xr
 
 from tests.helpers import assert_close
 from vivbench.cli import main
@@ -103,7 +104,7 @@ def test_cli_import_then_identify_keeps_quality(short_event, csv_dir, tmp_path, 
     _same(event_arrays(tree), event_arrays(short_event))
     written, failures = identify_files([out], tmp_path / "res", IdentifyConfig(window=30.0, step=15.0))
     assert not failures
-    res = __import__("xarray").open_dataset(written[0])
+    res = xr.open_dataset(written[0])
     assert res.attrs["quality_duplicates_dropped"] == 2 and res.attrs["quality_spikes_accel"] == 0
     res.close()
 

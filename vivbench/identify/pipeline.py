@@ -123,12 +123,21 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     -------
     xarray.Dataset
         The result (see module docstring); coordinates ``window``, ``equation``,
-        ``feature``, ``order`` and ``time`` (the preprocessing grid).
+        ``feature``, ``order`` and ``time`` (the preprocessing grid). Data-quality
+        attributes: ``quality_rate_{wind,accel}_hz`` (median rates),
+        ``quality_missing_fraction_{wind,accel}`` (time stamps with a NaN in
+        any section), ``quality_spikes_{wind,accel}`` and
+        ``quality_spikes_bridged_{wind,accel}`` (see ``spike_mad``),
+        ``quality_segments``, ``quality_windows``,
+        ``quality_windows_without_model``, plus the event's own ``quality_*``
+        attributes (repairs made on import).
 
     Raises
     ------
     ValueError
-        When no segment of the record is long enough for one window.
+        When no segment of the record is long enough for one window; when the
+        acceleration or the wind has a magnitude no bridge sees (a wrong unit)
+        or the wind never varies at a section (see vivbench.quality).
     """
     config = config or IdentifyConfig()
     arr = event_arrays(tree)
