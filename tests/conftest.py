@@ -44,3 +44,13 @@ def small_results(small_campaign, tmp_path_factory):
     results, failures = identify_files(small_campaign.files[:2], out, workers=1)
     assert not failures, failures
     return small_campaign, out, results
+
+
+@pytest.fixture(scope="session")
+def short_event():
+    """A 4 min synthetic event in memory (lock-in pass, seed 3): small input for import and bad-input tests."""
+    from vivbench.synth import generate_event
+
+    campaign = CampaignConfig(n_events=1, seed=3, duration=(240.0, 240.0))
+    spec, seed = campaign_specs(campaign)[0]
+    return generate_event(spec, campaign.generator, seed)
