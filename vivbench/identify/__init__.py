@@ -5,6 +5,7 @@ from vivbench.identify.derivative import DERIVATIVE_METHODS, Derivative, TVDeriv
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, SOLVERS, StlsqPath, StlsqSettings, WindowedSINDy, aicc, stlsq_path, window_bounds
 from vivbench.identify.forecast import Simulation, forecast, forecast_coefficients, forecast_table, nmse, simulate_identified, window_in_force
 from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
+from vivbench.identify.optimizers import OPTIMIZERS, OptimizerOptions, ensemble_path, run_optimizer, sr3_path
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, result_path
 from vivbench.identify.preprocess import (
@@ -30,5 +31,6 @@ __all__ = [
     "perpendicular_speed", "preprocess_arrays", "result_path", "segments", "stlsq_path", "to_grid", "tv_derivative",
     "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
     "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features",
+    "OPTIMIZERS", "OptimizerOptions", "ensemble_path", "run_optimizer", "sr3_path",
     "Simulation", "forecast", "forecast_coefficients", "forecast_table", "nmse", "simulate_identified", "window_in_force",
 ]

@@ -22,6 +22,7 @@ import xarray as xr
 import vivbench
 from vivbench.identify.derivative import Derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, WindowedSINDy
+from vivbench.identify.optimizers import OPTIMIZERS
 from vivbench.identify.preprocess import PreprocessConfig, preprocess_arrays
 from vivbench.io import event_arrays, read_event, write_netcdf_atomic
 
@@ -43,6 +44,9 @@ class IdentifyConfig:
     tau : regime threshold (DESIGN 2.5)
     aicc_margin : models within this AICc of the best count as competitors
     fit_tolerance : relative RMS residual within which an order-restricted model fits equally well
+    optimizer : sparse regression per window, "stlsq" (the fast engine), "sr3" or "ensemble"
+        (pysindy-based, see :mod:`vivbench.identify.optimizers`; "ensemble" adds ``inclusion``)
+    seed : seed of the ensemble's bootstrap samples (results depend on it only)
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
@@ -55,6 +59,8 @@ class IdentifyConfig:
     tau: float = 0.2
     aicc_margin: float = 2.0
     fit_tolerance: float = 0.1
+    optimizer: str = "stlsq"
+    seed: int = 0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "thresholds", tuple(float(x) for x in self.thresholds))
@@ -64,13 +70,18 @@ class IdentifyConfig:
             raise ValueError(f"tau must be in (0, 1); got {self.tau}")
         if self.aicc_margin < 0 or self.fit_tolerance < 0:
             raise ValueError("aicc_margin and fit_tolerance must be >= 0")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer must be one of {', '.join(OPTIMIZERS)}; got {self.optimizer!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"seed must be an integer >= 0; got {self.seed!r}")
         # the estimator validates the rest (thresholds, alpha, scaling) when it is built
         self.estimator()
 
     def estimator(self) -> WindowedSINDy:
         est = WindowedSINDy(window=self.window, step=self.step, thresholds=self.thresholds, alpha=self.alpha,
                             scaling=self.scaling, tau=self.tau, identifiability_margin=self.aicc_margin,
-                            fit_tolerance=self.fit_tolerance, keep_path=False)
+                            fit_tolerance=self.fit_tolerance, keep_path=False, optimizer=self.optimizer,
+                            random_state=self.seed)
         est.settings()
         return est
 
@@ -138,6 +149,8 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         dA[sel] = config.derivative.differentiate(pre.A[sel], t)
         est.fit(t, pre.A[sel], pre.U[sel], dA[sel])
         parts.append({name: getattr(est, attr) for name, (attr, *_rest) in _WINDOW_VARS.items()})
+        if config.optimizer == "ensemble":
+            parts[-1]["inclusion"] = est.inclusion_
         starts.append(est.window_start_)
         ends.append(est.window_end_)
         segs.append(np.full(est.window_start_.size, seg))
@@ -154,6 +167,10 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         elif name == "identifiable":
             values = values.astype(np.int8)  # NetCDF has no boolean type
         data[name] = (dims, values, {"units": units, "long_name": long_name})
+    if config.optimizer == "ensemble":
+        data["inclusion"] = (("window", "equation", "feature"), np.concatenate([p["inclusion"] for p in parts]),
+                             {"units": "1", "long_name": "inclusion probability of each regression-basis term over "
+                              "the bootstrap models (ensemble optimiser)"})
     data["window_start"] = (("window",), np.concatenate(starts), {"units": "s", "long_name": "window start since event start"})
     data["window_end"] = (("window",), np.concatenate(ends), {"units": "s", "long_name": "window end since event start"})
     data["window_segment"] = (("window",), np.concatenate(segs).astype(np.int32), {"units": "1", "long_name": "preprocessing segment of the window"})
