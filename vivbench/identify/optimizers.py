@@ -31,7 +31,10 @@ apply unchanged to the chosen coefficients.
     EnsembleOptimizer`` around ``pysindy.optimizers.STLSQ``. Per window and
     equation the STLSQ threshold is the one the engine's AICc selects on the
     whole window; ``n_models`` (default 20) bootstrap samples of the window's
-    rows (with replacement) are fitted at that threshold. The *inclusion
+    rows (with replacement) are fitted at that threshold, the ridge problems
+    solved by SVD (scikit-learn's ``solver="svd"``; the default Cholesky of
+    the normal equations loses every digit on these ill-conditioned windows
+    and keeps spurious terms even on exact data). The *inclusion
     probability* of a term is the share of bootstrap models in which it is
     non-zero. The chosen model keeps the terms with inclusion probability
     >= ``inclusion_cut`` (default 0.5: the term is in most bootstrap models);
@@ -299,7 +302,7 @@ def ensemble_path(theta, y, settings: StlsqSettings | None = None, options: Opti
             for t in np.unique(base.selected[w][base.selected[w] >= 0]):
                 eqs = np.flatnonzero(base.selected[w] == t)
                 opt = STLSQ(threshold=float(th[t]), alpha=settings.alpha, max_iter=settings.max_iter,
-                            unbias=settings.unbias)
+                            unbias=settings.unbias, ridge_kw={"solver": "svd"})
                 bag = EnsembleOptimizer(opt, bagging=True, n_models=options.n_models, replace=True)
                 with warnings.catch_warnings():
                     # STLSQ warns when a bootstrap sample loses every term or hits max_iter.
