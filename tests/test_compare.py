@@ -102,7 +102,7 @@ def test_two_cell_comparison_is_independent_of_workers(tmp_path):
     for r in first:
         assert r["error"] == ""
         assert int(r["n_scored"]) > 0
-        for k in ("coverage", "accuracy_all", "no_model_share"):
+        for k in ("coverage", "accuracy_all", "no_model_share", "truth_majority_share"):
             assert 0.0 <= float(r[k]) <= 1.0, (k, r[k])
         assert float(r["rhs_median_rel_error_active"]) > 0 and float(r["wall_time_s"]) > 0
     assert (out / "compare_scaling.png").stat().st_size > 0

@@ -28,7 +28,8 @@ Each cell identifies a small synthetic campaign (``n_events`` events, their
 duration and seed) with its settings and is scored by
 :func:`vivbench.validate.campaign_recovery`: coverage (share of window-
 equations flagged identifiable), regime accuracy overall and on identifiable
-windows, median relative error of the identified dA/dt on active windows, and
+windows (beside ``truth_majority_share``, the share of the most common true
+regime: the accuracy of always answering it), median relative error of the identified dA/dt on active windows, and
 the wall time of the identification. Cells that differ only in identification
 settings share one campaign: campaigns are generated once per (accel_noise,
 anemometer_noise, turbulence_intensity) and the seed, and reused from an
@@ -93,7 +94,7 @@ _LABELS = {
     "turbulence_intensity": "turbulence intensity sigma_u/U (-)",
 }
 _CAMPAIGN_FACTORS = ("accel_noise", "anemometer_noise", "turbulence_intensity")
-_METRICS = ("n_scored", "coverage", "accuracy_all", "accuracy_identifiable", "accuracy_not_identifiable",
+_METRICS = ("n_scored", "truth_majority_share", "coverage", "accuracy_all", "accuracy_identifiable", "accuracy_not_identifiable",
             "rhs_median_rel_error", "rhs_median_rel_error_active", "no_model_share", "wall_time_s",
             "wall_time_per_event_s")
 _COLUMNS = ("cell_id", "varied") + FACTORS + ("n_events",) + _METRICS + ("error",)
@@ -344,6 +345,8 @@ def _run_cell(task: dict) -> dict:
     scores = campaign_recovery(task["files"], results, active_share=config.active_share)
     return {
         "n_scored": scores["n"],
+        # Accuracy of always answering the most common true regime: the chance level of accuracy_all.
+        "truth_majority_share": max(scores["truth_regime_shares"].values()),
         "coverage": scores["coverage"],
         "accuracy_all": scores["accuracy_all"],
         "accuracy_identifiable": scores["accuracy_identifiable"],
@@ -491,7 +494,8 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
     x = np.array([pos[r[factor]] for r in sel], dtype=float)
     panels = [
         ("regime recovery (-)", [("coverage", "coverage (identifiable share)"), ("accuracy_all", "accuracy, all windows"),
-                                 ("accuracy_identifiable", "accuracy, identifiable windows")], False),
+                                 ("accuracy_identifiable", "accuracy, identifiable windows"),
+                                 ("truth_majority_share", "most common true regime (chance level)")], False),
         ("median rel. error of dA/dt,\nactive windows (-)", [("rhs_median_rel_error_active", None)], True),
         ("identification wall time\nper event (s)", [("wall_time_per_event_s", None)], False),
     ]
