@@ -16,7 +16,7 @@ import sys
 __all__ = ["main"]
 
 # Order of appearance in ``vivbench --help``.
-_COMMANDS = ("synth", "import_", "identify", "pool", "cluster", "forecast", "validate", "plot_event", "report", "demo")
+_COMMANDS = ("synth", "import_", "identify", "pool", "cluster", "forecast", "validate", "compare", "plot_event", "report", "demo")
 
 
 def _parser() -> argparse.ArgumentParser:

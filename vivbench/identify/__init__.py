@@ -17,6 +17,7 @@ from vivbench.identify.interpret import (
     summarize_clusters,
 )
 from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
+from vivbench.identify.optimizers import OPTIMIZERS, OptimizerOptions, ensemble_path, run_optimizer, sr3_path
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pooled import POOLED_NAME, PooledSINDy, pool_results, pooled_window_stats, with_campaign_model, write_pooled
 from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, result_path
@@ -48,4 +49,5 @@ __all__ = [
     "window_in_force", "window_ranges",
     "FEATURE_SETS", "CampaignWindows", "ClusterConfig", "ClusterResult", "campaign_windows", "cluster_scores",
     "cluster_windows", "read_result", "standardized_coefficients", "summarize_clusters",
+    "OPTIMIZERS", "OptimizerOptions", "ensemble_path", "run_optimizer", "sr3_path",
 ]

@@ -23,6 +23,7 @@ import xarray as xr
 import vivbench
 from vivbench.identify.derivative import Derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, WindowedSINDy
+from vivbench.identify.optimizers import OPTIMIZERS
 from vivbench.identify.preprocess import PreprocessConfig, perpendicular_speed, preprocess_arrays, wind_speed_direction
 from vivbench.io import EventFormatError, event_arrays, read_event, write_netcdf_atomic
 from vivbench.quality import check_acc_magnitude, check_wind_magnitude, check_wind_varies, despike
@@ -48,6 +49,9 @@ class IdentifyConfig:
     spike_mad : spike rule of the raw u, v and acc, robust standard deviations (1.4826 MAD) from the
         10 s block median (see vivbench.quality.despike); spike runs up to 0.1 s are bridged linearly,
         longer ones become NaN and split the record. None: off
+    optimizer : sparse regression per window, "stlsq" (the fast engine), "sr3" or "ensemble"
+        (pysindy-based, see :mod:`vivbench.identify.optimizers`; "ensemble" adds ``inclusion``)
+    seed : seed of the ensemble's bootstrap samples (results depend on it only)
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
@@ -61,6 +65,8 @@ class IdentifyConfig:
     aicc_margin: float = 2.0
     fit_tolerance: float = 0.1
     spike_mad: float | None = 8.0
+    optimizer: str = "stlsq"
+    seed: int = 0
 
     def __post_init__(self) -> None:
         if self.spike_mad is not None and not (isinstance(self.spike_mad, (int, float)) and np.isfinite(self.spike_mad)
@@ -73,13 +79,18 @@ class IdentifyConfig:
             raise ValueError(f"tau must be in (0, 1); got {self.tau}")
         if self.aicc_margin < 0 or self.fit_tolerance < 0:
             raise ValueError("aicc_margin and fit_tolerance must be >= 0")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer must be one of {', '.join(OPTIMIZERS)}; got {self.optimizer!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"seed must be an integer >= 0; got {self.seed!r}")
         # the estimator validates the rest (thresholds, alpha, scaling) when it is built
         self.estimator()
 
     def estimator(self) -> WindowedSINDy:
         est = WindowedSINDy(window=self.window, step=self.step, thresholds=self.thresholds, alpha=self.alpha,
                             scaling=self.scaling, tau=self.tau, identifiability_margin=self.aicc_margin,
-                            fit_tolerance=self.fit_tolerance, keep_path=False)
+                            fit_tolerance=self.fit_tolerance, keep_path=False, optimizer=self.optimizer,
+                            random_state=self.seed)
         est.settings()
         return est
 
@@ -157,6 +168,8 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         dA[sel] = config.derivative.differentiate(pre.A[sel], t)
         est.fit(t, pre.A[sel], pre.U[sel], dA[sel])
         parts.append({name: getattr(est, attr) for name, (attr, *_rest) in _WINDOW_VARS.items()})
+        if config.optimizer == "ensemble":
+            parts[-1]["inclusion"] = est.inclusion_
         starts.append(est.window_start_)
         ends.append(est.window_end_)
         segs.append(np.full(est.window_start_.size, seg))
@@ -173,6 +186,10 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         elif name == "identifiable":
             values = values.astype(np.int8)  # NetCDF has no boolean type
         data[name] = (dims, values, {"units": units, "long_name": long_name})
+    if config.optimizer == "ensemble":
+        data["inclusion"] = (("window", "equation", "feature"), np.concatenate([p["inclusion"] for p in parts]),
+                             {"units": "1", "long_name": "inclusion probability of each regression-basis term over "
+                              "the bootstrap models (ensemble optimiser)"})
     data["window_start"] = (("window",), np.concatenate(starts), {"units": "s", "long_name": "window start since event start"})
     data["window_end"] = (("window",), np.concatenate(ends), {"units": "s", "long_name": "window end since event start"})
     data["window_segment"] = (("window",), np.concatenate(segs).astype(np.int32), {"units": "1", "long_name": "preprocessing segment of the window"})

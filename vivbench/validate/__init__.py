@@ -1,5 +1,17 @@
-"""How well the identification chain recovers the truth of synthetic campaigns."""
+"""How well the identification chain recovers the truth of synthetic campaigns, and method comparisons."""
 
+from vivbench.validate.compare import (
+    BASE_LEVELS,
+    DESIGNS,
+    FACTORS,
+    CompareConfig,
+    CompareResult,
+    compare_cells,
+    compare_config_from_dict,
+    load_compare_config,
+    plan,
+    run_comparison,
+)
 from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
 from vivbench.validate.metrics import (
     REGIMES,
@@ -28,6 +40,8 @@ from vivbench.validate.recovery import (
 )
 
 __all__ = [
+    "BASE_LEVELS", "DESIGNS", "FACTORS", "CompareConfig", "CompareResult", "compare_cells", "compare_config_from_dict",
+    "load_compare_config", "plan", "run_comparison",
     "Plateau",
     "clearest_plateau",
     "measured_plateau",
