@@ -25,6 +25,7 @@ import numpy as np
 import xarray as xr
 
 import vivbench
+from vivbench.identify.pooled import POOLED_NAME, with_campaign_model
 from vivbench.io import atomic_path, list_events, read_event
 
 __all__ = ["EXTRA_STEPS", "write_report"]
@@ -357,6 +358,42 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
            "(non-finite, above 10x the largest measured A, or below -5 % of it) is stopped, drawn only up to "
            "there and marked x.",
            lambda p: F.forecast_figure(res0, p), "forecast_figure")
+
+    pooled_path = results_dir / POOLED_NAME
+    if pooled_path.is_file():
+        with xr.open_dataset(pooled_path, engine="h5netcdf") as ds:
+            pooled = ds.load()
+        md += ["## The campaign model (`vivbench pool`)", "",
+               "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
+               "AICc on all samples of all events (`vivbench.identify.pooled`). A window's regime is the rule of "
+               "DESIGN 2.5 applied to this model's order contributions over the window's data; it counts as "
+               "identifiable when (i) no model inside the coefficients' joint 95 % confidence region (residual "
+               "variance inflated by the residuals' correlation time) gives the window another regime, and (ii) at "
+               f"least {json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap "
+               "replicates of the whole selection agree. "
+               f"Terms per equation: {', '.join(str(int(k)) for k in pooled['n_terms'].values)}; "
+               f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
+               f"coverage {float(pooled.attrs['coverage']):.3f}."
+               + (f" **{pooled.attrs['note']}**" if pooled.attrs.get("note") else ""), "",
+               _produced_by(f"vivbench pool {results_dir}"), ""]
+        ev_of = pooled["event_id"].values.astype(str)
+        pres = []
+        for e in events:
+            r = results[e].copy()
+            sel = ev_of == e
+            r["regime"] = (r["regime"].dims, pooled["regime"].values[sel])
+            r["identifiable"] = (r["identifiable"].dims, pooled["identifiable"].values[sel])
+            pres.append(r)
+        figure("fig06b_regimes_campaign_model.png", "Fig. 6b: regimes of the campaign model against the truth",
+               "As Fig. 6, with the regimes of the campaign model (hatched: not identifiable by the confidence-region "
+               "and bootstrap tests) instead of the window models'.",
+               lambda p: F.regime_timeline_figure(pres, timeline_truth or [None] * len(events), p),
+               "regime_timeline_figure")
+        cm0 = with_campaign_model(res0, pooled)
+        figure("fig11b_forecast_campaign_model.png", "Fig. 11b: simulation and forecasts with the campaign model",
+               "As Fig. 11, with the campaign model in every window: one fixed model, so the forecasts for "
+               "different d coincide.",
+               lambda p: F.forecast_figure(cm0, p), "forecast_figure")
 
     md += _recovery_section(info, command)
     say("recovery")

@@ -87,7 +87,10 @@ def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     """NMSE rows of every ``forecast_<event_id>.csv`` in a directory (``vivbench forecast``).
 
     Each file needs the columns ``d`` (s), ``nmse`` and ``stopped`` (as written
-    from :func:`vivbench.identify.forecast_table`); other columns are ignored.
+    from :func:`vivbench.identify.forecast_table`), or is the table of
+    ``vivbench forecast`` (columns ``kind``, ``clip``, ``d_s``, ``nmse``,
+    ``stopped``), of which the window models' forecasts without clipping (the
+    paper's method) are read; other columns are ignored.
 
     Returns
     -------
@@ -104,12 +107,18 @@ def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     for f in files:
         with f.open(newline="") as fh:
             reader = csv.DictReader(fh)
-            missing = [c for c in ("d", "nmse", "stopped") if c not in (reader.fieldnames or [])]
+            names = reader.fieldnames or []
+            cli = {"kind", "clip", "d_s"} <= set(names)
+            dcol = "d_s" if cli else "d"
+            missing = [c for c in (dcol, "nmse", "stopped") if c not in names]
             if missing:
-                raise ValueError(f"{f}: missing columns {missing}; a forecast table needs d, nmse and stopped")
+                raise ValueError(f"{f}: missing columns {missing}; a forecast table needs d (or kind, clip, d_s), "
+                                 "nmse and stopped")
             for k, row in enumerate(reader, start=2):
+                if cli and (row["kind"] != "forecast" or row["clip"] != "none"):
+                    continue
                 try:
-                    d.append(float(row["d"]))
+                    d.append(float(row[dcol]))
                     nmse.append(float(row["nmse"]) if row["nmse"].strip() else math.nan)
                 except ValueError as exc:
                     raise ValueError(f"{f}: line {k}: {exc}") from None
