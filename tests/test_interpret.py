@@ -181,7 +181,7 @@ def test_forecast_cli_writes_every_file(identified, tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["cluster", "{missing}", "--out", "{tmp}/o"], "not a directory"),
-    (["cluster", "{tmp}", "--out", "{tmp}/o"], "no result files"),
+    (["cluster", "{tmp}", "--out", "{tmp}/o"], "no identification results"),
     (["forecast", "{missing}/E001.identify.nc", "--out", "{tmp}/o"], "no such result file"),
     (["forecast", "{bad}", "--out", "{tmp}/o"], "cannot be read"),
 ])

@@ -9,16 +9,6 @@ from pathlib import Path
 _LABEL_COLUMNS = ("event_id", "window", "equation", "window_start", "window_end", "feature_set", "label", "halo")
 
 
-def _result_files(results_dir: str) -> list[Path]:
-    d = Path(results_dir)
-    if not d.is_dir():
-        raise ValueError(f"{d}: not a directory of identification results")
-    files = sorted(d.glob("*.identify.nc"))
-    if not files:
-        raise ValueError(f"{d}: no result files (<event_id>.identify.nc) in this directory")
-    return files
-
-
 def _write_csv(path: Path, rows: list[dict], columns) -> None:
     from vivbench.io import atomic_path
 
@@ -38,7 +28,9 @@ def run(args) -> int:
     from vivbench.io import atomic_path
 
     config = ClusterConfig(kernel=args.kernel, dc_fraction=args.dc_fraction, n_centers=args.centers)
-    files = _result_files(args.results_dir)
+    from vivbench.identify import list_results
+
+    files = list_results(args.results_dir)
     if args.campaign is not None and not Path(args.campaign).is_dir():
         raise ValueError(f"{args.campaign}: not a campaign directory")
     windows = campaign_windows(files, args.campaign)

@@ -7,14 +7,10 @@ from pathlib import Path
 
 
 def run(args) -> int:
-    from vivbench.identify import PooledSINDy, pool_results, write_pooled
+    from vivbench.identify import PooledSINDy, list_results, pool_results, write_pooled
 
     results_dir = Path(args.results)
-    if not results_dir.is_dir():
-        raise ValueError(f"{results_dir}: not a directory of identification results")
-    files = sorted(results_dir.glob("*.identify.nc"))
-    if not files:
-        raise ValueError(f"{results_dir}: no identification results (<event_id>.identify.nc) in this directory")
+    files = list_results(results_dir)
     model = PooledSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement, tau=args.tau,
                         seed=args.seed)
     ds = pool_results(files, model)

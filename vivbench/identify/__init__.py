@@ -20,7 +20,7 @@ from vivbench.identify.identifiability import basis_orders, order_contributions_
 from vivbench.identify.optimizers import OPTIMIZERS, OptimizerOptions, ensemble_path, run_optimizer, sr3_path
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pooled import POOLED_NAME, PooledSINDy, pool_results, pooled_window_stats, with_campaign_model, write_pooled
-from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, result_path
+from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, list_results, result_path
 from vivbench.identify.preprocess import (
     Preprocessed,
     PreprocessConfig,
@@ -40,7 +40,7 @@ __all__ = [
     "DEFAULT_THRESHOLDS", "DERIVATIVE_METHODS", "Derivative", "IdentifyConfig", "PreprocessConfig", "Preprocessed",
     "SCALINGS", "SOLVERS", "StlsqPath", "StlsqSettings", "TVDerivativeResult", "WindowLibrary", "WindowedSINDy",
     "aicc", "basis_orders", "common_grid", "condition_number", "displacement", "envelope", "estimate_noise_std",
-    "identify_event", "identify_files", "library_cond", "mean_wind", "modal_frequency", "order_contributions_basis",
+    "identify_event", "identify_files", "list_results", "library_cond", "mean_wind", "modal_frequency", "order_contributions_basis",
     "perpendicular_speed", "preprocess_arrays", "result_path", "segments", "stlsq_path", "to_grid", "tv_derivative",
     "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
     "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features",

@@ -555,6 +555,33 @@ class _Factors:
         return out
 
 
+def _empty_path(W: int, q: int, T: int, p: int) -> dict:
+    """Path arrays of W windows, q targets, T thresholds and p terms before any fit (no model anywhere)."""
+    return dict(
+        coef=np.full((W, q, T, p), np.nan),
+        support=np.zeros((W, q, T, p), dtype=bool),
+        rss=np.full((W, q, T), np.nan),
+        n_terms=np.zeros((W, q, T), dtype=int),
+        aicc=np.full((W, q, T), np.inf),
+        n_iter=np.zeros((W, q, T), dtype=int),
+        converged=np.zeros((W, q, T), dtype=bool),
+        lower_bound=np.zeros((W, q, T), dtype=bool),
+    )
+
+
+def _as_batches(theta, y) -> tuple[np.ndarray, np.ndarray]:
+    """Designs (W, n, p) and targets (W, n, q) as float arrays, a single 2-D window given a batch axis."""
+    theta = np.asarray(theta, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if theta.ndim == 2:
+        theta = theta[None]
+    if y.ndim == 2:
+        y = y[None]
+    if theta.ndim != 3 or y.ndim != 3 or theta.shape[:2] != y.shape[:2]:
+        raise ValueError(f"theta (W, n, p) and y (W, n, q) must agree on W and n; got {theta.shape} and {y.shape}")
+    return theta, y
+
+
 def stlsq_path(theta: np.ndarray, y: np.ndarray, settings: StlsqSettings | None = None) -> StlsqPath:
     """Run STLSQ over a threshold path for a batch of windows and select by AICc.
 
@@ -573,14 +600,7 @@ def stlsq_path(theta: np.ndarray, y: np.ndarray, settings: StlsqSettings | None 
         With a leading window axis even for a single 2-D window.
     """
     settings = StlsqSettings() if settings is None else settings
-    theta = np.asarray(theta, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if theta.ndim == 2:
-        theta = theta[None]
-    if y.ndim == 2:
-        y = y[None]
-    if theta.ndim != 3 or y.ndim != 3 or theta.shape[:2] != y.shape[:2]:
-        raise ValueError(f"theta (W, n, p) and y (W, n, q) must agree on W and n; got {theta.shape} and {y.shape}")
+    theta, y = _as_batches(theta, y)
     W, N, p = theta.shape
     q = y.shape[2]
     th = np.asarray(settings.thresholds)
@@ -590,16 +610,7 @@ def stlsq_path(theta: np.ndarray, y: np.ndarray, settings: StlsqSettings | None 
     X = np.where(valid[..., None], theta, 0.0)
     Y = np.where(valid[..., None], y, 0.0)
 
-    out = dict(
-        coef=np.full((W, q, T, p), np.nan),
-        support=np.zeros((W, q, T, p), dtype=bool),
-        rss=np.full((W, q, T), np.nan),
-        n_terms=np.zeros((W, q, T), dtype=int),
-        aicc=np.full((W, q, T), np.inf),
-        n_iter=np.zeros((W, q, T), dtype=int),
-        converged=np.zeros((W, q, T), dtype=bool),
-        lower_bound=np.zeros((W, q, T), dtype=bool),
-    )
+    out = _empty_path(W, q, T, p)
     cond = np.full(W, np.nan)
     fit = np.flatnonzero(n_valid >= p + 2)
     solves = {"qr": 0, "cholesky": 0, "svd": 0, "lstsq": 0}

@@ -66,7 +66,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from vivbench.identify.engine import StlsqPath, StlsqSettings, aicc, stlsq_path
+from vivbench.identify.engine import StlsqPath, StlsqSettings, _as_batches, aicc, stlsq_path
+from vivbench.identify.engine import _empty_path as _engine_empty_path
 from vivbench.identify.library import condition_number
 
 __all__ = ["OPTIMIZERS", "OptimizerOptions", "run_optimizer", "sr3_path", "ensemble_path"]
@@ -120,14 +121,7 @@ class OptimizerOptions:
 
 
 def _prepare(theta, y):
-    theta = np.asarray(theta, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if theta.ndim == 2:
-        theta = theta[None]
-    if y.ndim == 2:
-        y = y[None]
-    if theta.ndim != 3 or y.ndim != 3 or theta.shape[:2] != y.shape[:2]:
-        raise ValueError(f"theta (W, n, p) and y (W, n, q) must agree on W and n; got {theta.shape} and {y.shape}")
+    theta, y = _as_batches(theta, y)
     valid = np.isfinite(theta).all(axis=2) & np.isfinite(y).all(axis=2)
     return theta, y, valid
 
@@ -144,19 +138,8 @@ def _score(X, Y, coef, n, settings: StlsqSettings):
 
 
 def _empty_path(W, q, T, p, thresholds) -> dict:
-    return dict(
-        thresholds=np.asarray(thresholds, dtype=float),
-        coef=np.full((W, q, T, p), np.nan),
-        support=np.zeros((W, q, T, p), dtype=bool),
-        rss=np.full((W, q, T), np.nan),
-        n_terms=np.zeros((W, q, T), dtype=int),
-        aicc=np.full((W, q, T), np.inf),
-        n_iter=np.zeros((W, q, T), dtype=int),
-        converged=np.zeros((W, q, T), dtype=bool),
-        lower_bound=np.zeros((W, q, T), dtype=bool),
-        n_samples=np.zeros(W, dtype=int),
-        cond=np.full(W, np.nan),
-    )
+    return dict(thresholds=np.asarray(thresholds, dtype=float), **_engine_empty_path(W, q, T, p),
+                n_samples=np.zeros(W, dtype=int), cond=np.full(W, np.nan))
 
 
 def _select(a: np.ndarray) -> np.ndarray:

@@ -28,7 +28,7 @@ from vivbench.identify.preprocess import PreprocessConfig, perpendicular_speed, 
 from vivbench.io import EventFormatError, event_arrays, read_event, write_netcdf_atomic
 from vivbench.quality import check_acc_magnitude, check_wind_magnitude, check_wind_varies, despike
 
-__all__ = ["IdentifyConfig", "identify_event", "identify_files", "result_path"]
+__all__ = ["IdentifyConfig", "identify_event", "identify_files", "list_results", "result_path"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -273,6 +273,23 @@ def _data_quality(arr: dict, span_azimuth_deg: float, config: IdentifyConfig) ->
         "quality_spikes_bridged_accel": int(bridged["accel"]),
     }
     return out, quality
+
+
+def list_results(results_dir) -> list[Path]:
+    """The ``<event_id>.identify.nc`` files of a directory, sorted.
+
+    Raises
+    ------
+    ValueError
+        The directory does not exist or holds no result file (the message names it).
+    """
+    d = Path(results_dir)
+    if not d.is_dir():
+        raise ValueError(f"{d}: not a directory of identification results")
+    files = sorted(d.glob("*.identify.nc"))
+    if not files:
+        raise ValueError(f"{d}: no identification results (<event_id>.identify.nc) in this directory")
+    return files
 
 
 def result_path(out_dir: str | Path, event_id: str) -> Path:

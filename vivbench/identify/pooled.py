@@ -44,6 +44,22 @@ from vivbench.terms import evaluate_library, feature_names, section_exponents
 __all__ = ["POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "with_campaign_model", "write_pooled"]
 
 
+def _record_library(t, A, U):
+    """Float arrays of one record and its physical library, zero on samples with a non-finite term (ok False)."""
+    t = np.asarray(t, dtype=float)
+    A = np.asarray(A, dtype=float)
+    U = np.asarray(U, dtype=float)
+    theta = evaluate_library(A, U)
+    ok = np.isfinite(theta).all(axis=1)
+    return t, A, U, np.where(ok[:, None], theta, 0.0), ok
+
+
+def _window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Sums of x over samples lo[w] <= i < hi[w] along axis 0, by one cumulative sum."""
+    c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)], axis=0)
+    return c[hi] - c[lo]
+
+
 def _blocks(t: np.ndarray, ok: np.ndarray, block_s: float) -> np.ndarray:
     """Block id of each sample of one record (-1 where not used)."""
     ids = np.full(t.shape, -1, dtype=np.int64)
@@ -353,20 +369,15 @@ class PooledSINDy:
         window mean of r_1/A is the same bound on a linear functional. Both
         are in m/s and 1/s after scaling by the target's RMS.
         """
-        t = np.asarray(t, dtype=float)
-        A = np.asarray(A, dtype=float)
-        U = np.asarray(U, dtype=float)
+        t, A, U, phys, ok = _record_library(t, A, U)
         S = A.shape[1]
-        phys = evaluate_library(A, U)
-        ok = np.isfinite(phys).all(axis=1)
-        X = np.where(ok[:, None], phys, 0.0) @ self._to_physical_
+        X = phys @ self._to_physical_
         orders = np.tile(section_exponents()[:, 0], S)
         lo = np.searchsorted(t, window_start, side="left")
         hi = np.searchsorted(t, window_end, side="left")
 
         def wsum(x):
-            c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)], axis=0)
-            return c[hi] - c[lo]
+            return _window_sums(x, lo, hi)
 
         nv = np.maximum(wsum(ok.astype(float)), 1.0)
         n_max = int(max((hi - lo).max(initial=0), 1))
@@ -432,13 +443,8 @@ def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
     R : ndarray, shape (M, W, S, 4), m/s; c1 : ndarray, shape (M, W, S), 1/s;
     n_valid : ndarray, shape (W,)
     """
-    t = np.asarray(t, dtype=float)
-    A = np.asarray(A, dtype=float)
-    U = np.asarray(U, dtype=float)
+    t, A, U, theta, ok = _record_library(t, A, U)
     S = A.shape[1]
-    theta = evaluate_library(A, U)
-    ok = np.isfinite(theta).all(axis=1)
-    theta = np.where(ok[:, None], theta, 0.0)
     orders = np.tile(section_exponents()[:, 0], S)
     models = np.nan_to_num(np.asarray(models, dtype=float))
     M = models.shape[0]
@@ -448,9 +454,7 @@ def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
     invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
 
     def wsum(x):
-        # window sums along the sample axis (0) through one cumulative sum
-        c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)], axis=0)
-        return c[hi] - c[lo]
+        return _window_sums(x, lo, hi)
 
     nv = wsum(ok.astype(float))
     sq = np.empty((lo.size, M, S, 4))

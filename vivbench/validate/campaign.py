@@ -187,9 +187,9 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     for d, what in ((campaign_dir, "campaign"), (results_dir, "results")):
         if not d.is_dir():
             raise ValueError(f"{d}: no such {what} directory")
-    result_files = sorted(results_dir.glob("*.identify.nc"))
-    if not result_files:
-        raise ValueError(f"{results_dir}: no identification results (<event_id>.identify.nc) in this directory")
+    from vivbench.identify.pipeline import list_results
+
+    result_files = list_results(results_dir)
     pairs = []
     for rp in result_files:
         event_id = rp.name[: -len(".identify.nc")]

@@ -62,12 +62,8 @@ import numpy as np
 
 from vivbench.identify.derivative import DERIVATIVE_METHODS
 from vivbench.identify.library import SCALINGS
+from vivbench._toml import load_toml
 from vivbench.identify.optimizers import OPTIMIZERS
-
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib
 
 __all__ = ["FACTORS", "DESIGNS", "BASE_LEVELS", "CompareConfig", "CompareResult", "compare_config_from_dict",
            "load_compare_config", "compare_cells", "plan", "run_comparison"]
@@ -247,15 +243,7 @@ def load_compare_config(path: str | Path) -> CompareConfig:
         optimizer = ["stlsq", "sr3", "ensemble"]
         window = [30.0, 50.0, 100.0]
     """
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
-        return compare_config_from_dict(data)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such grid file") from None
-    except (tomllib.TOMLDecodeError, ValueError, TypeError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
+    return load_toml(path, compare_config_from_dict, "grid file")
 
 
 def compare_cells(config: CompareConfig) -> list[dict]:
