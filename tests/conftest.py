@@ -33,3 +33,24 @@ def small_campaign(tmp_path_factory):
     result = generate_campaign(CampaignConfig(n_events=4, seed=11, duration=(360.0, 540.0)), out, workers=1)
     assert not result.failures, result.failures
     return result
+
+
+@pytest.fixture(scope="session")
+def small_results(small_campaign, tmp_path_factory):
+    """The first two events of ``small_campaign`` identified with the default settings: (campaign, dir, files)."""
+    from vivbench.identify import identify_files
+
+    out = tmp_path_factory.mktemp("small_identify")
+    results, failures = identify_files(small_campaign.files[:2], out, workers=1)
+    assert not failures, failures
+    return small_campaign, out, results
+
+
+@pytest.fixture(scope="session")
+def short_event():
+    """A 4 min synthetic event in memory (lock-in pass, seed 3): small input for import and bad-input tests."""
+    from vivbench.synth import generate_event
+
+    campaign = CampaignConfig(n_events=1, seed=3, duration=(240.0, 240.0))
+    spec, seed = campaign_specs(campaign)[0]
+    return generate_event(spec, campaign.generator, seed)

@@ -521,3 +521,116 @@ def test_other_bases_fit(scaling):
     if scaling == "raw":
         assert np.all(model.y_scale_ == 1.0) and np.all(model.col_scale_ == 1.0)
         assert np.array_equal(model.coef_, model.coef_scaled_), "raw coefficients are physical"
+
+
+# --------------------------------------------------------------------------
+# Optimisers for the comparison: pysindy's SR3 path and bagged STLSQ
+# --------------------------------------------------------------------------
+
+
+def _exact_single_section_windows(seed=0):
+    """Window designs (W, n, 23) and standardised targets of an exactly sparse one-section model,
+    and each window's true support on its basis."""
+    t, A3, U3 = _clean_event(seed, 300.0)
+    A, U = A3[:, :1], U3[:, :1]
+    xi = np.zeros(23)
+    for (i, j), c in zip([(0, 1), (1, 1), (3, 0)], [1.0, -2.0, 1.5]):
+        x = A[:, 0] ** i * U[:, 0] ** j
+        xi[_index(0, i, j)] = c * 1e-3 / np.sqrt(np.mean(x**2))
+    dA = evaluate_library(A, U) @ xi[:, None]
+    first, stop = window_bounds(t, 50.0, 25.0)[2:]
+    idx = first[:, None] + np.arange(int((stop - first).min()))
+    lib = window_library(A[idx], U[idx])
+    ys = np.sqrt(np.mean(dA[idx] ** 2, axis=1, keepdims=True))
+    y = dA[idx] / ys
+    expected = np.linalg.solve(lib.to_physical, np.broadcast_to(xi, (idx.shape[0], 23))[..., None])[..., 0] / ys[:, 0]
+    structural = np.abs(expected) > 1e-9 * np.abs(expected).max(axis=1, keepdims=True)
+    return lib.theta, y, structural, expected
+
+
+def test_sr3_recovers_exact_sparse_support():
+    """Noise-free data with the exact derivative of a sparse one-section model: the SR3 path with
+    AICc selection finds the model's support on every window's basis (exact data make the true
+    model a fixed point of SR3 for every threshold below its smallest coefficient)."""
+    from vivbench.identify.optimizers import sr3_path
+
+    theta, y, structural, expected = _exact_single_section_windows()
+    assert np.abs(expected)[structural].min() >= 1e-2, "the test model needs coefficients above the path's first thresholds"
+    path = sr3_path(theta, y, StlsqSettings(alpha=0.0, refit_rcond=None))
+    assert np.all(path.selected >= 0)
+    assert np.array_equal(path.best_support[:, 0], structural), "SR3 + AICc missed the sparse support"
+    assert np.all(path.best_rss <= 1e-18 * np.sum(y**2, axis=1)), "an exact model must fit exactly"
+
+
+def test_ensemble_on_exact_sparse_model_includes_exactly_its_terms():
+    """Every bootstrap sample of exact data holds the same model: inclusion is 1 on its support, 0 elsewhere."""
+    from vivbench.identify.optimizers import ensemble_path
+
+    theta, y, structural, _ = _exact_single_section_windows()
+    path, inclusion, threshold = ensemble_path(theta, y, StlsqSettings(alpha=0.0, refit_rcond=None), seed=3)
+    assert np.array_equal(inclusion[:, 0], structural.astype(float)), "inclusion must be the support's indicator"
+    assert np.all(path.selected == len(DEFAULT_THRESHOLDS)), "the ensemble model (last entry) must be selected"
+    assert np.array_equal(path.best_support[:, 0], structural)
+    assert np.all(np.isfinite(threshold))
+
+
+def test_ensemble_is_deterministic_for_a_seed_and_leaves_global_state():
+    from vivbench.identify.optimizers import OptimizerOptions
+
+    t, A, U, dA = _noisy_event(2, 100.0)
+    np.random.seed(123)
+    before = np.random.get_state()[1].copy()
+    kw = dict(optimizer="ensemble", keep_path=False, thresholds=DEFAULT_THRESHOLDS[::2],
+              optimizer_options=OptimizerOptions(n_models=8))
+    m1 = WindowedSINDy(random_state=5, **kw).fit(t, A, U, dA)
+    assert np.array_equal(np.random.get_state()[1], before), "the global random state must be restored"
+    m2 = WindowedSINDy(random_state=5, chunk_size=1, **kw).fit(t, A, U, dA)
+    m3 = WindowedSINDy(random_state=6, **kw).fit(t, A, U, dA)
+    assert np.array_equal(m1.inclusion_, m2.inclusion_, equal_nan=True), "same seed, other chunking: same inclusion"
+    assert np.array_equal(m1.coef_, m2.coef_, equal_nan=True)
+    assert not np.array_equal(m1.inclusion_, m3.inclusion_), "another seed must draw other bootstrap samples"
+    W = m1.window_start_.size
+    assert m1.inclusion_.shape == (W, 3, 69)
+    assert np.all((m1.inclusion_ >= 0) & (m1.inclusion_ <= 1))
+    # 8 bootstrap models: probabilities are multiples of 1/8
+    assert_close(m1.inclusion_ * 8, np.round(m1.inclusion_ * 8), rtol=0, atol=1e-12, reason="float division")
+    kept = m1.support_ & (m1.inclusion_ < 0.5)
+    assert not kept.any(), "a term below the inclusion cut must not be in the chosen model"
+
+
+def test_optimizer_is_validated():
+    from vivbench.identify.optimizers import OptimizerOptions
+
+    t, A, U, dA = _noisy_event(0, 150.0)
+    with pytest.raises(ValueError, match="optimizer must be one of"):
+        WindowedSINDy(optimizer="lasso").fit(t, A, U, dA)
+    with pytest.raises(ValueError, match="inclusion_cut"):
+        OptimizerOptions(inclusion_cut=0.0)
+    with pytest.raises(ValueError, match="coef_rule"):
+        OptimizerOptions(coef_rule="mean")
+
+
+@pytest.mark.parametrize("optimizer", ["sr3", "ensemble"])
+def test_pysindy_optimizers_through_identify_event(small_campaign, optimizer):
+    """The pysindy-based optimisers give complete, valid result files on a campaign event."""
+    from vivbench.identify import IdentifyConfig, identify_event
+    from vivbench.io import read_event
+
+    tree = read_event(small_campaign.files[1])
+    ds = identify_event(tree, IdentifyConfig(optimizer=optimizer, window=60.0, step=120.0))
+    W = ds.sizes["window"]
+    assert W >= 3 and ds["coef"].shape == (W, 3, 69)
+    regime = ds["regime"].values
+    fitted = np.isfinite(ds["coef"].values).all(axis=2)
+    assert fitted.any(), "no window got a model"
+    assert np.all((regime[fitted] >= 1) & (regime[fitted] <= 4)), "regimes of fitted windows must be 1..4"
+    assert np.all(regime[~fitted] == 0)
+    assert set(np.unique(ds["identifiable"].values)) <= {0, 1}
+    assert np.all(ds["identifiable"].values[~fitted] == 0)
+    assert '"optimizer": "' + optimizer + '"' in ds.attrs["identify_config_json"]
+    if optimizer == "ensemble":
+        inc = ds["inclusion"].values
+        assert inc.shape == (W, 3, 69)
+        assert np.all((inc[fitted] >= 0) & (inc[fitted] <= 1))
+    else:
+        assert "inclusion" not in ds

@@ -209,3 +209,74 @@ def test_negative_amplitude_is_stopped(event):
     sim = simulate_identified(_result(event["t"], event["A"], event["U"], coef, event["start"], event["end"]))
     assert sim.stopped and "fell below" in sim.reason, sim.reason
     assert sim.stopped_at < 10.0, f"expected an early stop; got {sim.stopped_at} s"
+
+
+def test_simulated_sparse_model_is_reidentified():
+    """Issue 4: a known sparse model, simulated forward by this module with a varying
+    wind, fitted back by the engine on the exact derivative, gives back its coefficients.
+
+    Each section's equation uses its own section's terms only (U, A, A U, A^3),
+    so one section's 23-term library holds the model; the engine runs without
+    ridge and with a plain least-squares refit (as in tests/test_engine.py),
+    on one window spanning the record so that U and A both vary.
+    """
+    t = np.arange(0.0, 600.0 + 1e-9, 1.0 / FS)
+    U = 8.0 + 1.5 * np.sin(2 * np.pi * t[:, None] / 230.0 + np.array([0.0, 0.9, 1.8]))
+    ex = feature_exponents(3)
+    Xi = np.zeros((3, 69))
+    for k in range(3):
+        for (i, j), value in {(0, 1): 1e-4, (1, 0): -0.03, (1, 1): 0.004, (3, 0): -2.0}.items():
+            Xi[k, np.flatnonzero((ex[:, 0] == k) & (ex[:, 1] == i) & (ex[:, 2] == j))[0]] = value
+    A_meas = np.full((t.size, 3), np.nan)
+    A_meas[0] = 0.01
+    res = _result(t, A_meas, U, Xi[None].copy(), np.array([0.0]), np.array([t[-1] + 1.0]))
+    sim = simulate_identified(res, t0=0.0, t1=t[-1])
+    assert not sim.stopped, sim.reason
+    A = sim.A_sim
+    assert A.max() > 2.0 * A[0].max() and np.ptp(U) > 2.5, "the trajectory must explore A and U"
+    dA = evaluate_library(A, U) @ Xi.T  # the exact derivative of the simulated model
+    # RK4 at 0.25 s is consistent with it: central differences agree to O(h^2)
+    fd = (A[2:] - A[:-2]) / (t[2:] - t[:-2])[:, None]
+    assert_close(fd, dA[1:-1], rtol=0, atol=2e-3 * np.abs(dA).max(), reason="central differences, O(h^2)",
+                 what="simulated trajectory vs its model")
+    for s in range(3):
+        est = WindowedSINDy(window=t[-1] + 0.25, step=t[-1] + 0.25, alpha=0.0, refit_rcond=None, keep_path=False,
+                            identifiability_margin=None)
+        est.fit(t, A[:, s:s + 1], U[:, s:s + 1], dA[:, s:s + 1])
+        got = est.coef_[0, 0]
+        want = Xi[s, 23 * s:23 * (s + 1)]
+        assert np.array_equal(got != 0, want != 0), f"S{s + 1}: support {np.flatnonzero(got)}, not {np.flatnonzero(want)}"
+        assert_close(got, want, rtol=1e-6, atol=1e-9 * np.abs(want).max(),
+                     reason="least squares in the scaled basis (measured error ~1e-16)", what=f"S{s + 1} coefficients")
+
+
+@pytest.mark.parametrize("clip", ["u", "au"])
+def test_clipping_keeps_exact_models_exact_and_bounds_the_arguments(event, clip):
+    """Clipping to the window's own ranges changes nothing while the trajectory stays in them."""
+    from vivbench.identify.forecast import window_ranges
+
+    a_lo, a_hi, u_lo, u_hi = window_ranges(event["result"])
+    t, A, U = event["t"], event["A"], event["U"]
+    w = 5
+    sel = (t >= event["start"][w]) & (t < event["end"][w])
+    assert_close(u_lo[w], U[sel].min(0), what="U range")
+    assert_close(a_hi[w], A[sel].max(0), what="A range")
+    sim = simulate_identified(event["result"], clip=clip)
+    assert not sim.stopped
+    # the window in force covers +-12.5 s around its centre, inside its own 50 s range
+    assert np.all(sim.nmse < 1e-10), f"clip={clip}: {sim.nmse}"
+    with pytest.raises(ValueError, match="clip"):
+        simulate_identified(event["result"], clip="bogus")
+
+
+def test_model_jacobian_matches_finite_differences():
+    from vivbench.identify.forecast import model_jacobian
+
+    rng = np.random.default_rng(0)
+    coef = rng.normal(size=(3, 69))
+    A, U = rng.uniform(0.01, 0.1, 3), rng.uniform(7.0, 9.0, 3)
+    f = lambda a: (evaluate_library(a[None], U[None]) @ coef.T)[0]
+    h = 1e-6
+    J = np.stack([(f(A + h * e) - f(A - h * e)) / (2 * h) for e in np.eye(3)], axis=1)
+    assert_close(model_jacobian(coef, A, U), J, rtol=1e-7, atol=1e-9 * np.abs(J).max(),
+                 reason="central differences", what="Jacobian")

@@ -204,9 +204,21 @@ def test_preprocessing_recovers_the_truth_it_is_scored_against(default_campaign_
 
 
 def test_cli_demo_small(tmp_path):
+    """A small demo runs every step and writes a report whose every link resolves (issue 5)."""
+    import re
+    from urllib.parse import unquote
+
     run = subprocess.run([sys.executable, "-m", "vivbench.cli", "demo", "--out", str(tmp_path), "--events", "2",
                           "--duration", "8", "--workers", "1"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
-    assert "recovery:" in run.stdout and "coverage" in run.stdout
-    assert (tmp_path / "event_E001.png").stat().st_size > 10000
-    assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == ["E001.identify.nc", "E002.identify.nc"]
+    assert "report:" in run.stdout and "campaign model" in run.stdout and "coverage" in run.stdout
+    assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == ["E001.identify.nc", "E002.identify.nc", "campaign.pooled.nc"]
+    report = tmp_path / "reports" / "demo" / "report.md"
+    text = report.read_text()
+    links = re.findall(r"\]\(([^)\s]+)\)", text)
+    assert sum(t.endswith(".png") for t in links) >= 12, links
+    for target in links:
+        assert not target.startswith(("/", "http")), f"{target}: links must be relative"
+        assert (report.parent / unquote(target)).is_file(), f"{target} is linked but missing"
+    for step in ("cluster", "forecast", "validate"):
+        assert (tmp_path / step / "command.txt").read_text().startswith(f"vivbench {step} ")

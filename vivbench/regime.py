@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-__all__ = ["DEFAULT_TAU", "classify_regime", "order_rms"]
+__all__ = ["DEFAULT_TAU", "classify_regime", "order_rms", "regime_rule"]
 
 DEFAULT_TAU = 0.2
 
@@ -62,13 +62,35 @@ def classify_regime(r: np.ndarray, A: np.ndarray, tau: float = DEFAULT_TAU, axis
     # A negative axis counts from A's end; r has the extra order axis last.
     axis = axis % A.ndim if A.ndim else 0
     R = order_rms(r, axis=axis)
-    M = R.max(axis=-1)
     with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
         # a window without a positive amplitude has no linear coefficient (NaN: not > 0)
         warnings.simplefilter("ignore", RuntimeWarning)
         c1 = np.nanmean(np.where(A > 0, r[..., 1] / A, np.nan), axis=axis)
-    regime = np.where(c1 > 0, 2, 1).astype(np.int8)
-    regime = np.where(R[..., 2] >= tau * M, 3, regime)
-    regime = np.where(R[..., 3] >= tau * M, 4, regime)
-    # A window with no dynamics at all (M == 0) is damped and unforced.
-    return np.where(M > 0, regime, 1).astype(np.int8)
+    return regime_rule(R, c1, tau)
+
+
+def regime_rule(R: np.ndarray, c1: np.ndarray, tau: float = DEFAULT_TAU) -> np.ndarray:
+    """The rule of DESIGN 2.5 from a window's statistics.
+
+    Parameters
+    ----------
+    R : ndarray, shape (..., 4), m/s
+        RMS over the window of each order contribution r_0..r_3.
+    c1 : ndarray, shape (...), 1/s
+        Window mean of r_1 / A (NaN where undefined: counts as not positive).
+    tau : float
+
+    Returns
+    -------
+    regime : ndarray of int8, shape (...)
+    """
+    if not 0.0 < tau < 1.0:
+        raise ValueError(f"tau must lie strictly between 0 and 1; got {tau}")
+    R = np.asarray(R, dtype=float)
+    M = R.max(axis=-1)
+    with np.errstate(invalid="ignore"):
+        regime = np.where(c1 > 0, 2, 1).astype(np.int8)
+        regime = np.where(R[..., 2] >= tau * M, 3, regime)
+        regime = np.where(R[..., 3] >= tau * M, 4, regime)
+        # A window with no dynamics at all (M == 0) is damped and unforced.
+        return np.where(M > 0, regime, 1).astype(np.int8)

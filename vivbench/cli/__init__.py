@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 __all__ = ["main"]
 
 # Order of appearance in ``vivbench --help``.
-_COMMANDS = ("synth", "identify", "sweep", "plot_event", "demo")
+_COMMANDS = ("synth", "import_", "identify", "pool", "cluster", "forecast", "validate", "compare", "sweep", "plot_event", "report", "demo")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -26,7 +27,16 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _single_threaded_blas() -> None:
+    # The chain solves thousands of tiny least-squares problems, which threaded
+    # BLAS makes about 10x slower on small machines; a user's explicit setting wins.
+    # Takes effect only before numpy is first imported (the subcommands import it lazily).
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+
+
 def main(argv: list[str] | None = None) -> int:
+    _single_threaded_blas()
     args = _parser().parse_args(argv)
     from vivbench.io import EventFormatError
 

@@ -1,56 +1,149 @@
-"""``vivbench demo``: the whole chain on the default synthetic campaign."""
+"""``vivbench demo``: the whole chain on the default synthetic campaign.
+
+Generate, identify, pool, cluster, forecast, refit, validate and report, each
+step as the subcommand a user would run (its exact command is written to
+``command.txt`` in the step's directory, so the report can cite it). A step
+that fails is reported on one line and the later steps still run where they
+can. Progress and the steps' own output go to stderr; stdout gets a short
+summary: where the report is, and the headline recovery figures.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import json
+import math
+import shlex
 import sys
 from pathlib import Path
 
-from vivbench.cli._common import DEFAULT_WORKERS, duration, progress
+from vivbench.cli._common import DEFAULT_WORKERS, duration
+
+
+
+def _f(x) -> str:
+    return "n/a" if x is None or not isinstance(x, (int, float)) or not math.isfinite(x) else f"{x:.3f}"
+
+
+def _minutes(seconds: tuple[float, float]) -> str:
+    lo, hi = (s / 60.0 for s in seconds)
+    return f"{lo:g}" if lo == hi else f"{lo:g}-{hi:g}"
+
+
+def _step(argv: list[str], out_dir: Path | None, failures: list[str]) -> bool:
+    """Run one subcommand in-process with its stdout sent to stderr; record its command."""
+    from vivbench.cli import main
+
+    command = "vivbench " + " ".join(shlex.quote(a) for a in argv)
+    print(f"[demo] {command}", file=sys.stderr)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        from vivbench.io import atomic_path
+
+        with atomic_path(out_dir / "command.txt") as tmp:
+            tmp.write_text(command + "\n")
+    with contextlib.redirect_stdout(sys.stderr):
+        code = main(argv)
+    if code != 0:
+        failures.append(f"{argv[0]} exited {code} (see the messages above)")
+    return code == 0
 
 
 def run(args) -> int:
-    from vivbench.identify import identify_files
-    from vivbench.io import read_event
-    from vivbench.report import event_figure
-    from vivbench.synth import CampaignConfig, generate_campaign
-    from vivbench.validate import campaign_recovery
+    from vivbench.validate import clearest_plateau
 
     out = Path(args.out)
-    campaign = CampaignConfig(seed=args.seed, n_events=args.events, duration=args.duration)
-    bar = progress(campaign.n_events, "synth")
+    campaign, identify = out / "campaign", out / "identify"
+    failures: list[str] = []
+    common = ["--workers", str(args.workers)]
+    _step(["synth", "--events", str(args.events), "--seed", str(args.seed), "--duration", _minutes(args.duration),
+           "--out", str(campaign), *common], None, failures)
+    if not list(campaign.glob("E*.nc")):
+        print("vivbench demo: no event was generated; nothing else to do", file=sys.stderr)
+        return 1
+    _step(["identify", str(campaign), "--out", str(identify), *common], None, failures)
+    if not list(identify.glob("*.identify.nc")):
+        print("vivbench demo: no event was identified; nothing else to do", file=sys.stderr)
+        return 1
+    _step(["pool", str(identify)], None, failures)
+    _step(["cluster", str(identify), "--out", str(out / "cluster"), "--campaign", str(campaign)], out / "cluster", failures)
     try:
-        result = generate_campaign(campaign, out / "campaign", workers=args.workers, progress=lambda _id: bar.update())
-    finally:
-        bar.close()
-    failed = dict(result.failures)
-    bar = progress(len(result.files), "identify")
+        plateau = clearest_plateau(campaign)
+        event_id = plateau.event_id
+    except ValueError as exc:  # no plateau in a small campaign: forecast the first event
+        print(f"vivbench demo: {exc}; forecasting the first event instead", file=sys.stderr)
+        event_id = sorted(p.name.split(".")[0] for p in identify.glob("*.identify.nc"))[0]
+    result = identify / f"{event_id}.identify.nc"
+    _step(["forecast", str(result), "--out", str(out / "forecast"), "--campaign", str(campaign)], out / "forecast", failures)
+    has_refit = _has_command("refit")
+    if has_refit:
+        _step(["refit", str(result), "--out", str(out / "refit"), "--event", str(campaign / f"{event_id}.nc")],
+              out / "refit", failures)
+    validate = ["validate", str(campaign), str(identify), "--out", str(out / "validate")]
+    if (out / "cluster" / "cluster_labels.csv").is_file():
+        validate += ["--clusters", str(out / "cluster" / "cluster_labels.csv")]
+    if list((out / "forecast").glob("forecast_*.csv")):
+        validate += ["--forecasts", str(out / "forecast")]
+    _step(validate, out / "validate", failures)
+    report = ["report", "--campaign", str(campaign), "--results", str(identify), "--name", args.name,
+              "--out-root", str(args.report_root if args.report_root else out / "reports")]
+    for step in ("cluster", "forecast", "refit", "validate"):
+        if (out / step).is_dir():
+            report += [f"--{step}", str(out / step)]
+    _step(report, None, failures)
+
+    report_md = Path(report[report.index("--out-root") + 1]) / args.name / "report.md"
+    s = _read_json(out / "validate" / "summary.json")
+    c = _read_json(out / "cluster" / "summary.json")
+    fc = _read_json(out / "forecast" / "summary.json")
+    print(f"report:   {report_md}" if report_md.is_file() else "report:   not written (see the messages above)")
+    print(f"campaign: {len(list(campaign.glob('E*.nc')))} events in {campaign}; results in {identify}")
+    if s:
+        print(f"regimes:  {s.get('n_window_equations')} window-equations; window models (the paper's method): "
+              f"coverage {_f(s.get('regime_coverage'))}, accuracy {_f(s.get('regime_accuracy_identifiable'))} "
+              f"identifiable / {_f(s.get('regime_accuracy_all'))} all (chance {_f(s.get('truth_most_common_regime_share'))})")
+        print(f"          campaign model (vivbench pool): coverage {_f(s.get('pooled_regime_coverage'))}, accuracy "
+              f"{_f(s.get('pooled_regime_accuracy_identifiable'))} identifiable / {_f(s.get('pooled_regime_accuracy_all'))} all")
+        print(f"dynamics: median relative error of dA/dt on windows with dynamics: window models "
+              f"{_f(s.get('median_rhs_rel_error_active'))}, campaign model {_f(s.get('pooled_median_rhs_rel_error_active'))}")
+    if c:
+        tags = sorted(k[len("n_clusters_"):] for k in c if k.startswith("n_clusters_"))
+        print("clusters: " + "; ".join(f"{t}: {c.get('n_clusters_' + t)} clusters, ARI {_f(c.get('ari_' + t))}" for t in tags))
+    if fc:
+        ds = sorted((k for k in fc if k.startswith("nmse_S2_d") and "clip" not in k), key=lambda k: float(k[9:]))
+        print(f"forecast: {fc.get('event_id')} from t0 = {fc.get('t0_s', float('nan')):.0f} s: window models NMSE(S2) "
+              + ", ".join(f"d={k[9:]} s {_g(fc.get(k))}" for k in ds)
+              + f"{'' if fc.get('forecasts_complete') else ' (stopped early)'}; campaign model {_g(fc.get('campaign_model_forecast_nmse_S2'))}")
+    for line in failures:
+        print(f"vivbench demo: {line}", file=sys.stderr)
+    return 1 if failures else 0
+
+
+def _g(x) -> str:
+    return "n/a" if x is None or not isinstance(x, (int, float)) or not math.isfinite(x) else f"{x:.3g}"
+
+
+def _read_json(path: Path) -> dict:
     try:
-        written, id_failures = identify_files(result.files, out / "identify", workers=args.workers,
-                                              progress=lambda _p: bar.update())
-    finally:
-        bar.close()
-    failed.update(id_failures)
-    for key, message in sorted(failed.items()):
-        print(f"vivbench demo: {message if message.startswith(str(key)) else f'{key}: {message}'}", file=sys.stderr)
-    figure = event_figure(read_event(result.files[0]), out / "event_E001.png")
-    done = {Path(p).name.replace(".identify.nc", ".nc") for p in written}
-    scores = campaign_recovery([f for f in result.files if f.name in done], written)
-    print(f"campaign: {len(result.files)} events in {out / 'campaign'} (catalogue {result.catalogue})")
-    print(f"identify: {len(written)} result files in {out / 'identify'}")
-    print(f"figure:   {figure}")
-    print(f"recovery: {scores['n']} window-equations; regime coverage (identifiable) {scores['coverage']:.3f}, "
-          f"regime accuracy {scores['accuracy_all']:.3f} overall and {scores['accuracy_identifiable']:.3f} on identifiable ones; "
-          f"median relative error of dA/dt {scores['rhs_median_rel_error_active']:.3f} on windows with dynamics")
-    print("not in this build yet: clustering, forecasting, refit, validation tables and the report (see the README).")
-    return 1 if failed else 0
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _has_command(name: str) -> bool:
+    from vivbench.cli import _COMMANDS
+
+    return name in _COMMANDS
 
 
 def register(sub) -> None:
-    s = sub.add_parser("demo", help="generate the default campaign, identify it and score the recovery")
+    s = sub.add_parser("demo", help="the whole chain on a synthetic campaign, ending in a report")
     s.add_argument("--out", default="demo", help="output directory (default ./demo)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--events", type=int, default=31, help="number of events (default 31)")
     s.add_argument("--duration", type=duration, default=(1200.0, 3600.0),
                    help="event duration in minutes: N or MIN-MAX (default 20-60)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS)
+    s.add_argument("--name", default="demo", help="report name (default demo)")
+    s.add_argument("--report-root", default=None, help="parent directory of the report (default OUT/reports)")
     s.set_defaults(func=run)

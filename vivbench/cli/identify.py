@@ -17,7 +17,7 @@ def run(args) -> int:
         preprocess=PreprocessConfig(modal_frequency_hz=args.mode_frequency, grid_step_s=args.grid_step),
         derivative=Derivative(method=args.derivative, **deriv_opts),
         window=args.window, step=args.step, alpha=args.alpha, scaling=args.scaling, tau=args.tau,
-        fit_tolerance=args.fit_tolerance,
+        fit_tolerance=args.fit_tolerance, spike_mad=args.spike_mad or None, optimizer=args.optimizer, seed=args.seed,
     )
     paths = event_paths(args.inputs)
     bar = progress(len(paths), "identify")
@@ -42,9 +42,14 @@ def register(sub) -> None:
     s.add_argument("--tv-time-scale", type=float, default=None, help="time scale of the automatic TV weight, s")
     s.add_argument("--alpha", type=float, default=0.05, help="STLSQ ridge parameter (default 0.05)")
     s.add_argument("--scaling", default="scaled", choices=("scaled", "normalized", "raw"), help="library basis")
+    s.add_argument("--optimizer", default="stlsq", choices=("stlsq", "sr3", "ensemble"),
+                   help="sparse regression per window (default stlsq: the fast engine; sr3, ensemble: pysindy)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the ensemble optimiser's bootstrap samples")
     s.add_argument("--tau", type=float, default=0.2, help="regime threshold (DESIGN 2.5)")
     s.add_argument("--fit-tolerance", type=float, default=0.1,
                    help="relative RMS residual within which a competing model fits equally well (default 0.1)")
+    s.add_argument("--spike-mad", type=float, default=8.0,
+                   help="spike rule: robust standard deviations from the local median (default 8; 0: off)")
     s.add_argument("--mode-frequency", type=float, default=None, help="modal frequency, Hz (default: from the spectrum)")
     s.add_argument("--grid-step", type=float, default=0.25, help="common time grid step, s (default 0.25)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help="worker processes (results do not depend on it)")

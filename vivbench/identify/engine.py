@@ -555,6 +555,33 @@ class _Factors:
         return out
 
 
+def _empty_path(W: int, q: int, T: int, p: int) -> dict:
+    """Path arrays of W windows, q targets, T thresholds and p terms before any fit (no model anywhere)."""
+    return dict(
+        coef=np.full((W, q, T, p), np.nan),
+        support=np.zeros((W, q, T, p), dtype=bool),
+        rss=np.full((W, q, T), np.nan),
+        n_terms=np.zeros((W, q, T), dtype=int),
+        aicc=np.full((W, q, T), np.inf),
+        n_iter=np.zeros((W, q, T), dtype=int),
+        converged=np.zeros((W, q, T), dtype=bool),
+        lower_bound=np.zeros((W, q, T), dtype=bool),
+    )
+
+
+def _as_batches(theta, y) -> tuple[np.ndarray, np.ndarray]:
+    """Designs (W, n, p) and targets (W, n, q) as float arrays, a single 2-D window given a batch axis."""
+    theta = np.asarray(theta, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if theta.ndim == 2:
+        theta = theta[None]
+    if y.ndim == 2:
+        y = y[None]
+    if theta.ndim != 3 or y.ndim != 3 or theta.shape[:2] != y.shape[:2]:
+        raise ValueError(f"theta (W, n, p) and y (W, n, q) must agree on W and n; got {theta.shape} and {y.shape}")
+    return theta, y
+
+
 def stlsq_path(theta: np.ndarray, y: np.ndarray, settings: StlsqSettings | None = None) -> StlsqPath:
     """Run STLSQ over a threshold path for a batch of windows and select by AICc.
 
@@ -573,14 +600,7 @@ def stlsq_path(theta: np.ndarray, y: np.ndarray, settings: StlsqSettings | None 
         With a leading window axis even for a single 2-D window.
     """
     settings = StlsqSettings() if settings is None else settings
-    theta = np.asarray(theta, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if theta.ndim == 2:
-        theta = theta[None]
-    if y.ndim == 2:
-        y = y[None]
-    if theta.ndim != 3 or y.ndim != 3 or theta.shape[:2] != y.shape[:2]:
-        raise ValueError(f"theta (W, n, p) and y (W, n, q) must agree on W and n; got {theta.shape} and {y.shape}")
+    theta, y = _as_batches(theta, y)
     W, N, p = theta.shape
     q = y.shape[2]
     th = np.asarray(settings.thresholds)
@@ -590,16 +610,7 @@ def stlsq_path(theta: np.ndarray, y: np.ndarray, settings: StlsqSettings | None 
     X = np.where(valid[..., None], theta, 0.0)
     Y = np.where(valid[..., None], y, 0.0)
 
-    out = dict(
-        coef=np.full((W, q, T, p), np.nan),
-        support=np.zeros((W, q, T, p), dtype=bool),
-        rss=np.full((W, q, T), np.nan),
-        n_terms=np.zeros((W, q, T), dtype=int),
-        aicc=np.full((W, q, T), np.inf),
-        n_iter=np.zeros((W, q, T), dtype=int),
-        converged=np.zeros((W, q, T), dtype=bool),
-        lower_bound=np.zeros((W, q, T), dtype=bool),
-    )
+    out = _empty_path(W, q, T, p)
     cond = np.full(W, np.nan)
     fit = np.flatnonzero(n_valid >= p + 2)
     solves = {"qr": 0, "cholesky": 0, "svd": 0, "lstsq": 0}
@@ -832,6 +843,16 @@ class WindowedSINDy:
         (None: no identifiability test, every fitted window flagged identifiable).
     order_deletion : bool
         Also compete with the best model without each order of A present.
+    fit_tolerance : float
+        Relative RMS residual within which an order-restricted model fits equally well.
+    optimizer : {"stlsq", "sr3", "ensemble"}
+        Sparse regression per window: this engine's STLSQ path (default), or
+        pysindy's SR3 path or bagged STLSQ on the same scaled problem, see
+        :mod:`vivbench.identify.optimizers`.
+    optimizer_options : OptimizerOptions, optional
+        Settings of ``"sr3"`` and ``"ensemble"`` (None: their defaults).
+    random_state : int
+        Seed of the bootstrap samples of ``"ensemble"`` (one child seed per window).
 
     Attributes
     ----------
@@ -876,6 +897,11 @@ class WindowedSINDy:
         Bit mask of the regimes among the equally good models (bit k-1: regime k).
     n_equivalent_ : ndarray of int, shape (W, S)
         Number of equally good competitors found.
+    inclusion_ : ndarray, shape (W, S, 23 S)
+        ``optimizer="ensemble"`` only: inclusion probability in [0, 1] of each
+        basis term over the bootstrap models (NaN where no model was fitted).
+        For ``"ensemble"`` the path attributes have T + 1 entries, the last
+        the ensemble model, and ``threshold_`` is the bootstrap fits' threshold.
     order_rms_ : ndarray, shape (W, S, 4), m/s
         RMS over the window of each order's contribution to dA/dt.
     feature_names_ : list of str
@@ -905,6 +931,9 @@ class WindowedSINDy:
         identifiability_margin: float | None = 2.0,
         order_deletion: bool = True,
         fit_tolerance: float = 0.1,
+        optimizer: str = "stlsq",
+        optimizer_options=None,
+        random_state: int = 0,
     ):
         self.window = window
         self.step = step
@@ -924,6 +953,9 @@ class WindowedSINDy:
         self.identifiability_margin = identifiability_margin
         self.order_deletion = order_deletion
         self.fit_tolerance = fit_tolerance
+        self.optimizer = optimizer
+        self.optimizer_options = optimizer_options
+        self.random_state = random_state
 
     _PARAMS = (
         "window",
@@ -944,6 +976,9 @@ class WindowedSINDy:
         "identifiability_margin",
         "order_deletion",
         "fit_tolerance",
+        "optimizer",
+        "optimizer_options",
+        "random_state",
     )
 
     def get_params(self, deep: bool = True) -> dict:
@@ -995,8 +1030,11 @@ class WindowedSINDy:
         self
         """
         from vivbench.identify.identifiability import window_regimes  # it builds on stlsq_path
+        from vivbench.identify.optimizers import OPTIMIZERS, run_optimizer
 
         settings = self.settings()
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer must be one of {OPTIMIZERS}; got {self.optimizer!r}")
         if self.scaling not in SCALINGS:
             raise ValueError(f"scaling must be one of {SCALINGS}; got {self.scaling!r}")
         chunk = self.chunk_size
@@ -1017,7 +1055,8 @@ class WindowedSINDy:
         n, S = A.shape
         p = 23 * S
         W = start.size
-        T = len(settings.thresholds)
+        # The ensemble's path ends with the ensemble model itself.
+        T = len(settings.thresholds) + (self.optimizer == "ensemble")
         n_max = int((stop - first).max())
 
         res = {
@@ -1053,6 +1092,9 @@ class WindowedSINDy:
                 converged_=np.zeros((W, S, T), dtype=bool),
                 path_lower_bound_=np.zeros((W, S, T), dtype=bool),
             )
+        if self.optimizer == "ensemble":
+            res["inclusion_"] = np.full((W, S, p), np.nan)
+        seeds = np.random.SeedSequence(self.random_state).spawn(W)
         cond_raw = np.full(W, np.nan) if self.raw_cond else None
         solves = {"qr": 0, "cholesky": 0, "svd": 0, "lstsq": 0}
 
@@ -1072,7 +1114,8 @@ class WindowedSINDy:
                     ys = np.sqrt(sq / lib.n_valid[:, None])
                 ys = np.where(np.isfinite(ys) & (ys > 0), ys, 1.0)
             y = np.where(valid[..., None], dAw / ys[:, None, :], np.nan)
-            path = stlsq_path(lib.theta, y, settings)
+            path, extra = run_optimizer(self.optimizer, lib.theta, y, settings, self.optimizer_options,
+                                        seed=seeds[ch])
             for key in solves:
                 solves[key] += path.solves.get(key, 0)
 
@@ -1084,7 +1127,9 @@ class WindowedSINDy:
             res["coef_"][ch] = lib.physical_coef(np.where(np.isfinite(best), best, 0.0)) * ys[:, :, None]
             res["coef_"][ch] = np.where(np.isfinite(best).all(axis=2, keepdims=True), res["coef_"][ch], np.nan)
             res["support_"][ch] = path.best_support
-            res["threshold_"][ch] = path.best_threshold
+            res["threshold_"][ch] = extra.get("threshold", path.best_threshold)
+            if "inclusion" in extra:
+                res["inclusion_"][ch] = extra["inclusion"]
             res["aicc_"][ch] = path.best_aicc + shift
             res["rss_"][ch] = path.best_rss * ys**2
             res["n_terms_"][ch] = path.best_n_terms
@@ -1113,6 +1158,8 @@ class WindowedSINDy:
             for key in ("regime", "identifiable", "regimes_seen", "n_equivalent", "order_rms"):
                 res[f"{key}_"][ch] = reg[key]
 
+        if "inclusion_" not in res and hasattr(self, "inclusion_"):
+            delattr(self, "inclusion_")
         path_names = ("path_support_", "path_aicc_", "path_rss_", "path_n_terms_", "n_iter_", "converged_")
         for name in path_names + ("path_lower_bound_",):
             # No stale path from an earlier fit with keep_path=True.

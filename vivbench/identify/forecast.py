@@ -34,6 +34,31 @@ stopped, not propagated: the step that produces a non-finite A, an A above
 ``-negative_tolerance`` times it ends the simulation; the samples from there
 on are NaN, and the NMSE covers only the valid part.
 
+Why window models blow up, and what was tried (``clip``). In a 50 s window
+A is nearly constant and A_1 : A_2 : A_3 is fixed by the mode shape, so the
+data fix dA/dt along the measured path but not how it changes when A leaves
+it: the Jacobian d(dA/dt)/dA of an identified model (:func:`model_jacobian`)
+is not identified. On the default campaign its largest real eigenvalue at the
+forecast start is 0.05-1 1/s for single windows and up to ~60 1/s for
+coefficients averaged over several windows (each window's large, cancelling
+coefficients average to a model that fits none of them), against about
++-0.006 1/s for the true averaged dynamics (``vivbench forecast`` reports both).
+Any deviation of the simulated A from the measurement then grows by e within
+seconds. Remedies tried: (1) float64 cancellation is not the cause: the
+largest physical term of a window is ~1e8 times dA/dt (8 of 16 digits), and
+evaluating the models in their windows' scaled basis instead gives the same
+right-hand side to 0.5 % at states within +-10 % of the measured A and the
+same Jacobian eigenvalues to 1e-5 (checked on event E001 of the default
+campaign);
+(2) ``clip="u"``, each model sees U only within the range of its window
+("a model is only valid on the data it saw"): no effect, the runs stop
+before U leaves the range; (3) ``clip="au"``, A clipped too: the runs last
+longer but the NMSE does not improve, since a model frozen at its window's
+edge only extrapolates dA/dt as a function of U; (4) a single model refitted
+by the engine on the pooled data of [t0, t0 + d] (explored, not kept): also
+stopped within 10-60 s. The paper's method (``clip="none"``) stays the
+default and the comparison.
+
 NMSE, per section s, over the compared samples (valid simulation and finite
 measurement)::
 
@@ -52,11 +77,12 @@ from scipy.interpolate import make_interp_spline
 
 from vivbench.terms import feature_exponents
 
-__all__ = ["Simulation", "simulate_identified", "forecast", "forecast_coefficients", "forecast_table", "nmse",
+__all__ = ["CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
            "window_in_force"]
 
 _METHODS = ("rk4",)
 _U_INTERP = ("cubic", "linear")
+CLIP_MODES = ("none", "u", "au")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -169,6 +195,44 @@ def window_in_force(result: xr.Dataset, t) -> np.ndarray:
     return idx[order[pick]].reshape(t.shape)
 
 
+def window_ranges(result: xr.Dataset) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Range of the data each window's model was fitted on.
+
+    Parameters
+    ----------
+    result : xarray.Dataset
+        Identification result (``A``, ``U`` on ``time``; ``window_start``, ``window_end``).
+
+    Returns
+    -------
+    a_lo, a_hi : ndarray, shape (W, 3), m
+        Smallest and largest finite A of each section over each window [start, end).
+    u_lo, u_hi : ndarray, shape (W, 3), m/s
+        The same for U. NaN for a window without finite samples.
+    """
+    t = np.asarray(result["time"].values, dtype=float)
+    start = np.asarray(result["window_start"].values, dtype=float)
+    end = np.asarray(result["window_end"].values, dtype=float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    tol = 1e-6 * dt
+    first = np.searchsorted(t, start - tol, side="left")
+    stop = np.searchsorted(t, end - tol, side="left")
+    n_max = int(max((stop - first).max(), 1)) if start.size else 1
+    offs = np.arange(n_max)
+    inwin = offs[None, :] < (stop - first)[:, None]
+    idx = np.minimum(first[:, None] + offs[None, :], t.size - 1)
+    out = []
+    for name in ("A", "U"):
+        x = np.asarray(result[name].values, dtype=float)[idx]  # (W, n_max, 3)
+        ok = inwin[..., None] & np.isfinite(x)
+        with np.errstate(invalid="ignore"):
+            lo = np.where(ok, x, np.inf).min(axis=1)
+            hi = np.where(ok, x, -np.inf).max(axis=1)
+        bad = ~ok.any(axis=1)
+        out += [np.where(bad, np.nan, lo), np.where(bad, np.nan, hi)]
+    return tuple(out)
+
+
 def forecast_coefficients(result: xr.Dataset, t0: float, d: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """The fixed coefficients of a forecast from t0.
 
@@ -201,6 +265,31 @@ def _polynomials(coef: np.ndarray) -> np.ndarray:
     P = np.zeros(coef.shape[:2] + (3, 4, 6))
     P[:, :, ex[:, 0], ex[:, 1], ex[:, 2]] = coef
     return P
+
+
+def model_jacobian(coef, A, U) -> np.ndarray:
+    """Jacobian d(dA/dt)/dA of a model on the physical library at one state.
+
+    Parameters
+    ----------
+    coef : ndarray, shape (3, 69)
+        Coefficients on :func:`vivbench.terms.evaluate_library`.
+    A, U : ndarray, shape (3,), m and m/s
+
+    Returns
+    -------
+    ndarray, shape (3, 3), 1/s
+        J[m, k] = d f_m / d A_k. Its largest real eigenvalue is the growth rate
+        of small deviations of A from the trajectory (the true VIV dynamics
+        have rates of order 1e-3..1e-2 1/s).
+    """
+    P = _polynomials(np.asarray(coef, dtype=float)[None])[0]  # (m, k, i, j)
+    A = np.asarray(A, dtype=float)
+    U = np.asarray(U, dtype=float)
+    i = np.arange(4)
+    dApow = i[None, :] * np.where(i[None, :] >= 1, A[:, None] ** np.maximum(i - 1, 0)[None, :], 0.0)  # (k, i)
+    Upow = U[:, None] ** np.arange(6)[None, :]  # (k, j)
+    return np.einsum("mkij,ki,kj->mk", P, dApow, Upow)
 
 
 def _grid(result: xr.Dataset, t0: float, t1: float):
@@ -237,25 +326,40 @@ def _stage_U(t: np.ndarray, U: np.ndarray, u_interp: str) -> tuple[np.ndarray, i
     return out, n_steps
 
 
-def _integrate(t, A0, U_stage, n_ok, P, widx, bound, neg):
-    """Fixed-step RK4; returns A (n, 3), index of the first invalid sample (or None), reason."""
+def _integrate(t, A0, U_stage, n_ok, P, widx, bound, neg, lims=None, clip="none"):
+    """Fixed-step RK4; returns A (n, 3), index of the first invalid sample (or None), reason.
+
+    ``lims`` = (a_lo, a_hi, u_lo, u_hi), each (n_models, 3), indexed like ``P``
+    by ``widx``: with ``clip`` "u" the model sees U clipped to its model's
+    range, with "au" also A (the state itself is not clipped, only the
+    argument of the right-hand side).
+    """
     n = t.size
     A = np.full((n, 3), np.nan)
     A[0] = A0
     if not np.all(np.isfinite(A0)):
         return A, 0, "measured A at t0 is not finite"
+    w = widx[:n_ok]
+    U_use = U_stage[:n_ok]
+    if clip != "none":
+        U_use = np.clip(U_use, lims[2][w][:, None, :], lims[3][w][:, None, :])
     # C[step, stage, m, k*4 + i] = sum_j P[m, k, i, j] U_k^j, all steps at once.
-    Upow = U_stage[:n_ok, :, :, None] ** np.arange(6)
-    C = np.einsum("wmkij,wskj->wsmki", P[widx[:n_ok]], Upow).reshape(n_ok, 3, 3, 12)
+    Upow = U_use[:, :, :, None] ** np.arange(6)
+    C = np.einsum("wmkij,wskj->wsmki", P[w], Upow).reshape(n_ok, 3, 3, 12)
+    if clip == "au":
+        a_lo, a_hi = lims[0][w], lims[1][w]
+    else:
+        a_lo = np.full((n_ok, 3), -np.inf)
+        a_hi = np.full((n_ok, 3), np.inf)
     pw = np.arange(4)
     h = np.diff(t)
     a = A[0].copy()
     for k in range(n_ok):
-        Ck, hk = C[k], h[k]
-        k1 = Ck[0] @ (a[:, None] ** pw).ravel()
-        k2 = Ck[1] @ ((a + 0.5 * hk * k1)[:, None] ** pw).ravel()
-        k3 = Ck[1] @ ((a + 0.5 * hk * k2)[:, None] ** pw).ravel()
-        k4 = Ck[2] @ ((a + hk * k3)[:, None] ** pw).ravel()
+        Ck, hk, lo, hi = C[k], h[k], a_lo[k], a_hi[k]
+        k1 = Ck[0] @ (np.clip(a, lo, hi)[:, None] ** pw).ravel()
+        k2 = Ck[1] @ (np.clip(a + 0.5 * hk * k1, lo, hi)[:, None] ** pw).ravel()
+        k3 = Ck[1] @ (np.clip(a + 0.5 * hk * k2, lo, hi)[:, None] ** pw).ravel()
+        k4 = Ck[2] @ (np.clip(a + hk * k3, lo, hi)[:, None] ** pw).ravel()
         a = a + hk / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         if not np.all(np.isfinite(a)):
             return A, k + 1, f"A became non-finite at t = {t[k + 1]:.2f} s"
@@ -271,7 +375,10 @@ def _integrate(t, A0, U_stage, n_ok, P, widx, bound, neg):
     return A, None, None
 
 
-def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_tolerance, windows, coef):
+def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_tolerance, windows, coef,
+         clip="none", lims=None):
+    if clip not in CLIP_MODES:
+        raise ValueError(f"clip must be one of {CLIP_MODES}; got {clip!r}")
     if method not in _METHODS:
         raise ValueError(f"method must be one of {_METHODS}; got {method!r}")
     if u_interp not in _U_INTERP:
@@ -289,7 +396,7 @@ def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_to
     U = np.asarray(result["U"].values, dtype=float)[i0:i1]
     U_stage, n_ok = _stage_U(t, U, u_interp)
     A_sim, stop, reason = _integrate(t, A_meas[0], U_stage, n_ok, P, widx, bound_factor * a_max,
-                                     negative_tolerance * a_max)
+                                     negative_tolerance * a_max, lims=lims, clip=clip)
     if stop is None:
         stopped_at, covered = None, 1.0
     else:
@@ -301,7 +408,7 @@ def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_to
 
 def simulate_identified(result: xr.Dataset, *, t0: float | None = None, t1: float | None = None, method: str = "rk4",
                    u_interp: str = "cubic", bound_factor: float = 10.0,
-                   negative_tolerance: float = 0.05) -> Simulation:
+                   negative_tolerance: float = 0.05, clip: str = "none") -> Simulation:
     """Integrate the time-varying model from the measured A at t0 to t1.
 
     Parameters
@@ -320,6 +427,12 @@ def simulate_identified(result: xr.Dataset, *, t0: float | None = None, t1: floa
         The run stops when A exceeds this multiple of the largest measured A.
     negative_tolerance : float
         The run stops when A falls below minus this fraction of the largest measured A.
+    clip : {"none", "u", "au"}
+        "none" (the paper's method): every model is evaluated wherever the
+        trajectory goes. "u": each model sees U clipped, per section, to the
+        range of U over the window it was fitted on (:func:`window_ranges`); a
+        model is only valid on the data it saw. "au": A clipped likewise (the
+        simulated A itself is not changed, only the argument of the model).
 
     Returns
     -------
@@ -332,16 +445,20 @@ def simulate_identified(result: xr.Dataset, *, t0: float | None = None, t1: floa
     i0, i1 = _grid(result, t0, t1)
     t = np.asarray(result["time"].values, dtype=float)[i0:i1]
     widx = window_in_force(result, t[:-1])
+    lims = window_ranges(result) if clip != "none" else None
     return _run(result, i0, i1, _polynomials(coef), widx, method=method, u_interp=u_interp,
-                bound_factor=bound_factor, negative_tolerance=negative_tolerance, windows=widx, coef=None)
+                bound_factor=bound_factor, negative_tolerance=negative_tolerance, windows=widx, coef=None,
+                clip=clip, lims=lims)
 
 
 def forecast(result: xr.Dataset, t0: float, horizon: float, *, d: float = 0.0, method: str = "rk4",
-             u_interp: str = "cubic", bound_factor: float = 10.0, negative_tolerance: float = 0.05) -> Simulation:
+             u_interp: str = "cubic", bound_factor: float = 10.0, negative_tolerance: float = 0.05,
+             clip: str = "none") -> Simulation:
     """Forecast from the measured A at t0 over [t0, t0 + horizon] with fixed coefficients.
 
     The coefficients are :func:`forecast_coefficients` (t0, d); the wind is
-    the measured U(t). Other parameters as in :func:`simulate_identified`.
+    the measured U(t). Other parameters as in :func:`simulate_identified`;
+    with ``clip`` the range is the union of the ranges of the windows averaged.
 
     Returns
     -------
@@ -353,8 +470,13 @@ def forecast(result: xr.Dataset, t0: float, horizon: float, *, d: float = 0.0, m
     coef, windows = forecast_coefficients(result, t0, d)
     i0, i1 = _grid(result, float(t0), float(t0) + float(horizon))
     widx = np.zeros(i1 - i0 - 1, dtype=int)
+    lims = None
+    if clip != "none":
+        lims = tuple(f(r[windows], axis=0, keepdims=True)
+                     for f, r in zip((np.nanmin, np.nanmax, np.nanmin, np.nanmax), window_ranges(result)))
     return _run(result, i0, i1, _polynomials(coef[None]), widx, method=method, u_interp=u_interp,
-                bound_factor=bound_factor, negative_tolerance=negative_tolerance, windows=windows, coef=coef)
+                bound_factor=bound_factor, negative_tolerance=negative_tolerance, windows=windows, coef=coef,
+                clip=clip, lims=lims)
 
 
 def forecast_table(result: xr.Dataset, t0: float, horizon: float, ds=(0, 50, 150, 300), **kwargs) -> list[dict]:

@@ -16,16 +16,19 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import h5py
 import numpy as np
 import xarray as xr
 
 import vivbench
 from vivbench.identify.derivative import Derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, WindowedSINDy
-from vivbench.identify.preprocess import PreprocessConfig, preprocess_arrays
-from vivbench.io import event_arrays, read_event, write_netcdf_atomic
+from vivbench.identify.optimizers import OPTIMIZERS
+from vivbench.identify.preprocess import PreprocessConfig, perpendicular_speed, preprocess_arrays, wind_speed_direction
+from vivbench.io import EventFormatError, event_arrays, read_event, write_netcdf_atomic
+from vivbench.quality import check_acc_magnitude, check_wind_magnitude, check_wind_varies, despike
 
-__all__ = ["IdentifyConfig", "identify_event", "identify_files", "result_path"]
+__all__ = ["IdentifyConfig", "identify_event", "identify_files", "list_results", "result_path"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -43,6 +46,12 @@ class IdentifyConfig:
     tau : regime threshold (DESIGN 2.5)
     aicc_margin : models within this AICc of the best count as competitors
     fit_tolerance : relative RMS residual within which an order-restricted model fits equally well
+    spike_mad : spike rule of the raw u, v and acc, robust standard deviations (1.4826 MAD) from the
+        10 s block median (see vivbench.quality.despike); spike runs up to 0.1 s are bridged linearly,
+        longer ones become NaN and split the record. None: off
+    optimizer : sparse regression per window, "stlsq" (the fast engine), "sr3" or "ensemble"
+        (pysindy-based, see :mod:`vivbench.identify.optimizers`; "ensemble" adds ``inclusion``)
+    seed : seed of the ensemble's bootstrap samples (results depend on it only)
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
@@ -55,8 +64,14 @@ class IdentifyConfig:
     tau: float = 0.2
     aicc_margin: float = 2.0
     fit_tolerance: float = 0.1
+    spike_mad: float | None = 8.0
+    optimizer: str = "stlsq"
+    seed: int = 0
 
     def __post_init__(self) -> None:
+        if self.spike_mad is not None and not (isinstance(self.spike_mad, (int, float)) and np.isfinite(self.spike_mad)
+                                               and self.spike_mad > 1):
+            raise ValueError(f"spike_mad must be None (no despiking) or a finite number > 1 of robust standard deviations; got {self.spike_mad!r}")
         object.__setattr__(self, "thresholds", tuple(float(x) for x in self.thresholds))
         if not (self.window > 0 and self.step > 0):
             raise ValueError(f"window and step must be positive seconds; got window={self.window}, step={self.step}")
@@ -64,13 +79,18 @@ class IdentifyConfig:
             raise ValueError(f"tau must be in (0, 1); got {self.tau}")
         if self.aicc_margin < 0 or self.fit_tolerance < 0:
             raise ValueError("aicc_margin and fit_tolerance must be >= 0")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer must be one of {', '.join(OPTIMIZERS)}; got {self.optimizer!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise ValueError(f"seed must be an integer >= 0; got {self.seed!r}")
         # the estimator validates the rest (thresholds, alpha, scaling) when it is built
         self.estimator()
 
     def estimator(self) -> WindowedSINDy:
         est = WindowedSINDy(window=self.window, step=self.step, thresholds=self.thresholds, alpha=self.alpha,
                             scaling=self.scaling, tau=self.tau, identifiability_margin=self.aicc_margin,
-                            fit_tolerance=self.fit_tolerance, keep_path=False)
+                            fit_tolerance=self.fit_tolerance, keep_path=False, optimizer=self.optimizer,
+                            random_state=self.seed)
         est.settings()
         return est
 
@@ -114,16 +134,26 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     -------
     xarray.Dataset
         The result (see module docstring); coordinates ``window``, ``equation``,
-        ``feature``, ``order`` and ``time`` (the preprocessing grid).
+        ``feature``, ``order`` and ``time`` (the preprocessing grid). Data-quality
+        attributes: ``quality_rate_{wind,accel}_hz`` (median rates),
+        ``quality_missing_fraction_{wind,accel}`` (time stamps with a NaN in
+        any section), ``quality_spikes_{wind,accel}`` and
+        ``quality_spikes_bridged_{wind,accel}`` (see ``spike_mad``),
+        ``quality_segments``, ``quality_windows``,
+        ``quality_windows_without_model``, plus the event's own ``quality_*``
+        attributes (repairs made on import).
 
     Raises
     ------
     ValueError
-        When no segment of the record is long enough for one window.
+        When no segment of the record is long enough for one window; when the
+        acceleration or the wind has a magnitude no bridge sees (a wrong unit)
+        or the wind never varies at a section (see vivbench.quality).
     """
     config = config or IdentifyConfig()
     arr = event_arrays(tree)
     sections = list(arr["sections"])
+    arr, quality = _data_quality(arr, float(tree.attrs["span_azimuth_deg"]), config)
     pre = preprocess_arrays(wind_time=arr["wind_time"], u=arr["u"], v=arr["v"], accel_time=arr["accel_time"],
                             acc=arr["acc"], span_azimuth_deg=float(tree.attrs["span_azimuth_deg"]),
                             config=config.preprocess)
@@ -138,6 +168,8 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         dA[sel] = config.derivative.differentiate(pre.A[sel], t)
         est.fit(t, pre.A[sel], pre.U[sel], dA[sel])
         parts.append({name: getattr(est, attr) for name, (attr, *_rest) in _WINDOW_VARS.items()})
+        if config.optimizer == "ensemble":
+            parts[-1]["inclusion"] = est.inclusion_
         starts.append(est.window_start_)
         ends.append(est.window_end_)
         segs.append(np.full(est.window_start_.size, seg))
@@ -154,6 +186,10 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         elif name == "identifiable":
             values = values.astype(np.int8)  # NetCDF has no boolean type
         data[name] = (dims, values, {"units": units, "long_name": long_name})
+    if config.optimizer == "ensemble":
+        data["inclusion"] = (("window", "equation", "feature"), np.concatenate([p["inclusion"] for p in parts]),
+                             {"units": "1", "long_name": "inclusion probability of each regression-basis term over "
+                              "the bootstrap models (ensemble optimiser)"})
     data["window_start"] = (("window",), np.concatenate(starts), {"units": "s", "long_name": "window start since event start"})
     data["window_end"] = (("window",), np.concatenate(ends), {"units": "s", "long_name": "window end since event start"})
     data["window_segment"] = (("window",), np.concatenate(segs).astype(np.int32), {"units": "1", "long_name": "preprocessing segment of the window"})
@@ -161,6 +197,9 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     data["U"] = (("time", "section"), pre.U, {"units": "m/s", "long_name": "mean wind speed perpendicular to the span"})
     data["dA"] = (("time", "section"), dA, {"units": "m/s", "long_name": f"dA/dt ({config.derivative.method})"})
     data["segment"] = (("time",), pre.segment.astype(np.int32), {"units": "1", "long_name": "contiguous segment (-1: excluded)"})
+    quality["quality_segments"] = int(pre.n_segments)
+    quality["quality_windows"] = int(n_w)
+    quality["quality_windows_without_model"] = int(np.sum(np.any(fit["regime"] == 0, axis=1)))
     ok = fit["regime"] > 0
     coverage = float(fit["identifiable"][ok].mean()) if ok.any() else float("nan")
     attrs = {
@@ -177,6 +216,9 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         "identify_config_json": config.to_json(),
         "vivbench_version": vivbench.__version__,
     }
+    # Repairs made when the event was imported travel with the result; this run's own come after.
+    attrs.update({k: v for k, v in tree.attrs.items() if str(k).startswith("quality_") and k not in quality})
+    attrs.update(quality)
     coords = {
         "window": np.arange(n_w),
         "equation": sections,
@@ -188,6 +230,68 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
+# Resolution floors of the spike rule's MAD: 0.05 m/s for sonic anemometers (records are
+# often quantised to 0.01 m/s), 1e-3 m/s^2 for accelerometers (about 16-bit steps of +-2 g).
+_SPIKE_FLOOR = {"wind": 0.05, "accel": 1e-3}
+# Spike runs up to 0.1 s (3 wind or 5 acceleration samples) are bridged linearly: far shorter
+# than the 60 s mean-wind time scale and the 3 s period of the VIV mode, and not worth the
+# 2 x edge_s of record that a split costs. Longer runs stay NaN and split the record.
+_SPIKE_BRIDGE_S = 0.1
+_FIX_UNITS = "in the import mapping and re-import (event files hold SI units)"
+
+
+def _data_quality(arr: dict, span_azimuth_deg: float, config: IdentifyConfig) -> tuple[dict, dict]:
+    """Refuse implausible records and replace spikes by NaN; returns the cleaned arrays and quality_* attributes."""
+    sections = list(arr["sections"])
+    check_acc_magnitude(arr["acc"], "m/s^2", where="/accel/acc", labels=sections, fix=_FIX_UNITS)
+    check_wind_magnitude(arr["u"], arr["v"], "m/s", where="/wind", labels=sections, fix=_FIX_UNITS)
+    rates = {"wind": 1.0 / float(np.median(np.diff(arr["wind_time"]))),
+             "accel": 1.0 / float(np.median(np.diff(arr["accel_time"])))}
+    missing_wind = ~(np.isfinite(arr["u"]) & np.isfinite(arr["v"])).all(axis=1)
+    missing_accel = ~np.isfinite(arr["acc"]).all(axis=1)
+    out = dict(arr)
+    spikes = {"wind": 0, "accel": 0}
+    bridged = {"wind": 0, "accel": 0}
+    if config.spike_mad is not None:
+        for group, names in (("wind", ("u", "v")), ("accel", ("acc",))):
+            for name in names:
+                out[name], n, nb = despike(arr[name], rates[group], threshold=config.spike_mad,
+                                           floor=_SPIKE_FLOOR[group], bridge_s=_SPIKE_BRIDGE_S)
+                spikes[group] += n
+                bridged[group] += nb
+    V, theta = wind_speed_direction(out["u"], out["v"])
+    check_wind_varies(perpendicular_speed(V, theta, span_azimuth_deg), where="/wind", labels=sections)
+    quality = {
+        "quality_rate_wind_hz": rates["wind"],
+        "quality_rate_accel_hz": rates["accel"],
+        "quality_missing_fraction_wind": float(missing_wind.mean()),
+        "quality_missing_fraction_accel": float(missing_accel.mean()),
+        "quality_spike_mad": float(config.spike_mad or 0.0),
+        "quality_spikes_wind": int(spikes["wind"]),
+        "quality_spikes_accel": int(spikes["accel"]),
+        "quality_spikes_bridged_wind": int(bridged["wind"]),
+        "quality_spikes_bridged_accel": int(bridged["accel"]),
+    }
+    return out, quality
+
+
+def list_results(results_dir) -> list[Path]:
+    """The ``<event_id>.identify.nc`` files of a directory, sorted.
+
+    Raises
+    ------
+    ValueError
+        The directory does not exist or holds no result file (the message names it).
+    """
+    d = Path(results_dir)
+    if not d.is_dir():
+        raise ValueError(f"{d}: not a directory of identification results")
+    files = sorted(d.glob("*.identify.nc"))
+    if not files:
+        raise ValueError(f"{d}: no identification results (<event_id>.identify.nc) in this directory")
+    return files
+
+
 def result_path(out_dir: str | Path, event_id: str) -> Path:
     return Path(out_dir) / f"{event_id}.identify.nc"
 
@@ -196,6 +300,18 @@ def _identify_one(path: str, out_dir: str, config: IdentifyConfig) -> str:
     tree = read_event(path)
     ds = identify_event(tree, config, source=Path(path).name)
     return str(write_netcdf_atomic(ds, result_path(out_dir, ds.attrs["event_id"])))
+
+
+def _peek_event_id(path) -> str | None:
+    """The root attribute event_id, read cheaply; None when unreadable (read_event then says why)."""
+    try:
+        with h5py.File(path, "r") as f:
+            eid = f.attrs.get("event_id")
+    except Exception:  # noqa: BLE001 - any failure is reported by read_event later
+        return None
+    if isinstance(eid, bytes):
+        eid = eid.decode("utf-8", "replace")
+    return eid if isinstance(eid, str) else None
 
 
 def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: IdentifyConfig | None = None, *,
@@ -216,18 +332,32 @@ def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: Ide
     def record(path, fn):
         try:
             written[str(path)] = Path(fn())
-        except Exception as exc:  # one bad event must not stop the others
+        except (EventFormatError, ValueError, OSError) as exc:  # documented refusals
             msg = " ".join(str(exc).split())
             failures[str(path)] = msg if msg.startswith(str(path)) else f"{path}: {msg}"
+        except Exception as exc:  # noqa: BLE001 - a bug; one bad event must not stop the others
+            failures[str(path)] = f"{path}: internal error ({type(exc).__name__}: {' '.join(str(exc).split())})"
         if progress is not None:
             progress(str(path))
 
+    # Two events with one id would write one result file over the other.
+    first_with: dict[str, str] = {}
+    for p in paths:
+        eid = _peek_event_id(p)
+        if eid is not None and eid in first_with:
+            failures[str(p)] = (f"{p}: event_id {eid!r} is also that of {first_with[eid]}; their results would "
+                                f"overwrite each other (give one of them another event_id)")
+            if progress is not None:
+                progress(str(p))
+        elif eid is not None:
+            first_with[eid] = str(p)
+    todo = [p for p in paths if str(p) not in failures]
     if workers <= 1:
-        for p in paths:
+        for p in todo:
             record(p, lambda p=p: _identify_one(str(p), str(out), config))
     else:
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futs = {pool.submit(_identify_one, str(p), str(out), config): p for p in paths}
+            futs = {pool.submit(_identify_one, str(p), str(out), config): p for p in todo}
             for fut in as_completed(futs):
                 record(futs[fut], fut.result)
     return [written[str(p)] for p in paths if str(p) in written], failures

@@ -1,5 +1,23 @@
 """Figures and reports."""
 
 from vivbench.report.event_figure import event_figure
+from vivbench.report.figures import (
+    DPI,
+    REGIME_COLOURS,
+    coefficient_map_figure,
+    decision_graph_figure,
+    displacement_figure,
+    forecast_figure,
+    regime_timeline_figure,
+    sensor_layout_figure,
+    term_scale,
+    time_frequency_figure,
+    wind_figure,
+)
+from vivbench.report.markdown import EXTRA_STEPS, write_report
 
-__all__ = ["event_figure"]
+__all__ = [
+    "DPI", "EXTRA_STEPS", "REGIME_COLOURS", "coefficient_map_figure", "decision_graph_figure", "displacement_figure",
+    "event_figure", "forecast_figure", "regime_timeline_figure", "sensor_layout_figure", "term_scale",
+    "time_frequency_figure", "wind_figure", "write_report",
+]

@@ -18,12 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from vivbench._toml import load_toml
 from vivbench.synth.turbulence import TurbulenceConfig
-
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 __all__ = [
     "Polynomial",
@@ -384,12 +380,4 @@ def load_config(path: str | Path) -> GeneratorConfig:
 
     Missing keys take their defaults. Errors name the file.
     """
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
-        return config_from_dict(data)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such configuration file") from None
-    except (tomllib.TOMLDecodeError, ValueError, TypeError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
+    return load_toml(path, config_from_dict, "configuration file")

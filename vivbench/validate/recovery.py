@@ -14,7 +14,7 @@ import xarray as xr
 from vivbench.regime import classify_regime
 from vivbench.terms import evaluate_library
 
-__all__ = ["truth_window_regimes", "rhs_relative_error", "regime_scores", "campaign_recovery"]
+__all__ = ["truth_window_regimes", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
 
 
 def truth_window_regimes(truth: xr.Dataset, window_start: np.ndarray, window_end: np.ndarray, tau: float = 0.2) -> np.ndarray:
@@ -96,6 +96,42 @@ def regime_scores(identified: np.ndarray, truth: np.ndarray, identifiable: np.nd
     }
 
 
+def window_rhs_errors(result: xr.Dataset, coef_true: np.ndarray, truth_r: np.ndarray, *,
+                      active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Relative RHS error of every window model of one result, and which windows have dynamics.
+
+    Parameters
+    ----------
+    result : an identification result (``coef``, ``window_start``, ``window_end``, ``time``, ``A``, ``U``)
+    coef_true : ndarray, shape (n_eq, n_features), the exact truth matrix
+    truth_r : ndarray, shape (n_t, n_sections, 4), m/s
+        The truth's order contributions; their sum sets the event's scale of dA/dt.
+    active_share : float
+        A window-equation is active when the RMS of its true dA/dt is at least
+        this share of the event's RMS true dA/dt of that section.
+
+    Returns
+    -------
+    errors : ndarray, shape (n_windows, n_eq)
+        :func:`rhs_relative_error` per window (a window without a model counts
+        as predicting zero, error 1; no true dynamics at all gives NaN).
+    active : ndarray of bool, shape (n_windows, n_eq)
+    """
+    start, end = result["window_start"].values, result["window_end"].values
+    t = result["time"].values
+    A, U, coef = result["A"].values, result["U"].values, result["coef"].values
+    scale = np.sqrt(np.mean(np.asarray(truth_r).sum(-1) ** 2, axis=0))
+    errors = np.full((start.size, coef_true.shape[0]), np.nan)
+    active = np.zeros(errors.shape, dtype=bool)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for w in range(start.size):
+            sel = (t >= start[w]) & (t < end[w])
+            errors[w] = rhs_relative_error(coef[w], coef_true, A[sel], U[sel])
+            f_true = evaluate_library(A[sel], U[sel]) @ coef_true.T
+            active[w] = np.sqrt(np.mean(f_true**2, axis=0)) >= active_share * scale
+    return errors, active
+
+
 def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -> dict:
     """Regime scores and right-hand-side errors of a campaign's results against its truth.
 
@@ -112,7 +148,8 @@ def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -
     dict
         :func:`regime_scores` plus ``rhs_median_rel_error`` (all windows),
         ``rhs_median_rel_error_active``, ``active_share`` (share of active
-        window-equations) and ``truth_regime_shares``.
+        window-equations) and ``truth_regime_shares``. The fuller tables are
+        :func:`vivbench.validate.validate_campaign`.
     """
     from vivbench.io import read_event
 
@@ -125,17 +162,9 @@ def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -
         regimes.append(res["regime"].values)
         truths.append(truth_window_regimes(truth, start, end))
         flags.append(res["identifiable"].values.astype(bool))
-        coef_true = truth["coef"].values
-        scale = np.sqrt(np.mean(truth["r"].values.sum(-1) ** 2, axis=0))
-        t = res["time"].values
-        A, U, coef = res["A"].values, res["U"].values, res["coef"].values
-        for w in range(start.size):
-            sel = (t >= start[w]) & (t < end[w])
-            e = rhs_relative_error(coef[w], coef_true, A[sel], U[sel])
-            f_true = evaluate_library(A[sel], U[sel]) @ coef_true.T
-            active = np.sqrt(np.mean(f_true**2, axis=0)) >= active_share * scale
-            errs.append(e)
-            errs_active.append(np.where(active, e, np.nan))
+        e, active = window_rhs_errors(res, truth["coef"].values, truth["r"].values, active_share=active_share)
+        errs.append(e.ravel())
+        errs_active.append(np.where(active, e, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths), np.concatenate(flags))
     errs_active = np.concatenate(errs_active)
     scores["rhs_median_rel_error"] = float(np.nanmedian(np.concatenate(errs)))

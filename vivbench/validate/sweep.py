@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from vivbench._toml import load_toml
 from vivbench.identify.derivative import Derivative
 from vivbench.identify.pipeline import IdentifyConfig, identify_files
 from vivbench.identify.preprocess import PreprocessConfig
@@ -45,11 +46,6 @@ from vivbench.synth.campaign import CampaignConfig, generate_campaign
 from vivbench.synth.config import GeneratorConfig, Polynomial, config_from_dict, config_to_dict
 from vivbench.validate import _journal
 from vivbench.validate.recovery import campaign_recovery
-
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 __all__ = [
     "SWEEP_PARAMETERS",
@@ -319,7 +315,7 @@ class SweepConfig:
 
 _TOP_KEYS = ("seed", "n_campaigns", "seeds", "n_events", "duration", "grid", "ranges", "generator", "identify")
 _IDENTIFY_KEYS = ("window", "step", "alpha", "scaling", "tau", "aicc_margin", "fit_tolerance", "thresholds",
-                  "derivative", "preprocess")
+                  "derivative", "preprocess", "spike_mad", "optimizer", "seed")
 
 
 def _identify_from_dict(data: dict) -> IdentifyConfig:
@@ -329,6 +325,8 @@ def _identify_from_dict(data: dict) -> IdentifyConfig:
     if unknown:
         raise ValueError(f"unknown keys {sorted(unknown)} in [identify]; allowed: {', '.join(_IDENTIFY_KEYS)}")
     kwargs = dict(data)
+    if kwargs.get("spike_mad") is False:  # TOML has no None: false switches despiking off
+        kwargs["spike_mad"] = None
     if "derivative" in kwargs:
         d = kwargs["derivative"]
         kwargs["derivative"] = Derivative(method=d) if isinstance(d, str) else Derivative(**d)
@@ -388,22 +386,15 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
         noise_density = [30.0, 300.0]
         [ranges]                      # drawn per campaign, uniformly
         turbulence_intensity = [0.04, 0.12]
-        [identify]                    # IdentifyConfig: window, step, alpha, derivative = "tv", [identify.preprocess] ...
+        [identify]                    # IdentifyConfig: window, step, alpha, optimizer, derivative = "tv",
+                                      # spike_mad (false: off), [identify.preprocess] ...
         window = 50.0
         [generator]                   # base generator configuration, as `vivbench synth --config`
         integration_step = 0.02
 
     Parameters of ``[grid]`` and ``[ranges]``: see ``SWEEP_PARAMETERS``.
     """
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
-        return sweep_config_from_dict(data)
-    except FileNotFoundError:
-        raise ValueError(f"{path}: no such sweep file") from None
-    except (tomllib.TOMLDecodeError, ValueError, TypeError) as exc:
-        raise ValueError(f"{path}: {' '.join(str(exc).split())}") from None
+    return load_toml(path, sweep_config_from_dict, "sweep file")
 
 
 # ---------------------------------------------------------------------- tasks

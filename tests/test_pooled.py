@@ -1,0 +1,171 @@
+"""The pooled campaign model: exact compression, regimes against the truth, the bootstrap verdict."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.helpers import assert_close
+from vivbench.identify import PooledSINDy, StlsqSettings, pooled_window_stats, stlsq_path, window_library
+from vivbench.identify.engine import aicc
+from vivbench.identify.pooled import _block_factors, _replicate_fits
+from vivbench.regime import classify_regime
+from vivbench.synth import CampaignConfig
+from vivbench.terms import evaluate_library, section_exponents
+from vivbench.validate import truth_window_regimes
+
+
+def _truth(sim):
+    """The averaged truth of a simulated event as (t, A, U, dA) and a /truth-like Dataset."""
+    import xarray as xr
+
+    phi = np.abs(np.asarray(CampaignConfig().generator.structure.mode_shape))
+    A = sim.Q[:, None] * phi
+    ds = xr.Dataset({"A": (("time", "section"), A), "r": (("time", "section", "order"), sim.r)},
+                    coords={"time": sim.truth_time})
+    return (sim.truth_time, A, sim.U, sim.r.sum(-1)), ds
+
+
+def test_replicates_equal_the_explicitly_resampled_fit():
+    """A weighted stack of block factors gives the fit of the data with blocks repeated."""
+    rng = np.random.default_rng(3)
+    n, S = 600, 3
+    t = np.arange(n) * 0.5
+    U = 7.0 + 2.0 * np.sin(t / 60.0)[:, None] + 0.1 * np.arange(S)
+    A = 0.05 + 0.04 * (1 + np.sin(t / 40.0))[:, None] * np.array([0.7, 1.0, 0.7]) + 1e-3 * rng.standard_normal((n, S))
+    dA = 0.01 * A - 0.05 * A**2 + 1e-4 * U * A + 1e-4 * rng.standard_normal((n, S))
+    lib = window_library(A[None], U[None])
+    y = dA / np.sqrt(np.mean(dA**2, axis=0))
+    block = (t // 50.0).astype(int)
+    nb = block.max() + 1
+    settings = StlsqSettings()
+    mult = np.zeros((1, nb))
+    mult[0, :] = rng.integers(0, 3, nb)
+    mult[0, 0] = 2
+    coef, sel, rss, _ = _replicate_fits(_block_factors(lib.theta[0], y, block, nb), mult, settings, chunk_size=4)
+    rows = np.concatenate([np.repeat(np.flatnonzero(block == b), int(mult[0, b])) for b in range(nb)])
+    direct = stlsq_path(lib.theta[0][rows], y[rows], settings)
+    scores = aicc(direct.rss, direct.n_terms, rows.size, floor=settings.residual_floor**2 * (y[rows] ** 2).sum(0)[None, :, None])
+    scores = np.where(np.isfinite(direct.aicc), scores, np.inf)
+    pick = np.argmin(scores, axis=2)[0]
+    assert np.array_equal(sel[0], pick)
+    best = direct.coef[0, np.arange(S), pick]
+    assert np.array_equal(coef[0] != 0, best != 0)
+    # rounding differs between the compressed and the full QR (condition number of the window library)
+    assert_close(coef[0], best, rtol=1e-7, atol=1e-9, reason="two QR orders of an ill-conditioned library")
+    assert_close(rss[0], direct.rss[0, np.arange(S), pick], rtol=1e-6, reason="RSS as a difference of squares")
+
+
+def test_window_stats_follow_the_shared_rule():
+    """The cumulative-sum window statistics give classify_regime's regimes."""
+    rng = np.random.default_rng(0)
+    n, S = 400, 3
+    t = np.arange(n) * 0.25
+    A = 0.1 + 0.05 * rng.random((n, S))
+    U = 8.0 + rng.random((n, S))
+    models = rng.standard_normal((2, S, 23 * S)) * 1e-3
+    start = np.array([0.0, 20.0, 40.0])
+    end = start + 50.0
+    R, c1, nv = pooled_window_stats(models, t, A, U, start, end)
+    from vivbench.regime import regime_rule
+
+    theta = evaluate_library(A, U)
+    orders = np.tile(section_exponents()[:, 0], S)
+    for m in range(2):
+        r = np.stack([theta[:, orders == i] @ models[m][:, orders == i].T for i in range(4)], axis=-1)
+        for w in range(start.size):
+            sel = (t >= start[w]) & (t < end[w])
+            assert nv[w] == sel.sum()
+            assert np.array_equal(regime_rule(R[m, w], c1[m, w], 0.2), classify_regime(r[sel], A[sel], axis=0))
+
+
+def test_pooled_model_recovers_the_true_regimes(event1):
+    """Exact averaged dynamics of the paper-like event: every window labelled as the truth, and identifiable."""
+    _spec, sim = event1
+    (t, A, U, dA), truth_ds = _truth(sim)
+    model = PooledSINDy(n_bootstrap=20, block_s=100.0, seed=1).fit([(t, A, U, dA)])
+    start = np.arange(t[0], t[-1] - 50.0, 25.0)
+    end = start + 50.0
+    out = model.window_regimes(t, A, U, start, end)
+    truth = truth_window_regimes(truth_ds, start, end)
+    assert np.array_equal(out["regime"], truth)
+    assert out["identifiable"].mean() > 0.9
+    pred = evaluate_library(A, U) @ model.coef_.T
+    assert_close(pred, dA, rtol=0, atol=1e-4 * np.abs(dA).max(), reason="sparse refit of exact dynamics")
+
+
+def test_a_plateau_alone_is_not_identifiable():
+    """A forced steady state with noise: the orders cannot be told apart and the bootstrap says so."""
+    rng = np.random.default_rng(5)
+    n = 4000
+    t = np.arange(n) * 0.25
+    A = (0.2 + 0.002 * rng.standard_normal(n))[:, None] * np.array([0.707, 1.0, 0.707])
+    U = 8.0 + 0.05 * np.sin(t / 100.0)[:, None] + np.array([0.0, 0.02, 0.04])
+    dA = 1e-4 * rng.standard_normal((n, 3))
+    model = PooledSINDy(n_bootstrap=30, block_s=100.0, seed=0).fit([(t, A, U, dA)])
+    start = np.arange(0.0, t[-1] - 50.0, 25.0)
+    out = model.window_regimes(t, A, U, start, start + 50.0)
+    assert out["identifiable"].mean() < 0.5
+    # the near-null-space test alone must see it: the bootstrap agrees on a stable but arbitrary split
+    assert out["robust"].mean() < 0.5, out["robust"].mean()
+
+
+def test_same_seed_same_model_and_validation():
+    rng = np.random.default_rng(1)
+    n = 800
+    t = np.arange(n) * 0.25
+    A = 0.1 + 0.05 * rng.random((n, 3))
+    U = 8.0 + rng.random((n, 3))
+    dA = 1e-3 * rng.standard_normal((n, 3))
+    a = PooledSINDy(n_bootstrap=5, seed=4).fit([(t, A, U, dA)])
+    b = PooledSINDy(n_bootstrap=5, seed=4).fit([(t, A, U, dA)])
+    assert np.array_equal(a.coef_bootstrap_, b.coef_bootstrap_, equal_nan=True)
+    with pytest.raises(ValueError, match="agreement"):
+        PooledSINDy(agreement=1.5).fit([(t, A, U, dA)])
+    with pytest.raises(ValueError, match="block_s"):
+        PooledSINDy(block_s=0.0).fit([(t, A, U, dA)])
+
+
+def test_cli_pool_and_validation_of_the_campaign_model(small_results, tmp_path):
+    """`vivbench pool` writes the campaign model; `vivbench validate` scores it beside the windows, as pooled_recovery does."""
+    import shutil
+
+    from vivbench.cli import main
+    from vivbench.identify import POOLED_NAME
+    from vivbench.validate import pooled_recovery, validate_campaign
+
+    camp, res_dir, results = small_results
+    res = tmp_path / "res"
+    shutil.copytree(res_dir, res)
+    assert main(["pool", str(res), "--bootstrap", "10", "--block", "20"]) == 0
+    assert (res / POOLED_NAME).is_file() and not list(res.glob("*.tmp*"))
+    v = validate_campaign(camp.files[0].parent, res)
+    direct = pooled_recovery(camp.files[:2], res / POOLED_NAME, sorted(res.glob("*.identify.nc")))
+    assert v["pooled"]["regime"]["n"] == direct["n"]
+    assert_close(v["summary"]["pooled_regime_accuracy_all"], direct["accuracy_all"])
+    assert_close(v["summary"]["pooled_regime_coverage"], direct["coverage"])
+    assert_close(v["summary"]["pooled_median_rhs_rel_error_active"], direct["rhs_median_rel_error_active"])
+    assert {r["group"] for r in v["regime_confusion"]} >= {"pooled_identifiable", "pooled_all"}
+
+
+def test_cli_pool_bad_input(tmp_path, capsys):
+    from vivbench.cli import main
+
+    assert main(["pool", str(tmp_path / "none")]) == 2
+    (tmp_path / "empty").mkdir()
+    assert main(["pool", str(tmp_path / "empty")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.startswith("vivbench pool:") for line in err)
+
+
+def test_too_little_data_gives_no_verdict():
+    rng = np.random.default_rng(2)
+    n = 2000
+    t = np.arange(n) * 0.25
+    A = 0.05 + 0.1 * (t / t[-1])[:, None] * np.array([0.7, 1.0, 0.7])
+    U = 8.0 + np.sin(t / 80.0)[:, None] + np.array([0.0, 0.1, 0.2])
+    dA = 0.01 * A - 0.2 * A**3 + 1e-6 * rng.standard_normal((n, 3))
+    model = PooledSINDy(n_bootstrap=10, block_s=300.0, min_blocks=20).fit([(t, A, U, dA)])
+    assert not model.enough_data_ and model.n_blocks_ == 2
+    out = model.window_regimes(t, A, U, np.array([0.0, 100.0]), np.array([50.0, 150.0]))
+    assert not out["identifiable"].any()

@@ -1,0 +1,672 @@
+"""Field data import: CSV and MATLAB files to the event format (DESIGN 4), and back to CSV.
+
+A mapping file (TOML) says where each channel is and in which unit::
+
+    event_id = "F001"
+    start_time = "2026-01-01T00:00:00Z"   # optional when the times are ISO 8601
+    span_azimuth_deg = 30.0
+
+    [wind]                       # defaults for every wind channel
+    time = "time"                # time column (CSV) or variable (MAT)
+    time_format = "seconds"      # "seconds" since start_time, or "iso8601"
+    units = "m/s"                # m/s, km/h, knots
+
+    [wind.S1]                    # one table per section, S1..Sn in order
+    file = "wind_S1.csv"         # paths are relative to the mapping file
+    u = "u"                      # column names
+    v = "v"
+    w = "w"
+
+    [accel]
+    file = "accel.csv"
+    time = "time"
+    units = "g"                  # m/s^2, g, mm/s^2, mg (milli-g)
+
+    [accel.S1]
+    acc = "acc_S1"
+
+A channel is a column name or an inline table ``{column = "...", file = ...,
+units = ..., time = ..., time_format = ..., index = k}`` (``index``: 1-based
+column of a MATLAB matrix); a setting of the channel overrides its section's,
+which overrides its group's. Every section needs ``u``, ``v``, ``w`` and
+``acc``; the wind and acceleration sections must be the same.
+
+Sources: CSV with a header row (empty cells and NaN are missing values); MAT
+files v4-v7 (:func:`scipy.io.loadmat`) and v7.3 (HDF5, read with h5py).
+ISO 8601 times are read from CSV only; a timestamp without an offset is UTC.
+
+Repairs, counted in root attributes of the event (``quality_*``): rows out of
+time order (at most 1 % of a file) are sorted; rows that repeat a time stamp
+are dropped (the first is kept); files of one group whose time stamps differ
+are merged on the union of their times, each channel NaN where its file has no
+row. Refused with a one-line :class:`ValueError` naming the file: a mapping
+error, a missing file, column or variable, a cell that is not a number, a
+missing time, a clock that goes back more often, a sampling rate more than
+10 % from nominal, files of one group whose clocks do not line up, and
+magnitudes that betray a wrong unit (see :mod:`vivbench.quality`). Unit
+conversions are recorded as ``import_units_<var>_<section>`` (the declared
+unit) and ``import_factor_<var>_<section>`` (the factor to SI).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+
+from vivbench.io import NOMINAL_RATES, EventFormatError, atomic_path, build_event, event_arrays, write_event
+from vivbench.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib
+
+__all__ = ["import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS"]
+
+TIME_FORMATS = ("seconds", "iso8601")
+_GROUPS = {"wind": ("u", "v", "w"), "accel": ("acc",)}
+_UNITS = {"wind": WIND_UNITS, "accel": ACC_UNITS}
+_SETTINGS = ("file", "time", "time_format", "units")
+_ROOT_KEYS = ("event_id", "start_time", "span_azimuth_deg", "source", "wind", "accel")
+# Sorting is a repair for a few swapped rows; a clock that goes back more often is refused.
+_MAX_REORDER_FRACTION = 0.01
+_RATE_TOLERANCE = 0.10
+
+
+@dataclass(frozen=True)
+class _Channel:
+    group: str
+    var: str
+    section: str
+    file: Path
+    column: str
+    time: str
+    time_format: str
+    units: str
+    index: int | None
+
+
+# --------------------------------------------------------------------- mapping
+
+
+def load_mapping(path) -> dict:
+    """Read and check a mapping file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        TOML mapping (see the module docstring).
+
+    Returns
+    -------
+    dict
+        ``event_id``, ``start_time`` (str or None), ``span_azimuth_deg``,
+        ``source``, ``sections`` (list of str) and ``channels`` (list of
+        resolved channel descriptions).
+
+    Raises
+    ------
+    ValueError
+        One line starting with the mapping file's name.
+    """
+    path = Path(path)
+    name = str(path)
+    if not path.is_file():
+        raise ValueError(f"{name}: no such mapping file")
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{name}: not valid TOML ({exc})") from None
+
+    def bad(problem: str) -> ValueError:
+        return ValueError(f"{name}: {' '.join(problem.split())}")
+
+    unknown = sorted(set(raw) - set(_ROOT_KEYS))
+    if unknown:
+        raise bad(f"unknown key(s) {unknown}; allowed: {list(_ROOT_KEYS)}")
+    for key in ("event_id", "span_azimuth_deg", "wind", "accel"):
+        if key not in raw:
+            raise bad(f"missing {key!r}; a mapping needs event_id, span_azimuth_deg, [wind] and [accel]")
+    if not isinstance(raw["event_id"], str):
+        raise bad(f"event_id must be a string; got {raw['event_id']!r}")
+    az = raw["span_azimuth_deg"]
+    if isinstance(az, bool) or not isinstance(az, (int, float)) or not math.isfinite(az):
+        raise bad(f"span_azimuth_deg must be a finite number of degrees; got {az!r}")
+    start = raw.get("start_time")
+    if isinstance(start, datetime):  # TOML has a date-time type; keep it as text
+        if start.tzinfo is None:
+            raise bad("start_time needs an offset: end it with Z (UTC)")
+        start = start.astimezone(timezone.utc).isoformat().replace("+00:00", "Z")
+    if start is not None and not isinstance(start, str):
+        raise bad(f"start_time must be an ISO 8601 string such as \"2026-01-01T00:00:00Z\"; got {start!r}")
+    source = raw.get("source", "field")
+
+    channels: list[_Channel] = []
+    sections_of = {}
+    for group, variables in _GROUPS.items():
+        table = raw[group]
+        if not isinstance(table, dict):
+            raise bad(f"[{group}] must be a table")
+        sec_names = [k for k in table if k not in _SETTINGS]
+        wrong = [k for k in sec_names if not isinstance(table[k], dict)]
+        if wrong:
+            raise bad(f"unknown key(s) {wrong} in [{group}]; allowed: {list(_SETTINGS)} and section tables S1..Sn")
+        expected = [f"S{k + 1}" for k in range(len(sec_names))]
+        if not sec_names or sorted(sec_names, key=_section_order) != expected:
+            raise bad(f"[{group}] has sections {sec_names}; expected tables S1..Sn, e.g. [{group}.S1], [{group}.S2], [{group}.S3]")
+        sections_of[group] = expected
+        base = {k: table[k] for k in _SETTINGS if k in table}
+        for sec in expected:
+            st = table[sec]
+            extra = sorted(set(st) - set(_SETTINGS) - set(variables))
+            if extra:
+                raise bad(f"unknown key(s) {extra} in [{group}.{sec}]; allowed: {list(variables)} and {list(_SETTINGS)}")
+            level = {**base, **{k: st[k] for k in _SETTINGS if k in st}}
+            for var in variables:
+                if var not in st:
+                    raise bad(f"[{group}.{sec}] lacks the channel {var!r}; every section needs {', '.join(variables)}")
+                channels.append(_resolve(path, group, sec, var, st[var], level, bad))
+    if sections_of["wind"] != sections_of["accel"]:
+        raise bad(f"[wind] has sections {sections_of['wind']} but [accel] has {sections_of['accel']}; they must be the same")
+    return {
+        "event_id": raw["event_id"],
+        "start_time": start,
+        "span_azimuth_deg": float(az),
+        "source": source,
+        "sections": sections_of["wind"],
+        "channels": channels,
+    }
+
+
+def _section_order(label: str):
+    return (len(label), label)
+
+
+def _resolve(mapping: Path, group: str, sec: str, var: str, spec, level: dict, bad) -> _Channel:
+    where = f"[{group}.{sec}] {var}"
+    if isinstance(spec, str):
+        spec = {"column": spec}
+    if not isinstance(spec, dict):
+        raise bad(f"{where} must be a column name or a table {{column = ..., file = ..., units = ...}}; got {spec!r}")
+    extra = sorted(set(spec) - {"column", "index", *_SETTINGS})
+    if extra:
+        raise bad(f"unknown key(s) {extra} in {where}; allowed: column, index, {', '.join(_SETTINGS)}")
+    s = {**level, **{k: spec[k] for k in _SETTINGS if k in spec}}
+    if "column" not in spec or not isinstance(spec["column"], str) or not spec["column"]:
+        raise bad(f"{where} needs a column (name of the column or variable)")
+    if "file" not in s or not isinstance(s["file"], str):
+        raise bad(f"{where} has no file: give file in [{group}], [{group}.{sec}] or the channel")
+    units = s.get("units")
+    allowed = ", ".join(_UNITS[group])
+    if units is None:
+        raise bad(f"{where} has no units: give units in [{group}] or below (one of {allowed})")
+    if units not in _UNITS[group]:
+        raise bad(f"{where} has units {units!r}; allowed for {group}: {allowed}")
+    fmt = s.get("time_format", "seconds")
+    if fmt not in TIME_FORMATS:
+        raise bad(f"{where} has time_format {fmt!r}; allowed: {', '.join(TIME_FORMATS)}")
+    time = s.get("time", "time")
+    if not isinstance(time, str) or not time:
+        raise bad(f"{where} has time {time!r}; expected the name of the time column or variable")
+    index = spec.get("index")
+    if index is not None and (isinstance(index, bool) or not isinstance(index, int) or index < 1):
+        raise bad(f"{where} has index {index!r}; expected a 1-based column number of a MATLAB matrix")
+    file = Path(s["file"])
+    if not file.is_absolute():
+        file = mapping.parent / file
+    return _Channel(group, var, sec, file, spec["column"], time, fmt, units, index)
+
+
+# --------------------------------------------------------------------- sources
+
+
+class _Table:
+    """One source file: columns or variables as float arrays, read once."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.name = str(path)
+        if not path.is_file():
+            raise ValueError(f"{self.name}: no such data file")
+        self.kind = "mat" if path.suffix.lower() == ".mat" else "csv"
+        try:
+            if self.kind == "csv":
+                self._frame = pd.read_csv(path, skipinitialspace=True, comment="#", low_memory=False)
+                self._frame.columns = [str(c).strip() for c in self._frame.columns]
+                self.names = list(self._frame.columns)
+            else:
+                self._vars = _load_mat(path)
+                self.names = sorted(self._vars)
+        except ValueError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - any reader failure: not a file of this kind
+            raise ValueError(f"{self.name}: cannot be read as {self.kind.upper()} ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+
+    def _missing(self, column: str) -> ValueError:
+        kind = "column" if self.kind == "csv" else "variable"
+        return ValueError(f"{self.name}: no {kind} {column!r}; it has {self.names[:20]}")
+
+    def values(self, column: str, index: int | None = None) -> np.ndarray:
+        if column not in self.names:
+            raise self._missing(column)
+        if self.kind == "csv":
+            if index is not None:
+                raise ValueError(f"{self.name}: index applies to MATLAB matrices, not to CSV column {column!r}")
+            col = self._frame[column]
+            num = pd.to_numeric(col, errors="coerce")
+            bad = num.isna().to_numpy() & col.notna().to_numpy()
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise ValueError(
+                    f"{self.name}: column {column!r} line {i + 2} holds {col.iloc[i]!r}, not a number "
+                    f"(a missing value is an empty cell or NaN)"
+                )
+            return num.to_numpy(dtype=np.float64)
+        a = self._vars[column]
+        if a.dtype.kind not in "fiub":
+            raise ValueError(f"{self.name}: variable {column!r} has type {a.dtype}, expected numbers")
+        a = np.asarray(a, dtype=np.float64)
+        if index is not None:
+            if a.ndim != 2 or not 1 <= index <= a.shape[1]:
+                raise ValueError(f"{self.name}: variable {column!r} of shape {a.shape} has no column {index} (1-based)")
+            return a[:, index - 1]
+        if a.ndim > 2 or (a.ndim == 2 and min(a.shape) != 1):
+            raise ValueError(f"{self.name}: variable {column!r} has shape {a.shape}; give index = k to pick a column")
+        return a.ravel()
+
+    def times(self, column: str, fmt: str) -> np.ndarray:
+        """Times of the rows: float seconds ("seconds") or int64 ns since 1970 UTC ("iso8601")."""
+        if fmt == "seconds":
+            t = self.values(column)
+            missing = ~np.isfinite(t)
+        else:
+            if self.kind != "csv":
+                raise ValueError(f"{self.name}: ISO 8601 times are read from CSV only; store seconds in MAT files")
+            if column not in self.names:
+                raise self._missing(column)
+            col = self._frame[column].astype("string").str.strip()
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    ts = pd.to_datetime(col, utc=True, format="ISO8601")
+            except (ValueError, TypeError, OverflowError) as exc:
+                raise ValueError(f"{self.name}: time column {column!r} is not ISO 8601 ({' '.join(str(exc).split())})") from None
+            missing = ts.isna().to_numpy()
+            # Integer nanoseconds: float64 nanoseconds since 1970 would keep only about 0.25 us.
+            t = ts.to_numpy(dtype="datetime64[ns]").astype(np.int64)
+        bad = np.flatnonzero(missing)
+        if bad.size:
+            raise ValueError(f"{self.name}: time {column!r} is missing at line {bad[0] + 2}; every row needs a time")
+        return t
+
+
+def _load_mat(path: Path) -> dict:
+    if h5py.is_hdf5(path):  # MATLAB v7.3
+        out = {}
+        with h5py.File(path, "r") as f:
+            for key, obj in f.items():
+                if isinstance(obj, h5py.Dataset) and not key.startswith("#"):
+                    # HDF5 stores MATLAB's column-major arrays transposed.
+                    out[key] = np.asarray(obj[()]).T
+        return out
+    from scipy.io import loadmat
+
+    data = loadmat(path, squeeze_me=False)
+    return {k: np.asarray(v) for k, v in data.items() if not k.startswith("__")}
+
+
+# ---------------------------------------------------------------------- import
+
+
+def import_event(mapping_path, out_path=None):
+    """Build an event from field files described by a mapping; optionally write it.
+
+    Parameters
+    ----------
+    mapping_path : str or os.PathLike
+        TOML mapping (see the module docstring).
+    out_path : str or os.PathLike, optional
+        Event file to write atomically (``vivbench.io.write_event``).
+
+    Returns
+    -------
+    xarray.DataTree
+        The event, ``source = "field"`` unless the mapping says otherwise,
+        with the unit conversions and the repairs in root attributes.
+
+    Raises
+    ------
+    ValueError
+        One line naming the mapping or data file and the problem.
+    """
+    m = load_mapping(mapping_path)
+    tables: dict[Path, _Table] = {}
+
+    def table(p: Path) -> _Table:
+        if p not in tables:
+            tables[p] = _Table(p)
+        return tables[p]
+
+    fmts = {c.time_format for c in m["channels"]}
+    start = m["start_time"]
+    if start is None and "seconds" in fmts:
+        raise ValueError(f"{mapping_path}: start_time is required when times are in seconds (e.g. start_time = \"2026-01-01T00:00:00Z\")")
+    start_ns = None
+    if start is not None:
+        try:
+            start_ns = int(pd.Timestamp(start).tz_convert("UTC").value)
+        except (ValueError, TypeError):
+            raise ValueError(f"{mapping_path}: start_time {start!r} is not an ISO 8601 UTC instant such as 2026-01-01T00:00:00Z") from None
+    # Absolute ISO times of every source, read once, give the default start.
+    raw_times = {}
+    for c in m["channels"]:
+        key = (c.file, c.time, c.time_format)
+        if key not in raw_times:
+            raw_times[key] = table(c.file).times(c.time, c.time_format)
+    if start_ns is None:
+        start_ns = int(min(t.min() for t in raw_times.values()))
+        start = pd.Timestamp(start_ns, tz="UTC").isoformat().replace("+00:00", "Z")
+
+    quality = {"quality_rows_reordered": 0, "quality_duplicates_dropped": 0}
+    attrs: dict = {"import_mapping": Path(mapping_path).name}
+    sources = {}
+    for key, t in raw_times.items():
+        file, _, fmt = key
+        seconds = (t - np.int64(start_ns)) / 1e9 if fmt == "iso8601" else t
+        order, keep, n_reordered, n_dups = _repair_time(seconds, str(file))
+        quality["quality_rows_reordered"] += n_reordered
+        quality["quality_duplicates_dropped"] += n_dups
+        sources[key] = (seconds[order][keep], order[keep])
+
+    data = {}
+    for group in _GROUPS:
+        chans = [c for c in m["channels"] if c.group == group]
+        keys = list(dict.fromkeys((c.file, c.time, c.time_format) for c in chans))
+        for k in keys:
+            _check_rate(sources[k][0], str(k[0]), group)
+        t_union, rows = _merge_times([sources[k][0] for k in keys], [str(k[0]) for k in keys], group)
+        group_data = {}
+        for c in chans:
+            k = (c.file, c.time, c.time_format)
+            tab = table(c.file)
+            raw = tab.values(c.column, c.index)
+            if raw.shape[0] != raw_times[k].shape[0]:
+                raise ValueError(f"{tab.name}: {c.column!r} has {raw.shape[0]} values but the time {c.time!r} has {raw_times[k].shape[0]}")
+            vals = np.full(t_union.size, np.nan)
+            vals[rows[keys.index(k)]] = raw[sources[k][1]]
+            group_data[(c.var, c.section)] = (vals, c)
+        data[group] = (t_union, group_data)
+
+    sections = m["sections"]
+    arrays = {}
+    for group, variables in _GROUPS.items():
+        t, gd = data[group]
+        for sec in sections:
+            if group == "wind":
+                (u, cu), (v, cv) = gd[("u", sec)], gd[("v", sec)]
+                if cu.units == cv.units:
+                    check_wind_magnitude(u, v, cu.units, where=f"{cu.file}: columns {cu.column!r}, {cv.column!r}", labels=[f"({sec})"])
+                else:
+                    check_wind_magnitude(u * WIND_UNITS[cu.units], v * WIND_UNITS[cv.units], "m/s",
+                                         where=f"{cu.file}: columns {cu.column!r}, {cv.column!r}", labels=[f"({sec})"])
+            else:
+                a, ca = gd[("acc", sec)]
+                check_acc_magnitude(a, ca.units, where=f"{ca.file}: column {ca.column!r}", labels=[f"({sec})"])
+        for var in variables:
+            cols = []
+            for sec in sections:
+                vals, c = gd[(var, sec)]
+                factor = _UNITS[group][c.units]
+                cols.append(vals * factor if factor != 1.0 else vals)
+                attrs[f"import_units_{var}_{sec}"] = c.units
+                attrs[f"import_factor_{var}_{sec}"] = float(factor)
+            arrays[var] = np.column_stack(cols)
+        arrays[f"{group}_time"] = t
+        n_missing = int(sum(np.isnan(arrays[v]).sum() for v in variables))
+        quality[f"quality_missing_{group}"] = n_missing
+    attrs["import_sources"] = "; ".join(sorted({p.name for p in tables}))
+    attrs.update(quality)
+    label = str(mapping_path)
+    try:
+        tree = build_event(
+            event_id=m["event_id"], start_time=start, source=m["source"], span_azimuth_deg=m["span_azimuth_deg"],
+            wind_time=arrays["wind_time"], u=arrays["u"], v=arrays["v"], w=arrays["w"],
+            accel_time=arrays["accel_time"], acc=arrays["acc"], attrs=attrs, sections=sections,
+        )
+    except EventFormatError as exc:
+        raise ValueError(f"{label}: {exc.problem}") from None
+    if out_path is not None:
+        write_event(tree, out_path)
+    return tree
+
+
+def _repair_time(t: np.ndarray, name: str):
+    """Sort a few swapped rows and drop repeated time stamps.
+
+    Returns the sorting order, the mask of kept rows (in sorted order), the
+    number of rows moved and of rows dropped.
+    """
+    n = t.size
+    if n < 2:
+        raise ValueError(f"{name}: {n} row(s); at least 2 needed")
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size > max(1, _MAX_REORDER_FRACTION * n):
+        i = back[0] + 1
+        raise ValueError(
+            f"{name}: time goes back {back.size} times, first at line {i + 2} (from {float(t[i - 1])!r} s to "
+            f"{float(t[i])!r} s after start); sort the file or fix the clock (up to 1 % of rows out of order are sorted)"
+        )
+    order = np.argsort(t, kind="stable")
+    n_reordered = int(np.sum(order != np.arange(n)))
+    ts = t[order]
+    keep = np.concatenate(([True], np.diff(ts) > 0))
+    return order, keep, n_reordered, int(n - keep.sum())
+
+
+def _check_rate(t: np.ndarray, name: str, group: str) -> None:
+    if t.size < 2:
+        raise ValueError(f"{name}: {t.size} distinct time(s); at least 2 needed")
+    rate = 1.0 / float(np.median(np.diff(t)))
+    nominal = NOMINAL_RATES[group]
+    if abs(rate / nominal - 1.0) > _RATE_TOLERANCE:
+        raise ValueError(
+            f"{name}: sampling rate {rate:.4g} Hz (median step) is more than {_RATE_TOLERANCE:.0%} from the nominal "
+            f"{nominal:g} Hz of {group} records; check the time column and its format"
+        )
+
+
+def _merge_times(times: list[np.ndarray], names: list[str], group: str):
+    """Union of the sources' times (matched to the microsecond) and each source's rows in it."""
+    if len(times) == 1:
+        return times[0], [np.arange(times[0].size)]
+    keys = [np.round(t * 1e6).astype(np.int64) for t in times]
+    all_keys, first = np.unique(np.concatenate(keys), return_index=True)
+    t_union = np.concatenate(times)[first]
+    step_union = float(np.median(np.diff(all_keys)))
+    step_min = min(float(np.median(np.diff(k))) for k in keys)
+    if step_union < 0.75 * step_min:
+        raise ValueError(
+            f"{', '.join(names)}: the {group} files' time stamps do not line up (merged they step every "
+            f"{step_union / 1e6:.4g} s instead of {step_min / 1e6:.4g} s); the files of one group must share one sample clock"
+        )
+    return t_union, [np.searchsorted(all_keys, k) for k in keys]
+
+
+# ---------------------------------------------------------------------- export
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, str):
+        return json.dumps(v)
+    return repr(float(v)) if isinstance(v, float) else str(v)
+
+
+def _write_text(path: Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def _mapping_text(tree, *, groups: dict, event_id: str | None = None) -> str:
+    lines = [
+        f"event_id = {_toml_value(event_id or str(tree.attrs['event_id']))}",
+        f"start_time = {_toml_value(str(tree.attrs['start_time']))}",
+        f"span_azimuth_deg = {_toml_value(float(tree.attrs['span_azimuth_deg']))}",
+        "",
+    ]
+    for group, (settings, sections) in groups.items():
+        lines.append(f"[{group}]")
+        lines += [f"{k} = {_toml_value(v)}" for k, v in settings.items()]
+        lines.append("")
+        for sec, entries in sections.items():
+            lines.append(f"[{group}.{sec}]")
+            lines += [f"{k} = {v}" for k, v in entries.items()]
+            lines.append("")
+    return "\n".join(lines)
+
+
+def _time_strings(t: np.ndarray, start_time: str) -> np.ndarray:
+    start = pd.Timestamp(start_time).tz_convert("UTC").tz_localize(None)
+    stamps = np.datetime64(start.to_datetime64(), "ns") + np.round(t * 1e9).astype("timedelta64[ns]")
+    return np.char.add(np.datetime_as_string(stamps, unit="us"), "Z")
+
+
+def export_csv(tree, out_dir, *, layout: str = "per_section", wind_units: str = "m/s", acc_units: str = "m/s^2",
+               time_format: str = "seconds", event_id: str | None = None):
+    """Write an event as CSV files plus a mapping that imports them back.
+
+    Parameters
+    ----------
+    tree : xarray.DataTree
+        A valid event (e.g. synthetic); its truth is not exported.
+    out_dir : str or os.PathLike
+        Directory for the files (created).
+    layout : {"per_section", "single"}
+        One file per sensor (``wind_S1.csv`` with time, u, v, w;
+        ``accel_S1.csv`` with time, acc) or one file per group (``wind.csv``
+        with time, u_S1, v_S1, w_S1, ...; ``accel.csv`` with time, acc_S1, ...).
+    wind_units, acc_units : str
+        Units written (keys of ``vivbench.quality.WIND_UNITS`` / ``ACC_UNITS``).
+    time_format : {"seconds", "iso8601"}
+        Times as seconds since start_time or as ISO 8601 UTC timestamps (microseconds).
+    event_id : str, optional
+        Event id written in the mapping (default: the event's own).
+
+    Returns
+    -------
+    pathlib.Path
+        The mapping file ``mapping.toml`` in ``out_dir``.
+    """
+    if layout not in ("per_section", "single"):
+        raise ValueError(f"layout must be 'per_section' or 'single'; got {layout!r}")
+    if wind_units not in WIND_UNITS or acc_units not in ACC_UNITS:
+        raise ValueError(f"units must be one of {list(WIND_UNITS)} (wind) and {list(ACC_UNITS)} (acc); got {wind_units!r}, {acc_units!r}")
+    if time_format not in TIME_FORMATS:
+        raise ValueError(f"time_format must be one of {TIME_FORMATS}; got {time_format!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    arr = event_arrays(tree)
+    sections = list(arr["sections"])
+    groups = {}
+    for group, variables, units, factor in (
+        ("wind", ("u", "v", "w"), wind_units, WIND_UNITS[wind_units]),
+        ("accel", ("acc",), acc_units, ACC_UNITS[acc_units]),
+    ):
+        t = arr[f"{group}_time"]
+        tcol = _time_strings(t, str(tree.attrs["start_time"])) if time_format == "iso8601" else t
+        settings = {"time": "time", "time_format": time_format, "units": units}
+        sec_entries = {}
+        if layout == "single":
+            fname = f"{group}.csv"
+            settings = {"file": fname, **settings}
+            frame = {"time": tcol}
+            for sec_i, sec in enumerate(sections):
+                for var in variables:
+                    frame[f"{var}_{sec}"] = np.asarray(arr[var][:, sec_i], dtype=np.float64) / factor
+                sec_entries[sec] = {var: json.dumps(f"{var}_{sec}") for var in variables}
+            _write_csv(out / fname, frame)
+        else:
+            for sec_i, sec in enumerate(sections):
+                fname = f"{group}_{sec}.csv"
+                frame = {"time": tcol}
+                for var in variables:
+                    frame[var] = np.asarray(arr[var][:, sec_i], dtype=np.float64) / factor
+                _write_csv(out / fname, frame)
+                sec_entries[sec] = {"file": json.dumps(fname), **{var: json.dumps(var) for var in variables}}
+        groups[group] = (settings, sec_entries)
+    mapping = out / "mapping.toml"
+    _write_text(mapping, _mapping_text(tree, groups=groups, event_id=event_id))
+    return mapping
+
+
+def _write_csv(path: Path, frame: dict) -> None:
+    with atomic_path(path) as tmp:
+        # float_format=None writes the shortest repr: the float64 values read back exactly.
+        pd.DataFrame(frame).to_csv(tmp, index=False, na_rep="NaN")
+
+
+def export_mat(tree, out_dir, *, version: str = "5", acc_units: str = "m/s^2"):
+    """Write an event as one MATLAB file ``event.mat`` plus a mapping that imports it.
+
+    Variables: ``wind_time`` (n_w, 1) s; ``u``, ``v``, ``w`` (n_w, n_sec) m/s;
+    ``accel_time`` (n_a, 1) s; ``acc`` (n_a, n_sec) in ``acc_units``.
+
+    Parameters
+    ----------
+    version : {"5", "7.3"}
+        MAT v5 (scipy.io.savemat) or v7.3 (HDF5 with MATLAB's 512-byte header,
+        arrays stored transposed as MATLAB does).
+
+    Returns
+    -------
+    pathlib.Path
+        The mapping file ``mapping.toml`` in ``out_dir``.
+    """
+    if version not in ("5", "7.3"):
+        raise ValueError(f"version must be '5' or '7.3'; got {version!r}")
+    if acc_units not in ACC_UNITS:
+        raise ValueError(f"acc_units must be one of {list(ACC_UNITS)}; got {acc_units!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    arr = event_arrays(tree)
+    sections = list(arr["sections"])
+    variables = {
+        "wind_time": arr["wind_time"][:, None],
+        "u": np.asarray(arr["u"], dtype=np.float64),
+        "v": np.asarray(arr["v"], dtype=np.float64),
+        "w": np.asarray(arr["w"], dtype=np.float64),
+        "accel_time": arr["accel_time"][:, None],
+        "acc": np.asarray(arr["acc"], dtype=np.float64) / ACC_UNITS[acc_units],
+    }
+    target = out / "event.mat"
+    with atomic_path(target, suffix=".mat") as tmp:
+        if version == "5":
+            from scipy.io import savemat
+
+            savemat(tmp, variables, format="5")
+        else:
+            with h5py.File(tmp, "w", userblock_size=512) as f:
+                for k, v in variables.items():
+                    ds = f.create_dataset(k, data=np.ascontiguousarray(v.T))
+                    ds.attrs["MATLAB_class"] = np.bytes_("double")
+            header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: vivbench. HDF5 schema 1.00 ."
+            with open(tmp, "r+b") as fh:
+                fh.write(header.ljust(116) + b"\x00" * 8 + b"\x00\x02IM")
+    groups = {
+        "wind": ({"file": "event.mat", "time": "wind_time", "units": "m/s"},
+                 {sec: {var: f"{{ column = \"{var}\", index = {i + 1} }}" for var in ("u", "v", "w")}
+                  for i, sec in enumerate(sections)}),
+        "accel": ({"file": "event.mat", "time": "accel_time", "units": acc_units},
+                  {sec: {"acc": f"{{ column = \"acc\", index = {i + 1} }}"} for i, sec in enumerate(sections)}),
+    }
+    mapping = out / "mapping.toml"
+    _write_text(mapping, _mapping_text(tree, groups=groups))
+    return mapping

@@ -1,0 +1,591 @@
+"""One SINDy model for a whole campaign, and the regimes it gives every window.
+
+Why: inside a 50 s window the orders of A cannot be told apart (DESIGN 2.5;
+``identifiability.py`` finds no identifiable window on the default campaign),
+because U drifts smoothly and U^j then acts as a time basis. The aeroelastic
+truth is, however, time-invariant as a function of (A, U): the coefficients of
+A^i vary only through the wind, which the library's U^j already carries. Pooled
+over a campaign, A and U range widely and the same 69-term library becomes
+identifiable. The pooled model is fitted by the same STLSQ path and AICc as the
+windows; each window's regime is the rule of DESIGN 2.5 applied to the pooled
+model's order contributions over that window's data.
+
+Identifiability of a window's regime is judged by a moving-block bootstrap:
+the samples are cut into contiguous blocks (default 300 s, longer than the
+correlation time of derivative errors), blocks are resampled with replacement,
+and the whole selection (threshold path and AICc) is rerun on every replicate.
+A window counts as identifiable when at least ``agreement`` of the replicate
+models give it the pooled model's regime.
+
+Each block is compressed once to the R factor of the QR decomposition of
+[Theta_b | y_b]: a replicate is then a weighted stack of these small factors,
+which gives exactly the least-squares (and ridge) problems of the resampled
+data at a fraction of the cost, and the residual outside each block's column
+space is added back so RSS and AICc are those of the full replicate.
+
+What this does not show: a campaign model explains dynamics that are a fixed
+function of (A, U); it cannot follow changes that are not carried by the wind
+(deck modifications, ice, traffic). On field data that assumption is the
+user's to check; the window models remain the paper's method.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+
+import numpy as np
+
+from vivbench.identify.engine import DEFAULT_THRESHOLDS, StlsqSettings, aicc, stlsq_path
+from vivbench.identify.library import window_library
+from vivbench.regime import DEFAULT_TAU, regime_rule
+from vivbench.terms import evaluate_library, feature_names, section_exponents
+
+__all__ = ["POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "with_campaign_model", "write_pooled"]
+
+
+def _record_library(t, A, U):
+    """Float arrays of one record and its physical library, zero on samples with a non-finite term (ok False)."""
+    t = np.asarray(t, dtype=float)
+    A = np.asarray(A, dtype=float)
+    U = np.asarray(U, dtype=float)
+    theta = evaluate_library(A, U)
+    ok = np.isfinite(theta).all(axis=1)
+    return t, A, U, np.where(ok[:, None], theta, 0.0), ok
+
+
+def _window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Sums of x over samples lo[w] <= i < hi[w] along axis 0, by one cumulative sum."""
+    c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)], axis=0)
+    return c[hi] - c[lo]
+
+
+def _blocks(t: np.ndarray, ok: np.ndarray, block_s: float) -> np.ndarray:
+    """Block id of each sample of one record (-1 where not used)."""
+    ids = np.full(t.shape, -1, dtype=np.int64)
+    if ok.any():
+        rel = t - t[ok][0]
+        ids[ok] = np.floor(rel[ok] / block_s).astype(np.int64)
+        # Compact the ids so empty blocks (gaps) do not exist.
+        _, ids[ok] = np.unique(ids[ok], return_inverse=True)
+    return ids
+
+
+def _block_factors(theta: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int):
+    """R factors of [theta_b | y_b] of every block.
+
+    Returns R (n_blocks, p, p), z (n_blocks, p, q), rss0 (n_blocks, q) and the
+    sample count and sum of y^2 of each block.
+    """
+    n, p = theta.shape
+    q = y.shape[1]
+    R = np.zeros((n_blocks, p, p))
+    z = np.zeros((n_blocks, p, q))
+    rss0 = np.zeros((n_blocks, q))
+    order = np.argsort(block, kind="stable")
+    bounds = np.searchsorted(block[order], np.arange(n_blocks + 1))
+    counts = np.diff(bounds)
+    yy = np.zeros((n_blocks, q))
+    # One QR per block (a few hundred per campaign), not per sample.
+    for b in range(n_blocks):
+        rows = order[bounds[b]:bounds[b + 1]]
+        M = np.hstack([theta[rows], y[rows]])
+        r = np.linalg.qr(M, mode="r")
+        k = min(r.shape[0], p)
+        R[b, :k] = r[:k, :p]
+        z[b, :k] = r[:k, p:]
+        rss0[b] = (r[p:, p:] ** 2).sum(axis=0) if r.shape[0] > p else 0.0
+        yy[b] = (y[rows] ** 2).sum(axis=0)
+    return R, z, rss0, counts, yy
+
+
+def _select(path, rss_true, n_samples, floor):
+    """Re-select along the path with the replicates' true RSS and N."""
+    scores = aicc(rss_true, path.n_terms, n_samples[:, None, None], floor=floor[..., None])
+    scores = np.where(np.isfinite(path.aicc), scores, np.inf)
+    sel = np.argmin(scores, axis=2)
+    has = np.isfinite(scores).any(axis=2)
+    pick = np.take_along_axis(path.coef, sel[:, :, None, None], axis=2)[:, :, 0]
+    best_rss = np.take_along_axis(rss_true, sel[:, :, None], axis=2)[:, :, 0]
+    best_aicc = np.take_along_axis(scores, sel[:, :, None], axis=2)[:, :, 0]
+    pick = np.where(has[..., None], pick, np.nan)
+    return pick, sel, best_rss, best_aicc, has
+
+
+def _integrated_correlation(resid: np.ndarray, block: np.ndarray) -> np.ndarray:
+    """Integrated autocorrelation time (in samples) of each residual column, within blocks.
+
+    1 + 2 sum_k rho_k, summed up to the first lag where rho turns non-positive:
+    the factor by which correlated residuals inflate the variance of a
+    least-squares estimate relative to independent ones.
+    """
+    n, q = resid.shape
+    r = resid - resid.mean(axis=0)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    spec = np.fft.rfft(r, size, axis=0)
+    acf = np.fft.irfft(spec * np.conj(spec), size, axis=0)[: n // 10 + 2]
+    rho = acf / np.where(acf[0] > 0, acf[0], 1.0)
+    out = np.ones(q)
+    for k in range(q):  # a handful of equations
+        neg = np.flatnonzero(rho[1:, k] <= 0)
+        stop = neg[0] + 1 if neg.size else rho.shape[0]
+        out[k] = max(1.0, 1.0 + 2.0 * rho[1:stop, k].sum())
+    return out
+
+
+def _replicate_fits(factors, mult: np.ndarray, settings: StlsqSettings, chunk_size: int):
+    """Threshold path and AICc selection of every replicate.
+
+    Parameters
+    ----------
+    factors : output of :func:`_block_factors`
+    mult : ndarray, shape (n_replicates, n_blocks)
+        How many times each block occurs in each replicate.
+
+    Returns
+    -------
+    coef (n_replicates, q, p) in the regression basis (NaN without a model),
+    selected path index, RSS and AICc (n_replicates, q) of the standardised targets.
+    """
+    R, z, rss0, counts, yy = factors
+    n_blocks, p, _ = R.shape
+    q = z.shape[2]
+    out = []
+    for c0 in range(0, mult.shape[0], chunk_size):
+        m = mult[c0:c0 + chunk_size]
+        w = np.sqrt(m)[:, :, None, None]
+        X = (w * R[None]).reshape(m.shape[0], n_blocks * p, p)
+        Y = (w * z[None]).reshape(m.shape[0], n_blocks * p, q)
+        path = stlsq_path(X, Y, settings)
+        N = (m * counts[None]).sum(axis=1)
+        rss_true = path.rss + (m @ rss0)[:, :, None]
+        floor = settings.residual_floor**2 * (m @ yy)
+        pick, sel, best_rss, best_aicc, _has = _select(path, rss_true, N, floor)
+        out.append((pick, sel, best_rss, best_aicc))
+    return tuple(np.concatenate([o[k] for o in out]) for k in range(4))
+
+
+class PooledSINDy:
+    """STLSQ + AICc on all samples of a campaign, with a block bootstrap of the selection.
+
+    Parameters
+    ----------
+    thresholds : sequence of float
+        Threshold path on the standardised coefficients (as the window engine).
+    alpha : float
+        Ridge parameter (as the window engine's default).
+    scaling : {"scaled", "normalized", "raw"}
+        Regression basis (``vivbench.identify.library``), fixed from all samples.
+    n_bootstrap : int
+        Bootstrap replicates (0: no identifiability verdict; every window flagged not identifiable).
+    block_s : float
+        Block length of the moving-block bootstrap, s.
+    agreement : float
+        Share of replicates that must give a window the pooled model's regime
+        for the window to count as identifiable.
+    min_blocks : int
+        Fewer bootstrap blocks than this (too little data: the resamples
+        cannot show how the selection varies) and no window is flagged
+        identifiable; ``enough_data_`` says so.
+    confidence : float
+        Level of the joint confidence region of the coefficients (chi-square
+        in p dimensions, residual variance inflated by the residuals'
+        integrated correlation time); the near-null-space test asks whether
+        any model in that region gives a window another regime.
+    tau : float
+        Regime threshold of DESIGN 2.5.
+    seed : int
+        Seed of the bootstrap.
+    chunk_size : int
+        Replicates solved together (memory: chunk_size x n_blocks x 69^2 floats).
+
+    Attributes
+    ----------
+    coef_ : ndarray, shape (S, 23 S)
+        Physical coefficients on ``vivbench.terms.evaluate_library``; dA_k/dt in m/s.
+    coef_bootstrap_ : ndarray, shape (n_bootstrap, S, 23 S)
+    support_, threshold_, n_terms_, rss_, aicc_ : the selected model per equation
+    n_samples_ : int; n_blocks_ : int; cond_ : float (of the scaled pooled library)
+    feature_names_ : list of str
+    """
+
+    def __init__(self, *, thresholds: Sequence[float] = DEFAULT_THRESHOLDS, alpha: float = 0.05,
+                 scaling: str = "scaled", n_bootstrap: int = 100, block_s: float = 300.0,
+                 agreement: float = 0.9, confidence: float = 0.95, min_blocks: int = 20, tau: float = DEFAULT_TAU, seed: int = 0,
+                 chunk_size: int = 16):
+        self.thresholds = thresholds
+        self.alpha = alpha
+        self.scaling = scaling
+        self.n_bootstrap = n_bootstrap
+        self.block_s = block_s
+        self.agreement = agreement
+        self.confidence = confidence
+        self.min_blocks = min_blocks
+        self.tau = tau
+        self.seed = seed
+        self.chunk_size = chunk_size
+
+    def get_params(self, deep: bool = True) -> dict:
+        return {k: getattr(self, k) for k in ("thresholds", "alpha", "scaling", "n_bootstrap", "block_s",
+                                                "agreement", "confidence", "min_blocks", "tau", "seed", "chunk_size")}
+
+    def to_json(self) -> str:
+        params = self.get_params()
+        params["thresholds"] = [float(x) for x in params["thresholds"]]
+        return json.dumps(params, sort_keys=True)
+
+    def _validate(self) -> None:
+        if isinstance(self.n_bootstrap, bool) or not isinstance(self.n_bootstrap, (int, np.integer)) or self.n_bootstrap < 0:
+            raise ValueError(f"n_bootstrap must be an integer >= 0; got {self.n_bootstrap!r}")
+        if not (np.isfinite(self.block_s) and self.block_s > 0):
+            raise ValueError(f"block_s must be a positive number of seconds; got {self.block_s!r}")
+        if not 0.0 < self.agreement <= 1.0:
+            raise ValueError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
+        if isinstance(self.min_blocks, bool) or not isinstance(self.min_blocks, (int, np.integer)) or self.min_blocks < 1:
+            raise ValueError(f"min_blocks must be an integer >= 1; got {self.min_blocks!r}")
+        if not 0.0 < self.confidence < 1.0:
+            raise ValueError(f"confidence must lie strictly between 0 and 1; got {self.confidence!r}")
+        if not 0.0 < self.tau < 1.0:
+            raise ValueError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
+        if isinstance(self.chunk_size, bool) or not isinstance(self.chunk_size, (int, np.integer)) or self.chunk_size < 1:
+            raise ValueError(f"chunk_size must be an integer >= 1; got {self.chunk_size!r}")
+
+    def fit(self, records: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> "PooledSINDy":
+        """Fit the campaign model.
+
+        Parameters
+        ----------
+        records : sequence of (t, A, U, dA)
+            One per event (or segment): t shape (n,), s; A, U, dA shape (n, S)
+            in m, m/s and m/s. Samples with a non-finite value are ignored.
+
+        Returns
+        -------
+        self
+        """
+        self._validate()
+        settings = StlsqSettings(thresholds=tuple(self.thresholds), alpha=self.alpha)
+        As, Us, dAs, blocks = [], [], [], []
+        offset = 0
+        for t, A, U, dA in records:
+            t, A, U, dA = (np.asarray(x, dtype=float) for x in (t, A, U, dA))
+            if A.ndim != 2 or A.shape != U.shape or A.shape != dA.shape or t.shape != (A.shape[0],):
+                raise ValueError(f"each record needs t (n,) and A, U, dA (n, S); got {t.shape}, {A.shape}, {U.shape}, {dA.shape}")
+            ok = np.isfinite(A).all(1) & np.isfinite(U).all(1) & np.isfinite(dA).all(1)
+            b = _blocks(t, ok, self.block_s)
+            As.append(A[ok]), Us.append(U[ok]), dAs.append(dA[ok]), blocks.append(b[ok] + offset)
+            offset += int(b.max()) + 1 if ok.any() else 0
+        if not As or sum(a.shape[0] for a in As) == 0:
+            raise ValueError("no valid samples to fit a pooled model")
+        A, U, dA = np.concatenate(As), np.concatenate(Us), np.concatenate(dAs)
+        block = np.concatenate(blocks)
+        n, S = A.shape
+        p = 23 * S
+        if n < p + 2:
+            raise ValueError(f"{n} valid samples are too few for the {p}-term library")
+        lib = window_library(A[None], U[None], scaling=self.scaling)
+        ys = np.sqrt(np.mean(dA**2, axis=0))
+        ys = np.where(ys > 0, ys, 1.0)
+        y = dA / ys
+
+        rng = np.random.default_rng(self.seed)
+        # Replicate 0 is the data itself; the others resample blocks with replacement.
+        mult = np.ones((1 + self.n_bootstrap, offset))
+        if self.n_bootstrap:
+            draws = rng.integers(0, offset, size=(self.n_bootstrap, offset))
+            mult[1:] = np.stack([np.bincount(d, minlength=offset) for d in draws])
+        factors = _block_factors(lib.theta[0], y, block, offset)
+        coef_scaled, sel, best_rss, best_aicc = _replicate_fits(factors, mult, settings, self.chunk_size)
+        phys = lib.physical_coef(np.nan_to_num(coef_scaled)) * ys[None, :, None]
+        phys = np.where(np.isfinite(coef_scaled).all(axis=-1, keepdims=True), phys, np.nan)
+
+        th = np.asarray(settings.thresholds)
+        self.coef_ = phys[0]
+        self.coef_scaled_ = coef_scaled[0]
+        self.coef_bootstrap_ = phys[1:]
+        self.support_ = coef_scaled[0] != 0
+        self.threshold_ = th[sel[0]]
+        self.n_terms_ = self.support_.sum(axis=1)
+        self.rss_ = best_rss[0] * ys**2
+        self.aicc_ = best_aicc[0] + n * np.log(ys**2)
+        self.n_samples_ = int(n)
+        self.n_blocks_ = int(offset)
+        self.enough_data_ = bool(offset >= self.min_blocks)
+        self.cond_ = float(np.linalg.cond(lib.theta[0]))
+        self.y_scale_ = ys
+        R = factors[0]
+        gram = np.einsum("bki,bkj->ij", R, R) + self.alpha * np.eye(p)
+        self._gram_inv_ = np.linalg.inv(gram)
+        self._to_physical_ = lib.to_physical[0]
+        self._rss_scaled_ = best_rss[0]
+        resid = y - lib.theta[0] @ np.nan_to_num(coef_scaled[0]).T
+        self.correlation_samples_ = _integrated_correlation(resid, block)
+        self.feature_names_ = feature_names(S)
+        self.n_sections_ = S
+        return self
+
+    def window_regimes(self, t: np.ndarray, A: np.ndarray, U: np.ndarray,
+                       window_start: np.ndarray, window_end: np.ndarray) -> dict:
+        """Regimes of the pooled model over the windows of one record, and their identifiability.
+
+        Parameters
+        ----------
+        t : ndarray, shape (n,), s
+        A, U : ndarray, shape (n, S), m and m/s
+        window_start, window_end : ndarray, shape (W,), s; a window holds t0 <= t < t1
+
+        Returns
+        -------
+        dict
+            ``regime`` (W, S) int8 (0: no valid sample), ``identifiable`` (W, S)
+            bool, ``agreement`` (W, S) share of bootstrap replicates with the same
+            regime (NaN without replicates), ``order_rms`` (W, S, 4) m/s.
+        """
+        models = np.concatenate([self.coef_[None], self.coef_bootstrap_], axis=0)
+        R, c1, nv = pooled_window_stats(models, t, A, U, window_start, window_end)
+        reg = regime_rule(R, c1, self.tau)  # (B+1, W, S)
+        reg = np.where(nv[None, :, None] > 0, reg, 0).astype(np.int8)
+        point = reg[0]
+        dR, dc1 = self._margins(t, A, U, window_start, window_end)
+        robust = _regime_is_determined(R[0], dR, c1[0], dc1, self.tau) & (point > 0)
+        if models.shape[0] > 1 and self.enough_data_:
+            agree = (reg[1:] == point[None]).mean(axis=0)
+            identifiable = robust & (agree >= self.agreement)
+        else:
+            agree = np.full(point.shape, np.nan)
+            identifiable = np.zeros(point.shape, dtype=bool)
+        return {"regime": point, "identifiable": identifiable, "agreement": agree, "robust": robust,
+                "order_rms": R[0], "order_rms_margin": dR}
+
+    def _margins(self, t, A, U, window_start, window_end):
+        """How far models that fit equally well can move each window's order RMS and c1.
+
+        Over all models xi + delta with ||X delta||^2 <= b (X the pooled scaled
+        library, b = chi2_p(confidence) sigma^2 n_corr, sigma^2 = RSS / N and
+        n_corr the residuals' integrated correlation time in samples), the
+        largest change of the window RMS of order i's contribution is
+        sqrt(b lambda_max(C_i^T X_wi^T X_wi C_i) / n_w), with C_i C_i^T
+        the order-i block of (X^T X + alpha I)^-1; the largest change of the
+        window mean of r_1/A is the same bound on a linear functional. Both
+        are in m/s and 1/s after scaling by the target's RMS.
+        """
+        t, A, U, phys, ok = _record_library(t, A, U)
+        S = A.shape[1]
+        X = phys @ self._to_physical_
+        orders = np.tile(section_exponents()[:, 0], S)
+        lo = np.searchsorted(t, window_start, side="left")
+        hi = np.searchsorted(t, window_end, side="left")
+
+        def wsum(x):
+            return _window_sums(x, lo, hi)
+
+        nv = np.maximum(wsum(ok.astype(float)), 1.0)
+        n_max = int(max((hi - lo).max(initial=0), 1))
+        idx = lo[:, None] + np.arange(n_max)[None, :]
+        inwin = idx < hi[:, None]
+        idx = np.minimum(idx, t.size - 1)
+        # Models the data cannot reject: a chi-square region in p dimensions with the
+        # residual variance inflated by the residuals' integrated correlation time.
+        from scipy.stats import chi2
+
+        p = X.shape[1]
+        budget = chi2.ppf(self.confidence, p) * self._rss_scaled_ / self.n_samples_ * self.correlation_samples_
+        dR = np.empty((lo.size, S, 4))
+        dc1 = None
+        okA = ok[:, None] & (A > 0)
+        invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
+        for i in range(4):
+            cols = orders == i
+            C = np.linalg.cholesky(self._gram_inv_[np.ix_(cols, cols)])
+            Z = X[:, cols] @ C
+            Zw = Z[idx] * inwin[..., None]  # (W, n_max, k); rows outside a window are zero
+            gw = np.matmul(np.swapaxes(Zw, 1, 2), Zw)
+            lam = np.linalg.eigvalsh(gw)[:, -1]
+            dR[:, :, i] = np.sqrt(np.maximum(lam, 0.0)[:, None] / nv[:, None] * budget[None, :])
+            if i == 1:
+                v = wsum(Z[:, None, :] * invA[:, :, None]) / np.maximum(wsum(okA.astype(float)), 1.0)[:, :, None]
+                dc1 = np.sqrt(budget)[None, :] * np.linalg.norm(v, axis=-1)
+        ys = self.y_scale_[None, :]
+        return dR * ys[..., None], dc1 * ys
+
+
+def _regime_is_determined(R, dR, c1, dc1, tau):
+    """Whether every order RMS in [R - dR, R + dR] and c1 in [c1 - dc1, c1 + dc1] give one regime.
+
+    Orders are bounded one at a time (conservative: a joint move is smaller).
+    """
+    lo = np.maximum(R - dR, 0.0)
+    hi = R + dR
+    m_lo = lo.max(axis=-1)
+    m_hi = hi.max(axis=-1)
+    can4 = hi[..., 3] >= tau * m_lo
+    not4 = lo[..., 3] < tau * m_hi
+    can3 = not4 & (hi[..., 2] >= tau * m_lo)
+    below = not4 & (lo[..., 2] < tau * m_hi)
+    with np.errstate(invalid="ignore"):
+        can2 = below & ~(c1 + dc1 <= 0)
+        can1 = below & ~(c1 - dc1 > 0)
+    return (can4.astype(int) + can3 + can2 + can1) == 1
+
+
+def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
+    """Order RMS and net linear coefficient of several models over every window.
+
+    Parameters
+    ----------
+    models : ndarray, shape (M, S, 23 S)
+        Physical coefficients.
+    t : ndarray, shape (n,), s; A, U : ndarray, shape (n, S)
+    window_start, window_end : ndarray, shape (W,), s
+
+    Returns
+    -------
+    R : ndarray, shape (M, W, S, 4), m/s; c1 : ndarray, shape (M, W, S), 1/s;
+    n_valid : ndarray, shape (W,)
+    """
+    t, A, U, theta, ok = _record_library(t, A, U)
+    S = A.shape[1]
+    orders = np.tile(section_exponents()[:, 0], S)
+    models = np.nan_to_num(np.asarray(models, dtype=float))
+    M = models.shape[0]
+    lo = np.searchsorted(t, window_start, side="left")
+    hi = np.searchsorted(t, window_end, side="left")
+    okA = ok[:, None] & (A > 0)
+    invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
+
+    def wsum(x):
+        return _window_sums(x, lo, hi)
+
+    nv = wsum(ok.astype(float))
+    sq = np.empty((lo.size, M, S, 4))
+    c1 = None
+    for i in range(4):
+        # (n, M*S) by one matrix product per order
+        r = theta[:, orders == i] @ models[..., orders == i].reshape(M * S, -1).T
+        r = r.reshape(-1, M, S)
+        sq[..., i] = wsum(r**2)
+        if i == 1:
+            c1 = wsum(r * invA[:, None, :])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        R = np.sqrt(sq / nv[:, None, None, None])
+        c1 = c1 / wsum(okA.astype(float))[:, None, :]
+    return np.moveaxis(R, 1, 0), np.moveaxis(c1, 1, 0), nv
+
+
+def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "xr.Dataset":
+    """Fit the campaign model on identification results and label every window with it.
+
+    Parameters
+    ----------
+    result_files : paths of ``<event_id>.identify.nc`` (their A, U, dA and windows are used)
+    model : PooledSINDy, optional (default settings otherwise)
+
+    Returns
+    -------
+    xarray.Dataset
+        Coordinates ``equation``, ``feature``, ``bootstrap``, ``order`` and
+        ``window_all`` (every window of every event); variables ``coef``
+        (equation, feature) in physical units (dA/dt in m/s), ``coef_bootstrap``,
+        ``n_terms``, ``threshold``, ``rss``, ``aicc``; per window ``event_id``,
+        ``window``, ``window_start``, ``window_end``, ``regime``,
+        ``identifiable``, ``agreement``, ``order_rms``. Written by
+        :func:`write_pooled` as ``campaign.pooled.nc``.
+    """
+    import xarray as xr
+
+    import vivbench
+
+    model = model or PooledSINDy()
+    results = []
+    for path in result_files:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            if ds.attrs.get("format") != "vivbench-identify":
+                raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
+            results.append((str(path), ds[["A", "U", "dA", "window_start", "window_end"]].load(), dict(ds.attrs),
+                            [str(s) for s in ds["equation"].values]))
+    if not results:
+        raise ValueError("no identification results to pool")
+    sections = results[0][3]
+    for path, _ds, _attrs, eq in results:
+        if eq != sections:
+            raise ValueError(f"{path}: equations {eq} differ from {sections} of the other results")
+    model.fit([(ds["time"].values, ds["A"].values, ds["U"].values, ds["dA"].values) for _p, ds, _a, _e in results])
+    rows = {k: [] for k in ("event_id", "window", "window_start", "window_end", "regime", "identifiable", "agreement", "robust", "order_rms")}
+    for _path, ds, attrs, _eq in results:
+        s, e = ds["window_start"].values, ds["window_end"].values
+        out = model.window_regimes(ds["time"].values, ds["A"].values, ds["U"].values, s, e)
+        rows["event_id"].append(np.full(s.size, str(attrs["event_id"]), dtype=object))
+        rows["window"].append(np.arange(s.size))
+        rows["window_start"].append(s)
+        rows["window_end"].append(e)
+        for key in ("regime", "identifiable", "agreement", "robust", "order_rms"):
+            rows[key].append(out[key])
+    cat = {k: np.concatenate(v) for k, v in rows.items()}
+    data = {
+        "coef": (("equation", "feature"), model.coef_, {"units": "m/s per unit of the feature", "long_name": "pooled campaign model"}),
+        "coef_bootstrap": (("bootstrap", "equation", "feature"), model.coef_bootstrap_, {"long_name": "block-bootstrap replicate models"}),
+        "n_terms": (("equation",), model.n_terms_.astype(np.int32), {"units": "1"}),
+        "threshold": (("equation",), model.threshold_, {"units": "1", "long_name": "selected STLSQ threshold (standardised)"}),
+        "rss": (("equation",), model.rss_, {"units": "m2 s-2"}),
+        "aicc": (("equation",), model.aicc_, {"units": "1"}),
+        "event_id": (("window_all",), cat["event_id"].astype(str)),
+        "window": (("window_all",), cat["window"].astype(np.int32), {"long_name": "window index in the event's result"}),
+        "window_start": (("window_all",), cat["window_start"], {"units": "s"}),
+        "window_end": (("window_all",), cat["window_end"], {"units": "s"}),
+        "regime": (("window_all", "equation"), cat["regime"].astype(np.int8), {"long_name": "regime of the pooled model (DESIGN 2.5)"}),
+        "identifiable": (("window_all", "equation"), cat["identifiable"].astype(np.int8),
+                         {"long_name": "bootstrap agreement on the regime reaches the agreement level"}),
+        "agreement": (("window_all", "equation"), cat["agreement"], {"units": "1", "long_name": "share of bootstrap models with the same regime"}),
+        "robust": (("window_all", "equation"), cat["robust"].astype(np.int8),
+                   {"long_name": "no model within the fit tolerance gives the window another regime (near-null-space test)"}),
+        "order_rms": (("window_all", "equation", "order"), cat["order_rms"], {"units": "m/s"}),
+    }
+    coords = {"equation": sections, "feature": model.feature_names_, "bootstrap": np.arange(model.coef_bootstrap_.shape[0]),
+              "order": np.arange(4), "window_all": np.arange(cat["window"].size)}
+    attrs = {
+        "format": "vivbench-pooled",
+        "format_version": 1,
+        "events": json.dumps([str(a["event_id"]) for _p, _d, a, _e in results]),
+        "n_samples": model.n_samples_,
+        "n_blocks": model.n_blocks_,
+        "cond": model.cond_,
+        "enough_data": int(model.enough_data_),
+        "note": ("" if model.enough_data_ else
+                 f"only {model.n_blocks_} bootstrap blocks of {model.block_s:g} s (fewer than {model.min_blocks}): "
+                 "too little data for an identifiability verdict, no window is flagged identifiable"),
+        "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
+        "pooled_config_json": model.to_json(),
+        "vivbench_version": vivbench.__version__,
+    }
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+POOLED_NAME = "campaign.pooled.nc"
+
+
+def write_pooled(ds, out_dir) -> "Path":
+    """Write a pooled result atomically as ``out_dir/campaign.pooled.nc``."""
+    from pathlib import Path
+
+    from vivbench.io import write_netcdf_atomic
+
+    return Path(write_netcdf_atomic(ds, Path(out_dir) / POOLED_NAME))
+
+
+def with_campaign_model(result, pooled):
+    """A copy of an identification result whose every window holds the campaign model's coefficients.
+
+    With it the simulation and forecasting functions of ``vivbench.identify.forecast``
+    run the pooled model (a forecast with it does not depend on d).
+
+    Parameters
+    ----------
+    result : xarray.Dataset, an ``<event_id>.identify.nc``
+    pooled : xarray.Dataset, a ``campaign.pooled.nc`` with the same equations and features
+    """
+    if [str(x) for x in pooled["feature"].values] != [str(x) for x in result["feature"].values]:
+        raise ValueError("the campaign model's features differ from the result's")
+    out = result.copy()
+    out["coef"] = (result["coef"].dims, np.broadcast_to(pooled["coef"].values, result["coef"].shape).copy(),
+                   result["coef"].attrs)
+    return out

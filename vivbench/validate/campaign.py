@@ -1,0 +1,434 @@
+"""Validation of a campaign's identification results against its synthetic truth.
+
+:func:`validate_campaign` pairs every ``<event_id>.identify.nc`` of a results
+directory with ``<event_id>.nc`` of the campaign, scores it with
+:mod:`vivbench.validate.metrics` and returns plain tables (lists of dicts);
+:func:`write_validation` writes them as CSV and JSON. Events without a
+``/truth`` group (field data) cannot be validated and are listed under
+``skipped`` with the reason.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from vivbench.regime import DEFAULT_TAU
+from vivbench.validate.metrics import (
+    REGIMES,
+    SUPPORT_NOTES,
+    cluster_agreement,
+    forecast_summary,
+    merge_support_scores,
+    regime_report,
+    rhs_error_summary,
+    support_scores,
+)
+from vivbench.validate.recovery import truth_window_regimes, window_rhs_errors
+
+__all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables"]
+
+_NOTES = (
+    "Regime accuracy is reported for identifiable window-equations apart from the others, with coverage "
+    "(share flagged identifiable) beside it; labels of unflagged windows are not findings (README, known limitations).",
+    "RHS error: relative RMS of identified minus true dA/dt, both evaluated on the result's own A and U over the "
+    "window; 'active' window-equations are those whose true dA/dt RMS is at least active_share of the event's.",
+    *SUPPORT_NOTES,
+)
+
+
+def _open_result(path: Path) -> xr.Dataset:
+    try:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            ds = ds.load()
+    except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
+        raise ValueError(f"{path}: cannot be read as an identification result ({type(exc).__name__}: {exc})") from exc
+    missing = [v for v in ("coef", "regime", "identifiable", "window_start", "window_end", "A", "U") if v not in ds]
+    if ds.attrs.get("format") != "vivbench-identify" or missing:
+        raise ValueError(f"{path}: not an identification result (format {ds.attrs.get('format')!r}, missing {missing})")
+    return ds
+
+
+def read_cluster_labels(path) -> list[dict]:
+    """Rows of ``cluster_labels.csv`` (see ``vivbench cluster``), typed.
+
+    Returns
+    -------
+    list of dict with ``event_id`` (str), ``window`` (int), ``equation`` (str),
+    ``feature_set`` (str), ``label`` (int), ``halo`` (bool)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such cluster labels file")
+    need = ("event_id", "window", "equation", "feature_set", "label", "halo")
+    with path.open(newline="") as fh:
+        reader = csv.DictReader(fh)
+        missing = [c for c in need if c not in (reader.fieldnames or [])]
+        if missing:
+            raise ValueError(f"{path}: missing columns {missing}; expected {list(need)}")
+        rows = []
+        for k, row in enumerate(reader, start=2):
+            try:
+                rows.append({"event_id": row["event_id"], "window": int(row["window"]), "equation": row["equation"],
+                             "feature_set": row["feature_set"], "label": int(row["label"]),
+                             "halo": row["halo"].strip().lower() in ("1", "true", "yes")})
+            except ValueError as exc:
+                raise ValueError(f"{path}: line {k}: {exc}") from None
+    return rows
+
+
+def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """NMSE rows of every ``forecast_<event_id>.csv`` in a directory (``vivbench forecast``).
+
+    Each file needs the columns ``d`` (s), ``nmse`` and ``stopped`` (as written
+    from :func:`vivbench.identify.forecast_table`), or is the table of
+    ``vivbench forecast`` (columns ``kind``, ``clip``, ``d_s``, ``nmse``,
+    ``stopped``), of which the window models' forecasts without clipping (the
+    paper's method) are read; other columns are ignored.
+
+    Returns
+    -------
+    nmse, stopped, d : ndarray, shape (n_rows,)
+    event_ids : list of str, one per row
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise ValueError(f"{directory}: no such forecast directory")
+    files = sorted(directory.glob("forecast_*.csv"))
+    if not files:
+        raise ValueError(f"{directory}: no forecast tables (forecast_<event_id>.csv) in this directory")
+    nmse, stopped, d, ids = [], [], [], []
+    for f in files:
+        with f.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            names = reader.fieldnames or []
+            cli = {"kind", "clip", "d_s"} <= set(names)
+            dcol = "d_s" if cli else "d"
+            missing = [c for c in (dcol, "nmse", "stopped") if c not in names]
+            if missing:
+                raise ValueError(f"{f}: missing columns {missing}; a forecast table needs d (or kind, clip, d_s), "
+                                 "nmse and stopped")
+            for k, row in enumerate(reader, start=2):
+                if cli and (row["kind"] != "forecast" or row["clip"] != "none"):
+                    continue
+                try:
+                    d.append(float(row[dcol]))
+                    nmse.append(float(row["nmse"]) if row["nmse"].strip() else math.nan)
+                except ValueError as exc:
+                    raise ValueError(f"{f}: line {k}: {exc}") from None
+                stopped.append(row["stopped"].strip().lower() in ("1", "true", "yes"))
+                ids.append(f.stem[len("forecast_"):])
+    return np.array(nmse, dtype=float), np.array(stopped, dtype=bool), np.array(d, dtype=float), ids
+
+
+def _cluster_tables(rows: list[dict], truth_regimes: dict) -> list[dict]:
+    """Cluster agreement per feature set, with and without the halo points."""
+    out = []
+    for fs in sorted({r["feature_set"] for r in rows}):
+        sel = [r for r in rows if r["feature_set"] == fs]
+        labels = np.array([r["label"] for r in sel])
+        halo = np.array([r["halo"] for r in sel])
+        truth = np.array([truth_regimes.get((r["event_id"], r["window"], r["equation"]), 0) for r in sel])
+        for ignore in (False, True):
+            row = {"feature_set": fs, "halo_ignored": ignore, "n_labels": len(sel),
+                   "n_without_truth": int((truth == 0).sum())}
+            row.update(cluster_agreement(labels, truth, halo, ignore_halo=ignore))
+            out.append(row)
+    return out
+
+
+def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts_dir=None, tau: float = DEFAULT_TAU,
+                      active_share: float = 0.1) -> dict:
+    """Score every identification result of a campaign against the truth.
+
+    Parameters
+    ----------
+    campaign_dir : directory of ``<event_id>.nc`` event files
+    results_dir : directory of ``<event_id>.identify.nc`` results
+    clusters_csv : optional ``cluster_labels.csv`` of ``vivbench cluster``
+    forecasts_dir : optional directory of ``forecast_<event_id>.csv`` (``vivbench forecast``);
+        see :func:`read_forecast_tables`
+    tau : regime threshold for the truth's window regimes (DESIGN 2.5)
+    active_share : see :func:`vivbench.validate.window_rhs_errors`
+
+    Returns
+    -------
+    dict
+        ``regime`` (:func:`regime_report` over all events), ``regime_confusion``
+        (rows group, true regime, counts per identified regime), ``rhs``
+        (:func:`rhs_error_summary`), ``support`` (:func:`support_scores` for all
+        models and for identifiable ones), ``support_table`` (rows), ``per_event``
+        (rows), ``clusters`` (rows, or None), ``forecast`` (rows of
+        :func:`forecast_summary` per d, or None), ``truth_regime_shares``,
+        ``pooled`` (regime report and RHS errors of the campaign model in
+        ``results_dir/campaign.pooled.nc`` when present, else None),
+        ``skipped`` (event file -> reason), ``notes``, ``settings``, ``summary``
+        (flat headline numbers).
+
+    Raises
+    ------
+    ValueError
+        No result files; a result without its event file (the message names
+        both); no event with a ``/truth`` group.
+    """
+    from vivbench.io import read_event
+
+    if not 0.0 <= active_share < 1.0:
+        raise ValueError(f"active_share must lie in [0, 1); got {active_share}")
+    if not 0.0 < tau < 1.0:
+        raise ValueError(f"tau must lie strictly between 0 and 1; got {tau}")
+    campaign_dir, results_dir = Path(campaign_dir), Path(results_dir)
+    for d, what in ((campaign_dir, "campaign"), (results_dir, "results")):
+        if not d.is_dir():
+            raise ValueError(f"{d}: no such {what} directory")
+    from vivbench.identify.pipeline import list_results
+
+    result_files = list_results(results_dir)
+    pairs = []
+    for rp in result_files:
+        event_id = rp.name[: -len(".identify.nc")]
+        ep = campaign_dir / f"{event_id}.nc"
+        if not ep.is_file():
+            raise ValueError(f"{rp}: no event file {ep} for this result")
+        pairs.append((event_id, ep, rp))
+
+    regimes, truths, flags, errs, actives, per_event = [], [], [], [], [], []
+    sup_all, sup_ok = [], []
+    skipped, truth_by_key = {}, {}
+    # The campaign model of ``vivbench pool``, scored beside the window models when present.
+    from vivbench.identify.pooled import POOLED_NAME
+
+    pooled_path = results_dir / POOLED_NAME
+    pooled = None
+    if pooled_path.is_file():
+        with xr.open_dataset(pooled_path, engine="h5netcdf") as ds:
+            pooled = ds.load()
+    p_reg, p_ok, p_errs, p_act = [], [], [], []
+    for event_id, ep, rp in pairs:
+        tree = read_event(ep)
+        if "truth" not in tree.children:
+            skipped[str(ep)] = "no /truth group (field data): nothing to validate against"
+            continue
+        truth = tree["truth"].ds
+        res = _open_result(rp)
+        start, end = res["window_start"].values, res["window_end"].values
+        reg = res["regime"].values.astype(int)
+        tru = truth_window_regimes(truth, start, end, tau=tau).astype(int)
+        ok = res["identifiable"].values.astype(bool)
+        equations = [str(x) for x in res["equation"].values]
+        truth_by_key.update({(event_id, w, eq): int(tru[w, e]) for w in range(tru.shape[0]) for e, eq in enumerate(equations)})
+        report = regime_report(reg, tru, ok)
+        row = {"event_id": event_id, "n_windows": int(start.size), "n_window_equations": report["n"],
+               "coverage": report["coverage"]}
+        for g in ("identifiable", "not_identifiable", "all"):
+            row[f"accuracy_{g}"] = report["groups"][g]["accuracy"]
+        regimes.append(reg)
+        truths.append(tru)
+        flags.append(ok)
+        if pooled is not None:
+            sel = pooled["event_id"].values.astype(str) == event_id
+            if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
+                raise ValueError(f"{pooled_path}: its windows of {event_id} differ from {rp}; re-run vivbench pool")
+            p_reg.append(pooled["regime"].values[sel].astype(int))
+            p_ok.append(pooled["identifiable"].values[sel].astype(bool))
+            if "coef" in truth.data_vars:
+                pres = res.copy()
+                pres["coef"] = (res["coef"].dims, np.broadcast_to(pooled["coef"].values, res["coef"].shape).copy())
+                pe, pact = window_rhs_errors(pres, truth["coef"].values, truth["r"].values, active_share=active_share)
+                p_errs.append(pe.ravel())
+                p_act.append(pact.ravel())
+        if "coef" in truth.data_vars:
+            coef_true = truth["coef"].values
+            e, act = window_rhs_errors(res, coef_true, truth["r"].values, active_share=active_share)
+            sup = support_scores(res["coef"].values, coef_true)
+            sup_all.append(sup)
+            sup_ok.append(support_scores(res["coef"].values, coef_true, mask=ok))
+            errs.append(e.ravel())
+            actives.append(act.ravel())
+            row.update(rhs_median_rel_error=float(np.nanmedian(e)) if np.isfinite(e).any() else math.nan,
+                       rhs_median_rel_error_active=float(np.nanmedian(e[act])) if np.isfinite(e[act]).any() else math.nan)
+            for level in ("terms", "pooled_terms", "orders"):
+                row[f"support_precision_{level}"] = sup[level]["precision"]
+                row[f"support_recall_{level}"] = sup[level]["recall"]
+        else:
+            skipped[str(ep)] = "truth has no exact coefficient matrix (coef): support and RHS error not scored"
+        per_event.append(row)
+    pooled_out = None
+    if pooled is not None and p_reg:
+        pr = regime_report(np.concatenate(p_reg), np.concatenate(truths), np.concatenate(p_ok))
+        pooled_out = {"regime": pr, "rhs": rhs_error_summary(np.concatenate(p_errs), np.concatenate(p_act)) if p_errs else None,
+                      "file": str(pooled_path), "n_terms": [int(k) for k in pooled["n_terms"].values]}
+    if not regimes:
+        raise ValueError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
+                         "validation needs synthetic events")
+
+    reg, tru, ok = (np.concatenate(x) for x in (regimes, truths, flags))
+    regime = regime_report(reg, tru, ok)
+    confusion_rows = []
+    groups = [(g, regime) for g in ("identifiable", "not_identifiable", "all")]
+    if pooled_out is not None:
+        groups += [(f"pooled_{g}", pooled_out["regime"]) for g in ("identifiable", "not_identifiable", "all")]
+    for g, rep in groups:
+        cm = rep["groups"][g.removeprefix("pooled_")]["confusion"]
+        for a in REGIMES:
+            confusion_rows.append({"group": g, "truth_regime": a, **{f"identified_{b}": cm[a - 1][b - 1] for b in REGIMES},
+                                   "n": int(sum(cm[a - 1]))})
+
+    rhs = support = None
+    support_rows = []
+    if errs:
+        rhs = rhs_error_summary(np.concatenate(errs), np.concatenate(actives))
+        support = {"all": merge_support_scores(sup_all), "identifiable": merge_support_scores(sup_ok)}
+        for g, sc in support.items():
+            for level in ("terms", "pooled_terms", "orders"):
+                support_rows.append({"models": g, "level": level, "item": "all", "n_models": sc["n"], **sc[level]})
+            for i in range(4):
+                support_rows.append({"models": g, "level": "order", "item": f"A^{i}", "n_models": sc["n"],
+                                     **sc["order_counts"][i]})
+
+    clusters = None
+    if clusters_csv is not None:
+        clusters = _cluster_tables(read_cluster_labels(clusters_csv), truth_by_key)
+
+    forecast = None
+    if forecasts_dir is not None:
+        forecast = forecast_summary(*read_forecast_tables(forecasts_dir)[:3])
+
+    truth_all = tru.ravel()
+    out = {
+        "regime": regime,
+        "regime_confusion": confusion_rows,
+        "rhs": rhs,
+        "support": support,
+        "support_table": support_rows,
+        "per_event": per_event,
+        "clusters": clusters,
+        "forecast": forecast,
+        "pooled": pooled_out,
+        "truth_regime_shares": {str(k): float(np.mean(truth_all == k)) for k in REGIMES},
+        "skipped": skipped,
+        "notes": list(_NOTES),
+        "settings": {"tau": float(tau), "active_share": float(active_share), "campaign_dir": str(campaign_dir),
+                     "results_dir": str(results_dir), "clusters_csv": None if clusters_csv is None else str(clusters_csv),
+                     "forecasts_dir": None if forecasts_dir is None else str(forecasts_dir)},
+    }
+    out["summary"] = _summary(out)
+    return out
+
+
+def _summary(v: dict) -> dict:
+    """Flat headline numbers (units in the names where they have any)."""
+    g = v["regime"]["groups"]
+    out = {
+        "n_events": len(v["per_event"]),
+        "n_events_skipped": len(v["skipped"]),
+        "n_window_equations": v["regime"]["n"],
+        "regime_coverage": v["regime"]["coverage"],
+        "regime_accuracy_identifiable": g["identifiable"]["accuracy"],
+        "regime_accuracy_not_identifiable": g["not_identifiable"]["accuracy"],
+        "regime_accuracy_all": g["all"]["accuracy"],
+        "truth_most_common_regime_share": max(v["truth_regime_shares"].values()),
+    }
+    if v["rhs"] is not None:
+        out.update(median_rhs_rel_error=v["rhs"]["all"]["median"],
+                   median_rhs_rel_error_active=v["rhs"]["active"]["median"],
+                   q90_rhs_rel_error_active=v["rhs"]["active"]["q90"],
+                   rhs_active_share=v["rhs"]["active_share"])
+    if v["support"] is not None:
+        s = v["support"]["all"]
+        out["support_mean_terms_per_model"] = s["mean_terms_per_model"]
+        for level in ("terms", "pooled_terms", "orders"):
+            out[f"support_precision_{level}"] = s[level]["precision"]
+            out[f"support_recall_{level}"] = s[level]["recall"]
+            out[f"support_precision_{level}_dense_model"] = s[level]["precision_dense_model"]
+        for i in range(4):
+            out[f"order_recall_A{i}"] = s["order_recall"][i]
+    if v.get("pooled") is not None:
+        pg = v["pooled"]["regime"]["groups"]
+        out.update(pooled_regime_coverage=v["pooled"]["regime"]["coverage"],
+                   pooled_regime_accuracy_identifiable=pg["identifiable"]["accuracy"],
+                   pooled_regime_accuracy_not_identifiable=pg["not_identifiable"]["accuracy"],
+                   pooled_regime_accuracy_all=pg["all"]["accuracy"])
+        if v["pooled"]["rhs"] is not None:
+            out["pooled_median_rhs_rel_error_active"] = v["pooled"]["rhs"]["active"]["median"]
+    for row in v["clusters"] or []:
+        tag = f"{row['feature_set']}{'_no_halo' if row['halo_ignored'] else ''}"
+        out[f"ari_{tag}"] = row["ari"]
+        out[f"purity_{tag}"] = row["purity"]
+        out[f"n_clusters_{tag}"] = row["n_clusters"]
+    for row in v["forecast"] or []:
+        tag = f"d{row['d_s']:g}s"
+        out[f"forecast_median_nmse_{tag}"] = row["median"]
+        out[f"forecast_stopped_share_{tag}"] = row["stopped_share"]
+    return out
+
+
+def _json_safe(obj):
+    """NaN and infinities become null (strict JSON); numpy scalars become Python numbers."""
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(x) for k, x in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(x) for x in obj]
+    if isinstance(obj, (np.integer, np.bool_)):
+        return obj.item()
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
+def _csv_text(rows: list[dict]) -> str:
+    buf = io.StringIO()
+    if rows:
+        fields = list(rows[0])
+        for r in rows[1:]:
+            fields += [k for k in r if k not in fields]
+        w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: _fmt(r.get(k, "")) for k in fields})
+    return buf.getvalue()
+
+
+def _fmt(x):
+    if isinstance(x, (float, np.floating)):
+        return "nan" if not math.isfinite(x) else repr(float(x))
+    return x
+
+
+def write_validation(v: dict, out_dir) -> list[Path]:
+    """Write :func:`validate_campaign`'s tables atomically.
+
+    Files: ``regime_confusion.csv``, ``per_event.csv``, ``support.csv``,
+    ``clusters.csv`` (when cluster labels were given), ``forecast_nmse.csv``
+    (when forecast tables were given), ``metrics.json``
+    (everything, NaN as null) and ``summary.json`` (flat headline numbers).
+
+    Returns
+    -------
+    list of pathlib.Path, the files written
+    """
+    from vivbench.io import atomic_path
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    texts = {"regime_confusion.csv": _csv_text(v["regime_confusion"]), "per_event.csv": _csv_text(v["per_event"]),
+             "support.csv": _csv_text(v["support_table"])}
+    if v["clusters"] is not None:
+        texts["clusters.csv"] = _csv_text(v["clusters"])
+    if v["forecast"] is not None:
+        texts["forecast_nmse.csv"] = _csv_text(v["forecast"])
+    texts["metrics.json"] = json.dumps(_json_safe(v), indent=2, sort_keys=True) + "\n"
+    texts["summary.json"] = json.dumps(_json_safe(v["summary"]), indent=2) + "\n"
+    written = []
+    for name, text in texts.items():
+        path = out_dir / name
+        with atomic_path(path) as tmp:
+            tmp.write_text(text)
+        written.append(path)
+    return written

@@ -1,0 +1,462 @@
+"""Recovery metrics as pure functions on arrays.
+
+Each function scores one aspect of an identification against a truth the
+testbed computes exactly: regimes (accuracy beside coverage, 4x4 confusion),
+support of the coefficient matrices (per term, per section-pooled term and per
+order of A), the relative error of the right-hand side, cluster agreement and
+forecast NMSE. Nothing here reads files; :mod:`vivbench.validate.campaign`
+feeds them.
+
+Support and the synthetic bridge
+--------------------------------
+In the synthetic bridge the averaged amplitudes are A_k = phi_k Q (DESIGN 2.3),
+so the columns A_1^i U_1^j, A_2^i U_2^j and A_3^i U_3^j of the library are
+proportional up to the small per-section offsets of U. The truth matrix
+``coef`` (equation, feature) is therefore only one representative of a family
+of matrices with the same dynamics: a model that carries a term on another
+section's column is as right as the truth, yet term-level scores count it as
+one false positive and one false negative. The section-pooled term set
+(A^i U^j present in an equation when it is nonzero for any section) and the
+orders of A present are what the data can determine; within a 50 s window U is
+nearly constant, so even the power j of U is weakly determined and the order
+level is the most meaningful. :data:`SUPPORT_NOTES` says this in the outputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vivbench.terms import section_exponents
+
+__all__ = [
+    "REGIMES",
+    "SUPPORT_NOTES",
+    "confusion_matrix",
+    "regime_report",
+    "support_mask",
+    "pooled_support",
+    "order_support",
+    "support_counts",
+    "support_scores",
+    "merge_support_scores",
+    "rhs_error_summary",
+    "cluster_purity",
+    "cluster_agreement",
+    "forecast_summary",
+]
+
+REGIMES = (1, 2, 3, 4)
+
+SUPPORT_NOTES = (
+    "In the synthetic bridge A_k = phi_k Q, so the columns A_1^i U_1^j, A_2^i U_2^j and A_3^i U_3^j are nearly "
+    "proportional and the truth coefficient matrix is one representative of a family with the same dynamics "
+    "(DESIGN 2.3): term-level support scores count a term placed on another section's column as wrong although "
+    "the data cannot tell them apart.",
+    "pooled_terms: a term A^i U^j is present in an equation when it is nonzero for any section; this is what "
+    "the data can determine across sections.",
+    "orders: which orders i of A appear in an equation (any section, any power of U); inside a 50 s window U is "
+    "nearly constant, so the power of U is weakly determined too and the order level is the most meaningful.",
+)
+
+_QUANTILES = (0.1, 0.25, 0.5, 0.75, 0.9)
+
+
+def _nan_ratio(num: float, den: float) -> float:
+    return float(num) / float(den) if den else float("nan")
+
+
+# ----------------------------------------------------------------------- regimes
+
+
+def confusion_matrix(truth: np.ndarray, identified: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """Counts of true regime (rows) against identified regime (columns).
+
+    Parameters
+    ----------
+    truth, identified : ndarray of int, same shape
+        Regimes 1..4; 0 means no truth (``truth``) or no model (``identified``),
+        and such entries are left out.
+    mask : ndarray of bool, same shape, optional
+        Only entries where it is True are counted.
+
+    Returns
+    -------
+    ndarray of int64, shape (4, 4)
+        Entry [a - 1, b - 1] counts true regime a identified as b.
+    """
+    truth = np.asarray(truth).ravel()
+    identified = np.asarray(identified).ravel()
+    if truth.shape != identified.shape:
+        raise ValueError(f"truth and identified must have the same size; got {truth.size} and {identified.size}")
+    keep = np.isin(truth, REGIMES) & np.isin(identified, REGIMES)
+    if mask is not None:
+        keep &= np.asarray(mask, dtype=bool).ravel()
+    idx = (truth[keep].astype(np.int64) - 1) * 4 + (identified[keep].astype(np.int64) - 1)
+    return np.bincount(idx, minlength=16).reshape(4, 4)
+
+
+def regime_report(identified: np.ndarray, truth: np.ndarray, identifiable: np.ndarray) -> dict:
+    """Regime accuracy and confusion, identifiable window-equations apart.
+
+    Parameters
+    ----------
+    identified, truth : ndarray of int, same shape, e.g. (n_windows, n_equations)
+        Regimes 1..4; 0: no model / no truth (not scored).
+    identifiable : ndarray of bool, same shape
+
+    Returns
+    -------
+    dict
+        ``n`` (scored window-equations), ``n_no_model`` (truth known but no
+        model), ``coverage`` (share of scored flagged identifiable) and
+        ``groups`` with ``identifiable``, ``not_identifiable`` and ``all``,
+        each ``{"n", "accuracy", "confusion"}`` (accuracy NaN for an empty
+        group; confusion a 4x4 list, rows true regime 1..4, columns
+        identified 1..4).
+    """
+    identified = np.asarray(identified).ravel()
+    truth = np.asarray(truth).ravel()
+    ok = np.asarray(identifiable, dtype=bool).ravel()
+    if not (identified.shape == truth.shape == ok.shape):
+        raise ValueError(f"identified, truth and identifiable must have the same size; got {identified.size}, {truth.size}, {ok.size}")
+    scored = np.isin(truth, REGIMES) & np.isin(identified, REGIMES)
+    groups = {}
+    for name, mask in (("identifiable", ok), ("not_identifiable", ~ok), ("all", np.ones_like(ok))):
+        cm = confusion_matrix(truth, identified, mask)
+        n = int(cm.sum())
+        groups[name] = {"n": n, "accuracy": _nan_ratio(np.trace(cm), n), "confusion": cm.tolist()}
+    return {
+        "n": int(scored.sum()),
+        "n_no_model": int((np.isin(truth, REGIMES) & ~np.isin(identified, REGIMES)).sum()),
+        "coverage": float(ok[scored].mean()) if scored.any() else float("nan"),
+        "groups": groups,
+    }
+
+
+# ----------------------------------------------------------------------- support
+
+
+def support_mask(coef: np.ndarray, tol: float = 0.0) -> np.ndarray:
+    """Terms present in coefficient matrices: finite and ``|coef| > tol``.
+
+    Parameters
+    ----------
+    coef : ndarray, shape (..., n_features)
+
+    Returns
+    -------
+    ndarray of bool, same shape
+    """
+    coef = np.asarray(coef, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(coef) & (np.abs(coef) > tol)
+
+
+def _by_section(support: np.ndarray, n_sections: int) -> np.ndarray:
+    support = np.asarray(support, dtype=bool)
+    n_terms = section_exponents().shape[0]
+    if support.shape[-1] != n_terms * n_sections:
+        raise ValueError(f"support must have {n_terms * n_sections} features ({n_sections} sections x {n_terms}) on its last axis; got {support.shape[-1]}")
+    return support.reshape(*support.shape[:-1], n_sections, n_terms)
+
+
+def pooled_support(support: np.ndarray, n_sections: int = 3) -> np.ndarray:
+    """Section-pooled term set: A^i U^j present for any section.
+
+    Parameters
+    ----------
+    support : ndarray of bool, shape (..., 23 * n_sections), library order of :mod:`vivbench.terms`
+
+    Returns
+    -------
+    ndarray of bool, shape (..., 23), in the order of :func:`vivbench.terms.section_exponents`
+    """
+    return _by_section(support, n_sections).any(axis=-2)
+
+
+def order_support(support: np.ndarray, n_sections: int = 3) -> np.ndarray:
+    """Orders i of A present (any section, any power of U).
+
+    Parameters
+    ----------
+    support : ndarray of bool, shape (..., 23 * n_sections)
+
+    Returns
+    -------
+    ndarray of bool, shape (..., 4), orders 0..3
+    """
+    pooled = pooled_support(support, n_sections)
+    order = section_exponents()[:, 0]
+    return np.stack([pooled[..., order == i].any(axis=-1) for i in range(4)], axis=-1)
+
+
+def support_counts(identified: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """True positives, false positives and false negatives along the last axis.
+
+    Parameters
+    ----------
+    identified : ndarray of bool, shape (..., n)
+    truth : ndarray of bool, broadcastable to ``identified``
+
+    Returns
+    -------
+    tp, fp, fn : ndarray of int, shape ``identified.shape[:-1]``
+    """
+    identified = np.asarray(identified, dtype=bool)
+    truth = np.broadcast_to(np.asarray(truth, dtype=bool), identified.shape)
+    return ((identified & truth).sum(-1), (identified & ~truth).sum(-1), (~identified & truth).sum(-1))
+
+
+def _pr(tp, fp, fn) -> dict:
+    tp, fp, fn = int(np.sum(tp)), int(np.sum(fp)), int(np.sum(fn))
+    return {"tp": tp, "fp": fp, "fn": fn, "precision": _nan_ratio(tp, tp + fp), "recall": _nan_ratio(tp, tp + fn)}
+
+
+def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: np.ndarray | None = None,
+                   n_sections: int = 3, tol: float = 0.0) -> dict:
+    """Support precision and recall of identified models against the truth matrix.
+
+    Counts are pooled (micro-averaged) over the scored models: precision =
+    sum TP / sum (TP + FP), recall = sum TP / sum (TP + FN).
+
+    Parameters
+    ----------
+    coef_identified : ndarray, shape (..., n_equations, n_features)
+        E.g. (n_windows, 3, 69). A model with any non-finite coefficient (no
+        model fitted) is left out.
+    coef_true : ndarray, shape (n_equations, n_features)
+        The exact truth (one representative of a family, see the module notes).
+    mask : ndarray of bool, shape (..., n_equations), optional
+        Score only these models (e.g. the identifiable ones).
+    n_sections : int
+    tol : float
+        A coefficient counts as present when ``|coef| > tol`` (physical units).
+
+    Returns
+    -------
+    dict
+        ``n`` (models scored), ``n_terms_identified``, ``n_terms_true``,
+        ``mean_terms_per_model``; ``terms`` (the 23 * n_sections columns),
+        ``pooled_terms`` (the 23 section-pooled A^i U^j) and ``orders`` (orders
+        of A), each ``{"tp", "fp", "fn", "precision", "recall",
+        "n_candidates", "precision_dense_model"}`` (the last: the precision
+        of a model holding every candidate, the chance level to beat);
+        ``order_counts`` (list of 4 such dicts, orders 0..3, counted over
+        models); ``order_recall`` and ``order_precision`` (lists of 4, NaN
+        where undefined); ``notes``.
+    """
+    coef_identified = np.asarray(coef_identified, dtype=float)
+    coef_true = np.asarray(coef_true, dtype=float)
+    if coef_identified.shape[-2:] != coef_true.shape:
+        raise ValueError(f"identified models have shape {coef_identified.shape[-2:]} per window; the truth has {coef_true.shape}")
+    valid = np.isfinite(coef_identified).all(axis=-1)
+    if mask is not None:
+        valid &= np.asarray(mask, dtype=bool)
+    sid = support_mask(coef_identified[valid], tol)  # (n, n_features)
+    eq = np.broadcast_to(np.arange(coef_true.shape[0]), valid.shape)[valid]
+    strue = support_mask(coef_true, tol)[eq]
+    levels = {
+        "terms": (sid, strue),
+        "pooled_terms": (pooled_support(sid, n_sections), pooled_support(strue, n_sections)),
+        "orders": (order_support(sid, n_sections), order_support(strue, n_sections)),
+    }
+    out = {"n": int(valid.sum()), "n_terms_identified": int(sid.sum()), "n_terms_true": int(strue.sum())}
+    for name, (a, b) in levels.items():
+        out[name] = _pr(*support_counts(a, b))
+        # a model with every candidate term scores recall 1 and this precision: the chance level
+        out[name]["n_candidates"] = int(b.size)
+    oi, ot = levels["orders"]
+    # per order: counts over models (axis 0), one column per order
+    out["order_counts"] = [_pr(*support_counts(oi[:, i:i + 1], ot[:, i:i + 1])) for i in range(4)]
+    return _finish_support(out)
+
+
+def _finish_support(out: dict) -> dict:
+    for level in ("terms", "pooled_terms", "orders"):
+        c = out[level]
+        c["precision_dense_model"] = _nan_ratio(c["tp"] + c["fn"], c["n_candidates"])
+    out["mean_terms_per_model"] = _nan_ratio(out["n_terms_identified"], out["n"])
+    out["order_recall"] = [c["recall"] for c in out["order_counts"]]
+    out["order_precision"] = [c["precision"] for c in out["order_counts"]]
+    out["notes"] = list(SUPPORT_NOTES)
+    if out["orders"]["n_candidates"] and out["orders"]["tp"] + out["orders"]["fn"] == out["orders"]["n_candidates"]:
+        out["notes"].append("Every scored true model holds all four orders of A, so order-level precision is 1 for "
+                            "any model and says nothing; compare precisions with precision_dense_model (a model "
+                            "with every candidate term).")
+    return out
+
+
+def merge_support_scores(parts: list[dict]) -> dict:
+    """Pool the counts of several :func:`support_scores` results (e.g. one per event).
+
+    Returns
+    -------
+    dict, as :func:`support_scores`, with counts summed and ratios recomputed
+    """
+    out = {k: int(sum(p[k] for p in parts)) for k in ("n", "n_terms_identified", "n_terms_true")}
+    for level in ("terms", "pooled_terms", "orders"):
+        out[level] = _pr(*(sum(p[level][k] for p in parts) for k in ("tp", "fp", "fn")))
+        out[level]["n_candidates"] = int(sum(p[level]["n_candidates"] for p in parts))
+    out["order_counts"] = [_pr(*(sum(p["order_counts"][i][k] for p in parts) for k in ("tp", "fp", "fn")))
+                           for i in range(4)]
+    return _finish_support(out)
+
+
+# ----------------------------------------------------------------------- dynamics
+
+
+def _quantile_summary(values: np.ndarray, quantiles) -> dict:
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    out = {"n": int(v.size)}
+    qs = np.quantile(v, quantiles) if v.size else np.full(len(quantiles), np.nan)
+    out["median"] = float(np.median(v)) if v.size else float("nan")
+    out.update({f"q{round(100 * q):02d}": float(x) for q, x in zip(quantiles, qs)})
+    return out
+
+
+def rhs_error_summary(errors: np.ndarray, active: np.ndarray | None = None, quantiles=_QUANTILES) -> dict:
+    """Median and quantiles of relative RHS errors, windows with dynamics apart.
+
+    Parameters
+    ----------
+    errors : ndarray, any shape, e.g. (n_windows, n_equations)
+        Relative RMS errors (:func:`vivbench.validate.rhs_relative_error`);
+        non-finite entries (no model, or no true dynamics) are left out and
+        counted in ``n_nonfinite``.
+    active : ndarray of bool, same shape, optional
+        Window-equations with dynamics (see :func:`vivbench.validate.window_rhs_errors`).
+    quantiles : sequence of float in [0, 1]
+
+    Returns
+    -------
+    dict
+        ``all`` and, when ``active`` is given, ``active`` and ``inactive``:
+        each ``{"n", "median", "q10", ...}``; ``n_nonfinite``; ``active_share``
+        (share of window-equations with dynamics, NaN without ``active``).
+    """
+    errors = np.asarray(errors, dtype=float)
+    out = {"all": _quantile_summary(errors, quantiles), "n_nonfinite": int((~np.isfinite(errors)).sum())}
+    if active is not None:
+        active = np.asarray(active, dtype=bool)
+        if active.shape != errors.shape:
+            raise ValueError(f"active must have the shape of errors {errors.shape}; got {active.shape}")
+        out["active"] = _quantile_summary(errors[active], quantiles)
+        out["inactive"] = _quantile_summary(errors[~active], quantiles)
+        out["active_share"] = float(active.mean()) if active.size else float("nan")
+    else:
+        out["active_share"] = float("nan")
+    return out
+
+
+# ----------------------------------------------------------------------- clusters
+
+
+def cluster_purity(labels: np.ndarray, truth: np.ndarray) -> float:
+    """Share of points whose cluster's most common true class is their own.
+
+    Parameters
+    ----------
+    labels, truth : ndarray of int, shape (n,)
+
+    Returns
+    -------
+    float in (0, 1]; NaN for no points
+    """
+    from sklearn.metrics.cluster import contingency_matrix
+
+    labels = np.asarray(labels).ravel()
+    truth = np.asarray(truth).ravel()
+    if labels.size == 0:
+        return float("nan")
+    c = contingency_matrix(truth, labels)  # (classes, clusters)
+    return float(c.max(axis=0).sum() / labels.size)
+
+
+def cluster_agreement(labels: np.ndarray, truth: np.ndarray, halo: np.ndarray | None = None, *,
+                      ignore_halo: bool = True) -> dict:
+    """Adjusted Rand index and purity of cluster labels against truth regimes.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (n,)
+        Cluster labels (any integers; permuting them changes nothing).
+    truth : ndarray of int, shape (n,)
+        True regimes 1..4; 0 (no truth) is left out.
+    halo : ndarray of bool, shape (n,), optional
+        Halo points of density-peaks clustering.
+    ignore_halo : bool
+        Leave the halo points out (when ``halo`` is given).
+
+    Returns
+    -------
+    dict
+        ``n`` (points scored), ``n_halo_ignored``, ``n_clusters``, ``ari``
+        (sklearn's adjusted Rand index; 1 is perfect, about 0 is chance),
+        ``purity``.
+    """
+    from sklearn.metrics import adjusted_rand_score
+
+    labels = np.asarray(labels).ravel()
+    truth = np.asarray(truth).ravel()
+    if labels.shape != truth.shape:
+        raise ValueError(f"labels and truth must have the same size; got {labels.size} and {truth.size}")
+    keep = np.isin(truth, REGIMES)
+    n_halo = 0
+    if halo is not None and ignore_halo:
+        halo = np.asarray(halo, dtype=bool).ravel()
+        n_halo = int((keep & halo).sum())
+        keep &= ~halo
+    lab, tru = labels[keep], truth[keep]
+    return {
+        "n": int(keep.sum()),
+        "n_halo_ignored": n_halo,
+        "n_clusters": int(np.unique(lab).size),
+        "ari": float(adjusted_rand_score(tru, lab)) if lab.size else float("nan"),
+        "purity": cluster_purity(lab, tru),
+    }
+
+
+# ----------------------------------------------------------------------- forecasts
+
+
+def forecast_summary(nmse: np.ndarray, stopped: np.ndarray, d: np.ndarray, quantiles=_QUANTILES) -> list[dict]:
+    """NMSE of forecasts per averaging length d, stopped runs counted apart.
+
+    A stopped (blown-up) forecast has no meaningful NMSE over the horizon: it
+    is counted in ``n_stopped`` and never enters the statistics; a completed
+    run without a finite NMSE is counted in ``n_nonfinite``.
+
+    Parameters
+    ----------
+    nmse : ndarray of float, shape (n,)
+        One value per forecast, e.g. per (event, d) or (event, d, section).
+    stopped : ndarray of bool, shape (n,)
+    d : ndarray of float, shape (n,), s
+
+    Returns
+    -------
+    list of dict, one per distinct d (ascending): ``d_s``, ``n``,
+    ``n_stopped``, ``stopped_share``, ``n_nonfinite``, ``n_completed``
+    (finite NMSE), ``median``, the quantiles and ``share_below_1`` (of the
+    completed runs: better than predicting the mean), all over completed runs.
+    """
+    nmse = np.asarray(nmse, dtype=float).ravel()
+    stopped = np.asarray(stopped, dtype=bool).ravel()
+    d = np.asarray(d, dtype=float).ravel()
+    if not (nmse.shape == stopped.shape == d.shape):
+        raise ValueError(f"nmse, stopped and d must have the same size; got {nmse.size}, {stopped.size}, {d.size}")
+    rows = []
+    for dv in np.unique(d):
+        sel = d == dv
+        done = sel & ~stopped
+        finite = done & np.isfinite(nmse)
+        summ = _quantile_summary(nmse[finite], quantiles)
+        n = int(sel.sum())
+        row = {"d_s": float(dv), "n": n, "n_stopped": int((sel & stopped).sum()),
+               "stopped_share": float((sel & stopped).sum() / n), "n_nonfinite": int((done & ~np.isfinite(nmse)).sum()),
+               "n_completed": summ.pop("n")}
+        row.update(summ)
+        row["share_below_1"] = float(np.mean(nmse[finite] < 1.0)) if finite.any() else float("nan")
+        rows.append(row)
+    return rows
