@@ -150,7 +150,7 @@ def test_dask_cluster_and_this_process_agree(tiny_config, reference, dask_addres
     ref_out, ref = reference
     table = ref.table.read_bytes()
     files = _files(ref_out)
-    assert len(files) == 4  # one event and its result per campaign
+    assert len(files) == 6  # one event, its result and the campaign model per campaign
     result = run_sweep(tiny_config, tmp_path / "dask", keep_files=True, scheduler=dask_address)
     assert result.table.read_bytes() == table, "dask: table differs from the single-process run"
     assert _files(tmp_path / "dask") == files, "dask: event or identification files differ"

@@ -142,6 +142,10 @@ METRIC_COLUMNS = (
     "rhs_median_rel_error",
     "rhs_median_rel_error_active",
     "active_share",
+    "pooled_coverage",
+    "pooled_accuracy_all",
+    "pooled_accuracy_identifiable",
+    "pooled_rhs_median_rel_error_active",
     "truth_share_regime1",
     "truth_share_regime2",
     "truth_share_regime3",
@@ -513,6 +517,14 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         results = sorted(written, key=lambda p: p.name)
         events = sorted(events, key=lambda p: p.name)
         metrics = _flatten_scores(campaign_recovery(events, results))
+        # The campaign model on the same windows (its verdict needs enough data: see PooledSINDy.min_blocks).
+        from vivbench.identify.pooled import PooledSINDy, pool_results, write_pooled
+        from vivbench.validate.pooled import pooled_recovery
+
+        pooled = write_pooled(pool_results(results, PooledSINDy(seed=task.campaign_seed)), root / "identify")
+        ps = pooled_recovery(events, pooled, results)
+        metrics.update({f"pooled_{k}": float(ps[k]) for k in ("coverage", "accuracy_all", "accuracy_identifiable",
+                                                               "rhs_median_rel_error_active")})
     except Exception as exc:
         # Temporary paths differ from run to run; the table must not.
         message = " ".join(f"{type(exc).__name__}: {exc}".split()).replace(str(root), "<campaign>")

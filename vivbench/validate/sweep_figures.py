@@ -82,7 +82,11 @@ def plot_recovery(rows: Sequence[dict], parameters: Sequence[str], path: str | P
             y = _column(ok_rows, col)
             ax.plot(x, y, "o", color="0.55", ms=4, alpha=0.8, label="campaign")
             mx, my = _medians(x, y)
-            ax.plot(mx, my, "-", color="C0", lw=2, marker="s", ms=5, label="median")
+            ax.plot(mx, my, "-", color="C0", lw=2, marker="s", ms=5, label="median, window models")
+            pooled = _column(ok_rows, f"pooled_{col}") if ok_rows and f"pooled_{col}" in ok_rows[0] else None
+            if pooled is not None and np.isfinite(pooled).any():
+                px, py = _medians(x, pooled)
+                ax.plot(px, py, "-", color="C2", lw=2, marker="^", ms=5, label="median, campaign model (vivbench pool)")
             if col == "accuracy_all":
                 cx, cy = _medians(x, _column(ok_rows, "truth_majority_share"))
                 ax.plot(cx, cy, "--", color="C3", lw=1.2, label="chance (always the most common true regime)")
@@ -140,7 +144,8 @@ def sweep_summary(rows: Sequence[dict], varied: Sequence[str], n_tasks: int) -> 
         "n_window_equations": int(np.nansum(_column(ok_rows, "n_window_equations"))) if ok_rows else 0,
     }
     for col in ("accuracy_all", "accuracy_identifiable", "truth_majority_share", "coverage",
-                "rhs_median_rel_error", "rhs_median_rel_error_active"):
+                "rhs_median_rel_error", "rhs_median_rel_error_active", "pooled_coverage", "pooled_accuracy_all",
+                "pooled_accuracy_identifiable", "pooled_rhs_median_rel_error_active"):
         out[f"median_{col}"] = _median(ok_rows, col)
     for name in varied:
         x = _column(ok_rows, name)
