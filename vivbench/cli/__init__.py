@@ -15,7 +15,7 @@ import sys
 __all__ = ["main"]
 
 # Order of appearance in ``vivbench --help``.
-_COMMANDS = ("synth", "identify", "plot_event", "demo")
+_COMMANDS = ("synth", "identify", "refit", "plot_event", "demo")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -292,35 +292,47 @@ def _whitening(theta, support, a, rate, rank_rtol):
     return G, rank, cond
 
 
-def _build_rhs(support, G, a):
-    """CasADi Function f(x (3), u (3), p) -> dx/dt (3) in scaled state x = A / a."""
+def _build_rhs(support, a):
+    """CasADi Function f(x (3), u (3), c) -> dx/dt (3) in scaled state x = A / a.
+
+    c holds the physical coefficients on the support, equation by equation
+    (row-major order of ``support``); the map from the scaled decision
+    variables to c is applied once, outside the integration, so the graph per
+    step stays as small as the support.
+    """
     import casadi as ca
 
     ex = feature_exponents(3)
-    n_p = sum(g.shape[1] for g in G)
+    n_c = int(support.sum())
     x = ca.SX.sym("x", _N_SEC)
     u = ca.SX.sym("u", _N_SEC)
-    p = ca.SX.sym("p", n_p)
+    c = ca.SX.sym("c", n_c)
     A = x * ca.DM(a)
-    used = np.flatnonzero(support.any(axis=0))
     theta = {}
-    for c in used:
-        s, i, j = (int(v) for v in ex[c])
-        theta[c] = A[s] ** i * u[s] ** j if i and j else (A[s] ** i if i else u[s] ** j)
+    for col in np.flatnonzero(support.any(axis=0)):
+        s, i, j = (int(v) for v in ex[col])
+        theta[col] = A[s] ** i * u[s] ** j if i and j else (A[s] ** i if i else u[s] ** j)
     rhs, k = [], 0
     for m in range(_N_SEC):
         cols = np.flatnonzero(support[m])
-        r = G[m].shape[1]
-        if cols.size == 0 or r == 0:
-            rhs.append(ca.SX(0))
-            continue
-        row = ca.vertcat(*[theta[c] for c in cols]).T  # (1, |S_m|)
-        rhs.append(ca.mtimes(ca.mtimes(row, ca.DM(G[m])), p[k:k + r]) / a[m])
-        k += r
-    return ca.Function("rhs", [x, u, p], [ca.vertcat(*rhs)]), n_p
+        terms = [theta[col] * c[k + q] for q, col in enumerate(cols)]
+        k += cols.size
+        rhs.append(sum(terms[1:], terms[0]) / a[m] if terms else ca.SX(0))
+    return ca.Function("rhs", [x, u, c], [ca.vertcat(*rhs)]), n_c
 
 
-def _build_step(rhs, n_p, substeps):
+def _block_diag(G):
+    rows = sum(g.shape[0] for g in G)
+    cols = sum(g.shape[1] for g in G)
+    out = np.zeros((rows, cols))
+    r = c = 0
+    for g in G:
+        out[r:r + g.shape[0], c:c + g.shape[1]] = g
+        r, c = r + g.shape[0], c + g.shape[1]
+    return out
+
+
+def _build_step(rhs, n_c, substeps):
     """One grid step: RK4 substeps with U linear between the grid samples."""
     import casadi as ca
 
@@ -328,7 +340,7 @@ def _build_step(rhs, n_p, substeps):
     u0 = ca.SX.sym("u0", _N_SEC)
     u1 = ca.SX.sym("u1", _N_SEC)
     h = ca.SX.sym("h")
-    p = ca.SX.sym("p", n_p)
+    p = ca.SX.sym("c", n_c)
     dt = h / substeps
     xk = x
     for q in range(substeps):
@@ -343,7 +355,7 @@ def _build_step(rhs, n_p, substeps):
     return ca.Function("step", [x, u0, u1, h, p], [xk])
 
 
-def _solve(t, x_meas, U, step, n_p, p0, config: RefitConfig):
+def _solve(t, x_meas, U, step, Gblk, p0, config: RefitConfig):
     """Multiple-shooting NLP; returns p, IPOPT stats, objective."""
     import casadi as ca
 
@@ -355,8 +367,10 @@ def _solve(t, x_meas, U, step, n_p, p0, config: RefitConfig):
     starts = np.array([j * N for j in range(J_full)] + ([J_full * N] if rem else []), dtype=int)
     J = starts.size
 
+    n_c, n_p = Gblk.shape
     X = ca.MX.sym("X", _N_SEC, J)
     p = ca.MX.sym("p", n_p)
+    c = ca.mtimes(ca.DM(Gblk), p)  # physical coefficients on the support
     ssq, ends = [], []
 
     def block(n_int, first_interval, n_j):
@@ -368,7 +382,7 @@ def _solve(t, x_meas, U, step, n_p, p0, config: RefitConfig):
         hh = ca.MX.sym("h", 1, n_int)
         meas = ca.MX.sym("meas", _N_SEC, n_int + 1)
         w_end = ca.MX.sym("w_end")
-        pp = ca.MX.sym("p", n_p)
+        pp = ca.MX.sym("c", n_c)
         xs = acc(x0, ua, ub, hh, pp)  # states after each step, (3, n_int)
         traj = ca.horzcat(x0, xs)
         # the end sample belongs to the next interval, except at the end of the segment
@@ -385,7 +399,7 @@ def _solve(t, x_meas, U, step, n_p, p0, config: RefitConfig):
             w[-1] = 1.0
         out_r, out_x = interval.map(n_j)(X[:, first_interval:first_interval + n_j], ca.DM(U[idx].T),
                                          ca.DM(U[idx + 1].T), ca.DM(h[idx][None, :]), ca.DM(x_meas[midx].T),
-                                         ca.DM(w[None, :]), p)
+                                         ca.DM(w[None, :]), c)
         ssq.append(ca.sum2(out_r))
         ends.append(out_x)
 
@@ -440,12 +454,14 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     rate = np.maximum(np.sqrt(np.mean((np.diff(x_meas, axis=0) / np.diff(t)[:, None]) ** 2, axis=0)), 1.0 / span)
     theta = evaluate_library(A, U)
     G, rank, cond = _whitening(theta, support, a, rate, config.rank_rtol)
-    rhs, n_p = _build_rhs(support, G, a)
-    step = _build_step(rhs, n_p, int(config.substeps))
+    rhs, n_c = _build_rhs(support, a)
+    step = _build_step(rhs, n_c, int(config.substeps))
+    Gblk = _block_diag(G)
+    n_p = Gblk.shape[1]
     # Starting point: least-squares projection of coef0 onto the fitted directions.
     p0 = np.concatenate([np.linalg.lstsq(G[m], coef0[m, support[m]], rcond=None)[0]
                          for m in range(_N_SEC) if G[m].size]) if n_p else np.zeros(0)
-    p_opt, stats, objective, _N, _J = _solve(t, x_meas, U, step, n_p, p0, config)
+    p_opt, stats, objective, _N, _J = _solve(t, x_meas, U, step, Gblk, p0, config)
     coef = np.zeros((_N_SEC, _N_FEAT))
     k = 0
     for m in range(_N_SEC):
