@@ -94,6 +94,6 @@ def register(sub) -> None:
     s.add_argument("--max-iter", type=int, default=200, help="IPOPT iteration limit (default 200)")
     s.add_argument("--tol", type=float, default=1e-10, help="IPOPT tolerance (default 1e-10)")
     s.add_argument("--ridge", type=float, default=0.0, help="ridge weight on the scaled coefficients (default 0)")
-    s.add_argument("--hessian", default="exact", choices=("exact", "limited-memory"),
-                   help="IPOPT Hessian (limited-memory for large supports)")
+    s.add_argument("--hessian", default="auto", choices=("auto", "exact", "limited-memory"),
+                   help="IPOPT Hessian (auto: exact up to 24 supported terms, limited-memory above)")
     s.set_defaults(func=run)

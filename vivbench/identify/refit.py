@@ -61,7 +61,10 @@ from vivbench.terms import evaluate_library, feature_exponents, feature_names
 __all__ = ["RefitConfig", "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients",
            "order_rms"]
 
-_HESSIANS = ("exact", "limited-memory")
+_HESSIANS = ("auto", "exact", "limited-memory")
+#: "auto" uses the exact Hessian up to this many supported coefficients: above
+#: it, CasADi's exact Hessian of the expanded intervals costs gigabytes.
+_EXACT_HESSIAN_MAX_TERMS = 24
 _SUPPORTS = ("identified", "window", "truth")
 _N_SEC = 3
 _N_FEAT = 69
@@ -87,8 +90,10 @@ class RefitConfig:
     rank_rtol : float
         Whitened directions with singular value below this fraction of the
         largest are not fitted (see module docstring).
-    hessian : {"exact", "limited-memory"}
-        IPOPT Hessian: exact (CasADi AD) or L-BFGS.
+    hessian : {"auto", "exact", "limited-memory"}
+        IPOPT Hessian: exact (CasADi AD) or L-BFGS; ``"auto"``: exact for at
+        most 24 supported coefficients, L-BFGS above (the exact Hessian of a
+        40-term-per-equation support over 100 s took > 4 GB of memory).
     expand : bool
         Expand the (mapped) MX graph into scalar SX operations before solving:
         slower to build, much faster to evaluate for these small states.
@@ -102,7 +107,7 @@ class RefitConfig:
     tol: float = 1e-10
     ridge: float = 0.0
     rank_rtol: float = 1e-10
-    hessian: str = "exact"
+    hessian: str = "auto"
     expand: bool = True
     bound_factor: float = 10.0
     negative_tolerance: float = 0.05
@@ -156,6 +161,9 @@ class RefitResult:
         empty support).
     wall_time : float, s
         Building and solving the NLP.
+    start : {"coef0", "zero"}
+        Starting coefficients: ``coef0``, or zero when ``coef0`` made the
+        model blow up inside a shooting interval (non-finite objective).
     """
 
     coef: np.ndarray
@@ -170,6 +178,7 @@ class RefitResult:
     rank: np.ndarray
     cond: np.ndarray
     wall_time: float
+    start: str = "coef0"
 
     @property
     def identifiable(self) -> bool:
@@ -321,6 +330,12 @@ def _build_rhs(support, a):
     return ca.Function("rhs", [x, u, c], [ca.vertcat(*rhs)]), n_c
 
 
+def _hessian(kind: str, n_c: int) -> str:
+    if kind == "auto":
+        return "exact" if n_c <= _EXACT_HESSIAN_MAX_TERMS else "limited-memory"
+    return kind
+
+
 def _block_diag(G):
     rows = sum(g.shape[0] for g in G)
     cols = sum(g.shape[1] for g in G)
@@ -412,15 +427,22 @@ def _solve(t, x_meas, U, step, Gblk, p0, config: RefitConfig):
     g = ca.vec(end_states[:, :J - 1] - X[:, 1:]) if J > 1 else ca.MX(0, 1)
     w = ca.vertcat(ca.vec(X), p)
     opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.max_iter": int(config.max_iter),
-            "ipopt.tol": float(config.tol), "ipopt.hessian_approximation": config.hessian,
+            "ipopt.tol": float(config.tol), "ipopt.hessian_approximation": _hessian(config.hessian, n_c),
             # IPOPT's trial points may make the model blow up; it backs off by itself, so no warnings.
             "show_eval_warnings": False}
     solver = ca.nlpsol("refit", "ipopt", {"x": w, "f": obj, "g": g}, opts)
     w0 = np.concatenate([x_meas[starts].ravel(), p0])  # vec(X) is column-major: nodes one after another
+    fg = ca.Function("fg", [w], [obj, g, ca.gradient(obj, w), ca.jacobian(g, w)])
+    start = "coef0"
+    if not all(np.all(np.isfinite(np.asarray(v))) for v in fg(w0)):
+        # coef0 blows up (or its derivatives overflow) inside a shooting interval;
+        # zero coefficients (dA/dt = 0) never do.
+        w0[_N_SEC * J:] = 0.0
+        start = "zero"
     sol = solver(x0=w0, lbg=0.0, ubg=0.0)
     stats = solver.stats()
     w_opt = np.asarray(sol["x"]).ravel()
-    return w_opt[_N_SEC * J:], stats, float(sol["f"]), N, J
+    return w_opt[_N_SEC * J:], stats, float(sol["f"]), start
 
 
 def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = None) -> RefitResult:
@@ -461,7 +483,7 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     # Starting point: least-squares projection of coef0 onto the fitted directions.
     p0 = np.concatenate([np.linalg.lstsq(G[m], coef0[m, support[m]], rcond=None)[0]
                          for m in range(_N_SEC) if G[m].size]) if n_p else np.zeros(0)
-    p_opt, stats, objective, _N, _J = _solve(t, x_meas, U, step, Gblk, p0, config)
+    p_opt, stats, objective, start = _solve(t, x_meas, U, step, Gblk, p0, config)
     coef = np.zeros((_N_SEC, _N_FEAT))
     k = 0
     for m in range(_N_SEC):
@@ -475,7 +497,7 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     return RefitResult(coef=coef, support=support.copy(), success=bool(stats.get("success", False)),
                        status=str(stats.get("return_status", "unknown")), iterations=int(stats.get("iter_count", -1)),
                        objective=objective, simulation=sim, nmse=sim.nmse, support_size=support.sum(axis=1),
-                       rank=rank, cond=cond, wall_time=wall)
+                       rank=rank, cond=cond, wall_time=wall, start=start)
 
 
 # ---------------------------------------------------------------------------- events
@@ -550,7 +572,7 @@ class EventRefit:
         f = self.fit
         s = {"event_id": self.event_id, "t0_s": self.t0, "t1_s": self.t1, "support": self.support_kind,
              "ipopt_status": f.status, "ipopt_success": f.success, "ipopt_iterations": f.iterations,
-             "objective": f.objective, "wall_time_s": f.wall_time,
+             "objective": f.objective, "wall_time_s": f.wall_time, "refit_start": f.start,
              "coefficients_identifiable": f.identifiable}
         for m in range(_N_SEC):
             s[f"support_size_S{m + 1}"] = int(f.support_size[m])
