@@ -7,6 +7,15 @@ from vivbench.identify.forecast import Simulation, forecast, forecast_coefficien
 from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, result_path
+from vivbench.identify.refit import (
+    EventRefit,
+    RefitConfig,
+    RefitResult,
+    order_rms,
+    refit_coefficients,
+    refit_event,
+    simulate_coefficients,
+)
 from vivbench.identify.preprocess import (
     Preprocessed,
     PreprocessConfig,
@@ -31,4 +40,5 @@ __all__ = [
     "window_bounds", "window_library", "window_regimes", "wind_speed_direction",
     "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features",
     "Simulation", "forecast", "forecast_coefficients", "forecast_table", "nmse", "simulate_identified", "window_in_force",
+    "EventRefit", "RefitConfig", "RefitResult", "order_rms", "refit_coefficients", "refit_event", "simulate_coefficients",
 ]
