@@ -20,8 +20,17 @@ Method (multiple shooting, IPOPT through CasADi):
   by the RMS of its measured A, plus ``ridge`` times the squared norm of the
   scaled coefficients.
 - The graph is vectorised: one CasADi Function for a grid step, ``mapaccum``
-  over the steps of an interval and ``map`` over the intervals (a shorter
-  last interval gets its own mapaccum). No Python code runs per sample.
+  over the steps of an interval (expanded to scalar SX code) and ``map`` over
+  the intervals (a shorter last interval gets its own map). No Python code
+  runs per sample.
+- Start: the node states are the measured A; the coefficients are the given
+  ones, or zero when those blow up inside a shooting interval (a non-finite
+  objective or derivative at the start would stop IPOPT at once).
+- Hessian: exact (CasADi AD) for small supports; for more than 24 supported
+  terms IPOPT's L-BFGS approximation, because the exact Hessian of the
+  expanded intervals grows to gigabytes (measured > 4 GB for 40 terms per
+  equation over 100 s). L-BFGS converges slowly on the ill-conditioned large
+  supports: check ``status`` and ``iterations``.
 
 Scaling. IPOPT sees scaled variables only: state x_m = A_m / a_m (a_m the RMS
 of the measured A_m), and, per equation, coefficients p_m in a whitened basis
