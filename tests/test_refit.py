@@ -84,11 +84,16 @@ def test_output_error_beats_equation_error_on_noisy_data(clean):
     """1.5 % white noise on A (seed 0), 300 s at 2 Hz, the four-term model per section.
 
     The equation-error fit is least squares on the same support with a
-    Savitzky-Golay derivative (41 samples, cubic) of the noisy A. Measured:
-    RMS relative coefficient error 0.177 for the refit against 0.250 for the
+    Savitzky-Golay derivative (41 samples, cubic) of the noisy A. The refit
+    fits the initial state too (``free_initial_state=True``): a noisy first
+    sample should not anchor the trajectory. Measured: RMS relative
+    coefficient error 0.177 for the refit against 0.250 for the
     equation-error fit. Over seeds 0-7 the refit was better in 7 of 8 cases
     (refit 0.05-0.28, equation error 0.25-1.71; seed 7: 0.277 vs 0.267), so
-    this is a typical case, not a guarantee.
+    this is a typical case, not a guarantee. With the initial state fixed to
+    the noisy first sample the refit was better in only 5 of 8 (errors up to
+    1.9): the default (fixed) suits scoring from the measured A, not noisy
+    coefficient estimation.
     """
     Xi, support = clean["Xi"], clean["Xi"] != 0
     t, A, U = clean["t"], clean["A"], clean["U"]
@@ -96,7 +101,7 @@ def test_output_error_beats_equation_error_on_noisy_data(clean):
     noisy = A + 0.015 * np.sqrt(np.mean(A**2, axis=0)) * rng.standard_normal(A.shape)
     dA = savgol_filter(noisy, 41, 3, deriv=1, delta=1.0 / FS, axis=0)
     lsq = _equation_error_fit(evaluate_library(noisy, U), dA, support)
-    fit = refit_coefficients(t, noisy, U, support, lsq, RefitConfig())
+    fit = refit_coefficients(t, noisy, U, support, lsq, RefitConfig(free_initial_state=True))
     assert fit.success, fit.status
 
     def err(c):
@@ -155,7 +160,7 @@ def test_refit_event_on_truth_support(identified):
     ev = refit_event(ds, t0=t0, t1=t0 + 40.0, support=mask, truth_coef=truth, config=RefitConfig(max_iter=15))
     assert set(ev.coef) == {"sindy", "lsq", "refit", "truth"}
     assert np.array_equal(ev.support, mask) and ev.support_kind == "mask"
-    assert ev.fit.start in ("coef0", "zero") and ev.fit.iterations >= 1
+    assert ev.fit.start in ("coef0-trajectory", "coef0", "zero") and ev.fit.iterations >= 1
     assert np.all(ev.coef["refit"][~ev.support] == 0)
     s = ev.summary()
     for name in ("sindy", "lsq", "refit", "truth", "sindy_tv"):

@@ -57,7 +57,8 @@ def run(args) -> int:
     if args.support == "truth" and truth is None:
         raise ValueError("--support truth needs --event EVENT.nc (the event file with /truth/coef)")
     config = RefitConfig(shooting_interval=args.shooting_interval, substeps=args.substeps, max_iter=args.max_iter,
-                         tol=args.tol, ridge=args.ridge, hessian=args.hessian)
+                         tol=args.tol, ridge=args.ridge, hessian=args.hessian,
+                         free_initial_state=args.free_initial_state)
     try:
         ev = refit_event(result, t0=args.t0, t1=args.t1, support=args.support, truth_coef=truth, config=config)
     except ValueError as exc:
@@ -96,4 +97,6 @@ def register(sub) -> None:
     s.add_argument("--ridge", type=float, default=0.0, help="ridge weight on the scaled coefficients (default 0)")
     s.add_argument("--hessian", default="auto", choices=("auto", "exact", "limited-memory"),
                    help="IPOPT Hessian (auto: exact up to 24 supported terms, limited-memory above)")
+    s.add_argument("--free-initial-state", action="store_true",
+                   help="fit the initial state too (default: fixed to the first measured A, as in the scoring)")
     s.set_defaults(func=run)
