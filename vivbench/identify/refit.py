@@ -207,9 +207,13 @@ class RefitResult:
 
     @property
     def identifiable(self) -> bool:
-        """Every supported direction was fitted (rank == support size) and cond < 1e8."""
+        """Every supported direction was fitted (rank == support size) and cond < 1e6.
+
+        A rule of thumb: with cond >= 1e6 a relative error of 1e-6 in the
+        library (far below the envelope's) can move the coefficients by O(1).
+        """
         used = self.support_size > 0
-        return bool(np.all(self.rank[used] == self.support_size[used]) and np.all(self.cond[used] < 1e8))
+        return bool(np.all(self.rank[used] == self.support_size[used]) and np.all(self.cond[used] < 1e6))
 
 
 # ---------------------------------------------------------------------------- simulation
