@@ -16,7 +16,7 @@ import sys
 __all__ = ["main"]
 
 # Order of appearance in ``vivbench --help``.
-_COMMANDS = ("synth", "import_", "identify", "pool", "cluster", "forecast", "validate", "compare", "sweep", "plot_event", "report", "demo")
+_COMMANDS = ("synth", "import_", "identify", "pool", "cluster", "forecast", "refit", "validate", "compare", "sweep", "plot_event", "report", "demo")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -21,6 +21,14 @@ from vivbench.identify.optimizers import OPTIMIZERS, OptimizerOptions, ensemble_
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pooled import POOLED_NAME, PooledSINDy, pool_results, pooled_window_stats, with_campaign_model, write_pooled
 from vivbench.identify.pipeline import IdentifyConfig, identify_event, identify_files, list_results, result_path
+from vivbench.identify.refit import (
+    EventRefit,
+    RefitConfig,
+    RefitResult,
+    refit_coefficients,
+    refit_event,
+    simulate_coefficients,
+)
 from vivbench.identify.preprocess import (
     Preprocessed,
     PreprocessConfig,
@@ -50,4 +58,5 @@ __all__ = [
     "FEATURE_SETS", "CampaignWindows", "ClusterConfig", "ClusterResult", "campaign_windows", "cluster_scores",
     "cluster_windows", "read_result", "standardized_coefficients", "summarize_clusters",
     "OPTIMIZERS", "OptimizerOptions", "ensemble_path", "run_optimizer", "sr3_path",
+    "EventRefit", "RefitConfig", "RefitResult", "refit_coefficients", "refit_event", "simulate_coefficients",
 ]

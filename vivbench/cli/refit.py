@@ -1,0 +1,129 @@
+"""``vivbench refit``: output-error (CasADi multiple-shooting) refit of one identification result."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+_CSV_COLUMNS = ("equation", "feature", "in_support", "sindy", "lsq", "refit", "truth")
+_ORDER_COLUMNS = ("equation", "order", "sindy", "lsq", "refit", "truth")
+
+
+def _load_result(path: str):
+    import xarray as xr
+
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{path}: no such file")
+    try:
+        ds = xr.load_dataset(p, engine="h5netcdf")
+    except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
+        raise ValueError(f"{path}: cannot be read as an identification result ({type(exc).__name__})") from None
+    if ds.attrs.get("format") != "vivbench-identify":
+        raise ValueError(f"{path}: not an identification result (format attribute is {ds.attrs.get('format')!r})")
+    missing = [v for v in ("coef", "window_start", "window_end", "A", "U") if v not in ds]
+    if missing:
+        raise ValueError(f"{path}: missing variables {missing}")
+    return ds
+
+
+def _truth_coef(path: str, event_id: str):
+    from vivbench.io import event_arrays, read_event
+
+    tree = read_event(path)
+    if str(tree.attrs["event_id"]) != event_id:
+        raise ValueError(f"{path}: event {tree.attrs['event_id']!r} does not match the result's {event_id!r}")
+    arr = event_arrays(tree)
+    if "coef" not in arr:
+        raise ValueError(f"{path}: no /truth/coef (a field event or a truth outside the library)")
+    return arr["coef"]
+
+
+def _json_value(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return None if math.isnan(v) else ("inf" if v > 0 else "-inf")
+    return v
+
+
+def _own_section_mask(spec: str, features) -> "np.ndarray":
+    """Support (S, 23 S) from section-generic monomials, e.g. "U^2, A, A U": equation k uses section k's terms."""
+    import re
+
+    import numpy as np
+
+    features = [str(f) for f in features]
+    S = len(features) // 23
+    mask = np.zeros((S, len(features)), dtype=bool)
+    terms = [t.strip() for t in spec.split(",") if t.strip()]
+    if not terms:
+        raise ValueError(f"--terms {spec!r}: give comma-separated monomials such as 'U^2, A, A U, A^3 U'")
+    for term in terms:
+        if not re.fullmatch(r"(A(\^[123])?)?\s*(U(\^[1-5])?)?", term):
+            raise ValueError(f"--terms: {term!r} is not a monomial A^i U^j (i <= 3, j <= 5), e.g. 'A^2 U^3'")
+        for k in range(S):
+            name = re.sub(r"\s+", " ", term.replace("A", f"A{k + 1}").replace("U", f"U{k + 1}"))
+            if name not in features:
+                raise ValueError(f"--terms: {term!r} is not in the library")
+            mask[k, features.index(name)] = True
+    return mask
+
+
+def run(args) -> int:
+    from vivbench.identify.refit import RefitConfig, refit_event
+    from vivbench.io import atomic_path
+
+    result = _load_result(args.result)
+    event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))
+    truth = _truth_coef(args.event, event_id) if args.event else None
+    if args.support == "truth" and truth is None:
+        raise ValueError("--support truth needs --event EVENT.nc (the event file with /truth/coef)")
+    config = RefitConfig(shooting_interval=args.shooting_interval, substeps=args.substeps, max_iter=args.max_iter,
+                         tol=args.tol, ridge=args.ridge, hessian=args.hessian,
+                         free_initial_state=args.free_initial_state)
+    support = _own_section_mask(args.terms, result["feature"].values) if args.terms else args.support
+    try:
+        ev = refit_event(result, t0=args.t0, t1=args.t1, support=support, truth_coef=truth, config=config)
+    except ValueError as exc:
+        raise ValueError(f"{args.result}: {exc}") from None
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, columns, rows in ((f"refit_{event_id}.csv", _CSV_COLUMNS, ev.rows()),
+                                (f"refit_orders_{event_id}.csv", _ORDER_COLUMNS, ev.order_rows())):
+        with atomic_path(out / name) as tmp, open(tmp, "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=columns, extrasaction="ignore")
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: (f"{v:.10g}" if isinstance(v, float) else v) for k, v in row.items()})
+    summary = {k: _json_value(v) for k, v in ev.summary().items()}
+    with atomic_path(out / "summary.json") as tmp:
+        Path(tmp).write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
+    print(f"refit {event_id} [{ev.t0:g}, {ev.t1:g}] s on the {ev.support_kind} support: IPOPT {ev.fit.status} "
+          f"after {ev.fit.iterations} iterations; wrote {out}")
+    return 0
+
+
+def register(sub) -> None:
+    s = sub.add_parser("refit", help="output-error refit of coefficients on a support (CasADi, IPOPT)")
+    s.add_argument("result", help="identification result <event_id>.identify.nc")
+    s.add_argument("--out", required=True, help="output directory")
+    s.add_argument("--event", default=None, help="the event file, for the truth coefficients and support")
+    s.add_argument("--t0", type=float, default=None, help="segment start, s (default: start of the grid)")
+    s.add_argument("--t1", type=float, default=None, help="segment end, s (default: end of the grid)")
+    s.add_argument("--support", default="identified", choices=("identified", "window", "truth"),
+                   help="identified: union over the windows in force in the segment; window: the window in force "
+                        "at t0; truth: the exact coefficients' nonzeros (needs --event)")
+    s.add_argument("--terms", default=None,
+                   help="instead of --support: section-generic monomials, each equation using its own section's, "
+                        "e.g. 'U^2, A, A U, A^2 U, A^3 U'")
+    s.add_argument("--shooting-interval", type=float, default=20.0, help="shooting interval, s (default 20)")
+    s.add_argument("--substeps", type=int, default=1, help="RK4 steps per grid step (default 1)")
+    s.add_argument("--max-iter", type=int, default=200, help="IPOPT iteration limit (default 200)")
+    s.add_argument("--tol", type=float, default=1e-10, help="IPOPT tolerance (default 1e-10)")
+    s.add_argument("--ridge", type=float, default=0.0, help="ridge weight on the scaled coefficients (default 0)")
+    s.add_argument("--hessian", default="auto", choices=("auto", "exact", "limited-memory"),
+                   help="IPOPT Hessian (auto: exact up to 24 supported terms, limited-memory above)")
+    s.add_argument("--free-initial-state", action="store_true",
+                   help="fit the initial state too (default: fixed to the first measured A, as in the scoring)")
+    s.set_defaults(func=run)
