@@ -82,7 +82,13 @@ def run(args) -> int:
     # The refit on the full identified or true support does not converge in reasonable time (README);
     # the demo refits a small, identifiable support around the forecast's t0.
     t0 = _read_json(out / "forecast" / "summary.json").get("t0_s")
-    window = ["--t0", f"{max(0.0, t0 - 500.0):g}", "--t1", f"{t0 + 300.0:g}"] if isinstance(t0, (int, float)) else []
+    window = []
+    if isinstance(t0, (int, float)):
+        import xarray as xr
+
+        with xr.open_dataset(result, engine="h5netcdf") as ds:
+            lo, hi = float(ds["time"].values[0]), float(ds["time"].values[-1])
+        window = ["--t0", f"{max(lo, t0 - 500.0):g}", "--t1", f"{min(hi, t0 + 300.0):g}"]
     _step(["refit", str(result), "--out", str(out / "refit"), "--event", str(campaign / f"{event_id}.nc"),
            "--terms", REFIT_TERMS, *window], out / "refit", failures)
     validate = ["validate", str(campaign), str(identify), "--out", str(out / "validate")]
