@@ -143,9 +143,19 @@ def window_regimes(
     same_support = (path.support == path.best_support[:, :, None, :]).all(axis=-1)
     near &= ~same_support
     if near.any():
-        r_path = order_contributions_basis(theta, path.coef, orders)  # (W, S, T, n, 4)
-        reg_path = _regimes(r_path, A, valid, tau)
-        seen |= np.bitwise_or.reduce(np.where(near, 1 << (reg_path.astype(int) - 1), 0), axis=2)
+        # Only the competitors' contributions are needed: gather them, padded to the
+        # largest count per window (most thresholds are not competitors).
+        k = near.reshape(W, -1).sum(axis=1)
+        K = int(k.max())
+        flat = np.argsort(~near.reshape(W, -1), axis=1, kind="stable")[:, :K]  # competitors first
+        has = np.arange(K)[None, :] < k[:, None]
+        coef_near = np.take_along_axis(path.coef.reshape(W, S * T, p), flat[:, :, None], axis=1)
+        r_near = order_contributions_basis(theta, np.where(has[..., None], coef_near, 0.0), orders)  # (W, K, n, 4)
+        s_of = flat // T
+        A_of = np.take_along_axis(np.moveaxis(A, 2, 1), s_of[:, :, None], axis=1)  # (W, K, n): each competitor's section
+        reg_near = _regimes(r_near[:, :, None], np.moveaxis(A_of, 1, 2), valid, tau)[:, :, 0]  # (W, K)
+        w_idx, k_idx = np.nonzero(has)
+        np.bitwise_or.at(seen, (w_idx, s_of[w_idx, k_idx]), 1 << (reg_near[w_idx, k_idx].astype(int) - 1))
         n_equiv += near.sum(axis=2)
     # 2) competitors restricted to a subset of the orders of A. A competitor
     #    counts when its residual RMS is within (1 + fit_tolerance) of the
