@@ -202,7 +202,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     sup_all, sup_ok = [], []
     skipped, truth_by_key = {}, {}
     # The campaign model of ``vivbench pool``, scored beside the window models when present.
-    from vivbench.identify.pooled import POOLED_NAME
+    from vivbench.identify.pooled import POOLED_NAME, with_campaign_model
 
     pooled_path = results_dir / POOLED_NAME
     pooled = None
@@ -238,9 +238,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
             p_reg.append(pooled["regime"].values[sel].astype(int))
             p_ok.append(pooled["identifiable"].values[sel].astype(bool))
             if "coef" in truth.data_vars:
-                pres = res.copy()
-                pres["coef"] = (res["coef"].dims, np.broadcast_to(pooled["coef"].values, res["coef"].shape).copy())
-                pe, pact = window_rhs_errors(pres, truth["coef"].values, truth["r"].values, active_share=active_share)
+                pe, pact = window_rhs_errors(with_campaign_model(res, pooled), truth["coef"].values, truth["r"].values,
+                                             active_share=active_share)
                 p_errs.append(pe.ravel())
                 p_act.append(pact.ravel())
         if "coef" in truth.data_vars:

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import xarray as xr
 
-from vivbench.terms import evaluate_library
-from vivbench.validate.recovery import regime_scores, rhs_relative_error, truth_window_regimes
+from vivbench.validate.recovery import regime_scores, truth_window_regimes, window_rhs_errors
 
 __all__ = ["pooled_recovery"]
 
@@ -31,41 +28,39 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         ``rhs_median_rel_error`` and ``rhs_median_rel_error_active`` (the one
         pooled model evaluated over every window).
     """
+    from vivbench.identify.pooled import with_campaign_model
     from vivbench.io import read_event
 
     with xr.open_dataset(pooled_file, engine="h5netcdf") as ds:
         pooled = ds.load()
-    events = {read_event(p).attrs["event_id"]: p for p in map(Path, event_files)}
+    truths = {}
+    for path in event_files:
+        tree = read_event(path)
+        truths[str(tree.attrs["event_id"])] = tree["truth"].ds
     results = {}
-    for p in result_files:
-        with xr.open_dataset(p, engine="h5netcdf") as ds:
-            results[str(ds.attrs["event_id"])] = ds[["A", "U"]].load()
-    coef = pooled["coef"].values
+    for path in result_files:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            results[str(ds.attrs["event_id"])] = ds.load()
     event_of = pooled["event_id"].values.astype(str)
-    regimes, truths, flags, errs, errs_active = [], [], [], [], []
+    regimes, truths_w, flags, errs, errs_active = [], [], [], [], []
     for event_id in dict.fromkeys(event_of):
-        if event_id not in events:
-            raise ValueError(f"{pooled_file}: event {event_id} has no event file among the {len(events)} given")
+        if event_id not in truths:
+            raise ValueError(f"{pooled_file}: event {event_id} has no event file among the {len(truths)} given")
         if event_id not in results:
             raise ValueError(f"{pooled_file}: event {event_id} has no identification result among those given")
         sel = event_of == event_id
-        truth = read_event(events[event_id])["truth"].ds
-        start, end = pooled["window_start"].values[sel], pooled["window_end"].values[sel]
+        truth = truths[event_id]
+        res = results[event_id]
+        if not np.array_equal(pooled["window_start"].values[sel], res["window_start"].values):
+            raise ValueError(f"{pooled_file}: its windows of {event_id} differ from the result's; re-run vivbench pool")
         regimes.append(pooled["regime"].values[sel])
         flags.append(pooled["identifiable"].values[sel].astype(bool))
-        truths.append(truth_window_regimes(truth, start, end, tau=tau))
-        coef_true = truth["coef"].values
-        scale = np.sqrt(np.mean(truth["r"].values.sum(-1) ** 2, axis=0))
-        res = results[event_id]
-        t, A, U = res["time"].values, res["A"].values, res["U"].values
-        for w in range(start.size):
-            m = (t >= start[w]) & (t < end[w]) & np.isfinite(A).all(1) & np.isfinite(U).all(1)
-            e = rhs_relative_error(coef, coef_true, A[m], U[m])
-            f_true = evaluate_library(A[m], U[m]) @ coef_true.T
-            active = np.sqrt(np.mean(f_true**2, axis=0)) >= active_share * scale
-            errs.append(e)
-            errs_active.append(np.where(active, e, np.nan))
-    scores = regime_scores(np.concatenate(regimes), np.concatenate(truths), np.concatenate(flags))
+        truths_w.append(truth_window_regimes(truth, res["window_start"].values, res["window_end"].values, tau=tau))
+        e, act = window_rhs_errors(with_campaign_model(res, pooled), truth["coef"].values, truth["r"].values,
+                                   active_share=active_share)
+        errs.append(e.ravel())
+        errs_active.append(np.where(act, e, np.nan).ravel())
+    scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))
     scores["rhs_median_rel_error"] = float(np.nanmedian(np.concatenate(errs)))
     scores["rhs_median_rel_error_active"] = float(np.nanmedian(np.concatenate(errs_active)))
     return scores
