@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -44,14 +45,23 @@ from vivbench.terms import evaluate_library, feature_names, section_exponents
 __all__ = ["POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "with_campaign_model", "write_pooled"]
 
 
-def _record_library(t, A, U):
-    """Float arrays of one record and its physical library, zero on samples with a non-finite term (ok False)."""
+class _Record(NamedTuple):
+    """One record's library (zero on samples with a non-finite term) and its windows' sample ranges."""
+
+    A: np.ndarray
+    theta: np.ndarray
+    ok: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def _record(t, A, U, window_start, window_end) -> _Record:
     t = np.asarray(t, dtype=float)
     A = np.asarray(A, dtype=float)
-    U = np.asarray(U, dtype=float)
-    theta = evaluate_library(A, U)
+    theta = evaluate_library(A, np.asarray(U, dtype=float))
     ok = np.isfinite(theta).all(axis=1)
-    return t, A, U, np.where(ok[:, None], theta, 0.0), ok
+    return _Record(A=A, theta=np.where(ok[:, None], theta, 0.0), ok=ok,
+                   lo=np.searchsorted(t, window_start, side="left"), hi=np.searchsorted(t, window_end, side="left"))
 
 
 def _window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -112,8 +122,8 @@ def _select(path, rss_true, n_samples, floor):
     return pick, sel, best_rss, best_aicc, has
 
 
-def _integrated_correlation(resid: np.ndarray, block: np.ndarray) -> np.ndarray:
-    """Integrated autocorrelation time (in samples) of each residual column, within blocks.
+def _integrated_correlation(resid: np.ndarray) -> np.ndarray:
+    """Integrated autocorrelation time (in samples) of each residual column.
 
     1 + 2 sum_k rho_k, summed up to the first lag where rho turns non-positive:
     the factor by which correlated residuals inflate the variance of a
@@ -311,15 +321,16 @@ class PooledSINDy:
         self.n_samples_ = int(n)
         self.n_blocks_ = int(offset)
         self.enough_data_ = bool(offset >= self.min_blocks)
-        self.cond_ = float(np.linalg.cond(lib.theta[0]))
-        self.y_scale_ = ys
         R = factors[0]
+        # The stacked block factors have the singular values of the whole library.
+        self.cond_ = float(np.linalg.cond(R.reshape(-1, p)))
+        self.y_scale_ = ys
         gram = np.einsum("bki,bkj->ij", R, R) + self.alpha * np.eye(p)
         self._gram_inv_ = np.linalg.inv(gram)
         self._to_physical_ = lib.to_physical[0]
         self._rss_scaled_ = best_rss[0]
         resid = y - lib.theta[0] @ np.nan_to_num(coef_scaled[0]).T
-        self.correlation_samples_ = _integrated_correlation(resid, block)
+        self.correlation_samples_ = _integrated_correlation(resid)
         self.feature_names_ = feature_names(S)
         self.n_sections_ = S
         return self
@@ -342,11 +353,12 @@ class PooledSINDy:
             regime (NaN without replicates), ``order_rms`` (W, S, 4) m/s.
         """
         models = np.concatenate([self.coef_[None], self.coef_bootstrap_], axis=0)
-        R, c1, nv = pooled_window_stats(models, t, A, U, window_start, window_end)
+        rec = _record(t, A, U, window_start, window_end)  # evaluated once for the statistics and the margins
+        R, c1, nv = _window_stats(models, rec)
         reg = regime_rule(R, c1, self.tau)  # (B+1, W, S)
         reg = np.where(nv[None, :, None] > 0, reg, 0).astype(np.int8)
         point = reg[0]
-        dR, dc1 = self._margins(t, A, U, window_start, window_end)
+        dR, dc1 = self._margins(rec)
         robust = _regime_is_determined(R[0], dR, c1[0], dc1, self.tau) & (point > 0)
         if models.shape[0] > 1 and self.enough_data_:
             agree = (reg[1:] == point[None]).mean(axis=0)
@@ -357,7 +369,7 @@ class PooledSINDy:
         return {"regime": point, "identifiable": identifiable, "agreement": agree, "robust": robust,
                 "order_rms": R[0], "order_rms_margin": dR}
 
-    def _margins(self, t, A, U, window_start, window_end):
+    def _margins(self, rec: _Record):
         """How far models that fit equally well can move each window's order RMS and c1.
 
         Over all models xi + delta with ||X delta||^2 <= b (X the pooled scaled
@@ -369,12 +381,10 @@ class PooledSINDy:
         window mean of r_1/A is the same bound on a linear functional. Both
         are in m/s and 1/s after scaling by the target's RMS.
         """
-        t, A, U, phys, ok = _record_library(t, A, U)
+        A, ok, lo, hi = rec.A, rec.ok, rec.lo, rec.hi
         S = A.shape[1]
-        X = phys @ self._to_physical_
+        X = rec.theta @ self._to_physical_
         orders = np.tile(section_exponents()[:, 0], S)
-        lo = np.searchsorted(t, window_start, side="left")
-        hi = np.searchsorted(t, window_end, side="left")
 
         def wsum(x):
             return _window_sums(x, lo, hi)
@@ -383,7 +393,7 @@ class PooledSINDy:
         n_max = int(max((hi - lo).max(initial=0), 1))
         idx = lo[:, None] + np.arange(n_max)[None, :]
         inwin = idx < hi[:, None]
-        idx = np.minimum(idx, t.size - 1)
+        idx = np.minimum(idx, A.shape[0] - 1)
         # Models the data cannot reject: a chi-square region in p dimensions with the
         # residual variance inflated by the residuals' integrated correlation time.
         from scipy.stats import chi2
@@ -443,13 +453,15 @@ def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
     R : ndarray, shape (M, W, S, 4), m/s; c1 : ndarray, shape (M, W, S), 1/s;
     n_valid : ndarray, shape (W,)
     """
-    t, A, U, theta, ok = _record_library(t, A, U)
+    return _window_stats(models, _record(t, A, U, window_start, window_end))
+
+
+def _window_stats(models: np.ndarray, rec: _Record):
+    A, theta, ok, lo, hi = rec
     S = A.shape[1]
     orders = np.tile(section_exponents()[:, 0], S)
     models = np.nan_to_num(np.asarray(models, dtype=float))
     M = models.shape[0]
-    lo = np.searchsorted(t, window_start, side="left")
-    hi = np.searchsorted(t, window_end, side="left")
     okA = ok[:, None] & (A > 0)
     invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
 
