@@ -33,6 +33,7 @@ from vivbench.validate.plateau import Plateau, clearest_plateau, measured_platea
 from vivbench.validate.pooled import pooled_recovery
 from vivbench.validate.recovery import (
     campaign_recovery,
+    recovery_by_event,
     regime_scores,
     rhs_relative_error,
     truth_window_regimes,
@@ -74,6 +75,7 @@ __all__ = [
     "pooled_support",
     "read_cluster_labels",
     "read_forecast_tables",
+    "recovery_by_event",
     "regime_report",
     "regime_scores",
     "rhs_error_summary",

@@ -14,7 +14,7 @@ import xarray as xr
 from vivbench.regime import classify_regime
 from vivbench.terms import evaluate_library
 
-__all__ = ["truth_window_regimes", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
+__all__ = ["recovery_by_event", "truth_window_regimes", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
 
 
 def truth_window_regimes(truth: xr.Dataset, window_start: np.ndarray, window_end: np.ndarray, tau: float = 0.2) -> np.ndarray:
@@ -151,25 +151,37 @@ def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -
         window-equations) and ``truth_regime_shares``. The fuller tables are
         :func:`vivbench.validate.validate_campaign`.
     """
+    return recovery_by_event(event_files, result_files, active_share=active_share)[0]
+
+
+def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -> tuple[dict, list[dict]]:
+    """:func:`campaign_recovery` over all events and for each event, every event scored once.
+
+    Returns
+    -------
+    campaign : dict, as :func:`campaign_recovery`
+    events : list of dict, the same scores per event, in the order of the files
+    """
     from vivbench.io import read_event
 
-    regimes, truths, flags, errs, errs_active = [], [], [], [], []
+    parts = []
     for ev_path, res_path in zip(event_files, result_files):
         truth = read_event(ev_path)["truth"].ds
         with xr.open_dataset(res_path, engine="h5netcdf") as res:
             res = res.load()
         start, end = res["window_start"].values, res["window_end"].values
-        regimes.append(res["regime"].values)
-        truths.append(truth_window_regimes(truth, start, end))
-        flags.append(res["identifiable"].values.astype(bool))
         e, active = window_rhs_errors(res, truth["coef"].values, truth["r"].values, active_share=active_share)
-        errs.append(e.ravel())
-        errs_active.append(np.where(active, e, np.nan).ravel())
-    scores = regime_scores(np.concatenate(regimes), np.concatenate(truths), np.concatenate(flags))
-    errs_active = np.concatenate(errs_active)
-    scores["rhs_median_rel_error"] = float(np.nanmedian(np.concatenate(errs)))
-    scores["rhs_median_rel_error_active"] = float(np.nanmedian(errs_active))
-    scores["active_share"] = float(np.mean(np.isfinite(errs_active)))
-    truth_all = np.concatenate(truths).ravel()
-    scores["truth_regime_shares"] = {k: float(np.mean(truth_all == k)) for k in (1, 2, 3, 4)}
+        parts.append({"regime": res["regime"].values, "truth": truth_window_regimes(truth, start, end),
+                      "flag": res["identifiable"].values.astype(bool), "err": e.ravel(),
+                      "err_active": np.where(active, e, np.nan).ravel()})
+    return _recovery_scores(parts), [_recovery_scores([p]) for p in parts]
+
+
+def _recovery_scores(parts: list[dict]) -> dict:
+    cat = {k: np.concatenate([np.ravel(p[k]) for p in parts]) for k in parts[0]}
+    scores = regime_scores(cat["regime"], cat["truth"], cat["flag"])
+    scores["rhs_median_rel_error"] = float(np.nanmedian(cat["err"]))
+    scores["rhs_median_rel_error_active"] = float(np.nanmedian(cat["err_active"]))
+    scores["active_share"] = float(np.mean(np.isfinite(cat["err_active"])))
+    scores["truth_regime_shares"] = {k: float(np.mean(cat["truth"] == k)) for k in (1, 2, 3, 4)}
     return scores
