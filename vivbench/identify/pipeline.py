@@ -314,6 +314,13 @@ def _peek_event_id(path) -> str | None:
     return eid if isinstance(eid, str) else None
 
 
+def _file_size(path) -> int:
+    try:
+        return Path(path).stat().st_size
+    except OSError:
+        return 0
+
+
 def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: IdentifyConfig | None = None, *,
                    workers: int = 1, progress: Callable[[str], None] | None = None) -> tuple[list[Path], dict[str, str]]:
     """Identify every event file; a failing file is reported and the others finish.
@@ -356,6 +363,9 @@ def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: Ide
         for p in todo:
             record(p, lambda p=p: _identify_one(str(p), str(out), config))
     else:
+        # Longest first (file size as the proxy): a long event started last
+        # would leave the other workers idle while it finishes.
+        todo = sorted(todo, key=_file_size, reverse=True)
         with ProcessPoolExecutor(max_workers=workers) as pool:
             futs = {pool.submit(_identify_one, str(p), str(out), config): p for p in todo}
             for fut in as_completed(futs):
