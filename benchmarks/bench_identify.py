@@ -43,6 +43,7 @@ from vivbench.synth import (  # noqa: E402
     generate_campaign,
 )
 from vivbench.validate import campaign_recovery, pooled_recovery  # noqa: E402
+from vivbench.io import NETCDF_ENGINE  # noqa: E402
 
 CLEAN = GeneratorConfig(
     aero=AeroConfig(cl_unlocked=0.0, buffeting_w=0.0),
@@ -92,7 +93,7 @@ def main(n_events: int = 31) -> dict:
         # The regressions alone against the pysindy loop, on the default campaign's own windows.
         ev_arrays = []
         for path in sorted((tmp / "default" / "results2").glob("*.identify.nc")):
-            with xr.open_dataset(path, engine="h5netcdf") as res:
+            with xr.open_dataset(path, engine=NETCDF_ENGINE) as res:
                 seg = res["segment"].values
                 keep = seg == 0
                 ev_arrays.append((res["time"].values[keep], res["A"].values[keep], res["U"].values[keep],

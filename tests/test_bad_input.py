@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 
 from vivbench.cli import main
 from vivbench.identify import IdentifyConfig, PreprocessConfig, identify_files
-from vivbench.io import write_netcdf_atomic
+from vivbench.io import NETCDF_ENGINE, write_netcdf_atomic
 from vivbench.quality import G
 from vivbench.synth import CampaignConfig, campaign_specs, generate_event
 
@@ -78,7 +78,7 @@ def _values(group, var, fn):
 
 def _xarray(edit):
     def apply(path: Path, base: Path):
-        tree = xr.load_datatree(base, engine="h5netcdf")
+        tree = xr.load_datatree(base, engine=NETCDF_ENGINE)
         write_netcdf_atomic(edit(tree), path)
     return apply
 
@@ -186,7 +186,7 @@ def _check_outcome(path: Path, out: Path, label: str, expected, written, failure
     if written:
         assert not failures, (label, failures)
         assert expected in ("ok", "either") or expected[0] == "spikes", (label, "accepted", expected)
-        ds = xr.load_dataset(written[0], engine="h5netcdf")
+        ds = xr.load_dataset(written[0], engine=NETCDF_ENGINE)
         for key in ("quality_missing_fraction_wind", "quality_missing_fraction_accel", "quality_spikes_wind",
                     "quality_spikes_accel", "quality_segments", "quality_rate_wind_hz", "quality_rate_accel_hz"):
             assert key in ds.attrs, (label, key)

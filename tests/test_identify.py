@@ -11,7 +11,7 @@ import xarray as xr
 from scipy.integrate import solve_ivp
 
 from vivbench.identify import IdentifyConfig, WindowedSINDy, identify_event, identify_files
-from vivbench.io import read_event, write_event
+from vivbench.io import NETCDF_ENGINE, read_event, write_event
 from vivbench.synth import (
     AeroConfig,
     DefectConfig,
@@ -146,7 +146,7 @@ def test_identify_files_same_bytes_for_any_worker_count(small_campaign, tmp_path
     assert not fail1 and not fail2
     for a, b in zip(one, two):
         assert a.read_bytes() == b.read_bytes(), a.name
-    back = xr.open_dataset(one[0], engine="h5netcdf")
+    back = xr.open_dataset(one[0], engine=NETCDF_ENGINE)
     assert back.attrs["format"] == "vivbench-identify" and back.sizes["feature"] == 69
     back.close()
 

@@ -23,6 +23,7 @@ from vivbench.identify import (
 from vivbench.identify.clustering import DensityPeaks
 from vivbench.terms import evaluate_library, feature_names
 from vivbench.validate import clearest_plateau, measured_plateau, truth_plateau
+from vivbench.io import NETCDF_ENGINE
 
 FS = 4.0
 
@@ -217,7 +218,7 @@ def test_plateau_pickers(small_campaign, identified):
     with pytest.raises(ValueError, match="no event has a run of true regime 4"):
         clearest_plateau(small_campaign.files[0].parent)
     _out, _c, written = identified
-    with xr.open_dataset(written[0], engine="h5netcdf") as res:
+    with xr.open_dataset(written[0], engine=NETCDF_ENGINE) as res:
         m = measured_plateau(res.load())
         A2 = res["A"].values[:, 1]
         inside = (res["time"].values >= m.start) & (res["time"].values <= m.end)

@@ -94,7 +94,7 @@ def _groups(tree: xr.DataTree) -> dict:
 
 def _write_raw(groups: dict, path: Path) -> Path:
     """Write a (possibly broken) tree with xarray alone, bypassing validation."""
-    xr.DataTree.from_dict(groups).to_netcdf(path, engine="h5netcdf")
+    xr.DataTree.from_dict(groups).to_netcdf(path, engine=io.NETCDF_ENGINE)
     return path
 
 

@@ -15,7 +15,7 @@ import xarray as xr
 
 from tests.helpers import assert_close
 from vivbench.identify import forecast_table, identify_files
-from vivbench.io import read_event, write_event, write_netcdf_atomic
+from vivbench.io import NETCDF_ENGINE, read_event, write_event, write_netcdf_atomic
 from vivbench.synth import GeneratorConfig, exact_coefficients
 from vivbench.terms import feature_exponents
 from vivbench.validate import (
@@ -276,7 +276,7 @@ def test_validate_perfect_results_score_perfectly(identified, tmp_path):
     camp, _res_dir, results = identified
     labels = []
     for path in results:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
+        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             ds = ds.load()
         truth = read_event(camp.files[0].parent / f"{ds.attrs['event_id']}.nc")["truth"].ds
         xi = truth["coef"].values
@@ -310,7 +310,7 @@ def test_cli_validate_writes_every_file(identified, tmp_path):
     # forecast tables as forecast_table writes them: stopped runs are counted, never averaged
     fc = tmp_path / "fc"
     fc.mkdir()
-    with xr.open_dataset(results[0], engine="h5netcdf") as res:
+    with xr.open_dataset(results[0], engine=NETCDF_ENGINE) as res:
         res = res.load()
     rows = forecast_table(res, float(res["window_start"].values[0]), 60.0, ds=(0, 50))
     with (fc / f"forecast_{res.attrs['event_id']}.csv").open("w", newline="") as fh:

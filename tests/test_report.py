@@ -15,7 +15,7 @@ import xarray as xr
 
 from vivbench.cli import main
 from vivbench.identify import forecast_table
-from vivbench.io import read_event
+from vivbench.io import NETCDF_ENGINE, read_event
 from vivbench.report import EXTRA_STEPS, forecast_figure, sensor_layout_figure, write_report
 
 _LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")
@@ -33,7 +33,7 @@ def forecast_dir(identified, tmp_path_factory):
     """A step directory with real content: forecast NMSE table, its figure and headline numbers."""
     _campaign, _results, written = identified
     out = tmp_path_factory.mktemp("forecast")
-    with xr.open_dataset(written[0], engine="h5netcdf") as ds:
+    with xr.open_dataset(written[0], engine=NETCDF_ENGINE) as ds:
         res = ds.load()
     t0 = float(res["window_start"].values[len(res["window_start"]) // 3])
     rows = forecast_table(res, t0, 120.0, ds=(0, 25, 50))

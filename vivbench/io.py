@@ -47,6 +47,7 @@ __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
     "NOMINAL_RATES",
+    "NETCDF_ENGINE",
     "COEF_UNITS",
     "build_event",
     "validate_event",
@@ -87,6 +88,11 @@ _TRUTH_KEYS = ("time", "U", "A", "r", "regime", "config", "coef", "feature", "ta
 # time: 0.22 -> 0.02 MB), so it is used for 8-byte types only. Deflate rather
 # than lzf because every netCDF-C/HDF5 reader can decode it.
 _DEFLATE_LEVEL = 1
+# The netCDF-C library (netCDF4-python) reads and writes these files 3x faster
+# than h5netcdf (measured: 0.035 s against 0.11 s to write a result file of 25
+# variables, 0.033 s against 0.096 s to read an event): h5netcdf's per-variable
+# bookkeeping in Python dominated the identification of short events.
+NETCDF_ENGINE = "netcdf4"
 _MIN_COMPRESSED_SIZE = 4096  # elements; smaller arrays are not worth a chunk index
 _CHUNK_BYTES = 1 << 18
 
@@ -619,7 +625,7 @@ def write_netcdf_atomic(data: xr.Dataset | xr.DataTree, path) -> Path:
     path = Path(path)
     tree = data if isinstance(data, xr.DataTree) else xr.DataTree(dataset=data)
     with atomic_path(path) as tmp:
-        tree.to_netcdf(tmp, mode="w", engine="h5netcdf", encoding=_encoding(tree))
+        tree.to_netcdf(tmp, mode="w", engine=NETCDF_ENGINE, encoding=_encoding(tree))
     return path
 
 
@@ -638,8 +644,8 @@ def _encoding(tree: xr.DataTree) -> dict:
                 row_bytes = var.dtype.itemsize * int(np.prod(var.shape[1:], dtype=np.int64))
                 rows = max(1, min(var.shape[0], _CHUNK_BYTES // max(row_bytes, 1)))
                 e.update(
-                    compression="gzip",
-                    compression_opts=_DEFLATE_LEVEL,
+                    zlib=True,
+                    complevel=_DEFLATE_LEVEL,
                     shuffle=var.dtype.itemsize >= 8,
                     chunksizes=(rows, *var.shape[1:]),
                 )
@@ -691,7 +697,7 @@ def read_event(path) -> xr.DataTree:
     try:
         _check_stored_shapes(path)
         tree = xr.load_datatree(
-            path, engine="h5netcdf", decode_times=False, decode_timedelta=False, phony_dims="sort"
+            path, engine=NETCDF_ENGINE, decode_times=False, decode_timedelta=False
         )
     except _Breach as breach:
         raise EventFormatError(name, str(breach)) from None

@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from vivbench.cli._common import DEFAULT_WORKERS, duration
+from vivbench.io import NETCDF_ENGINE
 
 
 
@@ -86,7 +87,7 @@ def run(args) -> int:
     if isinstance(t0, (int, float)):
         import xarray as xr
 
-        with xr.open_dataset(result, engine="h5netcdf") as ds:
+        with xr.open_dataset(result, engine=NETCDF_ENGINE) as ds:
             lo, hi = float(ds["time"].values[0]), float(ds["time"].values[-1])
         window = ["--t0", f"{max(lo, t0 - 500.0):g}", "--t1", f"{min(hi, t0 + 300.0):g}"]
     _step(["refit", str(result), "--out", str(out / "refit"), "--event", str(campaign / f"{event_id}.nc"),

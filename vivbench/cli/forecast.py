@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from vivbench.io import NETCDF_ENGINE
 
 _COLUMNS = ("kind", "clip", "d_s", "section", "nmse", "stopped", "stopped_at_s", "covered", "n_windows",
             "growth_rate_per_s", "reason")
@@ -167,7 +168,7 @@ def run(args) -> int:
         raise ValueError(f"{pooled_path}: no such campaign model file")
     if pooled_path.is_file():
         # The campaign model of ``vivbench pool``: one model for all windows, so d plays no role.
-        with xr.open_dataset(pooled_path, engine="h5netcdf") as ds:
+        with xr.open_dataset(pooled_path, engine=NETCDF_ENGINE) as ds:
             cm = with_campaign_model(result, ds.load())
         csim = simulate_identified(cm)
         cfc = forecast(cm, t0, horizon)

@@ -6,6 +6,7 @@ import csv
 import json
 import math
 from pathlib import Path
+from vivbench.io import NETCDF_ENGINE
 
 _CSV_COLUMNS = ("equation", "feature", "in_support", "sindy", "lsq", "refit", "truth")
 _ORDER_COLUMNS = ("equation", "order", "sindy", "lsq", "refit", "truth")
@@ -18,7 +19,7 @@ def _load_result(path: str):
     if not p.is_file():
         raise ValueError(f"{path}: no such file")
     try:
-        ds = xr.load_dataset(p, engine="h5netcdf")
+        ds = xr.load_dataset(p, engine=NETCDF_ENGINE)
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
         raise ValueError(f"{path}: cannot be read as an identification result ({type(exc).__name__})") from None
     if ds.attrs.get("format") != "vivbench-identify":

@@ -70,6 +70,7 @@ import xarray as xr
 from vivbench.identify.clustering import KERNELS, DensityPeaks, order_features
 from vivbench.identify.library import window_library
 from vivbench.terms import feature_names
+from vivbench.io import NETCDF_ENGINE
 
 __all__ = [
     "FEATURE_SETS",
@@ -101,7 +102,7 @@ def read_result(path) -> xr.Dataset:
     if not path.is_file():
         raise ValueError(f"{path}: no such result file")
     try:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
+        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             ds = ds.load()
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
         raise ValueError(f"{path}: cannot be read as a NetCDF-4 result ({type(exc).__name__})") from exc

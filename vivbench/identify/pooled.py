@@ -41,6 +41,7 @@ from vivbench.identify.engine import DEFAULT_THRESHOLDS, StlsqSettings, aicc, st
 from vivbench.identify.library import window_library
 from vivbench.regime import DEFAULT_TAU, regime_rule
 from vivbench.terms import evaluate_library, feature_names, section_exponents
+from vivbench.io import NETCDF_ENGINE
 
 __all__ = ["POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "with_campaign_model", "write_pooled"]
 
@@ -510,7 +511,7 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
     model = model or PooledSINDy()
     results = []
     for path in result_files:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
+        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             if ds.attrs.get("format") != "vivbench-identify":
                 raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
             results.append((str(path), ds[["A", "U", "dA", "window_start", "window_end"]].load(), dict(ds.attrs),

@@ -26,7 +26,7 @@ import xarray as xr
 
 import vivbench
 from vivbench.identify.pooled import POOLED_NAME, with_campaign_model
-from vivbench.io import atomic_path, list_events, read_event
+from vivbench.io import NETCDF_ENGINE, atomic_path, list_events, read_event
 
 __all__ = ["EXTRA_STEPS", "write_report"]
 
@@ -109,7 +109,7 @@ def _pairs(campaign_dir: Path, results_dir: Path) -> tuple[list[tuple[str, Path,
 
 
 def _load_result(path: Path) -> xr.Dataset:
-    with xr.open_dataset(path, engine="h5netcdf") as ds:
+    with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
         return ds.load()
 
 
@@ -119,7 +119,7 @@ def _event_info(eid: str, event_path: Path, result_path: Path) -> dict:
     Only the small groups are loaded (the 32 Hz and 50 Hz records stay on disk).
     """
     try:
-        with xr.open_datatree(event_path, engine="h5netcdf", decode_times=False) as tree:
+        with xr.open_datatree(event_path, engine=NETCDF_ENGINE, decode_times=False) as tree:
             attrs = dict(tree.attrs)
             truth = tree["truth"].to_dataset().load() if "truth" in tree.children else None
             t_acc = tree["accel"]["time"].values
@@ -361,7 +361,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
 
     pooled_path = results_dir / POOLED_NAME
     if pooled_path.is_file():
-        with xr.open_dataset(pooled_path, engine="h5netcdf") as ds:
+        with xr.open_dataset(pooled_path, engine=NETCDF_ENGINE) as ds:
             pooled = ds.load()
         md += ["## The campaign model (`vivbench pool`)", "",
                "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "

@@ -31,6 +31,7 @@ from vivbench.validate.metrics import (
     support_scores,
 )
 from vivbench.validate.recovery import truth_window_regimes, window_rhs_errors
+from vivbench.io import NETCDF_ENGINE
 
 __all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables"]
 
@@ -45,7 +46,7 @@ _NOTES = (
 
 def _open_result(path: Path) -> xr.Dataset:
     try:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
+        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             ds = ds.load()
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
         raise ValueError(f"{path}: cannot be read as an identification result ({type(exc).__name__}: {exc})") from exc
@@ -207,7 +208,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     pooled_path = results_dir / POOLED_NAME
     pooled = None
     if pooled_path.is_file():
-        with xr.open_dataset(pooled_path, engine="h5netcdf") as ds:
+        with xr.open_dataset(pooled_path, engine=NETCDF_ENGINE) as ds:
             pooled = ds.load()
     p_reg, p_ok, p_errs, p_act = [], [], [], []
     for event_id, ep, rp in pairs:

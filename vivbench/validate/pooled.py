@@ -6,6 +6,7 @@ import numpy as np
 import xarray as xr
 
 from vivbench.validate.recovery import regime_scores, truth_window_regimes, window_rhs_errors
+from vivbench.io import NETCDF_ENGINE
 
 __all__ = ["pooled_recovery"]
 
@@ -31,7 +32,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     from vivbench.identify.pooled import with_campaign_model
     from vivbench.io import read_event
 
-    with xr.open_dataset(pooled_file, engine="h5netcdf") as ds:
+    with xr.open_dataset(pooled_file, engine=NETCDF_ENGINE) as ds:
         pooled = ds.load()
     truths = {}
     for path in event_files:
@@ -39,7 +40,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         truths[str(tree.attrs["event_id"])] = tree["truth"].ds
     results = {}
     for path in result_files:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
+        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             results[str(ds.attrs["event_id"])] = ds.load()
     event_of = pooled["event_id"].values.astype(str)
     regimes, truths_w, flags, errs, errs_active = [], [], [], [], []

@@ -13,6 +13,7 @@ import xarray as xr
 
 from vivbench.regime import classify_regime
 from vivbench.terms import evaluate_library
+from vivbench.io import NETCDF_ENGINE
 
 __all__ = ["recovery_by_event", "truth_window_regimes", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
 
@@ -167,7 +168,7 @@ def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -
     parts = []
     for ev_path, res_path in zip(event_files, result_files):
         truth = read_event(ev_path)["truth"].ds
-        with xr.open_dataset(res_path, engine="h5netcdf") as res:
+        with xr.open_dataset(res_path, engine=NETCDF_ENGINE) as res:
             res = res.load()
         start, end = res["window_start"].values, res["window_end"].values
         e, active = window_rhs_errors(res, truth["coef"].values, truth["r"].values, active_share=active_share)
