@@ -314,3 +314,41 @@ def test_despike_finds_short_spikes_not_gusts_and_keeps_gaps():
     np.testing.assert_array_equal(y[:, 1], x[:, 1])
     y, n, n_bridged = despike(x, 32.0)       # without bridging the spikes become NaN
     assert (n, n_bridged) == (5, 0) and np.isnan(y[[5, 100, 101, 300, 2000], 0]).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(4, 700), k=st.integers(1, 3), seed=st.integers(0, 2**31 - 1), gaps=st.booleans())
+def test_despike_short_median_equals_scipy_median_filter(n, k, seed, gaps):
+    """The short-median test, evaluated only where the block rule fires, flags
+    exactly what scipy.ndimage.median_filter (mode "mirror") over every sample flags."""
+    from scipy import ndimage
+
+    from vivbench.quality import _block_nanmedian, despike
+
+    rng = np.random.default_rng(seed)
+    x = np.cumsum(rng.standard_normal((n, k)), axis=0) * 0.1 + rng.standard_normal((n, k))
+    hit = rng.random((n, k)) < 0.03
+    x[hit] += rng.choice([-1.0, 1.0], hit.sum()) * rng.uniform(5.0, 50.0, hit.sum())
+    x[:2] += 40.0                             # spikes at the edges, where the reflection matters
+    if gaps:
+        x[rng.random((n, k)) < 0.02] = np.nan
+    rate, threshold = 32.0, 4.0
+    cleaned, n_spikes, _ = despike(x, rate, threshold=threshold)
+
+    length = int(round(10.0 * rate))          # the default 10 s blocks
+    n_blocks = -(-n // length)
+    padded = np.full((n_blocks * length, k), np.nan)
+    padded[:n] = x
+    blocks = padded.reshape(n_blocks, length, k)
+    med = _block_nanmedian(blocks)
+    limit = threshold * 1.4826 * _block_nanmedian(np.abs(blocks - med))
+    with np.errstate(invalid="ignore"):
+        far = (np.abs(blocks - med) > limit).reshape(-1, k)[:n]
+    med_rows = np.broadcast_to(med, blocks.shape).reshape(-1, k)[:n]
+    lim_rows = np.broadcast_to(limit, blocks.shape).reshape(-1, k)[:n]
+    filled = np.where(np.isfinite(x), x, np.nan_to_num(med_rows))
+    local = ndimage.median_filter(filled, size=(7, 1), mode="mirror")
+    with np.errstate(invalid="ignore"):
+        expected = far & (np.abs(x - local) > lim_rows)
+    np.testing.assert_array_equal(np.isnan(cleaned) & ~np.isnan(x), expected)
+    assert n_spikes == int(expected.sum())

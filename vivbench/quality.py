@@ -161,9 +161,22 @@ def despike(x, rate_hz: float, *, threshold: float = 8.0, block_s: float = 10.0,
     # Missing samples count as the block median there (NaN-aware medians are slow).
     med_rows = np.broadcast_to(med, blocks.shape).reshape(-1, k)[:n]
     filled = np.where(np.isfinite(x2), x2, np.nan_to_num(med_rows))
-    local = ndimage.median_filter(filled, size=(_SHORT_WINDOW, 1), mode="mirror")
-    with np.errstate(invalid="ignore"):
-        spike = far.reshape(-1, k)[:n] & (np.abs(x2 - local) > limit_rows)
+    spike = far.reshape(-1, k)[:n].copy()
+    rows, cols = np.nonzero(spike)
+    if rows.size:
+        # The short median only where the block rule already fired (rare):
+        # a running median over every sample cost more than the rest of the
+        # screening. Reflection without repeating the edge sample, as
+        # scipy.ndimage's "mirror" mode, so the result equals median_filter's.
+        half = _SHORT_WINDOW // 2
+        if n > half:
+            padded_rows = np.pad(filled, ((half, half), (0, 0)), mode="reflect")
+            near = padded_rows[rows[:, None] + np.arange(_SHORT_WINDOW)[None, :], cols[:, None]]
+            local = np.median(near, axis=1)
+        else:
+            local = ndimage.median_filter(filled, size=(_SHORT_WINDOW, 1), mode="mirror")[rows, cols]
+        with np.errstate(invalid="ignore"):
+            spike[rows, cols] = np.abs(x2[rows, cols] - local) > limit_rows[rows, cols]
     spike |= np.isinf(x2)
     x2[spike] = np.nan
     max_run = int(np.floor(bridge_s * rate_hz + 1e-9))
