@@ -17,7 +17,8 @@ def run(args) -> int:
         preprocess=PreprocessConfig(modal_frequency_hz=args.mode_frequency, grid_step_s=args.grid_step),
         derivative=Derivative(method=args.derivative, **deriv_opts),
         window=args.window, step=args.step, alpha=args.alpha, scaling=args.scaling, tau=args.tau,
-        fit_tolerance=args.fit_tolerance, spike_mad=args.spike_mad or None, optimizer=args.optimizer, seed=args.seed,
+        fit_tolerance=args.fit_tolerance, spike_mad=args.spike_mad or None, min_snr=args.min_snr or None,
+        optimizer=args.optimizer, seed=args.seed,
     )
     paths = event_paths(args.inputs)
     bar = progress(len(paths), "identify")
@@ -50,6 +51,9 @@ def register(sub) -> None:
                    help="relative RMS residual within which a competing model fits equally well (default 0.1)")
     s.add_argument("--spike-mad", type=float, default=8.0,
                    help="spike rule: robust standard deviations from the local median (default 8; 0: off)")
+    s.add_argument("--min-snr", type=float, default=3.0,
+                   help="identifiable only if the window's mean amplitude is at least this many times the "
+                        "accelerometer noise floor (default 3; 0: off)")
     s.add_argument("--mode-frequency", type=float, default=None, help="modal frequency, Hz (default: from the spectrum)")
     s.add_argument("--grid-step", type=float, default=0.25, help="common time grid step, s (default 0.25)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help="worker processes (results do not depend on it)")

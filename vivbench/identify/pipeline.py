@@ -23,6 +23,7 @@ import xarray as xr
 import vivbench
 from vivbench.identify.derivative import Derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, WindowedSINDy
+from vivbench.identify.noise_floor import window_amplitude_snr
 from vivbench.identify.optimizers import OPTIMIZERS
 from vivbench.identify.preprocess import PreprocessConfig, perpendicular_speed, preprocess_arrays, wind_speed_direction
 from vivbench.io import EventFormatError, event_arrays, read_event, write_netcdf_atomic
@@ -49,6 +50,10 @@ class IdentifyConfig:
     spike_mad : spike rule of the raw u, v and acc, robust standard deviations (1.4826 MAD) from the
         10 s block median (see vivbench.quality.despike); spike runs up to 0.1 s are bridged linearly,
         longer ones become NaN and split the record. None: off
+    min_snr : a window's regime counts as identifiable only if its mean amplitude is at least this many
+        times the accelerometers' noise floor in the vibration band (see
+        :mod:`vivbench.identify.noise_floor`; the envelope of noise alone averages 1.25 times the floor).
+        None: no test
     optimizer : sparse regression per window, "stlsq" (the fast engine), "sr3" or "ensemble"
         (pysindy-based, see :mod:`vivbench.identify.optimizers`; "ensemble" adds ``inclusion``)
     seed : seed of the ensemble's bootstrap samples (results depend on it only)
@@ -65,6 +70,7 @@ class IdentifyConfig:
     aicc_margin: float = 2.0
     fit_tolerance: float = 0.1
     spike_mad: float | None = 8.0
+    min_snr: float | None = 3.0
     optimizer: str = "stlsq"
     seed: int = 0
 
@@ -79,6 +85,9 @@ class IdentifyConfig:
             raise ValueError(f"tau must be in (0, 1); got {self.tau}")
         if self.aicc_margin < 0 or self.fit_tolerance < 0:
             raise ValueError("aicc_margin and fit_tolerance must be >= 0")
+        if self.min_snr is not None and not (isinstance(self.min_snr, (int, float)) and np.isfinite(self.min_snr)
+                                             and self.min_snr >= 0):
+            raise ValueError(f"min_snr must be None (no noise-floor test) or a finite number >= 0; got {self.min_snr!r}")
         if self.optimizer not in OPTIMIZERS:
             raise ValueError(f"optimizer must be one of {', '.join(OPTIMIZERS)}; got {self.optimizer!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
@@ -106,7 +115,7 @@ _WINDOW_VARS = {
     "rss": ("rss_", ("window", "equation"), "m^2/s^2", "residual sum of squares"),
     "n_terms": ("n_terms_", ("window", "equation"), "1", "number of terms in the regression basis"),
     "regime": ("regime_", ("window", "equation"), "1", "regime of the selected model (DESIGN 2.5); 0: no model"),
-    "identifiable": ("identifiable_", ("window", "equation"), "1", "every equally good competing model has the same regime"),
+    "identifiable": ("identifiable_", ("window", "equation"), "1", "every equally good competing model has the same regime, and the amplitude is above the noise floor (min_snr)"),
     "regimes_seen": ("regimes_seen_", ("window", "equation"), "1", "bit mask of regimes among equally good models (bit k-1: regime k)"),
     "n_equivalent": ("n_equivalent_", ("window", "equation"), "1", "equally good competing models found"),
     "order_rms": ("order_rms_", ("window", "equation", "order"), "m/s", "RMS over the window of each order's contribution to dA/dt"),
@@ -178,6 +187,10 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         raise ValueError(f"no valid segment is as long as one window ({config.window:g} s); the longest is {longest:.0f} s")
     fit = {name: np.concatenate([p[name] for p in parts], axis=0) for name in _WINDOW_VARS}
     n_w = fit["cond"].shape[0]
+    snr = window_amplitude_snr(pre.t, pre.A, np.concatenate(starts), np.concatenate(ends), pre.noise_std)
+    if config.min_snr is not None:
+        # Below the noise floor A is the envelope of noise: no regression can give its regime.
+        fit["identifiable"] = fit["identifiable"] & ~(snr < config.min_snr)
     data = {}
     for name, (_attr, dims, units, long_name) in _WINDOW_VARS.items():
         values = fit[name]
@@ -190,6 +203,8 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         data["inclusion"] = (("window", "equation", "feature"), np.concatenate([p["inclusion"] for p in parts]),
                              {"units": "1", "long_name": "inclusion probability of each regression-basis term over "
                               "the bootstrap models (ensemble optimiser)"})
+    data["amplitude_snr"] = (("window", "equation"), snr, {"units": "1", "long_name": "mean amplitude over the window "
+                             "divided by the accelerometer noise floor in the vibration band (NaN: floor unknown)"})
     data["window_start"] = (("window",), np.concatenate(starts), {"units": "s", "long_name": "window start since event start"})
     data["window_end"] = (("window",), np.concatenate(ends), {"units": "s", "long_name": "window end since event start"})
     data["window_segment"] = (("window",), np.concatenate(segs).astype(np.int32), {"units": "1", "long_name": "preprocessing segment of the window"})
@@ -211,6 +226,7 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         "f_mode_hz": float(pre.f_mode_hz),
         "f_mode_source": pre.f_mode_source,
         "edge_s": float(pre.edge_s),
+        "noise_std_m": [float(x) for x in pre.noise_std],
         "span_azimuth_deg": float(pre.span_azimuth_deg),
         "coverage": coverage,
         "identify_config_json": config.to_json(),

@@ -15,7 +15,9 @@ the samples are cut into contiguous blocks (default 300 s, longer than the
 correlation time of derivative errors), blocks are resampled with replacement,
 and the whole selection (threshold path and AICc) is rerun on every replicate.
 A window counts as identifiable when at least ``agreement`` of the replicate
-models give it the pooled model's regime.
+models give it the pooled model's regime (and, in :func:`pool_results`, when
+its amplitude is above the accelerometers' noise floor by the identification's
+``min_snr``, see :mod:`vivbench.identify.noise_floor`).
 
 Each block is compressed once to the R factor of the QR decomposition of
 [Theta_b | y_b]: a replicate is then a weighted stack of these small factors,
@@ -514,8 +516,8 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
         with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             if ds.attrs.get("format") != "vivbench-identify":
                 raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
-            results.append((str(path), ds[["A", "U", "dA", "window_start", "window_end"]].load(), dict(ds.attrs),
-                            [str(s) for s in ds["equation"].values]))
+            names = ["A", "U", "dA", "window_start", "window_end"] + (["amplitude_snr"] if "amplitude_snr" in ds else [])
+            results.append((str(path), ds[names].load(), dict(ds.attrs), [str(s) for s in ds["equation"].values]))
     if not results:
         raise ValueError("no identification results to pool")
     sections = results[0][3]
@@ -527,6 +529,10 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
     for _path, ds, attrs, _eq in results:
         s, e = ds["window_start"].values, ds["window_end"].values
         out = model.window_regimes(ds["time"].values, ds["A"].values, ds["U"].values, s, e)
+        min_snr = json.loads(attrs.get("identify_config_json", "{}")).get("min_snr")
+        if min_snr is not None and "amplitude_snr" in ds:
+            # The identification's noise-floor test holds for any model: below the floor A is noise.
+            out["identifiable"] = out["identifiable"] & ~(ds["amplitude_snr"].values < min_snr)
         rows["event_id"].append(np.full(s.size, str(attrs["event_id"]), dtype=object))
         rows["window"].append(np.arange(s.size))
         rows["window_start"].append(s)
@@ -547,7 +553,8 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
         "window_end": (("window_all",), cat["window_end"], {"units": "s"}),
         "regime": (("window_all", "equation"), cat["regime"].astype(np.int8), {"long_name": "regime of the pooled model (DESIGN 2.5)"}),
         "identifiable": (("window_all", "equation"), cat["identifiable"].astype(np.int8),
-                         {"long_name": "bootstrap agreement on the regime reaches the agreement level"}),
+                         {"long_name": "bootstrap agreement on the regime reaches the agreement level, the "
+                          "near-null-space test passes and the amplitude is above the noise floor"}),
         "agreement": (("window_all", "equation"), cat["agreement"], {"units": "1", "long_name": "share of bootstrap models with the same regime"}),
         "robust": (("window_all", "equation"), cat["robust"].astype(np.int8),
                    {"long_name": "no model within the fit tolerance gives the window another regime (near-null-space test)"}),

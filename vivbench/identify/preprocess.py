@@ -42,6 +42,8 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
+from vivbench.identify.noise_floor import band_noise_std
+
 __all__ = [
     "PreprocessConfig",
     "Preprocessed",
@@ -221,6 +223,10 @@ class Preprocessed:
         Span azimuth used, degrees from north.
     config : PreprocessConfig
         The settings.
+    noise_std : ndarray, shape (n_sections,)
+        Accelerometer noise after integration to displacement in the band, m:
+        the noise floor of A (:mod:`vivbench.identify.noise_floor`); NaN
+        where it could not be estimated.
     """
 
     t: np.ndarray
@@ -234,6 +240,7 @@ class Preprocessed:
     band_hz: tuple[float, float]
     span_azimuth_deg: float
     config: PreprocessConfig
+    noise_std: np.ndarray
 
     @property
     def n_segments(self) -> int:
@@ -403,6 +410,17 @@ def modal_frequency(t_or_fs, acc, band: tuple[float, float] = (0.05, 2.0), *, se
     lo, hi = float(band[0]), float(band[1])
     if not 0.0 < lo < hi:
         raise ValueError(f"band must be (low, high) with 0 < low < high, Hz; got {band!r}")
+    f, psd = _welch_psd(t_or_fs, acc, segment_s, lo, hi)
+    return _spectral_peak(f, psd.sum(axis=1), lo, hi)
+
+
+def _welch_psd(t_or_fs, acc, segment_s: float, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """Welch PSD of each section averaged over the valid runs, shape (n_freq, n_sections).
+
+    Each run is weighted by its number of Welch sections. Raises ValueError if
+    the longest run cannot resolve ``lo`` (three cycles per section) or ``hi``
+    is not below the Nyquist frequency.
+    """
     _positive("segment_s", segment_s)
     acc = _as_2d(np.asarray(acc, dtype=float))
     if np.ndim(t_or_fs) == 0:
@@ -436,9 +454,13 @@ def modal_frequency(t_or_fs, acc, band: tuple[float, float] = (0.05, 2.0), *, se
             continue
         f, P = signal.welch(acc[i0:i1], fs=fs, window="hann", nperseg=nperseg, nfft=nfft, detrend="linear", axis=0)
         n_sections = 1 + (i1 - i0 - nperseg) // step
-        psd_sum = psd_sum + n_sections * P.sum(axis=1)
+        psd_sum = psd_sum + n_sections * P
         weight += n_sections
-    psd = psd_sum / weight
+    return f, psd_sum / weight
+
+
+def _spectral_peak(f: np.ndarray, psd: np.ndarray, lo: float, hi: float) -> float:
+    """Highest bin strictly inside [lo, hi], refined by a parabola through the log-PSD."""
     inside = np.flatnonzero((f >= lo) & (f <= hi))
     k = inside[np.argmax(psd[inside])]
     if k == inside[0] or k == inside[-1] or psd[k] <= 0:
@@ -810,12 +832,22 @@ def preprocess_arrays(
     if acc.shape[1] != U_tilde.shape[1]:
         raise ValueError(f"the wind has {U_tilde.shape[1]} sections but the acceleration has {acc.shape[1]}")
 
+    lo, hi = config.search_band_hz
     if config.modal_frequency_hz is not None:
         f_mode, source = float(config.modal_frequency_hz), "given"
+        try:
+            f_psd, psd = _welch_psd(accel_time, acc, config.welch_segment_s, lo, hi)
+        except ValueError:  # a given mode needs no spectrum; the noise floor stays unknown
+            f_psd = psd = None
     else:
-        f_mode = modal_frequency(accel_time, acc, config.search_band_hz, segment_s=config.welch_segment_s)
-        source = "spectrum"
+        # One spectrum serves the mode and the noise floor.
+        f_psd, psd = _welch_psd(accel_time, acc, config.welch_segment_s, lo, hi)
+        f_mode, source = _spectral_peak(f_psd, psd.sum(axis=1), lo, hi), "spectrum"
     half_width = config.half_width_hz(f_mode)
+    if psd is None:
+        noise_std = np.full(acc.shape[1], np.nan)
+    else:
+        noise_std = band_noise_std(f_psd, psd, f_mode, half_width, taper=config.band_taper)
     edge_s = config.settling_s(f_mode)
 
     U_wind, (w_starts, w_ends) = _mean_wind_runs(wind_time, U_tilde, config)
@@ -851,4 +883,5 @@ def preprocess_arrays(
         band_hz=(f_mode - half_width, f_mode + half_width),
         span_azimuth_deg=float(span_azimuth_deg),
         config=config,
+        noise_std=noise_std,
     )
