@@ -17,6 +17,7 @@ from vivbench.identify.interpret import (
     summarize_clusters,
 )
 from vivbench.identify.identifiability import basis_orders, order_contributions_basis, window_regimes
+from vivbench.identify.noise_floor import band_noise_std, window_amplitude_snr
 from vivbench.identify.optimizers import OPTIMIZERS, OptimizerOptions, ensemble_path, run_optimizer, sr3_path
 from vivbench.identify.library import SCALINGS, WindowLibrary, condition_number, library_cond, window_library
 from vivbench.identify.pooled import POOLED_NAME, PooledSINDy, pool_results, pooled_window_stats, with_campaign_model, write_pooled
@@ -59,4 +60,5 @@ __all__ = [
     "cluster_windows", "read_result", "standardized_coefficients", "summarize_clusters",
     "OPTIMIZERS", "OptimizerOptions", "ensemble_path", "run_optimizer", "sr3_path",
     "EventRefit", "RefitConfig", "RefitResult", "refit_coefficients", "refit_event", "simulate_coefficients",
+    "band_noise_std", "window_amplitude_snr",
 ]
