@@ -30,7 +30,6 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import xarray as xr  # noqa: E402
 
 from vivbench.identify import PooledSINDy, identify_files, pool_results, write_pooled  # noqa: E402
 from vivbench.synth import (  # noqa: E402
@@ -43,7 +42,6 @@ from vivbench.synth import (  # noqa: E402
     generate_campaign,
 )
 from vivbench.validate import campaign_recovery, pooled_recovery  # noqa: E402
-from vivbench.io import NETCDF_ENGINE  # noqa: E402
 
 CLEAN = GeneratorConfig(
     aero=AeroConfig(cl_unlocked=0.0, buffeting_w=0.0),
@@ -91,16 +89,10 @@ def main(n_events: int = 31) -> dict:
                   f"{prec['rhs_median_rel_error_active']:.4f} active windows")
 
         # The regressions alone against the pysindy loop, on the default campaign's own windows.
-        ev_arrays = []
-        for path in sorted((tmp / "default" / "results2").glob("*.identify.nc")):
-            with xr.open_dataset(path, engine=NETCDF_ENGINE) as res:
-                seg = res["segment"].values
-                keep = seg == 0
-                ev_arrays.append((res["time"].values[keep], res["A"].values[keep], res["U"].values[keep],
-                                  res["dA"].values[keep]))
-    spec = importlib.util.spec_from_file_location("bench_sindy", Path(__file__).with_name("bench_sindy.py"))
-    bench_sindy = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench_sindy)
+        spec = importlib.util.spec_from_file_location("bench_sindy", Path(__file__).with_name("bench_sindy.py"))
+        bench_sindy = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(bench_sindy)
+        ev_arrays = bench_sindy.events_from_results(tmp / "default" / "results2")
     print("\n[regressions only, default campaign windows, vs pysindy]")
     out["engine_vs_pysindy"] = bench_sindy.main(events=ev_arrays)
     return out

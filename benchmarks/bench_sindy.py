@@ -231,5 +231,28 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
     return figures
 
 
+def events_from_results(results_dir) -> list:
+    """(t, A, U, dA) of the first segment of every ``*.identify.nc`` in a folder: a campaign's own windows."""
+    from pathlib import Path
+
+    import xarray as xr
+
+    from vivbench.io import NETCDF_ENGINE
+
+    events = []
+    for path in sorted(Path(results_dir).glob("*.identify.nc")):
+        with xr.open_dataset(path, engine=NETCDF_ENGINE) as res:
+            keep = res["segment"].values == 0
+            events.append(tuple(res[name].values[keep] for name in ("time", "A", "U", "dA")))
+    return events
+
+
 if __name__ == "__main__":
-    main()
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", default=None,
+                        help="identification results (e.g. demo/identify): run on that campaign's windows "
+                             "instead of the synthetic sparse-model workload")
+    args = parser.parse_args()
+    main(events_from_results(args.results) if args.results else None)
