@@ -169,3 +169,31 @@ def test_too_little_data_gives_no_verdict():
     assert not model.enough_data_ and model.n_blocks_ == 2
     out = model.window_regimes(t, A, U, np.array([0.0, 100.0]), np.array([50.0, 150.0]))
     assert not out["identifiable"].any()
+
+
+def test_campaign_model_differentiates_the_results_amplitudes_itself(small_results):
+    """The campaign model takes dA/dt from the results' A with its own (unbiased) derivative,
+    on exactly the samples where the identification had one; derivative=None keeps the stored dA."""
+    import json
+
+    import xarray as xr
+
+    from vivbench.identify import pool_results
+    from vivbench.identify.pooled import CAMPAIGN_DERIVATIVE, _campaign_derivative
+    from vivbench.io import NETCDF_ENGINE
+
+    _camp, _out, results = small_results
+    with xr.open_dataset(results[0], engine=NETCDF_ENGINE) as ds:
+        ds = ds.load()
+    stored = ds["dA"].values
+    ours = _campaign_derivative(ds, CAMPAIGN_DERIVATIVE)
+    np.testing.assert_array_equal(np.isfinite(ours), np.isfinite(stored))
+    keep = (ds["segment"].values == 0) & np.isfinite(stored).all(axis=1)
+    expected = CAMPAIGN_DERIVATIVE.differentiate(ds["A"].values[keep], ds["time"].values[keep])
+    np.testing.assert_array_equal(ours[keep], expected)
+    # the chain's own derivative is the smoothed envelope setting, so the two differ
+    assert not np.allclose(ours[keep], stored[keep])
+    np.testing.assert_array_equal(_campaign_derivative(ds, None), stored)
+    pooled = pool_results(results, PooledSINDy(n_bootstrap=0))
+    assert json.loads(pooled.attrs["derivative_json"])["method"] == "tv"
+    assert json.loads(pool_results(results, PooledSINDy(n_bootstrap=0), derivative=None).attrs["derivative_json"]) is None

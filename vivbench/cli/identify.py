@@ -19,7 +19,7 @@ def run(args) -> int:
         deriv_opts["noise_scale"] = args.tv_noise_scale
     config = IdentifyConfig(
         preprocess=PreprocessConfig(modal_frequency_hz=args.mode_frequency, grid_step_s=args.grid_step),
-        derivative=Derivative(method=args.derivative, **deriv_opts),
+        derivative=Derivative.for_envelope(args.derivative, **deriv_opts),
         window=args.window, step=args.step, alpha=args.alpha, scaling=args.scaling, tau=args.tau,
         fit_tolerance=args.fit_tolerance, spike_mad=args.spike_mad or None, min_snr=args.min_snr or None,
         optimizer=args.optimizer, seed=args.seed,
@@ -44,11 +44,11 @@ def register(sub) -> None:
     s.add_argument("--step", type=float, default=25.0, help="window step, s (default 25)")
     s.add_argument("--derivative", default="tv", choices=("tv", "savgol", "spline", "finite_difference"),
                    help="dA/dt method (default tv: total-variation regularised)")
-    s.add_argument("--tv-time-scale", type=float, default=None, help="time scale of the automatic TV weight, s")
-    s.add_argument("--tv-huber", type=float, default=None, help="Huber threshold of the TV derivative (default 0: exact TV)")
+    s.add_argument("--tv-time-scale", type=float, default=None, help="time scale of the automatic TV weight, s (default 20)")
+    s.add_argument("--tv-huber", type=float, default=None, help="Huber threshold of the TV derivative (default 10; 0: exact TV)")
     s.add_argument("--tv-noise-scale", type=float, default=None,
-                   help="time scale at which the TV weight's noise level is measured, s (default 0: white noise; "
-                        "band-limited envelope noise: --tv-time-scale 20 --tv-huber 10 --tv-noise-scale 10)")
+                   help="time scale at which the TV weight's noise level is measured, s (default 10, for the "
+                        "envelope's band-limited noise; 0: white-noise estimate)")
     s.add_argument("--alpha", type=float, default=0.05, help="STLSQ ridge parameter (default 0.05)")
     s.add_argument("--scaling", default="scaled", choices=("scaled", "normalized", "raw"), help="library basis")
     s.add_argument("--optimizer", default="stlsq", choices=("stlsq", "sr3", "ensemble"),

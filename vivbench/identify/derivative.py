@@ -152,6 +152,11 @@ _SAVGOL_WINDOW = 20.0  # s
 _SAVGOL_POLYORDER = 3
 _FD_ORDER = 2
 
+# The band-limited-noise setting of the TV derivative (Derivative.for_envelope):
+# chosen on 8 events of the default campaign against the true dA/dt, checked on
+# the other 23 (benchmarks/bench_derivative_campaign.py).
+_ENVELOPE_TV = {"time_scale": 20.0, "huber": 10.0, "noise_scale": 10.0}
+
 _METHOD_OPTIONS = {
     "tv": ("alpha", "time_scale", "huber", "noise_scale", "tol", "max_iter"),
     "savgol": ("window", "polyorder"),
@@ -397,9 +402,9 @@ class Derivative:
         tv: time scale at which the noise level of the automatic rule is
         measured, s; default 0 (white-noise estimate from plain third
         differences). ``Derivative(time_scale=20, huber=10, noise_scale=10)``
-        is the band-limited-noise setting of the module docstring:
-        about 2.7x more accurate dA/dt on campaign envelopes, but not the
-        chain's default (README, "Known limitations").
+        is the band-limited-noise setting of the module docstring
+        (:meth:`for_envelope`, the identification chain's default): about
+        2.7x more accurate dA/dt on campaign envelopes.
     tol : float, optional
         tv: relative duality-gap tolerance; default 1e-6.
     max_iter : int, optional
@@ -455,6 +460,21 @@ class Derivative:
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
                 raise ValueError(f"{name} must be a positive integer; got {value!r}")
+
+    @classmethod
+    def for_envelope(cls, method: str = "tv", **options) -> "Derivative":
+        """The derivative for Hilbert envelopes of band-pass filtered vibration.
+
+        For ``method="tv"`` the options not given take the band-limited-noise
+        setting (``time_scale=20, huber=10, noise_scale=10``): the envelope's
+        noise is correlated over seconds, which the white-noise rule does not
+        see. Other methods take their own defaults. This is the default of
+        the identification chain (``IdentifyConfig``, ``vivbench identify``,
+        comparisons and sweeps).
+        """
+        if method == "tv":
+            options = {**_ENVELOPE_TV, **options}
+        return cls(method=method, **options)
 
     def differentiate(self, x: np.ndarray, t: np.ndarray | float) -> np.ndarray:
         """Time derivative of ``x``.

@@ -39,7 +39,8 @@ class IdentifyConfig:
     Attributes
     ----------
     preprocess : PreprocessConfig
-    derivative : Derivative (default: total-variation regularised, Chartrand 2011)
+    derivative : Derivative (default: total-variation regularised, Chartrand 2011, with the
+        band-limited-noise setting of :meth:`Derivative.for_envelope`)
     window, step : s (the paper: 50 s and 25 s)
     thresholds : STLSQ threshold path on standardised coefficients (None: the engine's default)
     alpha : ridge parameter of STLSQ
@@ -60,7 +61,7 @@ class IdentifyConfig:
     """
 
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
-    derivative: Derivative = field(default_factory=lambda: Derivative(method="tv"))
+    derivative: Derivative = field(default_factory=Derivative.for_envelope)
     window: float = 50.0
     step: float = 25.0
     thresholds: tuple[float, ...] = DEFAULT_THRESHOLDS

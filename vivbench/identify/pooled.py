@@ -33,19 +33,26 @@ user's to check; the window models remain the paper's method.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
+from vivbench.identify.derivative import Derivative
 from vivbench.identify.engine import DEFAULT_THRESHOLDS, StlsqSettings, aicc, stlsq_path
 from vivbench.identify.library import window_library
 from vivbench.regime import DEFAULT_TAU, regime_rule
 from vivbench.terms import evaluate_library, feature_names, section_exponents
 from vivbench.io import NETCDF_ENGINE
 
-__all__ = ["POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats", "with_campaign_model", "write_pooled"]
+__all__ = ["CAMPAIGN_DERIVATIVE", "POOLED_NAME", "PooledSINDy", "pool_results", "pooled_window_stats",
+           "with_campaign_model", "write_pooled"]
+
+#: dA/dt of the campaign model: exact TV with the white-noise weight, which on
+#: envelopes is nearly the (unbiased) finite differences (see pool_results).
+CAMPAIGN_DERIVATIVE = Derivative(method="tv")
 
 
 class _Record(NamedTuple):
@@ -487,13 +494,40 @@ def _window_stats(models: np.ndarray, rec: _Record):
     return np.moveaxis(R, 1, 0), np.moveaxis(c1, 1, 0), nv
 
 
-def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "xr.Dataset":
+def _campaign_derivative(ds, derivative: Derivative | None) -> np.ndarray:
+    """dA/dt for the campaign model: ``derivative`` on each segment where the result has one.
+
+    The same samples as the stored dA (the identification's segments long
+    enough for a window); None returns the stored dA unchanged.
+    """
+    stored = ds["dA"].values
+    if derivative is None:
+        return stored
+    t, A, seg = ds["time"].values, ds["A"].values, ds["segment"].values
+    out = np.full_like(stored, np.nan)
+    for s in np.unique(seg[seg >= 0]):
+        sel = (seg == s) & np.isfinite(stored).all(axis=1)
+        if sel.sum() >= 5:
+            out[sel] = derivative.differentiate(A[sel], t[sel])
+    return out
+
+
+def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
+                 derivative: Derivative | None = CAMPAIGN_DERIVATIVE) -> "xr.Dataset":
     """Fit the campaign model on identification results and label every window with it.
 
     Parameters
     ----------
-    result_files : paths of ``<event_id>.identify.nc`` (their A, U, dA and windows are used)
+    result_files : paths of ``<event_id>.identify.nc`` (their A, U, segments and windows are used)
     model : PooledSINDy, optional (default settings otherwise)
+    derivative : Derivative or None
+        dA/dt of the campaign model, recomputed from each result's A
+        (default :data:`CAMPAIGN_DERIVATIVE`); None uses the results' own dA.
+        The window regressions want a smoothed derivative (few samples,
+        variance matters most), the campaign model an unbiased one (tens of
+        thousands of samples average the noise, but not a smoother's bias):
+        with the chain's smoothed dA its median dA/dt error was 0.0121
+        against 0.0105 on the default campaign.
 
     Returns
     -------
@@ -516,7 +550,8 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
         with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             if ds.attrs.get("format") != "vivbench-identify":
                 raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
-            names = ["A", "U", "dA", "window_start", "window_end"] + (["amplitude_snr"] if "amplitude_snr" in ds else [])
+            names = ["A", "U", "dA", "segment", "window_start", "window_end"]
+            names += ["amplitude_snr"] if "amplitude_snr" in ds else []
             results.append((str(path), ds[names].load(), dict(ds.attrs), [str(s) for s in ds["equation"].values]))
     if not results:
         raise ValueError("no identification results to pool")
@@ -524,7 +559,8 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
     for path, _ds, _attrs, eq in results:
         if eq != sections:
             raise ValueError(f"{path}: equations {eq} differ from {sections} of the other results")
-    model.fit([(ds["time"].values, ds["A"].values, ds["U"].values, ds["dA"].values) for _p, ds, _a, _e in results])
+    model.fit([(ds["time"].values, ds["A"].values, ds["U"].values, _campaign_derivative(ds, derivative))
+               for _p, ds, _a, _e in results])
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end", "regime", "identifiable", "agreement", "robust", "order_rms")}
     for _path, ds, attrs, _eq in results:
         s, e = ds["window_start"].values, ds["window_end"].values
@@ -575,6 +611,7 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None) -> "x
                  "too little data for an identifiability verdict, no window is flagged identifiable"),
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
         "pooled_config_json": model.to_json(),
+        "derivative_json": json.dumps(None if derivative is None else dataclasses.asdict(derivative), sort_keys=True),
         "vivbench_version": vivbench.__version__,
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)

@@ -308,7 +308,7 @@ def _make_campaign(task: dict) -> list[str]:
 def _identify_config(cell: dict, config: CompareConfig):
     from vivbench.identify import Derivative, IdentifyConfig
 
-    return IdentifyConfig(derivative=Derivative(method=cell["derivative"]), window=cell["window"],
+    return IdentifyConfig(derivative=Derivative.for_envelope(cell["derivative"]), window=cell["window"],
                           step=cell["window"] * config.step_ratio, scaling=cell["scaling"],
                           optimizer=cell["optimizer"], seed=config.seed)
 

@@ -319,7 +319,7 @@ class SweepConfig:
 
 _TOP_KEYS = ("seed", "n_campaigns", "seeds", "n_events", "duration", "grid", "ranges", "generator", "identify")
 _IDENTIFY_KEYS = ("window", "step", "alpha", "scaling", "tau", "aicc_margin", "fit_tolerance", "thresholds",
-                  "derivative", "preprocess", "spike_mad", "optimizer", "seed")
+                  "derivative", "preprocess", "spike_mad", "min_snr", "optimizer", "seed")
 
 
 def _identify_from_dict(data: dict) -> IdentifyConfig:
@@ -333,7 +333,7 @@ def _identify_from_dict(data: dict) -> IdentifyConfig:
         kwargs["spike_mad"] = None
     if "derivative" in kwargs:
         d = kwargs["derivative"]
-        kwargs["derivative"] = Derivative(method=d) if isinstance(d, str) else Derivative(**d)
+        kwargs["derivative"] = Derivative.for_envelope(d) if isinstance(d, str) else Derivative.for_envelope(**d)
     if "preprocess" in kwargs:
         p = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs["preprocess"].items()}
         kwargs["preprocess"] = PreprocessConfig(**p)
