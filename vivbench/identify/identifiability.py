@@ -67,6 +67,20 @@ def order_contributions_basis(theta: np.ndarray, coef: np.ndarray, orders: np.nd
     return out.reshape((W,) + mid + (n, 4))
 
 
+def _dense_rss(theta: np.ndarray, y: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Least-squares RSS of every target on all columns of its window, shape (W, S).
+
+    A lower bound of the RSS of any model on a subset of these columns (for a
+    rank-deficient design, of its least-squares fit too: the Householder Q
+    spans at least the columns' range).
+    """
+    X = np.where(valid[..., None], np.nan_to_num(theta), 0.0)
+    Y = np.where(valid[..., None], np.nan_to_num(y), 0.0)
+    Q = np.linalg.qr(X)[0]  # (W, n, c): the same rows as the regression, invalid ones zeroed
+    proj = np.matmul(np.swapaxes(Q, 1, 2), Y)
+    return np.sum(Y**2, axis=1) - np.sum(proj**2, axis=1)
+
+
 def _regimes(r: np.ndarray, A: np.ndarray, valid: np.ndarray, tau: float) -> np.ndarray:
     """Regime per model: r (W, S, M, n, 4), A (W, n, S), valid (W, n) -> (W, S, M)."""
     Aw = np.where(valid[..., None], A, np.nan)  # invalid rows drop out of the c1 mean
@@ -180,6 +194,14 @@ def window_regimes(
             # order, and only windows whose verdict is still open are refitted.
             applies = present[..., ~allowed].any(axis=-1) & (seen == own) & has_model
             rows = np.flatnonzero(applies.any(axis=1))
+            if rows.size == 0:
+                continue
+            # No model on these columns fits better than all of them together: where even
+            # that least-squares fit misses the tolerance, the restricted path cannot
+            # find a competitor and is not run (the flags are the same).
+            with np.errstate(invalid="ignore"):
+                applies[rows] &= _dense_rss(theta[rows][..., keep], y[rows], valid[rows]) <= rss_equal[rows] * (1 + 1e-9)
+            rows = rows[applies[rows].any(axis=1)]
             if rows.size == 0:
                 continue
             alt = stlsq_path(theta[rows][..., keep], y[rows], alt_settings)
