@@ -85,10 +85,10 @@ def make_campaign(n_events: int = 31, windows_per_event: int = 100, seed: int = 
     return events
 
 
-def _pysindy_window(theta, y, thresholds, *, alpha, max_iter, use_sindy):
+def _pysindy_window(theta, y, thresholds, *, alpha, max_iter, use_sindy, unbias=True):
     coefs = []
     for th in thresholds:
-        opt = ps.STLSQ(threshold=th, alpha=alpha, max_iter=max_iter)
+        opt = ps.STLSQ(threshold=th, alpha=alpha, max_iter=max_iter, unbias=unbias)
         if use_sindy:
             model = ps.SINDy(optimizer=opt, feature_library=ps.IdentityLibrary())
             model.fit(theta, t=DT, x_dot=y)
@@ -105,13 +105,14 @@ def _pysindy_window(theta, y, thresholds, *, alpha, max_iter, use_sindy):
     return coefs, sel
 
 
-def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: int = 20, verbose: bool = True) -> dict:
+def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: int = 20, unbias: bool = True,
+         verbose: bool = True) -> dict:
     """Run ours on all windows and pysindy on ``n_reference`` of them; return the figures."""
     if events is None:
         events = make_campaign()
     thresholds = np.asarray(DEFAULT_THRESHOLDS)
     # Regression and AICc only, like the pysindy loop: no identifiability competitors.
-    est = dict(alpha=alpha, max_iter=max_iter, thresholds=thresholds, identifiability_margin=None)
+    est = dict(alpha=alpha, max_iter=max_iter, thresholds=thresholds, identifiability_margin=None, unbias=unbias)
 
     WindowedSINDy(**est).fit(*events[0])  # warm-up (imports, LAPACK workspaces)
     models = []
@@ -158,7 +159,7 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
             name = "pysindy SINDy loop" if use_sindy else "pysindy STLSQ loop"
             t0 = time.perf_counter()
             results[name] = [
-                _pysindy_window(th_, y_, thresholds, alpha=alpha, max_iter=max_iter, use_sindy=use_sindy)
+                _pysindy_window(th_, y_, thresholds, alpha=alpha, max_iter=max_iter, use_sindy=use_sindy, unbias=unbias)
                 for th_, y_ in designs
             ]
             timings[name] = (time.perf_counter() - t0) / len(designs)
@@ -183,6 +184,7 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
     ours_per_window = ours_time / n_windows
     figures = {
         "n_events": len(events),
+        "unbias": unbias,
         "n_windows": n_windows,
         "n_thresholds": int(thresholds.size),
         "ours_total_s": ours_time,
@@ -254,5 +256,8 @@ if __name__ == "__main__":
     parser.add_argument("--results", default=None,
                         help="identification results (e.g. demo/identify): run on that campaign's windows "
                              "instead of the synthetic sparse-model workload")
+    parser.add_argument("--no-unbias", action="store_true",
+                        help="both sides without pysindy's unbiased refit (STLSQ(unbias=False)): the ridge "
+                             "coefficients are kept, so no truncated-SVD refit is needed")
     args = parser.parse_args()
-    main(events_from_results(args.results) if args.results else None)
+    main(events_from_results(args.results) if args.results else None, unbias=not args.no_unbias)
