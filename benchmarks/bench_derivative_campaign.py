@@ -55,24 +55,13 @@ from vivbench.identify.derivative import Derivative  # noqa: E402
 from vivbench.identify.pipeline import IdentifyConfig, _data_quality  # noqa: E402
 from vivbench.identify.preprocess import preprocess_arrays  # noqa: E402
 from vivbench.io import event_arrays, read_event  # noqa: E402
-from vivbench.synth import (  # noqa: E402
-    AeroConfig,
-    CampaignConfig,
-    GeneratorConfig,
-    SensorConfig,
-    TurbulenceConfig,
-    WindConfig,
-    generate_campaign,
-)
+from vivbench.synth import CampaignConfig, generate_campaign  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_campaigns.py
+from _campaigns import CLEAN  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "out"
 CAMPAIGN = OUT / "campaign"
-# The same noise-free generator as bench_identify.py.
-CLEAN = GeneratorConfig(
-    aero=AeroConfig(cl_unlocked=0.0, buffeting_w=0.0),
-    wind=WindConfig(turbulence=TurbulenceConfig(intensity=0.0), noise=0.0, resolution=0.0),
-    sensors=SensorConfig(noise_density=0.0, bits=0),
-)
 METHODS = {
     "band-limited setting (chain default)": Derivative.for_envelope(),
     "white-noise rule": Derivative(),

@@ -32,22 +32,12 @@ from pathlib import Path  # noqa: E402
 
 
 from vivbench.identify import PooledSINDy, identify_files, pool_results, write_pooled  # noqa: E402
-from vivbench.synth import (  # noqa: E402
-    AeroConfig,
-    CampaignConfig,
-    GeneratorConfig,
-    SensorConfig,
-    TurbulenceConfig,
-    WindConfig,
-    generate_campaign,
-)
+from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_campaigns.py
+from _campaigns import CLEAN  # noqa: E402
 from vivbench.validate import campaign_recovery, pooled_recovery  # noqa: E402
 
-CLEAN = GeneratorConfig(
-    aero=AeroConfig(cl_unlocked=0.0, buffeting_w=0.0),
-    wind=WindConfig(turbulence=TurbulenceConfig(intensity=0.0), noise=0.0, resolution=0.0),
-    sensors=SensorConfig(noise_density=0.0, bits=0),
-)
 
 
 def main(n_events: int = 31) -> dict:
