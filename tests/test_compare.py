@@ -110,3 +110,14 @@ def test_two_cell_comparison_is_independent_of_workers(tmp_path):
     assert summary["n_cells"] == 2 and summary["n_failed"] == 0
     assert np.isclose(summary["base_accuracy_all"], float(first[0]["accuracy_all"]), rtol=1e-5)
     assert sorted(p.name for p in (out / "cells" / "c001").iterdir()) == ["E001.identify.nc"]
+
+
+def test_record_command_quotes_the_invocation(tmp_path):
+    import argparse
+
+    from vivbench.cli._common import record_command
+
+    record_command(tmp_path, argparse.Namespace(argv=["compare", "--grid", "my grid.toml", "--out", str(tmp_path)]))
+    assert (tmp_path / "command.txt").read_text() == f"vivbench compare --grid 'my grid.toml' --out {tmp_path}\n"
+    record_command(tmp_path / "missing", argparse.Namespace(argv=["compare"]))   # no directory: nothing written
+    assert not (tmp_path / "missing").exists()

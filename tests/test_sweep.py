@@ -318,6 +318,8 @@ def test_killed_cli_sweep_resumes_to_the_same_table(tmp_path):
     assert clean.returncode == 0, clean.stderr
     assert (out / "sweep.csv").read_bytes() == (tmp_path / "clean" / "sweep.csv").read_bytes()
     assert not (out / ".work").exists()
+    # the report cites the exact command of the run that finished the directory
+    assert (out / "command.txt").read_text() == f"vivbench sweep --grid {grid} --workers 1 --out {out}\n"
 
 
 def _sleep_and_mark(path):

@@ -38,6 +38,7 @@ def _single_threaded_blas() -> None:
 def main(argv: list[str] | None = None) -> int:
     _single_threaded_blas()
     args = _parser().parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     from vivbench.io import EventFormatError
 
     try:

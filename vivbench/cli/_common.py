@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 from pathlib import Path
 
@@ -45,3 +46,15 @@ def event_paths(inputs: list[str]) -> list[Path]:
         else:
             paths.append(p)
     return paths
+
+
+def record_command(out_dir, args) -> None:
+    """Write the command that produced ``out_dir`` to ``out_dir/command.txt`` (the report cites it)."""
+    from vivbench.io import atomic_path
+
+    out = Path(out_dir)
+    argv = getattr(args, "argv", None)
+    if argv is None or not out.is_dir():
+        return
+    with atomic_path(out / "command.txt") as tmp:
+        tmp.write_text("vivbench " + " ".join(shlex.quote(a) for a in argv) + "\n")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from vivbench.cli._common import DEFAULT_WORKERS, progress
+from vivbench.cli._common import DEFAULT_WORKERS, progress, record_command
 
 
 def run(args) -> int:
@@ -18,6 +18,7 @@ def run(args) -> int:
                                 progress=lambda _kind: bar.update())
     finally:
         bar.close()
+    record_command(args.out, args)
     for what, message in result.failures.items():
         print(f"vivbench compare: {what}: {message}", file=sys.stderr)
     print(f"wrote {result.table} ({len(result.rows)} cells), {len(result.figures)} figures and {result.summary}")

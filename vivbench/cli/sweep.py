@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from vivbench.cli._common import DEFAULT_WORKERS, progress
+from vivbench.cli._common import DEFAULT_WORKERS, progress, record_command
 
 
 def run(args) -> int:
@@ -27,6 +27,7 @@ def run(args) -> int:
         return 130
     finally:
         bar.close()
+    record_command(args.out, args)
     for task_id, message in sorted(result.failures.items()):
         print(f"vivbench sweep: task {task_id}: {message}", file=sys.stderr)
     notes = []
