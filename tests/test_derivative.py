@@ -367,3 +367,9 @@ def test_bad_shapes_and_times_refused():
         d.differentiate(np.ones(10), np.r_[np.arange(5.0), np.arange(5.0)])
     with pytest.raises(ValueError, match="window"):
         Derivative(method="savgol", window=100.0).differentiate(np.ones(50), DT)
+
+
+def test_for_envelope_is_the_band_limited_setting_with_overrides():
+    assert Derivative.for_envelope() == BAND_LIMITED
+    assert Derivative.for_envelope(time_scale=40.0) == Derivative(time_scale=40.0, huber=10.0, noise_scale=10.0)
+    assert Derivative.for_envelope("savgol") == Derivative(method="savgol")

@@ -48,13 +48,16 @@ def event_paths(inputs: list[str]) -> list[Path]:
     return paths
 
 
-def record_command(out_dir, args) -> None:
-    """Write the command that produced ``out_dir`` to ``out_dir/command.txt`` (the report cites it)."""
+def write_command(out_dir, argv: list[str]) -> None:
+    """Write ``vivbench ARGV`` (shell-quoted) to ``out_dir/command.txt``: the report cites it."""
     from vivbench.io import atomic_path
 
-    out = Path(out_dir)
+    with atomic_path(Path(out_dir) / "command.txt") as tmp:
+        tmp.write_text(f"vivbench {shlex.join(argv)}\n")
+
+
+def record_command(out_dir, args) -> None:
+    """:func:`write_command` with the parsed invocation's arguments, if ``out_dir`` exists."""
     argv = getattr(args, "argv", None)
-    if argv is None or not out.is_dir():
-        return
-    with atomic_path(out / "command.txt") as tmp:
-        tmp.write_text("vivbench " + " ".join(shlex.quote(a) for a in argv) + "\n")
+    if argv is not None and Path(out_dir).is_dir():
+        write_command(out_dir, argv)

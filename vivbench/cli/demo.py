@@ -17,7 +17,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from vivbench.cli._common import DEFAULT_WORKERS, duration
+from vivbench.cli._common import DEFAULT_WORKERS, duration, write_command
 from vivbench.io import NETCDF_ENGINE
 
 
@@ -39,14 +39,10 @@ def _step(argv: list[str], out_dir: Path | None, failures: list[str]) -> bool:
     """Run one subcommand in-process with its stdout sent to stderr; record its command."""
     from vivbench.cli import main
 
-    command = "vivbench " + " ".join(shlex.quote(a) for a in argv)
-    print(f"[demo] {command}", file=sys.stderr)
+    print(f"[demo] vivbench {shlex.join(argv)}", file=sys.stderr)
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        from vivbench.io import atomic_path
-
-        with atomic_path(out_dir / "command.txt") as tmp:
-            tmp.write_text(command + "\n")
+        write_command(out_dir, argv)
     with contextlib.redirect_stdout(sys.stderr):
         code = main(argv)
     if code != 0:

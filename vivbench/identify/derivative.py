@@ -86,15 +86,16 @@ smoothed more (on white noise, the 75 s modulation of
 ``benchmarks/bench_derivative.py`` is the case). ``noise_scale=0`` (the
 default) gives the plain third differences, the white-noise rule.
 
-Choosing the settings (measured). The defaults (``time_scale = 10`` s,
-exact TV, ``noise_scale = 0``: the white-noise rule) are kept for the
-identification chain; ``time_scale = 20``, ``huber = 10``, ``noise_scale =
-10`` is the setting for band-limited envelope noise. It was chosen among
-time_scale 10/20/40 s, huber 0/3/10/30 and noise_scale = time_scale/2 or
+Choosing the settings (measured). The class defaults (``time_scale = 10`` s,
+exact TV, ``noise_scale = 0``: the white-noise rule) suit white noise and are
+what the campaign model uses; ``time_scale = 20``, ``huber = 10``,
+``noise_scale = 10`` is the setting for band-limited envelope noise
+(:meth:`Derivative.for_envelope`), the identification chain's default. It
+was chosen among time_scale 10/20/40 s, huber 0/3/10/30 and noise_scale = time_scale/2 or
 time_scale as the smallest error on the first 8 events of the default
 synthetic campaign (relative RMS error of dA/dt against the true averaged
-dA/dt, geometric mean over events: 0.060, against 0.156 for the default and
-for finite differences, and 0.056 for Huber-TV tuned per event against the
+dA/dt, geometric mean over events: 0.060, against 0.156 for the white-noise
+rule and for finite differences, and 0.056 for Huber-TV tuned per event against the
 truth). On the 23 other events, not used for the choice: 0.063 against 0.177
 (tuned 0.058); ``benchmarks/bench_derivative_campaign.py``. With ``huber =
 10`` most changes of slope fall below the Huber threshold and the fit behaves
@@ -103,17 +104,17 @@ as a second-difference (Whittaker) smoother whose cut-off is set by
 only their total variation; Chartrand's own algorithm smooths ``|.|`` in the
 same way. Exact TV with the same noise rule (``huber=0, time_scale=20,
 noise_scale=10``) gives 0.096 on the 31 events. On noise-free campaign
-envelopes the band-limited setting's error is 0.2 % (default 0.3 %, finite
+envelopes the band-limited setting's error is 0.2 % (white-noise rule 0.3 %, finite
 differences 0.4 %; geometric means over 8 events), so it does not over-smooth
-clean envelopes. Why it is not the chain's default: with it, the window
-models' median dA/dt error on the default campaign falls from 0.26 to 0.078
-and the campaign model's coverage rises from 0.438 to 0.485 (accuracy 1.000
-on identifiable windows in both), but the campaign model's median dA/dt error
-rises from 0.0105 to 0.0121 (the pooled regression averages the noise over
-the whole campaign anyway; that the smoother's bias then costs more than the
-noise it removes is the likely reason, not measured separately). With exact TV and the
-white-noise rule on such envelopes the automatic weight is tiny and the
-derivative is nearly the finite differences.
+clean envelopes. With it as the chain's default, the window
+models' median dA/dt error on the default campaign falls from 0.26 to 0.078.
+Fed to the campaign model it would raise that model's median dA/dt error
+from 0.0105 to 0.0121 (coverage 0.438 to 0.485, accuracy 1.000 on
+identifiable windows in both): the pooled regression averages the noise over
+the whole campaign anyway but not the smoother's bias, so the campaign model
+differentiates with the white-noise rule (``vivbench.identify.pooled``).
+With exact TV and the white-noise rule on such envelopes the automatic weight
+is tiny and the derivative is nearly the finite differences.
 
 NaN. All methods refuse input containing NaN or infinity with a
 ``ValueError``: the derivative is global, a gap would contaminate the whole

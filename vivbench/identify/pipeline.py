@@ -188,7 +188,8 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         raise ValueError(f"no valid segment is as long as one window ({config.window:g} s); the longest is {longest:.0f} s")
     fit = {name: np.concatenate([p[name] for p in parts], axis=0) for name in _WINDOW_VARS}
     n_w = fit["cond"].shape[0]
-    snr = window_amplitude_snr(pre.t, pre.A, np.concatenate(starts), np.concatenate(ends), pre.noise_std)
+    window_start, window_end = np.concatenate(starts), np.concatenate(ends)
+    snr = window_amplitude_snr(pre.t, pre.A, window_start, window_end, pre.noise_std)
     if config.min_snr is not None:
         # Below the noise floor A is the envelope of noise: no regression can give its regime.
         fit["identifiable"] = fit["identifiable"] & ~(snr < config.min_snr)
@@ -206,8 +207,8 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
                               "the bootstrap models (ensemble optimiser)"})
     data["amplitude_snr"] = (("window", "equation"), snr, {"units": "1", "long_name": "mean amplitude over the window "
                              "divided by the accelerometer noise floor in the vibration band (NaN: floor unknown)"})
-    data["window_start"] = (("window",), np.concatenate(starts), {"units": "s", "long_name": "window start since event start"})
-    data["window_end"] = (("window",), np.concatenate(ends), {"units": "s", "long_name": "window end since event start"})
+    data["window_start"] = (("window",), window_start, {"units": "s", "long_name": "window start since event start"})
+    data["window_end"] = (("window",), window_end, {"units": "s", "long_name": "window end since event start"})
     data["window_segment"] = (("window",), np.concatenate(segs).astype(np.int32), {"units": "1", "long_name": "preprocessing segment of the window"})
     data["A"] = (("time", "section"), pre.A, {"units": "m", "long_name": "vibration amplitude (Hilbert envelope)"})
     data["U"] = (("time", "section"), pre.U, {"units": "m/s", "long_name": "mean wind speed perpendicular to the span"})
