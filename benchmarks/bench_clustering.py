@@ -9,7 +9,7 @@ missing they are made with the command line::
     python -m vivbench.cli identify benchmarks/out/campaign --out benchmarks/out/identify --workers 2
 
 1. Campaign windows: every (window, equation) model of the 31 events (8685
-   points) with both feature sets of :mod:`vivbench.identify.interpret`
+   points) with both feature sets of :mod:`vivbench.analysis.interpret`
    ("coef": 69 standardised coefficients; "order": 4 order shares). Ours and
    pydpc run the same Gaussian kernel with the same d_c (fraction 0.02) on
    the same points. pydpc chooses centres by thresholds on (rho, delta); it is
@@ -43,8 +43,8 @@ from _timing import best_of  # noqa: E402
 import numpy as np  # noqa: E402
 from sklearn.metrics import adjusted_rand_score  # noqa: E402
 
-from vivbench.identify import campaign_windows, cluster_scores  # noqa: E402
-from vivbench.identify.clustering import DensityPeaks  # noqa: E402
+from vivbench.analysis.interpret import campaign_windows, cluster_scores
+from vivbench.analysis.clustering import DensityPeaks
 
 OUT = Path(__file__).resolve().parent / "out"
 CAMPAIGN, RESULTS = OUT / "campaign", OUT / "identify"

@@ -55,7 +55,7 @@ import warnings  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from vivbench.identify.derivative import Derivative  # noqa: E402
+from vivbench.preprocess.derivative import Derivative
 
 DT = 0.25  # s
 N = 4800

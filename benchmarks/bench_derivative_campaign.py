@@ -51,10 +51,10 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from vivbench.identify.derivative import Derivative  # noqa: E402
-from vivbench.identify.pipeline import IdentifyConfig, _data_quality  # noqa: E402
-from vivbench.identify.preprocess import preprocess_arrays  # noqa: E402
-from vivbench.io import event_arrays, read_event  # noqa: E402
+from vivbench.preprocess.derivative import Derivative
+from vivbench.analysis.identify import IdentifyConfig, _data_quality
+from vivbench.preprocess.chain import preprocess_arrays
+from vivbench.io.event import event_arrays, read_event
 from vivbench.synth import CampaignConfig, generate_campaign  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_campaigns.py

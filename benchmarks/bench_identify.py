@@ -31,7 +31,10 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 
-from vivbench.identify import PooledSINDy, identify_files, pool_results, write_pooled  # noqa: E402
+from vivbench.models.campaign import PooledSINDy
+from vivbench.analysis.identify import identify_files
+from vivbench.analysis.pool import pool_results
+from vivbench.io.campaign_model import write_pooled
 from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_campaigns.py

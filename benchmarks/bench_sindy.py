@@ -31,10 +31,12 @@ import numpy as np  # noqa: E402
 import pysindy as ps  # noqa: E402
 from scipy.ndimage import gaussian_filter1d  # noqa: E402
 
-from vivbench.identify import engine as _engine  # noqa: E402
-from vivbench.identify.engine import DEFAULT_THRESHOLDS, WindowedSINDy, aicc, window_bounds  # noqa: E402
-from vivbench.identify.library import condition_number, window_library  # noqa: E402
-from vivbench.terms import evaluate_library, feature_exponents  # noqa: E402
+from vivbench.regression import stlsq as _engine  # noqa: E402
+from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, aicc
+from vivbench.models.window import WindowedSINDy
+from vivbench.preprocess.windows import window_bounds
+from vivbench.library.basis import condition_number, window_library
+from vivbench.core.terms import evaluate_library, feature_exponents
 
 DT = 0.25
 
@@ -112,7 +114,7 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
         events = make_campaign()
     thresholds = np.asarray(DEFAULT_THRESHOLDS)
     # Regression and AICc only, like the pysindy loop: no identifiability competitors.
-    est = dict(alpha=alpha, max_iter=max_iter, thresholds=thresholds, identifiability_margin=None, unbias=unbias)
+    est = dict(alpha=alpha, max_iter=max_iter, thresholds=thresholds, unbias=unbias)
 
     WindowedSINDy(**est).fit(*events[0])  # warm-up (imports, LAPACK workspaces)
     models = []
@@ -239,7 +241,7 @@ def events_from_results(results_dir) -> list:
 
     import xarray as xr
 
-    from vivbench.io import NETCDF_ENGINE
+    from vivbench.io.netcdf import NETCDF_ENGINE
 
     events = []
     for path in sorted(Path(results_dir).glob("*.identify.nc")):

@@ -38,7 +38,7 @@ def small_campaign(tmp_path_factory):
 @pytest.fixture(scope="session")
 def small_results(small_campaign, tmp_path_factory):
     """The first two events of ``small_campaign`` identified with the default settings: (campaign, dir, files)."""
-    from vivbench.identify import identify_files
+    from vivbench.analysis.identify import identify_files
 
     out = tmp_path_factory.mktemp("small_identify")
     results, failures = identify_files(small_campaign.files[:2], out, workers=1)

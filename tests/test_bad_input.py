@@ -24,9 +24,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vivbench.cli import main
-from vivbench.identify import IdentifyConfig, PreprocessConfig, identify_files
-from vivbench.io import NETCDF_ENGINE, write_netcdf_atomic
-from vivbench.quality import G
+from vivbench.analysis.identify import IdentifyConfig, identify_files
+from vivbench.preprocess.chain import PreprocessConfig
+from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
+from vivbench.io.quality import G
 from vivbench.synth import CampaignConfig, campaign_specs, generate_event
 
 # A small configuration for a 120 s event: 20 s windows, 20 s edges (the edge actually
@@ -35,7 +36,7 @@ DURATION = 120.0
 CONFIG = IdentifyConfig(window=20.0, step=10.0,
                         preprocess=PreprocessConfig(edge_s=20.0, min_segment_s=20.0, welch_segment_s=100.0))
 
-# The documented refusals (vivbench.io, vivbench.quality, preprocessing, pipeline).
+# The documented refusals (vivbench.io, vivbench.io.quality, preprocessing, pipeline).
 DOCUMENTED = {
     "time": r"is not strictly increasing|every time must be given|at least 2 needed",
     "rate": r"sampling rate [\d.e+-]+ Hz \(median step\) is more than 10% from the nominal",
@@ -300,7 +301,7 @@ def test_two_events_with_one_id_do_not_overwrite_each_other(short_event, tmp_pat
 
 
 def test_despike_finds_short_spikes_not_gusts_and_keeps_gaps():
-    from vivbench.quality import despike
+    from vivbench.io.quality import despike
 
     rng = np.random.default_rng(0)
     x = rng.standard_normal((3200, 2))
@@ -323,7 +324,7 @@ def test_despike_short_median_equals_scipy_median_filter(n, k, seed, gaps):
     exactly what scipy.ndimage.median_filter (mode "mirror") over every sample flags."""
     from scipy import ndimage
 
-    from vivbench.quality import _block_nanmedian, despike
+    from vivbench.io.quality import _block_nanmedian, despike
 
     rng = np.random.default_rng(seed)
     x = np.cumsum(rng.standard_normal((n, k)), axis=0) * 0.1 + rng.standard_normal((n, k))

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.helpers import assert_close
-from vivbench.identify.clustering import DensityPeaks, coefficient_features, decision_graph, order_features
+from vivbench.analysis.clustering import DensityPeaks, coefficient_features, decision_graph, order_features
 
 
 def _blobs(seed: int, n_per: int = 50, k: int = 4, dim: int = 5, sep: float = 8.0, spread: float = 1.0):

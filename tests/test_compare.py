@@ -115,7 +115,7 @@ def test_two_cell_comparison_is_independent_of_workers(tmp_path):
 def test_record_command_quotes_the_invocation(tmp_path):
     import argparse
 
-    from vivbench.cli._common import record_command
+    from vivbench.cli.common import record_command
 
     record_command(tmp_path, argparse.Namespace(argv=["compare", "--grid", "my grid.toml", "--out", str(tmp_path)]))
     assert (tmp_path / "command.txt").read_text() == f"vivbench compare --grid 'my grid.toml' --out {tmp_path}\n"

@@ -1,4 +1,4 @@
-"""Tests of vivbench.identify.derivative (DESIGN 3.1: derivative of the envelopes)."""
+"""Tests of vivbench.preprocess.derivative (DESIGN 3.1: derivative of the envelopes)."""
 
 from __future__ import annotations
 
@@ -8,20 +8,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.helpers import assert_close, relative_rms
-from vivbench.identify.preprocess import envelope
-from vivbench.identify.derivative import (
-    DERIVATIVE_METHODS,
-    Derivative,
-    estimate_noise_std,
-    tv_derivative,
-)
+from vivbench.preprocess.chain import envelope
+from vivbench.preprocess.derivative import DERIVATIVE_METHODS, Derivative, estimate_noise_std, tv_derivative
 
 DT = 0.25  # s, a few Hz as in the chain
 N = 4800  # 20 min
 T = np.arange(N) * DT
 INNER = slice(240, N - 240)  # drop 60 s at each end
 # The setting for band-limited envelope noise (module docstring of
-# vivbench.identify.derivative): noise level measured at 10 s, Huber-TV.
+# vivbench.preprocess.derivative): noise level measured at 10 s, Huber-TV.
 BAND_LIMITED = Derivative(time_scale=20.0, huber=10.0, noise_scale=10.0)
 
 

@@ -20,16 +20,11 @@ from scipy.integrate import solve_ivp
 from scipy.ndimage import gaussian_filter1d
 
 from tests.helpers import assert_close
-from vivbench.identify.engine import (
-    DEFAULT_THRESHOLDS,
-    StlsqSettings,
-    WindowedSINDy,
-    aicc,
-    stlsq_path,
-    window_bounds,
-)
-from vivbench.identify.library import condition_number, library_cond, window_library
-from vivbench.terms import evaluate_library, feature_exponents
+from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, StlsqSettings, aicc, stlsq_path
+from vivbench.models.window import WindowedSINDy
+from vivbench.preprocess.windows import window_bounds
+from vivbench.library.basis import condition_number, library_cond, window_library
+from vivbench.core.terms import evaluate_library, feature_exponents
 
 DT = 0.25
 EPS = np.finfo(float).eps
@@ -552,7 +547,7 @@ def test_sr3_recovers_exact_sparse_support():
     """Noise-free data with the exact derivative of a sparse one-section model: the SR3 path with
     AICc selection finds the model's support on every window's basis (exact data make the true
     model a fixed point of SR3 for every threshold below its smallest coefficient)."""
-    from vivbench.identify.optimizers import sr3_path
+    from vivbench.regression.optimizers import sr3_path
 
     theta, y, structural, expected = _exact_single_section_windows()
     assert np.abs(expected)[structural].min() >= 1e-2, "the test model needs coefficients above the path's first thresholds"
@@ -564,7 +559,7 @@ def test_sr3_recovers_exact_sparse_support():
 
 def test_ensemble_on_exact_sparse_model_includes_exactly_its_terms():
     """Every bootstrap sample of exact data holds the same model: inclusion is 1 on its support, 0 elsewhere."""
-    from vivbench.identify.optimizers import ensemble_path
+    from vivbench.regression.optimizers import ensemble_path
 
     theta, y, structural, _ = _exact_single_section_windows()
     path, inclusion, threshold = ensemble_path(theta, y, StlsqSettings(alpha=0.0, refit_rcond=None), seed=3)
@@ -575,7 +570,7 @@ def test_ensemble_on_exact_sparse_model_includes_exactly_its_terms():
 
 
 def test_ensemble_is_deterministic_for_a_seed_and_leaves_global_state():
-    from vivbench.identify.optimizers import OptimizerOptions
+    from vivbench.regression.optimizers import OptimizerOptions
 
     t, A, U, dA = _noisy_event(2, 100.0)
     np.random.seed(123)
@@ -599,7 +594,7 @@ def test_ensemble_is_deterministic_for_a_seed_and_leaves_global_state():
 
 
 def test_optimizer_is_validated():
-    from vivbench.identify.optimizers import OptimizerOptions
+    from vivbench.regression.optimizers import OptimizerOptions
 
     t, A, U, dA = _noisy_event(0, 150.0)
     with pytest.raises(ValueError, match="optimizer must be one of"):
@@ -613,8 +608,8 @@ def test_optimizer_is_validated():
 @pytest.mark.parametrize("optimizer", ["sr3", "ensemble"])
 def test_pysindy_optimizers_through_identify_event(small_campaign, optimizer):
     """The pysindy-based optimisers give complete, valid result files on a campaign event."""
-    from vivbench.identify import IdentifyConfig, identify_event
-    from vivbench.io import read_event
+    from vivbench.analysis.identify import IdentifyConfig, identify_event
+    from vivbench.io.event import read_event
 
     tree = read_event(small_campaign.files[1])
     ds = identify_event(tree, IdentifyConfig(optimizer=optimizer, window=60.0, step=120.0))

@@ -13,10 +13,10 @@ import xarray as xr
 
 from tests.helpers import assert_close
 from vivbench.cli import main
-from vivbench.fieldimport import export_csv, export_mat, import_event, load_mapping
-from vivbench.identify import IdentifyConfig, identify_files
-from vivbench.io import event_arrays, read_event
-from vivbench.quality import ACC_UNITS, G, WIND_UNITS
+from vivbench.io.fieldimport import export_csv, export_mat, import_event, load_mapping
+from vivbench.analysis.identify import IdentifyConfig, identify_files
+from vivbench.io.event import event_arrays, read_event
+from vivbench.io.quality import ACC_UNITS, G, WIND_UNITS
 
 VARS = ("wind_time", "u", "v", "w", "accel_time", "acc")
 

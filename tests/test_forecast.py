@@ -1,4 +1,4 @@
-"""Simulation and forecasting with time-varying models (vivbench.identify.forecast)."""
+"""Simulation and forecasting with time-varying models (vivbench.models.simulate)."""
 
 from __future__ import annotations
 
@@ -10,17 +10,10 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from tests.helpers import assert_close
-from vivbench.identify import WindowedSINDy
-from vivbench.identify.forecast import (
-    forecast,
-    forecast_coefficients,
-    forecast_table,
-    nmse,
-    simulate_identified,
-    window_in_force,
-)
+from vivbench.models.window import WindowedSINDy
+from vivbench.models.simulate import forecast, forecast_coefficients, forecast_table, nmse, simulate_identified, window_in_force
 from vivbench.synth import AeroConfig, StructureConfig, exact_coefficients
-from vivbench.terms import evaluate_library, feature_exponents, feature_names
+from vivbench.core.terms import evaluate_library, feature_exponents, feature_names
 
 FS = 4.0  # Hz, the preprocessed grid
 DURATION = 600.0  # s
@@ -240,8 +233,7 @@ def test_simulated_sparse_model_is_reidentified():
     assert_close(fd, dA[1:-1], rtol=0, atol=2e-3 * np.abs(dA).max(), reason="central differences, O(h^2)",
                  what="simulated trajectory vs its model")
     for s in range(3):
-        est = WindowedSINDy(window=t[-1] + 0.25, step=t[-1] + 0.25, alpha=0.0, refit_rcond=None, keep_path=False,
-                            identifiability_margin=None)
+        est = WindowedSINDy(window=t[-1] + 0.25, step=t[-1] + 0.25, alpha=0.0, refit_rcond=None, keep_path=False)
         est.fit(t, A[:, s:s + 1], U[:, s:s + 1], dA[:, s:s + 1])
         got = est.coef_[0, 0]
         want = Xi[s, 23 * s:23 * (s + 1)]
@@ -253,7 +245,7 @@ def test_simulated_sparse_model_is_reidentified():
 @pytest.mark.parametrize("clip", ["u", "au"])
 def test_clipping_keeps_exact_models_exact_and_bounds_the_arguments(event, clip):
     """Clipping to the window's own ranges changes nothing while the trajectory stays in them."""
-    from vivbench.identify.forecast import window_ranges
+    from vivbench.models.simulate import window_ranges
 
     a_lo, a_hi, u_lo, u_hi = window_ranges(event["result"])
     t, A, U = event["t"], event["A"], event["U"]
@@ -270,7 +262,7 @@ def test_clipping_keeps_exact_models_exact_and_bounds_the_arguments(event, clip)
 
 
 def test_model_jacobian_matches_finite_differences():
-    from vivbench.identify.forecast import model_jacobian
+    from vivbench.models.simulate import model_jacobian
 
     rng = np.random.default_rng(0)
     coef = rng.normal(size=(3, 69))

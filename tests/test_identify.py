@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import xarray as xr
 from scipy.integrate import solve_ivp
 
-from vivbench.identify import IdentifyConfig, WindowedSINDy, identify_event, identify_files
-from vivbench.io import NETCDF_ENGINE, read_event, write_event
+from vivbench.analysis.identify import IdentifyConfig, identify_event, identify_files
+from vivbench.models.window import WindowedSINDy
+from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.io.event import read_event, write_event
 from vivbench.synth import (
     AeroConfig,
     DefectConfig,
@@ -23,7 +26,9 @@ from vivbench.synth import (
     WindScript,
     generate_event,
 )
-from vivbench.validate import regime_scores, rhs_relative_error, truth_window_regimes
+from vivbench.validate import regime_scores, rhs_relative_error
+from vivbench.regimes.truth import truth_window_regimes
+from vivbench.regimes.window import label_windows
 
 PHI = np.array([0.707, 1.0, 0.707])
 T_WIN = np.arange(0.0, 50.0, 0.25)
@@ -35,7 +40,8 @@ A1, A3 = 0.006, 0.006 / 0.15**2
 def _fit_window(Q, dQ, U, noise=0.0, seed=0):
     rng = np.random.default_rng(seed)
     dA = dQ[:, None] * PHI + noise * rng.standard_normal((Q.size, 3))
-    return WindowedSINDy(window=50.0, step=25.0).fit(T_WIN, Q[:, None] * PHI, U, dA)
+    v = label_windows(WindowedSINDy(window=50.0, step=25.0), T_WIN, Q[:, None] * PHI, U, dA)
+    return SimpleNamespace(**{f"{k}_": x for k, x in v.items()})
 
 
 def test_flag_strong_growth_is_identifiable_and_right():
@@ -184,8 +190,8 @@ def test_identify_config_validation():
 def test_preprocessing_recovers_the_truth_it_is_scored_against(default_campaign_specs):
     # The deck feels the scripted mean plus the turbulence slower than 1/60 Hz; the
     # identification's mean-wind filter keeps the same part, so U is comparable.
-    from vivbench.identify import preprocess_arrays
-    from vivbench.io import event_arrays
+    from vivbench.preprocess.chain import preprocess_arrays
+    from vivbench.io.event import event_arrays
 
     spec, seed = default_campaign_specs[1]
     tree = generate_event(spec, GeneratorConfig(), seed)

@@ -1,4 +1,4 @@
-"""Cluster interpretation of window models (vivbench.identify.interpret) and the cluster/forecast CLIs."""
+"""Cluster interpretation of window models (vivbench.analysis.interpret) and the cluster/forecast CLIs."""
 
 from __future__ import annotations
 
@@ -11,19 +11,13 @@ import xarray as xr
 
 from tests.helpers import assert_close
 from vivbench.cli import main
-from vivbench.identify import (
-    ClusterConfig,
-    WindowedSINDy,
-    campaign_windows,
-    cluster_scores,
-    cluster_windows,
-    identify_files,
-    standardized_coefficients,
-)
-from vivbench.identify.clustering import DensityPeaks
-from vivbench.terms import evaluate_library, feature_names
+from vivbench.analysis.interpret import ClusterConfig, campaign_windows, cluster_scores, cluster_windows, standardized_coefficients
+from vivbench.models.window import WindowedSINDy
+from vivbench.analysis.identify import identify_files
+from vivbench.analysis.clustering import DensityPeaks
+from vivbench.core.terms import evaluate_library, feature_names
 from vivbench.validate import clearest_plateau, measured_plateau, truth_plateau
-from vivbench.io import NETCDF_ENGINE
+from vivbench.io.netcdf import NETCDF_ENGINE
 
 FS = 4.0
 
@@ -34,7 +28,7 @@ def _wind(t):
 
 
 def _index(section, i, j):
-    from vivbench.terms import feature_exponents
+    from vivbench.core.terms import feature_exponents
 
     ex = feature_exponents(3)
     return int(np.flatnonzero((ex[:, 0] == section) & (ex[:, 1] == i) & (ex[:, 2] == j))[0])

@@ -18,7 +18,8 @@ from hypothesis.extra import numpy as hnp
 
 from tests.helpers import assert_close
 from vivbench import io
-from vivbench.terms import feature_names
+from vivbench.io import netcdf
+from vivbench.core.terms import feature_names
 
 # ----------------------------------------------------------------------- helpers
 
@@ -360,7 +361,7 @@ def test_write_failure_at_rename_leaves_old_file_and_no_temp(tmp_path, monkeypat
     def failing_replace(src, dst):
         raise PermissionError("simulated: rename refused")
 
-    monkeypatch.setattr(io.os, "replace", failing_replace)
+    monkeypatch.setattr(netcdf.os, "replace", failing_replace)
     with pytest.raises(PermissionError, match="simulated"):
         io.write_event(io.build_event(**_event_kwargs(seed=2)), target)
     assert _directory_state(tmp_path) == before, "directory changed after a failed rename"

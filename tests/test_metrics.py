@@ -14,27 +14,13 @@ import pytest
 import xarray as xr
 
 from tests.helpers import assert_close
-from vivbench.identify import forecast_table, identify_files
-from vivbench.io import NETCDF_ENGINE, read_event, write_event, write_netcdf_atomic
+from vivbench.models.simulate import forecast_table
+from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
+from vivbench.io.event import read_event, write_event
 from vivbench.synth import GeneratorConfig, exact_coefficients
-from vivbench.terms import feature_exponents
-from vivbench.validate import (
-    campaign_recovery,
-    cluster_agreement,
-    cluster_purity,
-    confusion_matrix,
-    forecast_summary,
-    merge_support_scores,
-    order_support,
-    pooled_support,
-    regime_report,
-    rhs_error_summary,
-    rhs_relative_error,
-    support_mask,
-    support_scores,
-    truth_window_regimes,
-    validate_campaign,
-)
+from vivbench.core.terms import feature_exponents
+from vivbench.validate import campaign_recovery, cluster_agreement, cluster_purity, confusion_matrix, forecast_summary, merge_support_scores, order_support, pooled_support, regime_report, rhs_error_summary, rhs_relative_error, support_mask, support_scores, validate_campaign
+from vivbench.regimes.truth import truth_window_regimes
 
 EX = feature_exponents(3)
 

@@ -9,18 +9,21 @@ import pytest
 from scipy.integrate import quad
 
 from tests.helpers import assert_close
-from vivbench.identify import Derivative, IdentifyConfig, identify_event
-from vivbench.identify.noise_floor import band_noise_std, window_amplitude_snr
-from vivbench.identify.preprocess import PreprocessConfig, _band_gain, _welch_psd, preprocess_arrays
-from vivbench.io import event_arrays, read_event
-from vivbench.quality import G
+from vivbench.preprocess.derivative import Derivative
+from vivbench.analysis.identify import IdentifyConfig, identify_event
+from vivbench.preprocess.noise_floor import band_noise_std, window_amplitude_snr
+from vivbench.preprocess.chain import PreprocessConfig, preprocess_arrays
+from vivbench.preprocess.band import band_gain
+from vivbench.preprocess.chain import welch_psd
+from vivbench.io.event import event_arrays, read_event
+from vivbench.io.quality import G
 from vivbench.synth import CampaignConfig, campaign_specs, generate_event
 
 
 def _theory_std(density: float, f_mode: float, half_width: float, taper: float = 0.5) -> float:
     """Displacement noise of one-sided acceleration PSD ``density**2`` through the band integration."""
     def integrand(f):
-        return float(_band_gain(np.array([f]), f_mode, half_width, taper)[0] ** 2 / (2 * np.pi * f) ** 4)
+        return float(band_gain(np.array([f]), f_mode, half_width, taper)[0] ** 2 / (2 * np.pi * f) ** 4)
 
     value, _ = quad(integrand, f_mode - half_width, f_mode + half_width, limit=200)
     return density * np.sqrt(value)
@@ -34,7 +37,7 @@ def test_band_noise_std_recovers_white_noise_under_a_strong_mode():
     noise = rng.standard_normal((t.size, 3)) * density * np.sqrt(fs / 2)
     # A vibration 30-1000 times the noise in the band, slowly modulated.
     mode = 0.2 * (1 + 0.5 * np.sin(2 * np.pi * t / 600))[:, None] * np.cos(2 * np.pi * f0 * t)[:, None]
-    f, psd = _welch_psd(t, mode + noise, 300.0, 0.05, 2.0)
+    f, psd = welch_psd(t, mode + noise, 300.0, 0.05, 2.0)
     sigma = band_noise_std(f, psd, f0, 0.3 * f0)
     expected = [_theory_std(d, f0, 0.3 * f0) for d in density]
     # Welch medians over two flanks of ~100 bins each: a few per cent of scatter.
@@ -51,7 +54,7 @@ def test_band_noise_std_ignores_a_neighbouring_mode_on_one_flank():
     spectrum = np.fft.rfft(rng.standard_normal(t.size))
     freq = np.fft.rfftfreq(t.size, 1 / fs)
     other = np.fft.irfft(spectrum * np.exp(-0.5 * ((freq - 0.48) / 0.03) ** 2), n=t.size)[:, None] * 0.3
-    f, psd = _welch_psd(t, noise + other, 300.0, 0.05, 2.0)
+    f, psd = welch_psd(t, noise + other, 300.0, 0.05, 2.0)
     upper = (f > 1.3 * f0) & (f < 1.6 * f0)
     assert np.median(psd[upper]) > 10 * 1e-3**2           # the upper flank alone would say 3x the noise
     sigma = band_noise_std(f, psd, f0, 0.3 * f0)

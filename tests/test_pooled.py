@@ -6,13 +6,15 @@ import numpy as np
 import pytest
 
 from tests.helpers import assert_close
-from vivbench.identify import PooledSINDy, StlsqSettings, pooled_window_stats, stlsq_path, window_library
-from vivbench.identify.engine import aicc
-from vivbench.identify.pooled import _block_factors, _replicate_fits
-from vivbench.regime import classify_regime
+from vivbench.models.campaign import PooledSINDy, pooled_window_stats
+from vivbench.regression.stlsq import StlsqSettings, stlsq_path
+from vivbench.library.basis import window_library
+from vivbench.regression.stlsq import aicc
+from vivbench.models.campaign import _block_factors, _replicate_fits
+from vivbench.core.regime import classify_regime
 from vivbench.synth import CampaignConfig
-from vivbench.terms import evaluate_library, section_exponents
-from vivbench.validate import truth_window_regimes
+from vivbench.core.terms import evaluate_library, section_exponents
+from vivbench.regimes.truth import truth_window_regimes
 
 
 def _truth(sim):
@@ -67,7 +69,7 @@ def test_window_stats_follow_the_shared_rule():
     start = np.array([0.0, 20.0, 40.0])
     end = start + 50.0
     R, c1, nv = pooled_window_stats(models, t, A, U, start, end)
-    from vivbench.regime import regime_rule
+    from vivbench.core.regime import regime_rule
 
     theta = evaluate_library(A, U)
     orders = np.tile(section_exponents()[:, 0], S)
@@ -131,7 +133,7 @@ def test_cli_pool_and_validation_of_the_campaign_model(small_results, tmp_path):
     import shutil
 
     from vivbench.cli import main
-    from vivbench.identify import POOLED_NAME
+    from vivbench.io.campaign_model import POOLED_NAME
     from vivbench.validate import pooled_recovery, validate_campaign
 
     camp, res_dir, results = small_results
@@ -178,9 +180,9 @@ def test_campaign_model_differentiates_the_results_amplitudes_itself(small_resul
 
     import xarray as xr
 
-    from vivbench.identify import pool_results
-    from vivbench.identify.pooled import CAMPAIGN_DERIVATIVE, _campaign_derivative
-    from vivbench.io import NETCDF_ENGINE
+    from vivbench.analysis.pool import pool_results
+    from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE, _campaign_derivative
+    from vivbench.io.netcdf import NETCDF_ENGINE
 
     _camp, _out, results = small_results
     with xr.open_dataset(results[0], engine=NETCDF_ENGINE) as ds:

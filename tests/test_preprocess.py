@@ -1,4 +1,4 @@
-"""Tests of the preprocessing chain (vivbench.identify.preprocess) on signals built here."""
+"""Tests of the preprocessing chain (vivbench.preprocess.chain) on signals built here."""
 
 from __future__ import annotations
 
@@ -9,19 +9,7 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from tests.helpers import assert_close, relative_rms
-from vivbench.identify.preprocess import (
-    PreprocessConfig,
-    common_grid,
-    displacement,
-    envelope,
-    mean_wind,
-    modal_frequency,
-    perpendicular_speed,
-    preprocess_arrays,
-    segments,
-    to_grid,
-    wind_speed_direction,
-)
+from vivbench.preprocess.chain import PreprocessConfig, common_grid, displacement, envelope, mean_wind, modal_frequency, perpendicular_speed, preprocess_arrays, segments, to_grid, wind_speed_direction
 
 FS_WIND = 32.0
 FS_ACC = 50.0

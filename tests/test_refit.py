@@ -1,4 +1,4 @@
-"""Output-error refit of coefficients (vivbench.identify.refit, vivbench refit)."""
+"""Output-error refit of coefficients (vivbench.models.refit, vivbench refit)."""
 
 from __future__ import annotations
 
@@ -11,17 +11,12 @@ from scipy.signal import savgol_filter
 
 from tests.helpers import assert_close
 from vivbench.cli import main
-from vivbench.identify import IdentifyConfig, identify_event, result_path
-from vivbench.identify.refit import (
-    RefitConfig,
-    _equation_error_fit,
-    order_rms,
-    refit_coefficients,
-    refit_event,
-    simulate_coefficients,
-)
-from vivbench.io import read_event, write_netcdf_atomic
-from vivbench.terms import evaluate_library, feature_names
+from vivbench.analysis.identify import IdentifyConfig, identify_event
+from vivbench.io.result import result_path
+from vivbench.models.refit import RefitConfig, _equation_error_fit, order_rms, refit_coefficients, refit_event, simulate_coefficients
+from vivbench.io.event import read_event
+from vivbench.io.netcdf import write_netcdf_atomic
+from vivbench.core.terms import evaluate_library, feature_names
 
 FS = 2.0  # Hz
 DURATION = 300.0  # s
@@ -151,7 +146,7 @@ def identified(small_campaign, tmp_path_factory):
 
 
 def test_refit_event_on_truth_support(identified):
-    from vivbench.io import event_arrays
+    from vivbench.io.event import event_arrays
 
     truth = event_arrays(read_event(identified["event"]))["coef"]
     ds = identified["ds"]
@@ -181,7 +176,7 @@ def test_cli_writes_files_and_rejects_bad_input(identified, tmp_path, capsys):
     assert table[0].split(",")[:2] == ["equation", "feature"] and len(table) > 1
     summary = json.loads((out / "summary.json").read_text())
     assert {"ipopt_status", "ipopt_iterations", "wall_time_s", "nmse_refit_mean"} <= set(summary)
-    from vivbench.io import event_arrays
+    from vivbench.io.event import event_arrays
 
     truth = event_arrays(read_event(identified["event"]))["coef"]
     assert summary["support"] == "truth"

@@ -14,8 +14,9 @@ import pytest
 import xarray as xr
 
 from vivbench.cli import main
-from vivbench.identify import forecast_table
-from vivbench.io import NETCDF_ENGINE, read_event
+from vivbench.models.simulate import forecast_table
+from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.io.event import read_event
 from vivbench.report import EXTRA_STEPS, forecast_figure, sensor_layout_figure, write_report
 
 _LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)\)")

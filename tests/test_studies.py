@@ -10,7 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vivbench.identify import PooledSINDy, identify_files, pool_results, write_pooled
+from vivbench.models.campaign import PooledSINDy
+from vivbench.analysis.identify import identify_files
+from vivbench.analysis.pool import pool_results
+from vivbench.io.campaign_model import write_pooled
 from vivbench.synth import AeroConfig, CampaignConfig, GeneratorConfig, SensorConfig, TurbulenceConfig, WindConfig, generate_campaign
 from vivbench.validate import campaign_recovery, pooled_recovery
 

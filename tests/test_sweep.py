@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vivbench.parallel import run_tasks
+from vivbench.core.parallel import run_tasks
 from vivbench.validate import (
     METRIC_COLUMNS,
     SweepConfig,

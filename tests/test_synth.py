@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from scipy.signal import welch
 
 from tests.helpers import assert_close, relative_rms
-from vivbench.io import read_event
-from vivbench.regime import classify_regime
+from vivbench.io.event import read_event
+from vivbench.core.regime import classify_regime
 from vivbench.synth import (
     AeroConfig,
     CampaignConfig,
@@ -36,7 +36,7 @@ from vivbench.synth import (
     simulate_event,
 )
 from vivbench.synth.config import Polynomial
-from vivbench.terms import evaluate_library
+from vivbench.core.terms import evaluate_library
 
 
 def _quiet_config(**aero) -> GeneratorConfig:

@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     _single_threaded_blas()
     args = _parser().parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
-    from vivbench.io import EventFormatError
+    from vivbench.io.event import EventFormatError
 
     try:
         return args.func(args)

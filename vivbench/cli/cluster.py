@@ -10,7 +10,7 @@ _LABEL_COLUMNS = ("event_id", "window", "equation", "window_start", "window_end"
 
 
 def _write_csv(path: Path, rows: list[dict], columns) -> None:
-    from vivbench.io import atomic_path
+    from vivbench.io.netcdf import atomic_path
 
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as fh:
@@ -24,11 +24,12 @@ def _fmt(x):
 
 
 def run(args) -> int:
-    from vivbench.identify import ClusterConfig, campaign_windows, cluster_windows, decision_graph
-    from vivbench.io import atomic_path
+    from vivbench.analysis.interpret import ClusterConfig, campaign_windows, cluster_windows
+    from vivbench.analysis.clustering import decision_graph
+    from vivbench.io.netcdf import atomic_path
 
     config = ClusterConfig(kernel=args.kernel, dc_fraction=args.dc_fraction, n_centers=args.centers)
-    from vivbench.identify import list_results
+    from vivbench.io.result import list_results
 
     files = list_results(args.results_dir)
     if args.campaign is not None and not Path(args.campaign).is_dir():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from vivbench.cli._common import DEFAULT_WORKERS, progress, record_command
+from vivbench.cli.common import DEFAULT_WORKERS, progress, record_command
 
 
 def run(args) -> int:

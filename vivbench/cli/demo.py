@@ -17,8 +17,8 @@ import shlex
 import sys
 from pathlib import Path
 
-from vivbench.cli._common import DEFAULT_WORKERS, duration, write_command
-from vivbench.io import NETCDF_ENGINE
+from vivbench.cli.common import DEFAULT_WORKERS, duration, write_command
+from vivbench.io.netcdf import NETCDF_ENGINE
 
 
 

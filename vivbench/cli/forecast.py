@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from vivbench.io import NETCDF_ENGINE
+from vivbench.io.netcdf import NETCDF_ENGINE
 
 _COLUMNS = ("kind", "clip", "d_s", "section", "nmse", "stopped", "stopped_at_s", "covered", "n_windows",
             "growth_rate_per_s", "reason")
@@ -42,7 +42,7 @@ def _choose_t0(args, result):
     if args.t0 is not None:
         return float(args.t0), "given"
     if args.campaign is not None:
-        from vivbench.io import read_event
+        from vivbench.io.event import read_event
 
         path = Path(args.campaign) / f"{result.attrs['event_id']}.nc"
         tree = read_event(path)
@@ -57,8 +57,8 @@ def _choose_t0(args, result):
 def _truth_growth(args, result, t0):
     if args.campaign is None:
         return None
-    from vivbench.identify.forecast import model_jacobian
-    from vivbench.io import read_event
+    from vivbench.models.simulate import model_jacobian
+    from vivbench.io.event import read_event
 
     tree = read_event(Path(args.campaign) / f"{result.attrs['event_id']}.nc")
     if "truth" not in tree.children or "coef" not in tree["truth"].ds:
@@ -120,9 +120,12 @@ def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None):
 def run(args) -> int:
     import xarray as xr
 
-    from vivbench.identify import POOLED_NAME, CLIP_MODES, forecast, read_result, simulate_identified, with_campaign_model
-    from vivbench.identify.forecast import model_jacobian
-    from vivbench.io import atomic_path
+    from vivbench.io.campaign_model import POOLED_NAME
+    from vivbench.models.simulate import CLIP_MODES, forecast, simulate_identified
+    from vivbench.io.result import read_result
+    from vivbench.analysis.pool import with_campaign_model
+    from vivbench.models.simulate import model_jacobian
+    from vivbench.io.netcdf import atomic_path
 
     result = read_result(args.result)
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import sys
 
-from vivbench.cli._common import DEFAULT_WORKERS, event_paths, progress
+from vivbench.cli.common import DEFAULT_WORKERS, event_paths, progress
 
 
 def run(args) -> int:
-    from vivbench.identify import Derivative, IdentifyConfig, PreprocessConfig, identify_files
+    from vivbench.preprocess.derivative import Derivative
+    from vivbench.analysis.identify import IdentifyConfig, identify_files
+    from vivbench.preprocess.chain import PreprocessConfig
 
     deriv_opts = {}
     if args.tv_time_scale is not None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def run(args) -> int:
-    from vivbench.fieldimport import import_event
+    from vivbench.io.fieldimport import import_event
 
     tree = import_event(args.mapping, args.out)
     attrs = tree.attrs

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 def run(args) -> int:
-    from vivbench.io import read_event
+    from vivbench.io.event import read_event
     from vivbench.report import event_figure
 
     out = event_figure(read_event(args.event), args.out, section=args.section)

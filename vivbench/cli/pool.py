@@ -7,7 +7,10 @@ from pathlib import Path
 
 
 def run(args) -> int:
-    from vivbench.identify import PooledSINDy, list_results, pool_results, write_pooled
+    from vivbench.models.campaign import PooledSINDy
+    from vivbench.io.result import list_results
+    from vivbench.analysis.pool import pool_results
+    from vivbench.io.campaign_model import write_pooled
 
     results_dir = Path(args.results)
     files = list_results(results_dir)

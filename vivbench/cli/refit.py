@@ -6,7 +6,11 @@ import csv
 import json
 import math
 from pathlib import Path
-from vivbench.io import NETCDF_ENGINE
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
+from vivbench.io.netcdf import NETCDF_ENGINE
 
 _CSV_COLUMNS = ("equation", "feature", "in_support", "sindy", "lsq", "refit", "truth")
 _ORDER_COLUMNS = ("equation", "order", "sindy", "lsq", "refit", "truth")
@@ -31,7 +35,7 @@ def _load_result(path: str):
 
 
 def _truth_coef(path: str, event_id: str):
-    from vivbench.io import event_arrays, read_event
+    from vivbench.io.event import event_arrays, read_event
 
     tree = read_event(path)
     if str(tree.attrs["event_id"]) != event_id:
@@ -48,7 +52,7 @@ def _json_value(v):
     return v
 
 
-def _own_section_mask(spec: str, features) -> "np.ndarray":
+def _own_section_mask(spec: str, features) -> np.ndarray:
     """Support (S, 23 S) from section-generic monomials, e.g. "U^2, A, A U": equation k uses section k's terms."""
     import re
 
@@ -72,8 +76,8 @@ def _own_section_mask(spec: str, features) -> "np.ndarray":
 
 
 def run(args) -> int:
-    from vivbench.identify.refit import RefitConfig, refit_event
-    from vivbench.io import atomic_path
+    from vivbench.models.refit import RefitConfig, refit_event
+    from vivbench.io.netcdf import atomic_path
 
     result = _load_result(args.result)
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from vivbench.cli._common import DEFAULT_WORKERS, progress, record_command
+from vivbench.cli.common import DEFAULT_WORKERS, progress, record_command
 
 
 def run(args) -> int:

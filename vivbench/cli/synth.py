@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from vivbench.cli._common import DEFAULT_WORKERS, duration, progress
+from vivbench.cli.common import DEFAULT_WORKERS, duration, progress
 
 
 def run(args) -> int:

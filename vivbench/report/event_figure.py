@@ -11,7 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from vivbench.io import atomic_path  # noqa: E402
+from vivbench.io.netcdf import atomic_path
 
 __all__ = ["event_figure"]
 

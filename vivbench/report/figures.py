@@ -38,18 +38,10 @@ from matplotlib.colors import SymLogNorm  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from scipy import signal  # noqa: E402
 
-from vivbench.identify.forecast import forecast, simulate_identified  # noqa: E402
-from vivbench.identify.preprocess import (  # noqa: E402
-    PreprocessConfig,
-    displacement,
-    envelope,
-    mean_wind,
-    modal_frequency,
-    perpendicular_speed,
-    wind_speed_direction,
-)
-from vivbench.io import atomic_path  # noqa: E402
-from vivbench.terms import evaluate_library, feature_exponents  # noqa: E402
+from vivbench.models.simulate import forecast, simulate_identified
+from vivbench.preprocess.chain import PreprocessConfig, displacement, envelope, mean_wind, modal_frequency, perpendicular_speed, wind_speed_direction
+from vivbench.io.netcdf import atomic_path
+from vivbench.core.terms import evaluate_library, feature_exponents
 
 __all__ = [
     "DPI",
@@ -270,7 +262,7 @@ def time_frequency_figure(tree: xr.DataTree, path: str | Path, *, section: str =
     path : output PNG
     section : section shown
     f_mode : modal frequency, Hz (None: from the Welch spectrum,
-        :func:`vivbench.identify.preprocess.modal_frequency`)
+        :func:`vivbench.preprocess.chain.modal_frequency`)
     f_max : upper frequency shown, Hz
     segment_s : length of the spectrogram segments, s
     """
@@ -315,8 +307,8 @@ def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path,
 
     Panel (a) integrates the longest gap-free run of the acceleration in the
     frequency domain inside the band used by the identification
-    (:func:`vivbench.identify.preprocess.displacement`) and takes its Hilbert
-    envelope (:func:`~vivbench.identify.preprocess.envelope`); the edges the
+    (:func:`vivbench.preprocess.chain.displacement`) and takes its Hilbert
+    envelope (:func:`~vivbench.preprocess.chain.envelope`); the edges the
     identification drops are shaded. Panels (b) and (c) are the result's A and
     dA/dt on the common grid, with the truth (synthetic events) dashed.
 
@@ -660,10 +652,10 @@ def forecast_figure(result: xr.Dataset, path: str | Path, *, t0: float | None = 
     Panel (a): the measured amplitudes against the simulation of the whole
     event with the time-varying window models, from the measured A at the
     first window's start and the measured wind
-    (:func:`vivbench.identify.forecast.simulate_identified`). Panel (b): the
+    (:func:`vivbench.models.simulate.simulate_identified`). Panel (b): the
     measured amplitude of ``equation`` against forecasts from ``t0`` with
     coefficients fixed at t0 (d = 0) or averaged over the windows starting in
-    [t0, t0 + d] (:func:`vivbench.identify.forecast.forecast`). A run that blew
+    [t0, t0 + d] (:func:`vivbench.models.simulate.forecast`). A run that blew
     up is drawn only up to where it was stopped and marked with a cross.
 
     Parameters

@@ -25,8 +25,10 @@ import numpy as np
 import xarray as xr
 
 import vivbench
-from vivbench.identify.pooled import POOLED_NAME, with_campaign_model
-from vivbench.io import NETCDF_ENGINE, atomic_path, list_events, read_event
+from vivbench.io.campaign_model import POOLED_NAME
+from vivbench.analysis.pool import with_campaign_model
+from vivbench.io.netcdf import NETCDF_ENGINE, atomic_path
+from vivbench.io.event import list_events, read_event
 
 __all__ = ["EXTRA_STEPS", "write_report"]
 
@@ -320,7 +322,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
 
     timeline_truth = None
     if has_truth:
-        from vivbench.validate import truth_window_regimes
+        from vivbench.regimes.truth import truth_window_regimes
 
         timeline_truth = [truth_window_regimes(trees[e]["truth"].ds, results[e]["window_start"].values,
                                                results[e]["window_end"].values,
@@ -341,7 +343,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                         ("order", "shares of the order contributions (12 per window)")):
         figure(f"fig08_decision_graph_{kind}.png", f"Fig. 8-10: decision graph and clusters ({kind} features)",
                "Paper Figs. 8-10. Density-peaks clustering (Rodriguez and Laio 2014; "
-               "`vivbench.identify.DensityPeaks` with its defaults) of the window models of all events, one point "
+               "`vivbench.analysis.DensityPeaks` with its defaults) of the window models of all events, one point "
                f"per window, features: {label}. (a) decision graph: centres are points with both a high density "
                "and a large distance to any denser point; (b) the clusters on the first two principal components; "
                "(c) how each cluster's windows split between the true regimes (of S2) - a cluster that matches a "
@@ -365,7 +367,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
             pooled = ds.load()
         md += ["## The campaign model (`vivbench pool`)", "",
                "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
-               "AICc on all samples of all events (`vivbench.identify.pooled`). A window's regime is the rule of "
+               "AICc on all samples of all events (`vivbench.models.campaign`). A window's regime is the rule of "
                "DESIGN 2.5 applied to this model's order contributions over the window's data; it counts as "
                "identifiable when (i) no model inside the coefficients' joint 95 % confidence region (residual "
                "variance inflated by the residuals' correlation time) gives the window another regime, and (ii) at "
@@ -491,7 +493,7 @@ def _settings_table(cfg: dict) -> str:
 
 def _cluster_inputs(info: Sequence[dict], *, with_truth: bool) -> dict:
     """Window features, true regimes (S2) and a deterministic subsample for the decision graphs."""
-    from vivbench.validate import truth_window_regimes
+    from vivbench.regimes.truth import truth_window_regimes
 
     coefs, orders, truths = [], [], []
     for item in info:
@@ -522,7 +524,7 @@ def _cluster_inputs(info: Sequence[dict], *, with_truth: bool) -> dict:
 def _cluster_figure(inputs: dict, kind: str, path: Path) -> None:
     from sklearn.decomposition import PCA
 
-    from vivbench.identify.clustering import DensityPeaks, coefficient_features, order_features
+    from vivbench.analysis.clustering import DensityPeaks, coefficient_features, order_features
     from vivbench.report.figures import decision_graph_figure
 
     X = coefficient_features(inputs["coef"]) if kind == "coef" else order_features(inputs["order"])

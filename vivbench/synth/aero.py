@@ -19,7 +19,7 @@ import numpy as np
 from numpy.polynomial import polynomial as P
 
 from vivbench.synth.config import AeroConfig, StructureConfig
-from vivbench.terms import feature_exponents
+from vivbench.core.terms import feature_exponents
 
 __all__ = [
     "modal_coefficients",

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vivbench.io import atomic_path, write_event
+from vivbench.io.netcdf import atomic_path
+from vivbench.io.event import write_event
 from vivbench.synth.config import GeneratorConfig
 from vivbench.synth.event import EventSpec, generate_event
 from vivbench.synth.wind import WindScript

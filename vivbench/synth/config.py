@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from vivbench._toml import load_toml
+from vivbench.core.toml import load_toml
 from vivbench.synth.turbulence import TurbulenceConfig
 
 __all__ = [

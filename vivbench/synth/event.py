@@ -9,14 +9,14 @@ import numpy as np
 import xarray as xr
 from scipy.integrate import cumulative_trapezoid
 
-from vivbench.io import build_event
-from vivbench.regime import classify_regime
+from vivbench.io.event import build_event
+from vivbench.core.regime import classify_regime
 from vivbench.synth.aero import amplitude_coefficients, exact_coefficients, modal_coefficients, order_contributions
 from vivbench.synth.config import GeneratorConfig, config_to_dict
 from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, felt_mean_wind, mean_wind
-from vivbench.terms import feature_names
+from vivbench.core.terms import feature_names
 
 __all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event"]
 

@@ -31,14 +31,8 @@ from vivbench.validate.metrics import (
 )
 from vivbench.validate.plateau import Plateau, clearest_plateau, measured_plateau, truth_plateau
 from vivbench.validate.pooled import pooled_recovery
-from vivbench.validate.recovery import (
-    campaign_recovery,
-    recovery_by_event,
-    regime_scores,
-    rhs_relative_error,
-    truth_window_regimes,
-    window_rhs_errors,
-)
+from vivbench.validate.recovery import campaign_recovery, recovery_by_event, regime_scores, rhs_relative_error, window_rhs_errors
+from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.sweep import (
     METRIC_COLUMNS,
     SWEEP_PARAMETERS,

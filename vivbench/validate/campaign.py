@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from vivbench.regime import DEFAULT_TAU
+from vivbench.core.regime import DEFAULT_TAU
 from vivbench.validate.metrics import (
     REGIMES,
     SUPPORT_NOTES,
@@ -30,8 +30,9 @@ from vivbench.validate.metrics import (
     rhs_error_summary,
     support_scores,
 )
-from vivbench.validate.recovery import truth_window_regimes, window_rhs_errors
-from vivbench.io import NETCDF_ENGINE
+from vivbench.regimes.truth import truth_window_regimes
+from vivbench.validate.recovery import window_rhs_errors
+from vivbench.io.netcdf import NETCDF_ENGINE
 
 __all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables"]
 
@@ -88,7 +89,7 @@ def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     """NMSE rows of every ``forecast_<event_id>.csv`` in a directory (``vivbench forecast``).
 
     Each file needs the columns ``d`` (s), ``nmse`` and ``stopped`` (as written
-    from :func:`vivbench.identify.forecast_table`), or is the table of
+    from :func:`vivbench.models.forecast_table`), or is the table of
     ``vivbench forecast`` (columns ``kind``, ``clip``, ``d_s``, ``nmse``,
     ``stopped``), of which the window models' forecasts without clipping (the
     paper's method) are read; other columns are ignored.
@@ -178,7 +179,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         No result files; a result without its event file (the message names
         both); no event with a ``/truth`` group.
     """
-    from vivbench.io import read_event
+    from vivbench.io.event import read_event
 
     if not 0.0 <= active_share < 1.0:
         raise ValueError(f"active_share must lie in [0, 1); got {active_share}")
@@ -188,7 +189,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     for d, what in ((campaign_dir, "campaign"), (results_dir, "results")):
         if not d.is_dir():
             raise ValueError(f"{d}: no such {what} directory")
-    from vivbench.identify.pipeline import list_results
+    from vivbench.io.result import list_results
 
     result_files = list_results(results_dir)
     pairs = []
@@ -203,7 +204,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     sup_all, sup_ok = [], []
     skipped, truth_by_key = {}, {}
     # The campaign model of ``vivbench pool``, scored beside the window models when present.
-    from vivbench.identify.pooled import POOLED_NAME, with_campaign_model
+    from vivbench.io.campaign_model import POOLED_NAME
+    from vivbench.analysis.pool import with_campaign_model
 
     pooled_path = results_dir / POOLED_NAME
     pooled = None
@@ -413,7 +415,7 @@ def write_validation(v: dict, out_dir) -> list[Path]:
     -------
     list of pathlib.Path, the files written
     """
-    from vivbench.io import atomic_path
+    from vivbench.io.netcdf import atomic_path
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -35,7 +35,7 @@ writing the results; not the scoring). Cells that differ only in identification
 settings share one campaign: campaigns are generated once per (accel_noise,
 anemometer_noise, turbulence_intensity) and the seed, and reused from an
 earlier run into the same directory when their configuration matches.
-Campaigns, then cells, run through :func:`vivbench.parallel.run_tasks`
+Campaigns, then cells, run through :func:`vivbench.core.parallel.run_tasks`
 (local processes or dask); the table does not depend on the worker count or
 the completion order (wall times aside).
 
@@ -60,10 +60,10 @@ from pathlib import Path
 
 import numpy as np
 
-from vivbench.identify.derivative import DERIVATIVE_METHODS
-from vivbench.identify.library import SCALINGS
-from vivbench._toml import load_toml
-from vivbench.identify.optimizers import OPTIMIZERS
+from vivbench.preprocess.derivative import DERIVATIVE_METHODS
+from vivbench.library.basis import SCALINGS
+from vivbench.core.toml import load_toml
+from vivbench.regression.optimizers import OPTIMIZERS
 
 __all__ = ["FACTORS", "DESIGNS", "BASE_LEVELS", "CompareConfig", "CompareResult", "compare_config_from_dict",
            "load_compare_config", "compare_cells", "plan", "run_comparison"]
@@ -284,7 +284,8 @@ def _campaign_config(config: CompareConfig, key: tuple):
 
 def _make_campaign(task: dict) -> list[str]:
     """Generate one campaign (or reuse it when its recorded configuration matches)."""
-    from vivbench.io import atomic_path, list_events
+    from vivbench.io.netcdf import atomic_path
+    from vivbench.io.event import list_events
     from vivbench.synth import config_to_dict, generate_campaign
 
     out = Path(task["dir"])
@@ -306,7 +307,8 @@ def _make_campaign(task: dict) -> list[str]:
 
 
 def _identify_config(cell: dict, config: CompareConfig):
-    from vivbench.identify import Derivative, IdentifyConfig
+    from vivbench.preprocess.derivative import Derivative
+    from vivbench.analysis.identify import IdentifyConfig
 
     return IdentifyConfig(derivative=Derivative.for_envelope(cell["derivative"]), window=cell["window"],
                           step=cell["window"] * config.step_ratio, scaling=cell["scaling"],
@@ -315,8 +317,10 @@ def _identify_config(cell: dict, config: CompareConfig):
 
 def _run_cell(task: dict) -> dict:
     """Identify one cell's campaign with its settings and score it; returns the metrics."""
-    from vivbench.identify import identify_event, result_path
-    from vivbench.io import read_event, write_netcdf_atomic
+    from vivbench.analysis.identify import identify_event
+    from vivbench.io.result import result_path
+    from vivbench.io.event import read_event
+    from vivbench.io.netcdf import write_netcdf_atomic
     from vivbench.validate.recovery import campaign_recovery
 
     cell, config = task["cell"], task["config"]
@@ -369,7 +373,7 @@ def run_comparison(config: CompareConfig, out_dir: str | Path, *, workers: int =
     ----------
     config : CompareConfig
     out_dir : output directory (created)
-    workers, scheduler : see :func:`vivbench.parallel.run_tasks` (with a scheduler address,
+    workers, scheduler : see :func:`vivbench.core.parallel.run_tasks` (with a scheduler address,
         ``out_dir`` must be on a file system the workers share)
     progress : optional callback, called with ``"campaign"`` or ``"cell"`` as each task finishes
         (``n_campaigns + n_cells`` calls; see :func:`plan`)
@@ -380,7 +384,7 @@ def run_comparison(config: CompareConfig, out_dir: str | Path, *, workers: int =
         A cell that fails (or whose campaign failed) has its metrics NaN and
         its message in ``error``; the others finish.
     """
-    from vivbench.parallel import run_tasks
+    from vivbench.core.parallel import run_tasks
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -447,7 +451,7 @@ def _fmt(value) -> str:
 
 
 def _write_table(rows: list[dict], path: Path) -> Path:
-    from vivbench.io import atomic_path
+    from vivbench.io.netcdf import atomic_path
 
     buf = _io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(_COLUMNS), lineterminator="\n")
@@ -474,7 +478,7 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from vivbench.io import atomic_path
+    from vivbench.io.netcdf import atomic_path
 
     levels = _levels(config, factor)
     if config.design == "one_at_a_time":
@@ -530,7 +534,7 @@ def _clean(v):
 
 
 def _write_summary(rows: list[dict], config: CompareConfig, path: Path) -> Path:
-    from vivbench.io import atomic_path
+    from vivbench.io.netcdf import atomic_path
 
     ok = [r for r in rows if not r["error"]]
     summary = {"design": config.design, "n_cells": len(rows), "n_failed": len(rows) - len(ok),

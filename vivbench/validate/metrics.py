@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vivbench.terms import section_exponents
+from vivbench.core.terms import section_exponents
 
 __all__ = [
     "REGIMES",
@@ -165,11 +165,11 @@ def pooled_support(support: np.ndarray, n_sections: int = 3) -> np.ndarray:
 
     Parameters
     ----------
-    support : ndarray of bool, shape (..., 23 * n_sections), library order of :mod:`vivbench.terms`
+    support : ndarray of bool, shape (..., 23 * n_sections), library order of :mod:`vivbench.core.terms`
 
     Returns
     -------
-    ndarray of bool, shape (..., 23), in the order of :func:`vivbench.terms.section_exponents`
+    ndarray of bool, shape (..., 23), in the order of :func:`vivbench.core.terms.section_exponents`
     """
     return _by_section(support, n_sections).any(axis=-2)
 

@@ -127,7 +127,7 @@ def clearest_plateau(campaign_dir, *, section: int = 1, window: float = 50.0) ->
     ValueError
         No event with a truth, or no event with a regime-4 run.
     """
-    from vivbench.io import list_events, read_event
+    from vivbench.io.event import list_events, read_event
 
     best, seen_truth = None, False
     for path in list_events(Path(campaign_dir)):

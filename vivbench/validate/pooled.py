@@ -1,12 +1,13 @@
-"""Recovery of the truth by the pooled campaign model (``vivbench.identify.pooled``)."""
+"""Recovery of the truth by the pooled campaign model (``vivbench.models.campaign``)."""
 
 from __future__ import annotations
 
 import numpy as np
 import xarray as xr
 
-from vivbench.validate.recovery import regime_scores, truth_window_regimes, window_rhs_errors
-from vivbench.io import NETCDF_ENGINE
+from vivbench.validate.recovery import regime_scores, window_rhs_errors
+from vivbench.regimes.truth import truth_window_regimes
+from vivbench.io.netcdf import NETCDF_ENGINE
 
 __all__ = ["pooled_recovery"]
 
@@ -29,8 +30,8 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         ``rhs_median_rel_error`` and ``rhs_median_rel_error_active`` (the one
         pooled model evaluated over every window).
     """
-    from vivbench.identify.pooled import with_campaign_model
-    from vivbench.io import read_event
+    from vivbench.analysis.pool import with_campaign_model
+    from vivbench.io.event import read_event
 
     with xr.open_dataset(pooled_file, engine=NETCDF_ENGINE) as ds:
         pooled = ds.load()

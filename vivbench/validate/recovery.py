@@ -11,35 +11,11 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from vivbench.regime import classify_regime
-from vivbench.terms import evaluate_library
-from vivbench.io import NETCDF_ENGINE
+from vivbench.core.terms import evaluate_library
+from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.regimes.truth import truth_window_regimes
 
-__all__ = ["recovery_by_event", "truth_window_regimes", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
-
-
-def truth_window_regimes(truth: xr.Dataset, window_start: np.ndarray, window_end: np.ndarray, tau: float = 0.2) -> np.ndarray:
-    """True regime of each window and section.
-
-    Parameters
-    ----------
-    truth : the ``/truth`` group of an event (time, A, r)
-    window_start, window_end : ndarray, shape (W,), s
-
-    Returns
-    -------
-    regime : ndarray of int8, shape (W, n_sections); 0 where the window holds no truth sample
-    """
-    t = truth["time"].values
-    A = truth["A"].values
-    r = truth["r"].values
-    out = np.zeros((len(window_start), A.shape[1]), dtype=np.int8)
-    # Windows are few (about 100 per event): one vectorised rule call per window.
-    for w, (t0, t1) in enumerate(zip(window_start, window_end)):
-        m = (t >= t0) & (t <= t1)
-        if m.any():
-            out[w] = classify_regime(r[m], A[m], tau=tau, axis=0)
-    return out
+__all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -163,7 +139,7 @@ def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -
     campaign : dict, as :func:`campaign_recovery`
     events : list of dict, the same scores per event, in the order of the files
     """
-    from vivbench.io import read_event
+    from vivbench.io.event import read_event
 
     parts = []
     for ev_path, res_path in zip(event_files, result_files):

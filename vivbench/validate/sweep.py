@@ -8,7 +8,7 @@ the identification chain recovers the truth (:func:`campaign_recovery`).
 One task is one campaign. Its seeds are fixed by the sweep configuration
 alone (``numpy.random.SeedSequence``), so a task gives the same numbers
 wherever and in whatever order it runs: in this process, in local worker
-processes or on a dask cluster (:func:`vivbench.parallel.run_tasks`).
+processes or on a dask cluster (:func:`vivbench.core.parallel.run_tasks`).
 Replicate ``r`` uses the same campaign seed at every grid point (common random
 numbers): the wind scripts and noise draws are paired across grid points, so
 differences between points come from the parameters, not from the draws.
@@ -36,16 +36,20 @@ from typing import Any
 
 import numpy as np
 
-from vivbench._toml import load_toml
-from vivbench.identify.derivative import Derivative
-from vivbench.identify.pipeline import IdentifyConfig, identify_files
-from vivbench.identify.preprocess import PreprocessConfig
-from vivbench.io import atomic_path
-from vivbench.parallel import parse_scheduler, run_tasks
+from vivbench.core.toml import load_toml
+from vivbench.preprocess.derivative import Derivative
+from vivbench.analysis.identify import IdentifyConfig, identify_files
+from vivbench.preprocess.chain import PreprocessConfig
+from vivbench.io.netcdf import atomic_path
+from vivbench.core.parallel import parse_scheduler, run_tasks
 from vivbench.synth.campaign import CampaignConfig, generate_campaign
-from vivbench.synth.config import GeneratorConfig, Polynomial, config_from_dict, config_to_dict
-from vivbench.validate import _journal
+from vivbench.synth.config import GeneratorConfig, config_from_dict, config_to_dict
+from vivbench.validate.journal import append as journal_append
+from vivbench.validate.journal import load as journal_load
+from vivbench.validate.journal import write_table
 from vivbench.validate.recovery import campaign_recovery
+from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
+from vivbench.validate.sweep_parameters import PARAMETERS, SWEEP_PARAMETERS
 
 __all__ = [
     "SWEEP_PARAMETERS",
@@ -60,75 +64,6 @@ __all__ = [
     "run_sweep",
 ]
 
-
-# ----------------------------------------------------------------- parameters
-
-
-def _y1_peak(gen: GeneratorConfig) -> float:
-    """Peak of a bell-shaped (downward quadratic) Y1(U); NaN for any other form."""
-    c = gen.aero.Y1.coefficients
-    if len(c) != 3 or not c[2] < 0:
-        return float("nan")
-    return float(c[0] - c[1] ** 2 / (4.0 * c[2]))
-
-
-def _set_y1_peak(gen: GeneratorConfig, value: float) -> GeneratorConfig:
-    peak = _y1_peak(gen)
-    if not peak > 0:
-        raise ValueError("y1_peak needs the base generator's aero.Y1 to be a bell (a quadratic in U with a positive "
-                         f"peak); got coefficients {gen.aero.Y1.coefficients}")
-    if not value >= 0:
-        raise ValueError(f"y1_peak must be >= 0 (the height of the Y1 bell; 0 removes self-excitation); got {value}")
-    # Scaling the whole bell keeps its centre and its zero crossings (the lock-in range).
-    y1 = Polynomial(coefficients=tuple(value / peak * c for c in gen.aero.Y1.coefficients))
-    return dataclasses.replace(gen, aero=dataclasses.replace(gen.aero, Y1=y1))
-
-
-@dataclass(frozen=True)
-class _Parameter:
-    description: str
-    axis_label: str
-    read: Callable[[GeneratorConfig], float]
-    apply: Callable[[GeneratorConfig, float], GeneratorConfig]
-
-
-def _replace_in(section: str, name: str):
-    def apply(gen: GeneratorConfig, value: float) -> GeneratorConfig:
-        sub = dataclasses.replace(getattr(gen, section), **{name: value})
-        return dataclasses.replace(gen, **{section: sub})
-    return apply
-
-
-def _set_turbulence(gen: GeneratorConfig, value: float) -> GeneratorConfig:
-    turb = dataclasses.replace(gen.wind.turbulence, intensity=value)
-    return dataclasses.replace(gen, wind=dataclasses.replace(gen.wind, turbulence=turb))
-
-
-_PARAMETERS: dict[str, _Parameter] = {
-    "noise_density": _Parameter(
-        "accelerometer noise floor, micro-g/sqrt(Hz) (sensors.noise_density)",
-        "accelerometer noise floor (µg/√Hz)",
-        lambda g: g.sensors.noise_density, _replace_in("sensors", "noise_density")),
-    "anemometer_noise": _Parameter(
-        "anemometer rms error relative to the wind speed, 1 (wind.noise)",
-        "anemometer rms error (fraction of wind speed)",
-        lambda g: g.wind.noise, _replace_in("wind", "noise")),
-    "turbulence_intensity": _Parameter(
-        "longitudinal turbulence intensity sigma_u / U, 1 (wind.turbulence.intensity)",
-        "turbulence intensity σ_u/U (-)",
-        lambda g: g.wind.turbulence.intensity, _set_turbulence),
-    "damping_ratio": _Parameter(
-        "structural damping ratio zeta, 1 (structure.damping_ratio)",
-        "structural damping ratio ζ (-)",
-        lambda g: g.structure.damping_ratio, _replace_in("structure", "damping_ratio")),
-    "y1_peak": _Parameter(
-        "peak of the bell-shaped aerodynamic damping derivative Y1(U), 1 (aero.Y1 scaled as a whole)",
-        "peak of Y1(U) (-)",
-        _y1_peak, _set_y1_peak),
-}
-
-#: Parameters a sweep can vary: name -> what it sets, with its unit.
-SWEEP_PARAMETERS: dict[str, str] = {name: p.description for name, p in _PARAMETERS.items()}
 
 #: Per-campaign metrics of the sweep table (see :func:`campaign_recovery`).
 METRIC_COLUMNS = (
@@ -152,7 +87,7 @@ METRIC_COLUMNS = (
     "truth_share_regime4",
 )
 _ID_COLUMNS = ("task_id", "point", "replicate", "campaign_seed", "n_events")
-COLUMNS = (*_ID_COLUMNS, *_PARAMETERS, *METRIC_COLUMNS, "error")
+COLUMNS = (*_ID_COLUMNS, *PARAMETERS, *METRIC_COLUMNS, "error")
 
 
 def _number(value: Any, what: str) -> float:
@@ -167,7 +102,7 @@ def _number(value: Any, what: str) -> float:
 def _apply(gen: GeneratorConfig, values: dict[str, float], where: str) -> GeneratorConfig:
     for name, value in values.items():
         try:
-            gen = _PARAMETERS[name].apply(gen, value)
+            gen = PARAMETERS[name].apply(gen, value)
         except (ValueError, TypeError) as exc:
             raise ValueError(f"{where} {name} = {value!r}: {exc}") from None
     return gen
@@ -250,8 +185,8 @@ class SweepConfig:
                 name, values = item
             except (TypeError, ValueError):
                 raise ValueError(f"[{kind}] must map parameter names to values; got {item!r}") from None
-            if name not in _PARAMETERS:
-                raise ValueError(f"[{kind}] unknown parameter {name!r}; allowed: {', '.join(_PARAMETERS)}")
+            if name not in PARAMETERS:
+                raise ValueError(f"[{kind}] unknown parameter {name!r}; allowed: {', '.join(PARAMETERS)}")
             if isinstance(values, (str, bytes)) or not hasattr(values, "__len__"):
                 raise ValueError(f"[{kind}] {name} must be a list of numbers; got {values!r}")
             vals = tuple(_number(v, f"[{kind}] {name} value") for v in values)
@@ -296,7 +231,7 @@ class SweepConfig:
     def varied(self) -> tuple[str, ...]:
         """Parameters that take more than one value, in registry order."""
         names = {n for n, v in self.grid if len(v) > 1} | {n for n, (lo, hi) in self.ranges if hi > lo}
-        return tuple(n for n in _PARAMETERS if n in names)
+        return tuple(n for n in PARAMETERS if n in names)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-data form (JSON-ready); its hash identifies the sweep in its output directory."""
@@ -459,7 +394,7 @@ def sweep_tasks(config: SweepConfig) -> list[SweepTask]:
             gen = _apply(config.generator, chosen, "sweep parameter")
             # Chosen values as given (reading Y1's peak back would add rounding); the others as in effect.
             params = tuple((name, float(chosen[name]) if name in chosen else float(p_.read(gen)))
-                           for name, p_ in _PARAMETERS.items())
+                           for name, p_ in PARAMETERS.items())
             seed = _campaign_seed(config, r)
             campaign = CampaignConfig(n_events=config.n_events, seed=seed, duration=config.duration, generator=gen)
             tasks.append(SweepTask(task_id=p * config.n_campaigns + r, point=p, replicate=r, campaign_seed=seed,
@@ -518,7 +453,9 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         events = sorted(events, key=lambda p: p.name)
         metrics = _flatten_scores(campaign_recovery(events, results))
         # The campaign model on the same windows (its verdict needs enough data: see PooledSINDy.min_blocks).
-        from vivbench.identify.pooled import PooledSINDy, pool_results, write_pooled
+        from vivbench.models.campaign import PooledSINDy
+        from vivbench.analysis.pool import pool_results
+        from vivbench.io.campaign_model import write_pooled
         from vivbench.validate.pooled import pooled_recovery
 
         pooled = write_pooled(pool_results(results, PooledSINDy(seed=task.campaign_seed)), root / "identify")
@@ -623,7 +560,6 @@ def run_sweep(config: SweepConfig, out_dir: str | Path, *, workers: int = 1, sch
         The numbers in the table do not depend on ``workers``, ``scheduler``
         or on how often the sweep was interrupted and resumed.
     """
-    from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -632,7 +568,7 @@ def run_sweep(config: SweepConfig, out_dir: str | Path, *, workers: int = 1, sch
         _check_config_record(out, config)
         journal = out / "sweep.jsonl"
         tasks = sweep_tasks(config)
-        done, repaired = _journal.load(journal, n_tasks=len(tasks), columns=COLUMNS)
+        done, repaired = journal_load(journal, n_tasks=len(tasks), columns=COLUMNS)
         work = out / ".work"
         shutil.rmtree(work, ignore_errors=True)  # temporary campaigns of a run that was killed
         # Workers of a remote cluster may not see OUT: they use their own temporary directory.
@@ -642,7 +578,7 @@ def run_sweep(config: SweepConfig, out_dir: str | Path, *, workers: int = 1, sch
                    for t in tasks if t.task_id not in done]
         resumed = tuple(sorted(done))
         table = out / "sweep.csv"
-        _journal.write_table(table, done, COLUMNS)
+        write_table(table, done, COLUMNS)
         if progress is not None:
             progress(len(done), len(tasks))
         computed, failures = [], {}
@@ -657,10 +593,10 @@ def run_sweep(config: SweepConfig, out_dir: str | Path, *, workers: int = 1, sch
                     else:
                         row["error"] = outcome.error
                         failures[task.task_id] = outcome.error
-                    _journal.append(journal, task.task_id, outcome.ok, row)
+                    journal_append(journal, task.task_id, outcome.ok, row)
                     done[task.task_id] = row
                     computed.append(task.task_id)
-                    _journal.write_table(table, done, COLUMNS)
+                    write_table(table, done, COLUMNS)
                     if progress is not None:
                         progress(len(done), len(tasks))
         finally:

@@ -13,7 +13,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.stats import spearmanr  # noqa: E402
 
-from vivbench.io import atomic_path  # noqa: E402
+from vivbench.io.netcdf import atomic_path
+from vivbench.validate.sweep_parameters import PARAMETERS
 
 __all__ = ["plot_recovery", "sweep_summary"]
 
@@ -27,9 +28,7 @@ _MAX_DISCRETE = 12  # more distinct x values than this are binned
 
 
 def _axis_label(name: str) -> str:
-    from vivbench.validate.sweep import _PARAMETERS
-
-    return _PARAMETERS[name].axis_label
+    return PARAMETERS[name].axis_label
 
 
 def _column(rows, name: str) -> np.ndarray:

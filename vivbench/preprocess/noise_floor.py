@@ -20,7 +20,7 @@ deviation in the band,
 
     sigma^2 = S_n * integral over the band of G(f)^2 / (2 pi f)^4 df,
 
-with G the band's gain (vivbench.identify.preprocess.displacement). An
+with G the band's gain (vivbench.preprocess.chain.displacement). An
 envelope of noise alone has mean sigma sqrt(pi/2) ~ 1.25 sigma; with a
 vibration of amplitude a it fluctuates by about sigma around a. The estimate
 is an upper bound where the structure's own broadband response reaches the
@@ -33,6 +33,8 @@ window (``amplitude_snr`` in the result files).
 from __future__ import annotations
 
 import numpy as np
+
+from vivbench.preprocess.band import band_gain
 
 __all__ = ["band_noise_std", "window_amplitude_snr"]
 
@@ -66,8 +68,6 @@ def band_noise_std(f: np.ndarray, psd: np.ndarray, f_mode: float, half_width: fl
         NaN for a section where neither flank has a spectral bin inside
         (0, f[-1]].
     """
-    from vivbench.identify.preprocess import _band_gain  # the integration's own gain
-
     f = np.asarray(f, dtype=float)
     psd = np.asarray(psd, dtype=float)
     if psd.ndim == 1:
@@ -77,7 +77,7 @@ def band_noise_std(f: np.ndarray, psd: np.ndarray, f_mode: float, half_width: fl
     levels = [np.mean(psd[m], axis=0) if m.sum() >= 3 else np.full(psd.shape[1], np.nan) for m in flanks]
     level = np.fmin(levels[0], levels[1])
     fq = np.linspace(max(lo, 1e-9), hi, _N_QUAD)
-    g = _band_gain(fq, f_mode, half_width, taper) ** 2 / (2.0 * np.pi * fq) ** 4
+    g = band_gain(fq, f_mode, half_width, taper) ** 2 / (2.0 * np.pi * fq) ** 4
     weight = float(np.sum(0.5 * (g[1:] + g[:-1]) * np.diff(fq)))
     return np.sqrt(level * weight)
 

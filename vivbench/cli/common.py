@@ -33,7 +33,7 @@ def progress(total: int, desc: str, unit: str = "event"):
 
 def event_paths(inputs: list[str]) -> list[Path]:
     """Expand campaign directories into their event files; keep files as given."""
-    from vivbench.io import list_events
+    from vivbench.io.event import list_events
 
     paths: list[Path] = []
     for item in inputs:
@@ -50,7 +50,7 @@ def event_paths(inputs: list[str]) -> list[Path]:
 
 def write_command(out_dir, argv: list[str]) -> None:
     """Write ``vivbench ARGV`` (shell-quoted) to ``out_dir/command.txt``: the report cites it."""
-    from vivbench.io import atomic_path
+    from vivbench.io.netcdf import atomic_path
 
     with atomic_path(Path(out_dir) / "command.txt") as tmp:
         tmp.write_text(f"vivbench {shlex.join(argv)}\n")

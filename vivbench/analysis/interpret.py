@@ -5,7 +5,7 @@ of a campaign is one point. Two feature sets describe it:
 
 ``"coef"``
     The model's 69 coefficients in its window's regression basis
-    (:func:`vivbench.identify.library.window_library`, ``scaling="scaled"``),
+    (:func:`vivbench.library.basis.window_library`, ``scaling="scaled"``),
     divided by the window RMS of dA/dt: the standardised coefficients that
     STLSQ thresholded. Term (l, i, j) is A_l^i times a degree-j polynomial in
     the window-centred U_l, with unit RMS over the window, so a coefficient of
@@ -24,7 +24,7 @@ of a campaign is one point. Two feature sets describe it:
     A^0..A^3 (``order_rms`` of the result, divided by its sum): the regime's
     signature (DESIGN 2.5), independent of the amplitude.
 
-Clustering is :class:`vivbench.identify.clustering.DensityPeaks` (automatic
+Clustering is :class:`vivbench.analysis.clustering.DensityPeaks` (automatic
 centres by the largest log-gap of rho * delta among eligible points, or a
 given number of centres or centre indices). Each cluster is summarised by its
 size, its halo, its dominant terms (largest mean |standardised coefficient|),
@@ -67,53 +67,14 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from vivbench.identify.clustering import KERNELS, DensityPeaks, order_features
-from vivbench.identify.library import window_library
-from vivbench.terms import feature_names
-from vivbench.io import NETCDF_ENGINE
+from vivbench.analysis.clustering import KERNELS, DensityPeaks, order_features
+from vivbench.library.basis import window_library
+from vivbench.core.terms import feature_names
+from vivbench.io.result import read_result
 
-__all__ = [
-    "FEATURE_SETS",
-    "ClusterConfig",
-    "CampaignWindows",
-    "ClusterResult",
-    "campaign_windows",
-    "cluster_scores",
-    "cluster_windows",
-    "read_result",
-    "standardized_coefficients",
-    "summarize_clusters",
-]
+__all__ = ["FEATURE_SETS", "ClusterConfig", "CampaignWindows", "ClusterResult", "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients", "summarize_clusters"]
 
 FEATURE_SETS = ("coef", "order")
-
-_REQUIRED = ("coef", "order_rms", "regime", "window_start", "window_end", "A", "U", "dA")
-
-
-def read_result(path) -> xr.Dataset:
-    """Load an identification result into memory and check what later stages read.
-
-    Raises
-    ------
-    ValueError
-        One line naming the file: missing, unreadable, or lacking a variable.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: no such result file")
-    try:
-        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
-            ds = ds.load()
-    except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
-        raise ValueError(f"{path}: cannot be read as a NetCDF-4 result ({type(exc).__name__})") from exc
-    if ds.attrs.get("format") != "vivbench-identify":
-        raise ValueError(f"{path}: not an identification result (format attribute is {ds.attrs.get('format')!r})")
-    missing = [v for v in _REQUIRED if v not in ds.variables]
-    if missing:
-        raise ValueError(f"{path}: result lacks {', '.join(missing)}")
-    if ds["coef"].ndim != 3 or ds["coef"].shape[2] != 23 * ds["coef"].shape[1]:
-        raise ValueError(f"{path}: coef must have shape (window, equation, 23 x sections); got {ds['coef'].shape}")
-    return ds
 
 
 def standardized_coefficients(result: xr.Dataset) -> np.ndarray:
@@ -144,7 +105,7 @@ def standardized_coefficients(result: xr.Dataset) -> np.ndarray:
     out = np.full((W, S, p), np.nan)
     if W == 0:
         return out
-    # the engine's window sample rule (vivbench.identify.engine.window_bounds)
+    # the engine's window sample rule (vivbench.regression.stlsq.window_bounds)
     tol = 1e-6 * float(np.median(np.diff(t)))
     first = np.searchsorted(t, start - tol, side="left")
     stop = np.searchsorted(t, end - tol, side="left")
@@ -206,8 +167,8 @@ class CampaignWindows:
 
 
 def _truth_regimes(campaign_dir, event_id: str, start, end, tau: float):
-    from vivbench.io import read_event
-    from vivbench.validate import truth_window_regimes
+    from vivbench.io.event import read_event
+    from vivbench.regimes.truth import truth_window_regimes
 
     path = Path(campaign_dir) / f"{event_id}.nc"
     if not path.exists():

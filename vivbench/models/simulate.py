@@ -1,8 +1,8 @@
 """Simulation and forecasting with identified time-varying models (DESIGN 3.4).
 
-An identification result (:func:`vivbench.identify.identify_event`) holds one
+An identification result (:func:`vivbench.analysis.identify_event`) holds one
 coefficient matrix Xi_w per window, with dA/dt = Theta(A, U) Xi_w^T on the
-physical library :func:`vivbench.terms.evaluate_library`. This module
+physical library :func:`vivbench.core.terms.evaluate_library`. This module
 integrates that model for the three sections with the measured wind U(t):
 
 - :func:`simulate_identified` uses the time-varying coefficients: the window in
@@ -75,7 +75,7 @@ import numpy as np
 import xarray as xr
 from scipy.interpolate import make_interp_spline
 
-from vivbench.terms import feature_exponents
+from vivbench.core.terms import feature_exponents
 
 __all__ = ["CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
            "window_in_force"]
@@ -273,7 +273,7 @@ def model_jacobian(coef, A, U) -> np.ndarray:
     Parameters
     ----------
     coef : ndarray, shape (3, 69)
-        Coefficients on :func:`vivbench.terms.evaluate_library`.
+        Coefficients on :func:`vivbench.core.terms.evaluate_library`.
     A, U : ndarray, shape (3,), m and m/s
 
     Returns

@@ -1,13 +1,13 @@
 """Alternative sparse regressions for the windowed SINDy: pysindy's SR3 and bagged STLSQ.
 
-The fast engine (:mod:`vivbench.identify.engine`) runs STLSQ over a threshold
+The fast engine (:mod:`vivbench.regression.stlsq`) runs STLSQ over a threshold
 path and selects by AICc. For the method comparison two pysindy optimisers
 run on exactly the same problem: the same scaled window library
-(:func:`vivbench.identify.library.window_library`), the same standardised
+(:func:`vivbench.library.basis.window_library`), the same standardised
 targets, the same threshold path and the same AICc rule (residual floor,
 exclusion of the empty model and of models with N - k - 1 <= 0). Both return
-an :class:`~vivbench.identify.engine.StlsqPath`, so the regimes and the
-identifiability flag (:func:`vivbench.identify.identifiability.window_regimes`)
+an :class:`~vivbench.regression.stlsq.StlsqPath`, so the regimes and the
+identifiability flag (:func:`vivbench.regimes.window.window_regimes`)
 apply unchanged to the chosen coefficients.
 
 ``"sr3"``
@@ -66,9 +66,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from vivbench.identify.engine import StlsqPath, StlsqSettings, _as_batches, aicc, stlsq_path
-from vivbench.identify.engine import _empty_path as _engine_empty_path
-from vivbench.identify.library import condition_number
+from vivbench.regression.stlsq import StlsqPath, StlsqSettings, as_batches, aicc, stlsq_path
+from vivbench.regression.stlsq import empty_path as _engine_empty_path
+from vivbench.library.basis import condition_number
 
 __all__ = ["OPTIMIZERS", "OptimizerOptions", "run_optimizer", "sr3_path", "ensemble_path"]
 
@@ -121,7 +121,7 @@ class OptimizerOptions:
 
 
 def _prepare(theta, y):
-    theta, y = _as_batches(theta, y)
+    theta, y = as_batches(theta, y)
     valid = np.isfinite(theta).all(axis=2) & np.isfinite(y).all(axis=2)
     return theta, y, valid
 
@@ -137,7 +137,7 @@ def _score(X, Y, coef, n, settings: StlsqSettings):
     return rss, k, a
 
 
-def _empty_path(W, q, T, p, thresholds) -> dict:
+def empty_path(W, q, T, p, thresholds) -> dict:
     return dict(thresholds=np.asarray(thresholds, dtype=float), **_engine_empty_path(W, q, T, p),
                 n_samples=np.zeros(W, dtype=int), cond=np.full(W, np.nan))
 
@@ -185,7 +185,7 @@ def sr3_path(theta, y, settings: StlsqSettings | None = None, options: Optimizer
     q = y.shape[2]
     th = np.asarray(settings.thresholds)
     T = th.size
-    out = _empty_path(W, q, T, p, th)
+    out = empty_path(W, q, T, p, th)
     nu = options.relax_coeff_nu
     for w in range(W):
         rows = valid[w]

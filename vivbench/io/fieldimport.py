@@ -43,7 +43,7 @@ row. Refused with a one-line :class:`ValueError` naming the file: a mapping
 error, a missing file, column or variable, a cell that is not a number, a
 missing time, a clock that goes back more often, a sampling rate more than
 10 % from nominal, files of one group whose clocks do not line up, and
-magnitudes that betray a wrong unit (see :mod:`vivbench.quality`). Unit
+magnitudes that betray a wrong unit (see :mod:`vivbench.io.quality`). Unit
 conversions are recorded as ``import_units_<var>_<section>`` (the declared
 unit) and ``import_factor_<var>_<section>`` (the factor to SI).
 """
@@ -61,8 +61,9 @@ import h5py
 import numpy as np
 import pandas as pd
 
-from vivbench.io import NOMINAL_RATES, EventFormatError, atomic_path, build_event, event_arrays, write_event
-from vivbench.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
+from vivbench.io.event import NOMINAL_RATES, EventFormatError, build_event, event_arrays, write_event
+from vivbench.io.netcdf import atomic_path
+from vivbench.io.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
 
 try:
     import tomllib
@@ -554,7 +555,7 @@ def export_csv(tree, out_dir, *, layout: str = "per_section", wind_units: str = 
         ``accel_S1.csv`` with time, acc) or one file per group (``wind.csv``
         with time, u_S1, v_S1, w_S1, ...; ``accel.csv`` with time, acc_S1, ...).
     wind_units, acc_units : str
-        Units written (keys of ``vivbench.quality.WIND_UNITS`` / ``ACC_UNITS``).
+        Units written (keys of ``vivbench.io.quality.WIND_UNITS`` / ``ACC_UNITS``).
     time_format : {"seconds", "iso8601"}
         Times as seconds since start_time or as ISO 8601 UTC timestamps (microseconds).
     event_id : str, optional

@@ -21,15 +21,19 @@ import numpy as np
 import xarray as xr
 
 import vivbench
-from vivbench.identify.derivative import Derivative
-from vivbench.identify.engine import DEFAULT_THRESHOLDS, WindowedSINDy
-from vivbench.identify.noise_floor import window_amplitude_snr
-from vivbench.identify.optimizers import OPTIMIZERS
-from vivbench.identify.preprocess import PreprocessConfig, perpendicular_speed, preprocess_arrays, wind_speed_direction
-from vivbench.io import EventFormatError, event_arrays, read_event, write_netcdf_atomic
-from vivbench.quality import check_acc_magnitude, check_wind_magnitude, check_wind_varies, despike
+from vivbench.preprocess.derivative import Derivative
+from vivbench.regression.stlsq import DEFAULT_THRESHOLDS
+from vivbench.models.window import WindowedSINDy
+from vivbench.preprocess.noise_floor import window_amplitude_snr
+from vivbench.regression.optimizers import OPTIMIZERS
+from vivbench.regimes.window import label_windows
+from vivbench.preprocess.chain import PreprocessConfig, perpendicular_speed, preprocess_arrays, wind_speed_direction
+from vivbench.io.event import EventFormatError, event_arrays, read_event
+from vivbench.io.netcdf import write_netcdf_atomic
+from vivbench.io.result import result_path
+from vivbench.io.quality import check_acc_magnitude, check_wind_magnitude, check_wind_varies, despike
 
-__all__ = ["IdentifyConfig", "identify_event", "identify_files", "list_results", "result_path"]
+__all__ = ["IdentifyConfig", "identify_event", "identify_files"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,14 +53,14 @@ class IdentifyConfig:
     aicc_margin : models within this AICc of the best count as competitors
     fit_tolerance : relative RMS residual within which an order-restricted model fits equally well
     spike_mad : spike rule of the raw u, v and acc, robust standard deviations (1.4826 MAD) from the
-        10 s block median (see vivbench.quality.despike); spike runs up to 0.1 s are bridged linearly,
+        10 s block median (see vivbench.io.quality.despike); spike runs up to 0.1 s are bridged linearly,
         longer ones become NaN and split the record. None: off
     min_snr : a window's regime counts as identifiable only if its mean amplitude is at least this many
         times the accelerometers' noise floor in the vibration band (see
-        :mod:`vivbench.identify.noise_floor`; the envelope of noise alone averages 1.25 times the floor).
+        :mod:`vivbench.preprocess.noise_floor`; the envelope of noise alone averages 1.25 times the floor).
         None: no test
     optimizer : sparse regression per window, "stlsq" (the fast engine), "sr3" or "ensemble"
-        (pysindy-based, see :mod:`vivbench.identify.optimizers`; "ensemble" adds ``inclusion``)
+        (pysindy-based, see :mod:`vivbench.regression.optimizers`; "ensemble" adds ``inclusion``)
     seed : seed of the ensemble's bootstrap samples (results depend on it only)
     """
 
@@ -98,8 +102,7 @@ class IdentifyConfig:
 
     def estimator(self) -> WindowedSINDy:
         est = WindowedSINDy(window=self.window, step=self.step, thresholds=self.thresholds, alpha=self.alpha,
-                            scaling=self.scaling, tau=self.tau, identifiability_margin=self.aicc_margin,
-                            fit_tolerance=self.fit_tolerance, keep_path=False, optimizer=self.optimizer,
+                            scaling=self.scaling, keep_path=False, optimizer=self.optimizer,
                             random_state=self.seed)
         est.settings()
         return est
@@ -158,7 +161,7 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     ValueError
         When no segment of the record is long enough for one window; when the
         acceleration or the wind has a magnitude no bridge sees (a wrong unit)
-        or the wind never varies at a section (see vivbench.quality).
+        or the wind never varies at a section (see vivbench.io.quality).
     """
     config = config or IdentifyConfig()
     arr = event_arrays(tree)
@@ -176,8 +179,10 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         if t.size < 2 or t[-1] - t[0] < config.window:
             continue
         dA[sel] = config.derivative.differentiate(pre.A[sel], t)
-        est.fit(t, pre.A[sel], pre.U[sel], dA[sel])
-        parts.append({name: getattr(est, attr) for name, (attr, *_rest) in _WINDOW_VARS.items()})
+        verdict = label_windows(est, t, pre.A[sel], pre.U[sel], dA[sel], tau=config.tau, margin=config.aicc_margin,
+                                fit_tolerance=config.fit_tolerance)
+        parts.append({name: verdict[name] if name in verdict else getattr(est, attr)
+                      for name, (attr, *_rest) in _WINDOW_VARS.items()})
         if config.optimizer == "ensemble":
             parts[-1]["inclusion"] = est.inclusion_
         starts.append(est.window_start_)
@@ -291,27 +296,6 @@ def _data_quality(arr: dict, span_azimuth_deg: float, config: IdentifyConfig) ->
         "quality_spikes_bridged_accel": int(bridged["accel"]),
     }
     return out, quality
-
-
-def list_results(results_dir) -> list[Path]:
-    """The ``<event_id>.identify.nc`` files of a directory, sorted.
-
-    Raises
-    ------
-    ValueError
-        The directory does not exist or holds no result file (the message names it).
-    """
-    d = Path(results_dir)
-    if not d.is_dir():
-        raise ValueError(f"{d}: not a directory of identification results")
-    files = sorted(d.glob("*.identify.nc"))
-    if not files:
-        raise ValueError(f"{d}: no identification results (<event_id>.identify.nc) in this directory")
-    return files
-
-
-def result_path(out_dir: str | Path, event_id: str) -> Path:
-    return Path(out_dir) / f"{event_id}.identify.nc"
 
 
 def _identify_one(path: str, out_dir: str, config: IdentifyConfig) -> str:

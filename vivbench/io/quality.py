@@ -1,7 +1,7 @@
 """Data quality of sensor records: plausibility of units, spikes, dropouts, a wind that never varies.
 
-Used on the two paths a user's data takes: :mod:`vivbench.fieldimport` (raw
-field files to an event file) and :func:`vivbench.identify.identify_event`
+Used on the two paths a user's data takes: :mod:`vivbench.io.fieldimport` (raw
+field files to an event file) and :func:`vivbench.analysis.identify_event`
 (event file to identification). Each problem is either repaired, with the
 repair counted in ``quality_*`` attributes of the output, or refused with a
 one-line :class:`ValueError` that says what is wrong and how to fix it.
@@ -17,7 +17,7 @@ Repairs
   mistaken for spikes; a sinusoid's peaks lie about one robust standard
   deviation from its median, far below the default of 8.
 - NaN (dropouts, spikes removed): the preprocessing splits the record into
-  segments at every NaN (see :mod:`vivbench.identify.preprocess`).
+  segments at every NaN (see :mod:`vivbench.preprocess.chain`).
 
 Refusals
 --------

@@ -18,7 +18,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from vivbench.io import atomic_path
+from vivbench.io.netcdf import atomic_path
 
 __all__ = ["load", "append", "write_table", "format_value"]
 

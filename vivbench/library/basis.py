@@ -1,6 +1,6 @@
 """Window libraries in a well-conditioned basis that spans exactly the physical library.
 
-The physical library of one section (:mod:`vivbench.terms`) is the 23 monomials
+The physical library of one section (:mod:`vivbench.core.terms`) is the 23 monomials
 A^i U^j, i = 0..3, j = 0..5, (i, j) != (0, 0). Inside a 50 s window U is
 nearly constant, so U, U^2, ..., U^5 are nearly parallel and the raw window
 library has condition numbers up to 1e17. This module evaluates, per window,
@@ -51,7 +51,7 @@ terms of three sections still 1e14-1e17 ``"scaled"``. That floor is not an
 artefact of the basis: within a window each section's U q(U) (deg q <= 4)
 approximates a constant to about (s/c)^5, so the three sections' constant-like
 terms are nearly interchangeable in any basis of the physical space. The
-regression engine copes with it (:mod:`vivbench.identify.engine`).
+regression engine copes with it (:mod:`vivbench.regression.stlsq`).
 
 All three bases span exactly the physical space, so a model fitted in any of
 them is a physical model: ``to_physical @ coef`` is exact in exact arithmetic.
@@ -67,7 +67,7 @@ from math import comb
 
 import numpy as np
 
-from vivbench.terms import section_exponents
+from vivbench.core.terms import section_exponents
 
 __all__ = [
     "SCALINGS",
@@ -75,6 +75,8 @@ __all__ = [
     "window_library",
     "library_cond",
     "condition_number",
+    "basis_orders",
+    "order_contributions_basis",
 ]
 
 SCALINGS = ("raw", "normalized", "scaled")
@@ -98,7 +100,7 @@ class WindowLibrary:
         samples are NaN.
     to_physical : ndarray, shape (..., p, p)
         Block-diagonal map: coefficients ``xi`` on ``theta`` are the physical
-        coefficients ``to_physical @ xi`` on :func:`vivbench.terms.evaluate_library`,
+        coefficients ``to_physical @ xi`` on :func:`vivbench.core.terms.evaluate_library`,
         i.e. ``theta == evaluate_library(A, U) @ to_physical`` on valid rows.
     valid : ndarray of bool, shape (..., n)
         Samples used (finite A and U, and the caller's mask).
@@ -341,3 +343,33 @@ def library_cond(
     ndarray, shape (...)
     """
     return condition_number(window_library(A, U, scaling=scaling, valid=valid).theta)
+
+
+def basis_orders(n_sections: int = 3) -> np.ndarray:
+    """Power of A of every library column (the same in the scaled basis), shape (23 n_sections,)."""
+    return np.tile(section_exponents()[:, 0], n_sections)
+
+
+def order_contributions_basis(theta: np.ndarray, coef: np.ndarray, orders: np.ndarray) -> np.ndarray:
+    """Contributions of the orders of A to the prediction ``theta @ coef``.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (W, n, p)
+    coef : ndarray, shape (W, ..., p); any models per window
+    orders : ndarray of int, shape (p,)
+
+    Returns
+    -------
+    r : ndarray, shape (W, ..., n, 4), in the units of ``theta @ coef``
+    """
+    theta = np.nan_to_num(theta)
+    coef = np.nan_to_num(coef)
+    W, n, p = theta.shape
+    mid = coef.shape[1:-1]
+    c2 = coef.reshape(W, -1, p)
+    out = np.empty((W, c2.shape[1], n, 4))
+    for i in range(4):  # four orders, each a batched matrix product
+        cols = orders == i
+        out[..., i] = np.einsum("wnc,wmc->wmn", theta[..., cols], c2[..., cols], optimize=True)
+    return out.reshape((W,) + mid + (n, 4))

@@ -30,41 +30,12 @@ import dataclasses
 
 import numpy as np
 
-from vivbench.identify.engine import StlsqSettings, stlsq_path
-from vivbench.regime import classify_regime
-from vivbench.terms import section_exponents
+from vivbench.models.window import WindowedSINDy, WindowProblem
+from vivbench.regression.stlsq import StlsqSettings, stlsq_path
+from vivbench.core.regime import classify_regime
+from vivbench.library.basis import basis_orders, order_contributions_basis
 
-__all__ = ["basis_orders", "order_contributions_basis", "window_regimes"]
-
-
-def basis_orders(n_sections: int = 3) -> np.ndarray:
-    """Power of A of every library column (the same in the scaled basis), shape (23 n_sections,)."""
-    return np.tile(section_exponents()[:, 0], n_sections)
-
-
-def order_contributions_basis(theta: np.ndarray, coef: np.ndarray, orders: np.ndarray) -> np.ndarray:
-    """Contributions of the orders of A to the prediction ``theta @ coef``.
-
-    Parameters
-    ----------
-    theta : ndarray, shape (W, n, p)
-    coef : ndarray, shape (W, ..., p); any models per window
-    orders : ndarray of int, shape (p,)
-
-    Returns
-    -------
-    r : ndarray, shape (W, ..., n, 4), in the units of ``theta @ coef``
-    """
-    theta = np.nan_to_num(theta)
-    coef = np.nan_to_num(coef)
-    W, n, p = theta.shape
-    mid = coef.shape[1:-1]
-    c2 = coef.reshape(W, -1, p)
-    out = np.empty((W, c2.shape[1], n, 4))
-    for i in range(4):  # four orders, each a batched matrix product
-        cols = orders == i
-        out[..., i] = np.einsum("wnc,wmc->wmn", theta[..., cols], c2[..., cols], optimize=True)
-    return out.reshape((W,) + mid + (n, 4))
+__all__ = ["label_windows", "window_regimes"]
 
 
 def _dense_rss(theta: np.ndarray, y: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -218,3 +189,39 @@ def window_regimes(
     identifiable = has_model & (seen == np.where(has_model, 1 << (regime.astype(int) - 1), 0))
     return {"regime": regime, "identifiable": identifiable, "regimes_seen": seen.astype(np.int8),
             "n_equivalent": n_equiv, "order_rms": order_rms}
+
+
+def label_windows(model: WindowedSINDy, t, A, U, dA, *, tau: float = 0.2, margin: float | None = 2.0,
+                  order_deletion: bool = True, fit_tolerance: float = 0.1) -> dict:
+    """Fit window SINDy and give every selected model its regime and identifiability verdict.
+
+    Parameters
+    ----------
+    model : WindowedSINDy
+        Fitted here (``model.fit(t, A, U, dA)``); its fitted attributes are set as usual.
+    t : ndarray, shape (n,), s
+    A, U, dA : ndarray, shape (n, S); m, m/s and m/s
+    tau : regime threshold of DESIGN 2.5
+    margin, order_deletion, fit_tolerance : see :func:`window_regimes`
+
+    Returns
+    -------
+    dict of ndarray, shape (W, S)
+        ``regime`` int8 (0: no model), ``identifiable`` bool, ``regimes_seen`` int8
+        bit mask, ``n_equivalent`` int (see :func:`window_regimes`).
+    """
+    parts: list[tuple[slice, dict]] = []
+
+    def verdict(problem: WindowProblem) -> None:
+        parts.append((problem.windows, window_regimes(
+            problem.theta, problem.y, problem.y_scale, problem.A, problem.valid, problem.path, problem.settings,
+            tau=tau, margin=margin, order_deletion=order_deletion, fit_tolerance=fit_tolerance)))
+
+    model.fit(t, A, U, dA, on_chunk=verdict)
+    W, S = model.coef_.shape[:2]
+    out = {"regime": np.zeros((W, S), dtype=np.int8), "identifiable": np.zeros((W, S), dtype=bool),
+           "regimes_seen": np.zeros((W, S), dtype=np.int8), "n_equivalent": np.zeros((W, S), dtype=int)}
+    for windows, reg in parts:
+        for key, values in out.items():
+            values[windows] = reg[key]
+    return out

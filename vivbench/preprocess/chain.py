@@ -42,7 +42,8 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
-from vivbench.identify.noise_floor import band_noise_std
+from vivbench.preprocess.band import band_gain
+from vivbench.preprocess.noise_floor import band_noise_std
 
 __all__ = [
     "PreprocessConfig",
@@ -51,6 +52,8 @@ __all__ = [
     "perpendicular_speed",
     "mean_wind",
     "modal_frequency",
+    "welch_psd",
+    "spectral_peak",
     "displacement",
     "envelope",
     "segments",
@@ -225,7 +228,7 @@ class Preprocessed:
         The settings.
     noise_std : ndarray, shape (n_sections,)
         Accelerometer noise after integration to displacement in the band, m:
-        the noise floor of A (:mod:`vivbench.identify.noise_floor`); NaN
+        the noise floor of A (:mod:`vivbench.preprocess.noise_floor`); NaN
         where it could not be estimated.
     """
 
@@ -374,47 +377,7 @@ def _mean_wind_runs(t: np.ndarray, U_tilde: np.ndarray, config: PreprocessConfig
 # ---------------------------------------------------------------------- vibration
 
 
-def modal_frequency(t_or_fs, acc, band: tuple[float, float] = (0.05, 2.0), *, segment_s: float = 300.0) -> float:
-    """Dominant frequency of the acceleration in a band, from a Welch spectrum.
-
-    The spectra of all sections and of all valid runs are averaged (each run
-    weighted by its number of Welch sections); the highest bin strictly
-    inside the band is refined by a parabola through the logarithm of the
-    peak bin and its neighbours (exact for a Gaussian peak, close to the Hann
-    window's main lobe).
-
-    Parameters
-    ----------
-    t_or_fs : float or array_like, shape (n,)
-        Sampling rate in Hz, or the sample times in s (jumps in the time
-        stamps then split the record like NaN gaps).
-    acc : array_like, shape (n,) or (n, n_sections)
-        Acceleration, m/s^2; NaN marks missing data.
-    band : tuple of float
-        (low, high) search band, Hz.
-    segment_s : float
-        Length of the Welch sections, s; shortened to the longest valid run
-        when that is shorter.
-
-    Returns
-    -------
-    float
-        Modal frequency, Hz.
-
-    Raises
-    ------
-    ValueError
-        If the record is too short to resolve the band, or the largest value
-        in the band lies on its edge (no peak inside the band).
-    """
-    lo, hi = float(band[0]), float(band[1])
-    if not 0.0 < lo < hi:
-        raise ValueError(f"band must be (low, high) with 0 < low < high, Hz; got {band!r}")
-    f, psd = _welch_psd(t_or_fs, acc, segment_s, lo, hi)
-    return _spectral_peak(f, psd.sum(axis=1), lo, hi)
-
-
-def _welch_psd(t_or_fs, acc, segment_s: float, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+def welch_psd(t_or_fs, acc, segment_s: float, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
     """Welch PSD of each section averaged over the valid runs, shape (n_freq, n_sections).
 
     Each run is weighted by its number of Welch sections. Raises ValueError if
@@ -459,7 +422,7 @@ def _welch_psd(t_or_fs, acc, segment_s: float, lo: float, hi: float) -> tuple[np
     return f, psd_sum / weight
 
 
-def _spectral_peak(f: np.ndarray, psd: np.ndarray, lo: float, hi: float) -> float:
+def spectral_peak(f: np.ndarray, psd: np.ndarray, lo: float, hi: float) -> float:
     """Highest bin strictly inside [lo, hi], refined by a parabola through the log-PSD."""
     inside = np.flatnonzero((f >= lo) & (f <= hi))
     k = inside[np.argmax(psd[inside])]
@@ -474,12 +437,44 @@ def _spectral_peak(f: np.ndarray, psd: np.ndarray, lo: float, hi: float) -> floa
     return float(f[k] + delta * (f[1] - f[0]))
 
 
-def _band_gain(f: np.ndarray, f_mode: float, half_width: float, taper: float) -> np.ndarray:
-    """Gain 1 within (1 - taper) * half_width of f_mode, raised cosine to 0 at half_width."""
-    d = np.abs(f - f_mode)
-    flat = (1.0 - taper) * half_width
-    x = np.clip((d - flat) / (taper * half_width), 0.0, 1.0)
-    return 0.5 * (1.0 + np.cos(np.pi * x))
+def modal_frequency(t_or_fs, acc, band: tuple[float, float] = (0.05, 2.0), *, segment_s: float = 300.0) -> float:
+    """Dominant frequency of the acceleration in a band, from a Welch spectrum.
+
+    The spectra of all sections and of all valid runs are averaged (each run
+    weighted by its number of Welch sections); the highest bin strictly
+    inside the band is refined by a parabola through the logarithm of the
+    peak bin and its neighbours (exact for a Gaussian peak, close to the Hann
+    window's main lobe).
+
+    Parameters
+    ----------
+    t_or_fs : float or array_like, shape (n,)
+        Sampling rate in Hz, or the sample times in s (jumps in the time
+        stamps then split the record like NaN gaps).
+    acc : array_like, shape (n,) or (n, n_sections)
+        Acceleration, m/s^2; NaN marks missing data.
+    band : tuple of float
+        (low, high) search band, Hz.
+    segment_s : float
+        Length of the Welch sections, s; shortened to the longest valid run
+        when that is shorter.
+
+    Returns
+    -------
+    float
+        Modal frequency, Hz.
+
+    Raises
+    ------
+    ValueError
+        If the record is too short to resolve the band, or the largest value
+        in the band lies on its edge (no peak inside the band).
+    """
+    lo, hi = float(band[0]), float(band[1])
+    if not 0.0 < lo < hi:
+        raise ValueError(f"band must be (low, high) with 0 < low < high, Hz; got {band!r}")
+    f, psd = welch_psd(t_or_fs, acc, segment_s, lo, hi)
+    return spectral_peak(f, psd.sum(axis=1), lo, hi)
 
 
 def displacement(acc, fs: float, f_mode: float, half_width: float, *, taper: float = 0.5) -> np.ndarray:
@@ -528,7 +523,7 @@ def displacement(acc, fs: float, f_mode: float, half_width: float, *, taper: flo
     n = acc.shape[0]
     nfft = sp_fft.next_fast_len(2 * n, real=True)
     f = sp_fft.rfftfreq(nfft, d=1.0 / fs)
-    gain = _band_gain(f, f_mode, half_width, taper)
+    gain = band_gain(f, f_mode, half_width, taper)
     H = np.zeros_like(f)
     inband = gain > 0
     H[inband] = -gain[inband] / (2.0 * np.pi * f[inband]) ** 2
@@ -836,13 +831,13 @@ def preprocess_arrays(
     if config.modal_frequency_hz is not None:
         f_mode, source = float(config.modal_frequency_hz), "given"
         try:
-            f_psd, psd = _welch_psd(accel_time, acc, config.welch_segment_s, lo, hi)
+            f_psd, psd = welch_psd(accel_time, acc, config.welch_segment_s, lo, hi)
         except ValueError:  # a given mode needs no spectrum; the noise floor stays unknown
             f_psd = psd = None
     else:
         # One spectrum serves the mode and the noise floor.
-        f_psd, psd = _welch_psd(accel_time, acc, config.welch_segment_s, lo, hi)
-        f_mode, source = _spectral_peak(f_psd, psd.sum(axis=1), lo, hi), "spectrum"
+        f_psd, psd = welch_psd(accel_time, acc, config.welch_segment_s, lo, hi)
+        f_mode, source = spectral_peak(f_psd, psd.sum(axis=1), lo, hi), "spectrum"
     half_width = config.half_width_hz(f_mode)
     if psd is None:
         noise_std = np.full(acc.shape[1], np.nan)

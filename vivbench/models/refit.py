@@ -67,8 +67,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from vivbench.identify.forecast import Simulation, simulate_identified, window_in_force
-from vivbench.terms import evaluate_library, feature_exponents, feature_names
+from vivbench.models.simulate import Simulation, simulate_identified, window_in_force
+from vivbench.core.terms import evaluate_library, feature_exponents, feature_names
 
 __all__ = ["RefitConfig", "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients",
            "order_rms"]
@@ -120,7 +120,7 @@ class RefitConfig:
         fixed state beat the equation-error fit in 5 of 8 seeds, the free
         state in 7 of 8).
     bound_factor, negative_tolerance : float
-        Blow-up bounds of the evaluation simulations (see vivbench.identify.forecast).
+        Blow-up bounds of the evaluation simulations (see vivbench.models.simulate).
     """
 
     shooting_interval: float = 20.0
@@ -236,7 +236,7 @@ def _one_window_result(t, A, U, coef) -> xr.Dataset:
 def simulate_coefficients(t, A, U, coef, *, bound_factor: float = 10.0, negative_tolerance: float = 0.05) -> Simulation:
     """Simulate fixed coefficients from the first measured A, U linear between samples.
 
-    Uses :func:`vivbench.identify.forecast.simulate_identified` (RK4 on the
+    Uses :func:`vivbench.models.simulate.simulate_identified` (RK4 on the
     grid, blow-ups stopped and reported); the bounds refer to the largest
     measured A of this grid.
 
@@ -492,7 +492,7 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     U : ndarray, shape (n, 3), m/s
         Measured wind, linear between the samples.
     support : ndarray of bool, shape (3, 69)
-        Terms each equation may use (library order of :mod:`vivbench.terms`).
+        Terms each equation may use (library order of :mod:`vivbench.core.terms`).
         An equation with no term has dA/dt = 0.
     coef0 : ndarray, shape (3, 69)
         Starting coefficients (projected onto the fitted directions).

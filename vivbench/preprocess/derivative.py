@@ -112,7 +112,7 @@ Fed to the campaign model it would raise that model's median dA/dt error
 from 0.0105 to 0.0121 (coverage 0.438 to 0.485, accuracy 1.000 on
 identifiable windows in both): the pooled regression averages the noise over
 the whole campaign anyway but not the smoother's bias, so the campaign model
-differentiates with the white-noise rule (``vivbench.identify.pooled``).
+differentiates with the white-noise rule (``vivbench.models.campaign``).
 With exact TV and the white-noise rule on such envelopes the automatic weight
 is tiny and the derivative is nearly the finite differences.
 

@@ -7,6 +7,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
+__all__ = ["load_toml"]
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover

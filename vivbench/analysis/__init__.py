@@ -1,0 +1,29 @@
+"""The identification chain over events and campaigns, density-peaks clustering and its interpretation."""
+
+from vivbench.analysis.clustering import (
+    KERNELS,
+    DensityPeaks,
+    coefficient_features,
+    decision_graph,
+    order_features,
+)
+from vivbench.analysis.identify import IdentifyConfig, identify_event, identify_files
+from vivbench.analysis.interpret import (
+    FEATURE_SETS,
+    ClusterConfig,
+    CampaignWindows,
+    ClusterResult,
+    campaign_windows,
+    cluster_scores,
+    cluster_windows,
+    standardized_coefficients,
+    summarize_clusters,
+)
+from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE, pool_results, with_campaign_model
+
+__all__ = [
+    "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features", "IdentifyConfig",
+    "identify_event", "identify_files", "FEATURE_SETS", "ClusterConfig", "CampaignWindows", "ClusterResult",
+    "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
+    "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "with_campaign_model",
+]

@@ -1,0 +1,81 @@
+"""The generator settings a recovery sweep can vary, with how to read and set each one."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from vivbench.synth.config import GeneratorConfig, Polynomial
+
+__all__ = ["PARAMETERS", "SWEEP_PARAMETERS", "Parameter"]
+
+
+
+def _y1_peak(gen: GeneratorConfig) -> float:
+    """Peak of a bell-shaped (downward quadratic) Y1(U); NaN for any other form."""
+    c = gen.aero.Y1.coefficients
+    if len(c) != 3 or not c[2] < 0:
+        return float("nan")
+    return float(c[0] - c[1] ** 2 / (4.0 * c[2]))
+
+
+def _set_y1_peak(gen: GeneratorConfig, value: float) -> GeneratorConfig:
+    peak = _y1_peak(gen)
+    if not peak > 0:
+        raise ValueError("y1_peak needs the base generator's aero.Y1 to be a bell (a quadratic in U with a positive "
+                         f"peak); got coefficients {gen.aero.Y1.coefficients}")
+    if not value >= 0:
+        raise ValueError(f"y1_peak must be >= 0 (the height of the Y1 bell; 0 removes self-excitation); got {value}")
+    # Scaling the whole bell keeps its centre and its zero crossings (the lock-in range).
+    y1 = Polynomial(coefficients=tuple(value / peak * c for c in gen.aero.Y1.coefficients))
+    return dataclasses.replace(gen, aero=dataclasses.replace(gen.aero, Y1=y1))
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A generator setting a sweep can vary: what it sets, its axis label, how to read and set it."""
+
+    description: str
+    axis_label: str
+    read: Callable[[GeneratorConfig], float]
+    apply: Callable[[GeneratorConfig, float], GeneratorConfig]
+
+
+def _replace_in(section: str, name: str):
+    def apply(gen: GeneratorConfig, value: float) -> GeneratorConfig:
+        sub = dataclasses.replace(getattr(gen, section), **{name: value})
+        return dataclasses.replace(gen, **{section: sub})
+    return apply
+
+
+def _set_turbulence(gen: GeneratorConfig, value: float) -> GeneratorConfig:
+    turb = dataclasses.replace(gen.wind.turbulence, intensity=value)
+    return dataclasses.replace(gen, wind=dataclasses.replace(gen.wind, turbulence=turb))
+
+
+PARAMETERS: dict[str, Parameter] = {
+    "noise_density": Parameter(
+        "accelerometer noise floor, micro-g/sqrt(Hz) (sensors.noise_density)",
+        "accelerometer noise floor (µg/√Hz)",
+        lambda g: g.sensors.noise_density, _replace_in("sensors", "noise_density")),
+    "anemometer_noise": Parameter(
+        "anemometer rms error relative to the wind speed, 1 (wind.noise)",
+        "anemometer rms error (fraction of wind speed)",
+        lambda g: g.wind.noise, _replace_in("wind", "noise")),
+    "turbulence_intensity": Parameter(
+        "longitudinal turbulence intensity sigma_u / U, 1 (wind.turbulence.intensity)",
+        "turbulence intensity σ_u/U (-)",
+        lambda g: g.wind.turbulence.intensity, _set_turbulence),
+    "damping_ratio": Parameter(
+        "structural damping ratio zeta, 1 (structure.damping_ratio)",
+        "structural damping ratio ζ (-)",
+        lambda g: g.structure.damping_ratio, _replace_in("structure", "damping_ratio")),
+    "y1_peak": Parameter(
+        "peak of the bell-shaped aerodynamic damping derivative Y1(U), 1 (aero.Y1 scaled as a whole)",
+        "peak of Y1(U) (-)",
+        _y1_peak, _set_y1_peak),
+}
+
+#: Parameters a sweep can vary: name -> what it sets, with its unit.
+SWEEP_PARAMETERS: dict[str, str] = {name: p.description for name, p in PARAMETERS.items()}
