@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.distance import pdist, squareform
+from vivbench.core.errors import InputError
 
 __all__ = ["KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features"]
 
@@ -220,15 +221,15 @@ class DensityPeaks:
 
     def _validate(self, n: int) -> None:
         if self.kernel not in KERNELS:
-            raise ValueError(f"kernel={self.kernel!r} is not known; allowed: {KERNELS}")
+            raise InputError(f"kernel={self.kernel!r} is not known; allowed: {KERNELS}")
         if self.dc is not None and not (np.isfinite(self.dc) and self.dc > 0):
-            raise ValueError(f"dc={self.dc} must be a positive finite distance or None")
+            raise InputError(f"dc={self.dc} must be a positive finite distance or None")
         if not 0.0 < self.neighbor_fraction < 1.0:
-            raise ValueError(f"neighbor_fraction={self.neighbor_fraction} must lie in (0, 1)")
+            raise InputError(f"neighbor_fraction={self.neighbor_fraction} must lie in (0, 1)")
         if self.n_centers is not None and not 1 <= int(self.n_centers) <= n:
-            raise ValueError(f"n_centers={self.n_centers} must be None or an integer in [1, {n}]")
+            raise InputError(f"n_centers={self.n_centers} must be None or an integer in [1, {n}]")
         if not self.center_delta_factor >= 0:
-            raise ValueError(f"center_delta_factor={self.center_delta_factor} must be >= 0")
+            raise InputError(f"center_delta_factor={self.center_delta_factor} must be >= 0")
 
     def fit(self, X, y=None) -> "DensityPeaks":
         """Cluster the rows of X.
@@ -251,7 +252,7 @@ class DensityPeaks:
         condensed = pdist(X)
         dc = float(self.dc) if self.dc is not None else _cutoff_from_fraction(condensed, self.neighbor_fraction)
         if not dc > 0:
-            raise ValueError("d_c from neighbor_fraction is 0 (too many duplicated points); give dc or a larger fraction")
+            raise InputError("d_c from neighbor_fraction is 0 (too many duplicated points); give dc or a larger fraction")
         dist = squareform(condensed)
         del condensed
         gauss = _gaussian_density(dist, dc)
@@ -266,9 +267,9 @@ class DensityPeaks:
         if self.centers is not None:
             centers = np.unique(np.asarray(self.centers, dtype=np.intp))
             if centers.size == 0 or centers.min() < 0 or centers.max() >= n:
-                raise ValueError(f"centers must be a non-empty list of indices in [0, {n})")
+                raise InputError(f"centers must be a non-empty list of indices in [0, {n})")
             if top not in centers:
-                raise ValueError(f"centers must include the densest point (index {top}); it has no denser point to follow")
+                raise InputError(f"centers must include the densest point (index {top}); it has no denser point to follow")
         elif self.n_centers is not None:
             others = order[1:][np.lexsort((rank[order[1:]], -gamma[order[1:]]))]
             centers = np.concatenate(([top], others[: int(self.n_centers) - 1]))

@@ -28,10 +28,11 @@ from vivbench.preprocess.noise_floor import window_amplitude_snr
 from vivbench.regression.optimizers import OPTIMIZERS
 from vivbench.regimes.window import label_windows
 from vivbench.preprocess.chain import PreprocessConfig, perpendicular_speed, preprocess_arrays, wind_speed_direction
-from vivbench.io.event import EventFormatError, event_arrays, read_event
+from vivbench.io.event import event_arrays, read_event
 from vivbench.io.netcdf import write_netcdf_atomic
 from vivbench.io.result import result_path
 from vivbench.io.quality import check_acc_magnitude, check_wind_magnitude, check_wind_varies, despike
+from vivbench.core.errors import InputError
 
 __all__ = ["IdentifyConfig", "identify_event", "identify_files"]
 
@@ -82,21 +83,21 @@ class IdentifyConfig:
     def __post_init__(self) -> None:
         if self.spike_mad is not None and not (isinstance(self.spike_mad, (int, float)) and np.isfinite(self.spike_mad)
                                                and self.spike_mad > 1):
-            raise ValueError(f"spike_mad must be None (no despiking) or a finite number > 1 of robust standard deviations; got {self.spike_mad!r}")
+            raise InputError(f"spike_mad must be None (no despiking) or a finite number > 1 of robust standard deviations; got {self.spike_mad!r}")
         object.__setattr__(self, "thresholds", tuple(float(x) for x in self.thresholds))
         if not (self.window > 0 and self.step > 0):
-            raise ValueError(f"window and step must be positive seconds; got window={self.window}, step={self.step}")
+            raise InputError(f"window and step must be positive seconds; got window={self.window}, step={self.step}")
         if not 0 < self.tau < 1:
-            raise ValueError(f"tau must be in (0, 1); got {self.tau}")
+            raise InputError(f"tau must be in (0, 1); got {self.tau}")
         if self.aicc_margin < 0 or self.fit_tolerance < 0:
-            raise ValueError("aicc_margin and fit_tolerance must be >= 0")
+            raise InputError("aicc_margin and fit_tolerance must be >= 0")
         if self.min_snr is not None and not (isinstance(self.min_snr, (int, float)) and np.isfinite(self.min_snr)
                                              and self.min_snr >= 0):
-            raise ValueError(f"min_snr must be None (no noise-floor test) or a finite number >= 0; got {self.min_snr!r}")
+            raise InputError(f"min_snr must be None (no noise-floor test) or a finite number >= 0; got {self.min_snr!r}")
         if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"optimizer must be one of {', '.join(OPTIMIZERS)}; got {self.optimizer!r}")
+            raise InputError(f"optimizer must be one of {', '.join(OPTIMIZERS)}; got {self.optimizer!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ValueError(f"seed must be an integer >= 0; got {self.seed!r}")
+            raise InputError(f"seed must be an integer >= 0; got {self.seed!r}")
         # the estimator validates the rest (thresholds, alpha, scaling) when it is built
         self.estimator()
 
@@ -190,7 +191,7 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         segs.append(np.full(est.window_start_.size, seg))
     if not parts:
         longest = max((float(np.ptp(pre.t[pre.segment == s])) for s in np.unique(pre.segment[pre.segment >= 0])), default=0.0)
-        raise ValueError(f"no valid segment is as long as one window ({config.window:g} s); the longest is {longest:.0f} s")
+        raise InputError(f"no valid segment is as long as one window ({config.window:g} s); the longest is {longest:.0f} s")
     fit = {name: np.concatenate([p[name] for p in parts], axis=0) for name in _WINDOW_VARS}
     n_w = fit["cond"].shape[0]
     window_start, window_end = np.concatenate(starts), np.concatenate(ends)
@@ -341,7 +342,7 @@ def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: Ide
     def record(path, fn):
         try:
             written[str(path)] = Path(fn())
-        except (EventFormatError, ValueError, OSError) as exc:  # documented refusals
+        except (InputError, OSError) as exc:  # documented refusals (EventFormatError is an InputError)
             msg = " ".join(str(exc).split())
             failures[str(path)] = msg if msg.startswith(str(path)) else f"{path}: {msg}"
         except Exception as exc:  # noqa: BLE001 - a bug; one bad event must not stop the others

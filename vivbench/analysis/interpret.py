@@ -71,6 +71,7 @@ from vivbench.analysis.clustering import KERNELS, DensityPeaks, order_features
 from vivbench.library.basis import window_library
 from vivbench.core.terms import feature_names
 from vivbench.io.result import read_result
+from vivbench.core.errors import InputError
 
 __all__ = ["FEATURE_SETS", "ClusterConfig", "CampaignWindows", "ClusterResult", "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients", "summarize_clusters"]
 
@@ -172,7 +173,7 @@ def _truth_regimes(campaign_dir, event_id: str, start, end, tau: float):
 
     path = Path(campaign_dir) / f"{event_id}.nc"
     if not path.exists():
-        raise ValueError(f"{path}: no event file for result {event_id} in the campaign directory")
+        raise InputError(f"{path}: no event file for result {event_id} in the campaign directory")
     tree = read_event(path)
     if "truth" not in tree.children:
         return None
@@ -198,7 +199,7 @@ def campaign_windows(result_files: Sequence, campaign_dir=None, *, tau: float = 
         Windows without a model (NaN coefficients) are left out.
     """
     if len(result_files) == 0:
-        raise ValueError("no result files given")
+        raise InputError("no result files given")
     cols = {k: [] for k in ("event_id", "window", "equation", "window_start", "window_end", "regime",
                             "identifiable", "truth_regime", "coef", "order")}
     names, has_truth, n_eq = None, campaign_dir is not None, None
@@ -209,7 +210,7 @@ def campaign_windows(result_files: Sequence, campaign_dir=None, *, tau: float = 
         if n_eq is None:
             n_eq, names = S, feature_names(S)
         elif S != n_eq:
-            raise ValueError(f"{path}: {S} equations, but earlier results have {n_eq}")
+            raise InputError(f"{path}: {S} equations, but earlier results have {n_eq}")
         start = res["window_start"].values.astype(float)
         end = res["window_end"].values.astype(float)
         xi = standardized_coefficients(res)
@@ -234,7 +235,7 @@ def campaign_windows(result_files: Sequence, campaign_dir=None, *, tau: float = 
         cols["order"].append(order_features(res["order_rms"].values[w_idx, e_idx][:, None, :]))
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     if cat["event_id"].size < 2:
-        raise ValueError(f"the results hold {cat['event_id'].size} fitted window model(s); clustering needs at least 2")
+        raise InputError(f"the results hold {cat['event_id'].size} fitted window model(s); clustering needs at least 2")
     return CampaignWindows(
         event_id=cat["event_id"].astype(str), window=cat["window"], equation=cat["equation"],
         window_start=cat["window_start"], window_end=cat["window_end"], regime=cat["regime"],
@@ -272,21 +273,21 @@ class ClusterConfig:
 
     def __post_init__(self) -> None:
         if self.kernel not in KERNELS:
-            raise ValueError(f"kernel={self.kernel!r} is not known; allowed: {', '.join(KERNELS)}")
+            raise InputError(f"kernel={self.kernel!r} is not known; allowed: {', '.join(KERNELS)}")
         if not 0.0 < self.dc_fraction < 1.0:
-            raise ValueError(f"dc_fraction={self.dc_fraction} must lie in (0, 1)")
+            raise InputError(f"dc_fraction={self.dc_fraction} must lie in (0, 1)")
         if self.n_centers is not None and not (isinstance(self.n_centers, (int, np.integer)) and self.n_centers >= 1):
-            raise ValueError(f"n_centers={self.n_centers!r} must be None or an integer >= 1")
+            raise InputError(f"n_centers={self.n_centers!r} must be None or an integer >= 1")
         if self.centers is not None:
             object.__setattr__(self, "centers", tuple(int(c) for c in self.centers))
         if not self.center_delta_factor >= 0:
-            raise ValueError(f"center_delta_factor={self.center_delta_factor} must be >= 0")
+            raise InputError(f"center_delta_factor={self.center_delta_factor} must be >= 0")
         if self.n_top_terms < 1:
-            raise ValueError(f"n_top_terms={self.n_top_terms} must be >= 1")
+            raise InputError(f"n_top_terms={self.n_top_terms} must be >= 1")
 
     def estimator(self, n_points: int) -> DensityPeaks:
         if self.n_centers is not None and self.n_centers > n_points:
-            raise ValueError(f"n_centers={self.n_centers} exceeds the number of window models ({n_points})")
+            raise InputError(f"n_centers={self.n_centers} exceeds the number of window models ({n_points})")
         return DensityPeaks(kernel=self.kernel, neighbor_fraction=self.dc_fraction, n_centers=self.n_centers,
                             centers=self.centers, center_delta_factor=self.center_delta_factor)
 
@@ -402,7 +403,7 @@ def cluster_windows(windows: CampaignWindows, config: ClusterConfig | None = Non
     out = {}
     for name in feature_sets:
         if name not in FEATURE_SETS:
-            raise ValueError(f"feature set {name!r} is not known; allowed: {', '.join(FEATURE_SETS)}")
+            raise InputError(f"feature set {name!r} is not known; allowed: {', '.join(FEATURE_SETS)}")
         X = windows.features[name]
         model = config.estimator(X.shape[0]).fit(X)
         out[name] = ClusterResult(

@@ -14,6 +14,7 @@ import vivbench
 from vivbench.models.campaign import PooledSINDy
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.core.errors import InputError
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "with_campaign_model"]
 
@@ -74,16 +75,16 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     for path in result_files:
         with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             if ds.attrs.get("format") != "vivbench-identify":
-                raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
+                raise InputError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
             names = ["A", "U", "dA", "segment", "window_start", "window_end"]
             names += ["amplitude_snr"] if "amplitude_snr" in ds else []
             results.append((str(path), ds[names].load(), dict(ds.attrs), [str(s) for s in ds["equation"].values]))
     if not results:
-        raise ValueError("no identification results to pool")
+        raise InputError("no identification results to pool")
     sections = results[0][3]
     for path, _ds, _attrs, eq in results:
         if eq != sections:
-            raise ValueError(f"{path}: equations {eq} differ from {sections} of the other results")
+            raise InputError(f"{path}: equations {eq} differ from {sections} of the other results")
     model.fit([(ds["time"].values, ds["A"].values, ds["U"].values, _campaign_derivative(ds, derivative))
                for _p, ds, _a, _e in results])
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end", "regime", "identifiable", "agreement", "robust", "order_rms")}
@@ -153,8 +154,12 @@ def with_campaign_model(result, pooled):
     result : xarray.Dataset, an ``<event_id>.identify.nc``
     pooled : xarray.Dataset, a ``campaign.pooled.nc`` with the same equations and features
     """
+    missing = [v for v in ("coef", "feature") if v not in pooled]
+    if missing:
+        source = pooled.encoding.get("source", "the campaign model")
+        raise InputError(f"{source}: not a campaign model (campaign.pooled.nc of vivbench pool): missing {missing}")
     if [str(x) for x in pooled["feature"].values] != [str(x) for x in result["feature"].values]:
-        raise ValueError("the campaign model's features differ from the result's")
+        raise InputError("the campaign model's features differ from the result's")
     out = result.copy()
     out["coef"] = (result["coef"].dims, np.broadcast_to(pooled["coef"].values, result["coef"].shape).copy(),
                    result["coef"].attrs)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
+from vivbench.core.errors import InputError
 
 _LABEL_COLUMNS = ("event_id", "window", "equation", "window_start", "window_end", "feature_set", "label", "halo")
 
@@ -33,7 +34,7 @@ def run(args) -> int:
 
     files = list_results(args.results_dir)
     if args.campaign is not None and not Path(args.campaign).is_dir():
-        raise ValueError(f"{args.campaign}: not a campaign directory")
+        raise InputError(f"{args.campaign}: not a campaign directory")
     windows = campaign_windows(files, args.campaign)
     results = cluster_windows(windows, config)
     out = Path(args.out)

@@ -7,6 +7,7 @@ import os
 import shlex
 import sys
 from pathlib import Path
+from vivbench.core.errors import InputError
 
 DEFAULT_WORKERS = min(2, os.cpu_count() or 1)
 
@@ -41,7 +42,7 @@ def event_paths(inputs: list[str]) -> list[Path]:
         if p.is_dir():
             found = list_events(p)
             if not found:
-                raise ValueError(f"{p}: no event files (<event_id>.nc) in this directory")
+                raise InputError(f"{p}: no event files (<event_id>.nc) in this directory")
             paths.extend(found)
         else:
             paths.append(p)

@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from vivbench.cli.common import DEFAULT_WORKERS, duration, write_command
+from vivbench.core.errors import InputError
 from vivbench.io.netcdf import NETCDF_ENGINE
 
 
@@ -71,7 +72,7 @@ def run(args) -> int:
     try:
         plateau = clearest_plateau(campaign)
         event_id = plateau.event_id
-    except ValueError as exc:  # no plateau in a small campaign: forecast the first event
+    except InputError as exc:  # no plateau in a small campaign: forecast the first event
         print(f"vivbench demo: {exc}; forecasting the first event instead", file=sys.stderr)
         event_id = sorted(p.name.split(".")[0] for p in identify.glob("*.identify.nc"))[0]
     result = identify / f"{event_id}.identify.nc"

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.core.errors import InputError
 
 _COLUMNS = ("kind", "clip", "d_s", "section", "nmse", "stopped", "stopped_at_s", "covered", "n_windows",
             "growth_rate_per_s", "reason")
@@ -130,11 +131,11 @@ def run(args) -> int:
     result = read_result(args.result)
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))
     if not (np.isfinite(args.horizon) and args.horizon > 0):
-        raise ValueError(f"--horizon must be > 0 s; got {args.horizon}")
+        raise InputError(f"--horizon must be > 0 s; got {args.horizon}")
     t0, t0_source = _choose_t0(args, result)
     t_end = float(result["time"].values[-1])
     if not result["time"].values[0] <= t0 < t_end:
-        raise ValueError(f"{args.result}: t0 = {t0:g} s lies outside the record (0-{t_end:.0f} s)")
+        raise InputError(f"{args.result}: t0 = {t0:g} s lies outside the record (0-{t_end:.0f} s)")
     horizon = min(float(args.horizon), t_end - t0)
     sections = [str(s) for s in result["equation"].values]
     i0 = int(np.argmin(np.abs(result["time"].values - t0)))
@@ -168,7 +169,7 @@ def run(args) -> int:
     campaign = None
     pooled_path = Path(args.pooled) if args.pooled else Path(args.result).with_name(POOLED_NAME)
     if args.pooled and not pooled_path.is_file():
-        raise ValueError(f"{pooled_path}: no such campaign model file")
+        raise InputError(f"{pooled_path}: no such campaign model file")
     if pooled_path.is_file():
         # The campaign model of ``vivbench pool``: one model for all windows, so d plays no role.
         with xr.open_dataset(pooled_path, engine=NETCDF_ENGINE) as ds:

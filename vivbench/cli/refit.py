@@ -7,6 +7,7 @@ import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
+from vivbench.core.errors import InputError
 
 if TYPE_CHECKING:
     import numpy as np
@@ -21,16 +22,16 @@ def _load_result(path: str):
 
     p = Path(path)
     if not p.is_file():
-        raise ValueError(f"{path}: no such file")
+        raise InputError(f"{path}: no such file")
     try:
         ds = xr.load_dataset(p, engine=NETCDF_ENGINE)
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
-        raise ValueError(f"{path}: cannot be read as an identification result ({type(exc).__name__})") from None
+        raise InputError(f"{path}: cannot be read as an identification result ({type(exc).__name__})") from None
     if ds.attrs.get("format") != "vivbench-identify":
-        raise ValueError(f"{path}: not an identification result (format attribute is {ds.attrs.get('format')!r})")
+        raise InputError(f"{path}: not an identification result (format attribute is {ds.attrs.get('format')!r})")
     missing = [v for v in ("coef", "window_start", "window_end", "A", "U") if v not in ds]
     if missing:
-        raise ValueError(f"{path}: missing variables {missing}")
+        raise InputError(f"{path}: missing variables {missing}")
     return ds
 
 
@@ -39,10 +40,10 @@ def _truth_coef(path: str, event_id: str):
 
     tree = read_event(path)
     if str(tree.attrs["event_id"]) != event_id:
-        raise ValueError(f"{path}: event {tree.attrs['event_id']!r} does not match the result's {event_id!r}")
+        raise InputError(f"{path}: event {tree.attrs['event_id']!r} does not match the result's {event_id!r}")
     arr = event_arrays(tree)
     if "coef" not in arr:
-        raise ValueError(f"{path}: no /truth/coef (a field event or a truth outside the library)")
+        raise InputError(f"{path}: no /truth/coef (a field event or a truth outside the library)")
     return arr["coef"]
 
 
@@ -63,14 +64,14 @@ def _own_section_mask(spec: str, features) -> np.ndarray:
     mask = np.zeros((S, len(features)), dtype=bool)
     terms = [t.strip() for t in spec.split(",") if t.strip()]
     if not terms:
-        raise ValueError(f"--terms {spec!r}: give comma-separated monomials such as 'U^2, A, A U, A^3 U'")
+        raise InputError(f"--terms {spec!r}: give comma-separated monomials such as 'U^2, A, A U, A^3 U'")
     for term in terms:
         if not re.fullmatch(r"(A(\^[123])?)?\s*(U(\^[1-5])?)?", term):
-            raise ValueError(f"--terms: {term!r} is not a monomial A^i U^j (i <= 3, j <= 5), e.g. 'A^2 U^3'")
+            raise InputError(f"--terms: {term!r} is not a monomial A^i U^j (i <= 3, j <= 5), e.g. 'A^2 U^3'")
         for k in range(S):
             name = re.sub(r"\s+", " ", term.replace("A", f"A{k + 1}").replace("U", f"U{k + 1}"))
             if name not in features:
-                raise ValueError(f"--terms: {term!r} is not in the library")
+                raise InputError(f"--terms: {term!r} is not in the library")
             mask[k, features.index(name)] = True
     return mask
 
@@ -83,7 +84,7 @@ def run(args) -> int:
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))
     truth = _truth_coef(args.event, event_id) if args.event else None
     if args.support == "truth" and truth is None:
-        raise ValueError("--support truth needs --event EVENT.nc (the event file with /truth/coef)")
+        raise InputError("--support truth needs --event EVENT.nc (the event file with /truth/coef)")
     config = RefitConfig(shooting_interval=args.shooting_interval, substeps=args.substeps, max_iter=args.max_iter,
                          tol=args.tol, ridge=args.ridge, hessian=args.hessian,
                          free_initial_state=args.free_initial_state)
@@ -91,7 +92,7 @@ def run(args) -> int:
     try:
         ev = refit_event(result, t0=args.t0, t1=args.t1, support=support, truth_coef=truth, config=config)
     except ValueError as exc:
-        raise ValueError(f"{args.result}: {exc}") from None
+        raise InputError(f"{args.result}: {exc}") from None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     for name, columns, rows in ((f"refit_{event_id}.csv", _CSV_COLUMNS, ev.rows()),

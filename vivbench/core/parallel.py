@@ -14,6 +14,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 import logging
 from dataclasses import dataclass
 from typing import Any
+from vivbench.core.errors import InputError
 
 __all__ = ["Outcome", "run_tasks", "parse_scheduler"]
 
@@ -45,7 +46,7 @@ def parse_scheduler(text: str | None) -> tuple[str, int | str | None]:
         except ValueError:
             n = 0
         if n < 1:
-            raise ValueError(f"scheduler {text!r}: expected local:N with N >= 1 worker processes, or a scheduler address")
+            raise InputError(f"scheduler {text!r}: expected local:N with N >= 1 worker processes, or a scheduler address")
         return "local", n
     return "address", text
 
@@ -89,7 +90,7 @@ def _dask(func, tasks, kind, arg) -> Iterator[Outcome]:
     try:
         from dask.distributed import Client, LocalCluster, as_completed as dask_completed
     except ImportError as exc:  # pragma: no cover - dask is in the test extra
-        raise ValueError("dask.distributed is not installed: pip install 'vivbench[dask]'") from exc
+        raise InputError("dask.distributed is not installed: pip install 'vivbench[dask]'") from exc
     cluster = None
     futures = []
     if kind == "local":
@@ -139,7 +140,7 @@ def run_tasks(func: Callable[[Any], Any], tasks: Sequence[Any], *, workers: int 
     """
     kind, arg = parse_scheduler(scheduler)
     if workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+        raise InputError(f"workers must be >= 1, got {workers}")
     if len(tasks) == 0:
         return  # no worker processes or cluster for nothing (a resumed run that is complete)
     if kind == "processes":

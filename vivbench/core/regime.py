@@ -10,6 +10,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from vivbench.core.errors import InputError
 
 __all__ = ["DEFAULT_TAU", "classify_regime", "order_rms", "regime_rule"]
 
@@ -54,7 +55,7 @@ def classify_regime(r: np.ndarray, A: np.ndarray, tau: float = DEFAULT_TAU, axis
     (1, 4)); that is how the truth is labelled on its time grid.
     """
     if not 0.0 < tau < 1.0:
-        raise ValueError(f"tau must lie strictly between 0 and 1; got {tau}")
+        raise InputError(f"tau must lie strictly between 0 and 1; got {tau}")
     r = np.asarray(r, dtype=float)
     A = np.asarray(A, dtype=float)
     if r.shape[:-1] != A.shape or r.shape[-1] != 4:
@@ -85,7 +86,7 @@ def regime_rule(R: np.ndarray, c1: np.ndarray, tau: float = DEFAULT_TAU) -> np.n
     regime : ndarray of int8, shape (...)
     """
     if not 0.0 < tau < 1.0:
-        raise ValueError(f"tau must lie strictly between 0 and 1; got {tau}")
+        raise InputError(f"tau must lie strictly between 0 and 1; got {tau}")
     R = np.asarray(R, dtype=float)
     M = R.max(axis=-1)
     with np.errstate(invalid="ignore"):

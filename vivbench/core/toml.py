@@ -6,6 +6,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
+from vivbench.core.errors import InputError
 
 __all__ = ["load_toml"]
 
@@ -22,7 +23,7 @@ def load_toml(path, build: Callable[[dict], T], what: str = "configuration file"
 
     Raises
     ------
-    ValueError
+    InputError
         ``<path>: no such <what>`` or ``<path>: <problem>`` for bad TOML or a
         configuration that ``build`` refuses.
     """
@@ -32,6 +33,6 @@ def load_toml(path, build: Callable[[dict], T], what: str = "configuration file"
             data = tomllib.load(fh)
         return build(data)
     except FileNotFoundError:
-        raise ValueError(f"{path}: no such {what}") from None
+        raise InputError(f"{path}: no such {what}") from None
     except (tomllib.TOMLDecodeError, ValueError, TypeError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise InputError(f"{path}: {exc}") from None

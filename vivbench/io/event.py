@@ -40,6 +40,7 @@ import numpy as np
 import xarray as xr
 
 from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
+from vivbench.core.errors import InputError
 
 __all__ = ["EventFormatError", "FORMAT", "FORMAT_VERSION", "NOMINAL_RATES", "COEF_UNITS", "build_event", "validate_event", "write_event", "read_event", "event_arrays", "list_events"]
 
@@ -64,7 +65,7 @@ _UNIT_SPELLINGS = {
 _TRUTH_KEYS = ("time", "U", "A", "r", "regime", "config", "coef", "feature", "tau")
 
 
-class EventFormatError(ValueError):
+class EventFormatError(InputError):
     """An event file (or in-memory event) that breaks the format of DESIGN 4.
 
     Parameters
@@ -183,18 +184,18 @@ def build_event(
 def _as_time(values, what: str) -> np.ndarray:
     t = np.asarray(values, dtype=np.float64)
     if t.ndim != 1:
-        raise ValueError(f"{what} must be one-dimensional (n_samples,); got shape {t.shape}")
+        raise InputError(f"{what} must be one-dimensional (n_samples,); got shape {t.shape}")
     return t
 
 
 def _as_float(values, what: str, shape: tuple, shape_text: str) -> np.ndarray:
     a = np.asarray(values)
     if a.dtype.kind not in "fiu":
-        raise ValueError(f"{what} must hold real numbers; got dtype {a.dtype}")
+        raise InputError(f"{what} must hold real numbers; got dtype {a.dtype}")
     if a.dtype.kind != "f":
         a = a.astype(np.float64)
     if a.shape != shape:
-        raise ValueError(f"{what} must have shape {shape_text} = {shape}; got {a.shape}")
+        raise InputError(f"{what} must have shape {shape_text} = {shape}; got {a.shape}")
     return a
 
 
@@ -207,7 +208,7 @@ def _sensor_coords(time: np.ndarray, sections: list[str]) -> dict:
 
 def _root_attrs(event_id, start_time, source, span_azimuth_deg, extra) -> dict:
     if not isinstance(span_azimuth_deg, numbers.Real) or isinstance(span_azimuth_deg, bool):
-        raise ValueError(f"span_azimuth_deg must be a real number of degrees; got {span_azimuth_deg!r}")
+        raise InputError(f"span_azimuth_deg must be a real number of degrees; got {span_azimuth_deg!r}")
     out = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -218,11 +219,11 @@ def _root_attrs(event_id, start_time, source, span_azimuth_deg, extra) -> dict:
     }
     for key, value in (extra or {}).items():
         if not isinstance(key, str) or not key or key.startswith("_"):
-            raise ValueError(f"extra attribute name {key!r} must be a non-empty str not starting with '_'")
+            raise InputError(f"extra attribute name {key!r} must be a non-empty str not starting with '_'")
         if key in out:
-            raise ValueError(f"extra attribute {key!r} would replace the format's own attribute; allowed: any other name")
+            raise InputError(f"extra attribute {key!r} would replace the format's own attribute; allowed: any other name")
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (str, numbers.Integral, numbers.Real)):
-            raise ValueError(
+            raise InputError(
                 f"extra attribute {key!r} must be a str, int or float scalar (netCDF-storable); got {type(value).__name__}"
             )
         out[key] = value

@@ -64,6 +64,7 @@ import pandas as pd
 from vivbench.io.event import NOMINAL_RATES, EventFormatError, build_event, event_arrays, write_event
 from vivbench.io.netcdf import atomic_path
 from vivbench.io.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
+from vivbench.core.errors import InputError
 
 try:
     import tomllib
@@ -121,12 +122,12 @@ def load_mapping(path) -> dict:
     path = Path(path)
     name = str(path)
     if not path.is_file():
-        raise ValueError(f"{name}: no such mapping file")
+        raise InputError(f"{name}: no such mapping file")
     try:
         with open(path, "rb") as fh:
             raw = tomllib.load(fh)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{name}: not valid TOML ({exc})") from None
+        raise InputError(f"{name}: not valid TOML ({exc})") from None
 
     def bad(problem: str) -> ValueError:
         return ValueError(f"{name}: {' '.join(problem.split())}")
@@ -237,7 +238,7 @@ class _Table:
         self.path = path
         self.name = str(path)
         if not path.is_file():
-            raise ValueError(f"{self.name}: no such data file")
+            raise InputError(f"{self.name}: no such data file")
         self.kind = "mat" if path.suffix.lower() == ".mat" else "csv"
         try:
             if self.kind == "csv":
@@ -250,7 +251,7 @@ class _Table:
         except ValueError:
             raise
         except Exception as exc:  # noqa: BLE001 - any reader failure: not a file of this kind
-            raise ValueError(f"{self.name}: cannot be read as {self.kind.upper()} ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+            raise InputError(f"{self.name}: cannot be read as {self.kind.upper()} ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
 
     def _missing(self, column: str) -> ValueError:
         kind = "column" if self.kind == "csv" else "variable"
@@ -261,27 +262,27 @@ class _Table:
             raise self._missing(column)
         if self.kind == "csv":
             if index is not None:
-                raise ValueError(f"{self.name}: index applies to MATLAB matrices, not to CSV column {column!r}")
+                raise InputError(f"{self.name}: index applies to MATLAB matrices, not to CSV column {column!r}")
             col = self._frame[column]
             num = pd.to_numeric(col, errors="coerce")
             bad = num.isna().to_numpy() & col.notna().to_numpy()
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
-                raise ValueError(
+                raise InputError(
                     f"{self.name}: column {column!r} line {i + 2} holds {col.iloc[i]!r}, not a number "
                     f"(a missing value is an empty cell or NaN)"
                 )
             return num.to_numpy(dtype=np.float64)
         a = self._vars[column]
         if a.dtype.kind not in "fiub":
-            raise ValueError(f"{self.name}: variable {column!r} has type {a.dtype}, expected numbers")
+            raise InputError(f"{self.name}: variable {column!r} has type {a.dtype}, expected numbers")
         a = np.asarray(a, dtype=np.float64)
         if index is not None:
             if a.ndim != 2 or not 1 <= index <= a.shape[1]:
-                raise ValueError(f"{self.name}: variable {column!r} of shape {a.shape} has no column {index} (1-based)")
+                raise InputError(f"{self.name}: variable {column!r} of shape {a.shape} has no column {index} (1-based)")
             return a[:, index - 1]
         if a.ndim > 2 or (a.ndim == 2 and min(a.shape) != 1):
-            raise ValueError(f"{self.name}: variable {column!r} has shape {a.shape}; give index = k to pick a column")
+            raise InputError(f"{self.name}: variable {column!r} has shape {a.shape}; give index = k to pick a column")
         return a.ravel()
 
     def times(self, column: str, fmt: str) -> np.ndarray:
@@ -291,7 +292,7 @@ class _Table:
             missing = ~np.isfinite(t)
         else:
             if self.kind != "csv":
-                raise ValueError(f"{self.name}: ISO 8601 times are read from CSV only; store seconds in MAT files")
+                raise InputError(f"{self.name}: ISO 8601 times are read from CSV only; store seconds in MAT files")
             if column not in self.names:
                 raise self._missing(column)
             col = self._frame[column].astype("string").str.strip()
@@ -300,13 +301,13 @@ class _Table:
                     warnings.simplefilter("ignore")
                     ts = pd.to_datetime(col, utc=True, format="ISO8601")
             except (ValueError, TypeError, OverflowError) as exc:
-                raise ValueError(f"{self.name}: time column {column!r} is not ISO 8601 ({' '.join(str(exc).split())})") from None
+                raise InputError(f"{self.name}: time column {column!r} is not ISO 8601 ({' '.join(str(exc).split())})") from None
             missing = ts.isna().to_numpy()
             # Integer nanoseconds: float64 nanoseconds since 1970 would keep only about 0.25 us.
             t = ts.to_numpy(dtype="datetime64[ns]").astype(np.int64)
         bad = np.flatnonzero(missing)
         if bad.size:
-            raise ValueError(f"{self.name}: time {column!r} is missing at line {bad[0] + 2}; every row needs a time")
+            raise InputError(f"{self.name}: time {column!r} is missing at line {bad[0] + 2}; every row needs a time")
         return t
 
 
@@ -360,13 +361,13 @@ def import_event(mapping_path, out_path=None):
     fmts = {c.time_format for c in m["channels"]}
     start = m["start_time"]
     if start is None and "seconds" in fmts:
-        raise ValueError(f"{mapping_path}: start_time is required when times are in seconds (e.g. start_time = \"2026-01-01T00:00:00Z\")")
+        raise InputError(f"{mapping_path}: start_time is required when times are in seconds (e.g. start_time = \"2026-01-01T00:00:00Z\")")
     start_ns = None
     if start is not None:
         try:
             start_ns = int(pd.Timestamp(start).tz_convert("UTC").value)
         except (ValueError, TypeError):
-            raise ValueError(f"{mapping_path}: start_time {start!r} is not an ISO 8601 UTC instant such as 2026-01-01T00:00:00Z") from None
+            raise InputError(f"{mapping_path}: start_time {start!r} is not an ISO 8601 UTC instant such as 2026-01-01T00:00:00Z") from None
     # Absolute ISO times of every source, read once, give the default start.
     raw_times = {}
     for c in m["channels"]:
@@ -401,7 +402,7 @@ def import_event(mapping_path, out_path=None):
             tab = table(c.file)
             raw = tab.values(c.column, c.index)
             if raw.shape[0] != raw_times[k].shape[0]:
-                raise ValueError(f"{tab.name}: {c.column!r} has {raw.shape[0]} values but the time {c.time!r} has {raw_times[k].shape[0]}")
+                raise InputError(f"{tab.name}: {c.column!r} has {raw.shape[0]} values but the time {c.time!r} has {raw_times[k].shape[0]}")
             vals = np.full(t_union.size, np.nan)
             vals[rows[keys.index(k)]] = raw[sources[k][1]]
             group_data[(c.var, c.section)] = (vals, c)
@@ -444,7 +445,7 @@ def import_event(mapping_path, out_path=None):
             accel_time=arrays["accel_time"], acc=arrays["acc"], attrs=attrs, sections=sections,
         )
     except EventFormatError as exc:
-        raise ValueError(f"{label}: {exc.problem}") from None
+        raise InputError(f"{label}: {exc.problem}") from None
     if out_path is not None:
         write_event(tree, out_path)
     return tree
@@ -458,11 +459,11 @@ def _repair_time(t: np.ndarray, name: str):
     """
     n = t.size
     if n < 2:
-        raise ValueError(f"{name}: {n} row(s); at least 2 needed")
+        raise InputError(f"{name}: {n} row(s); at least 2 needed")
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size > max(1, _MAX_REORDER_FRACTION * n):
         i = back[0] + 1
-        raise ValueError(
+        raise InputError(
             f"{name}: time goes back {back.size} times, first at line {i + 2} (from {float(t[i - 1])!r} s to "
             f"{float(t[i])!r} s after start); sort the file or fix the clock (up to 1 % of rows out of order are sorted)"
         )
@@ -475,11 +476,11 @@ def _repair_time(t: np.ndarray, name: str):
 
 def _check_rate(t: np.ndarray, name: str, group: str) -> None:
     if t.size < 2:
-        raise ValueError(f"{name}: {t.size} distinct time(s); at least 2 needed")
+        raise InputError(f"{name}: {t.size} distinct time(s); at least 2 needed")
     rate = 1.0 / float(np.median(np.diff(t)))
     nominal = NOMINAL_RATES[group]
     if abs(rate / nominal - 1.0) > _RATE_TOLERANCE:
-        raise ValueError(
+        raise InputError(
             f"{name}: sampling rate {rate:.4g} Hz (median step) is more than {_RATE_TOLERANCE:.0%} from the nominal "
             f"{nominal:g} Hz of {group} records; check the time column and its format"
         )
@@ -495,7 +496,7 @@ def _merge_times(times: list[np.ndarray], names: list[str], group: str):
     step_union = float(np.median(np.diff(all_keys)))
     step_min = min(float(np.median(np.diff(k))) for k in keys)
     if step_union < 0.75 * step_min:
-        raise ValueError(
+        raise InputError(
             f"{', '.join(names)}: the {group} files' time stamps do not line up (merged they step every "
             f"{step_union / 1e6:.4g} s instead of {step_min / 1e6:.4g} s); the files of one group must share one sample clock"
         )
@@ -567,11 +568,11 @@ def export_csv(tree, out_dir, *, layout: str = "per_section", wind_units: str = 
         The mapping file ``mapping.toml`` in ``out_dir``.
     """
     if layout not in ("per_section", "single"):
-        raise ValueError(f"layout must be 'per_section' or 'single'; got {layout!r}")
+        raise InputError(f"layout must be 'per_section' or 'single'; got {layout!r}")
     if wind_units not in WIND_UNITS or acc_units not in ACC_UNITS:
-        raise ValueError(f"units must be one of {list(WIND_UNITS)} (wind) and {list(ACC_UNITS)} (acc); got {wind_units!r}, {acc_units!r}")
+        raise InputError(f"units must be one of {list(WIND_UNITS)} (wind) and {list(ACC_UNITS)} (acc); got {wind_units!r}, {acc_units!r}")
     if time_format not in TIME_FORMATS:
-        raise ValueError(f"time_format must be one of {TIME_FORMATS}; got {time_format!r}")
+        raise InputError(f"time_format must be one of {TIME_FORMATS}; got {time_format!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     arr = event_arrays(tree)
@@ -632,9 +633,9 @@ def export_mat(tree, out_dir, *, version: str = "5", acc_units: str = "m/s^2"):
         The mapping file ``mapping.toml`` in ``out_dir``.
     """
     if version not in ("5", "7.3"):
-        raise ValueError(f"version must be '5' or '7.3'; got {version!r}")
+        raise InputError(f"version must be '5' or '7.3'; got {version!r}")
     if acc_units not in ACC_UNITS:
-        raise ValueError(f"acc_units must be one of {list(ACC_UNITS)}; got {acc_units!r}")
+        raise InputError(f"acc_units must be one of {list(ACC_UNITS)}; got {acc_units!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     arr = event_arrays(tree)

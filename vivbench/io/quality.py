@@ -40,6 +40,7 @@ import warnings
 
 import numpy as np
 from scipy import ndimage
+from vivbench.core.errors import InputError
 
 __all__ = [
     "G",
@@ -138,7 +139,7 @@ def despike(x, rate_hz: float, *, threshold: float = 8.0, block_s: float = 10.0,
         Number of them filled by interpolation.
     """
     if not (threshold > 0 and block_s > 0 and rate_hz > 0 and floor >= 0):
-        raise ValueError(
+        raise InputError(
             f"despike needs threshold, block_s, rate_hz > 0 and floor >= 0; got {threshold}, {block_s}, {rate_hz}, {floor}"
         )
     x = np.array(x, dtype=np.float64)
@@ -251,7 +252,7 @@ def check_acc_magnitude(acc, units: str = "m/s^2", *, where: str = "acc", labels
                       and abs(abs(med[j]) * ACC_UNITS[u] / G - 1.0) <= _GRAVITY_TOLERANCE]
         if gravity_in:
             cand = gravity_in[0]
-            raise ValueError(
+            raise InputError(
                 f"{where} {label}: {level} (declared {units}) looks like {cand} including gravity; "
                 f'set units = "{cand}" {fix}'
             )
@@ -259,7 +260,7 @@ def check_acc_magnitude(acc, units: str = "m/s^2", *, where: str = "acc", labels
             cands = [u for u in _ACC_CANONICAL if spread[j] * ACC_UNITS[u] <= MAX_ACC_RMS and ACC_UNITS[u] < factor]
             hint = " or ".join(f'"{u}"' for u in cands) if cands else "a smaller unit"
             si = f" = {std_si:.3g} m/s^2" if factor != 1.0 else ""
-            raise ValueError(
+            raise InputError(
                 f"{where} {label}: {level} {units}{si} is implausible for a bridge deck (limit {MAX_ACC_RMS:g} m/s^2); "
                 f"it looks like {hint}: set units = {hint} {fix}"
             )
@@ -290,7 +291,7 @@ def check_wind_magnitude(u, v, units: str = "m/s", *, where: str = "wind", label
         if np.isfinite(med[j]) and med[j] * factor > MAX_WIND_SPEED:
             cands = [w for w in _WIND_CANONICAL if WIND_UNITS[w] < factor and med[j] * WIND_UNITS[w] <= MAX_WIND_SPEED]
             hint = " or ".join(f'"{w}"' for w in cands) if cands else "another unit"
-            raise ValueError(
+            raise InputError(
                 f"{where} {label}: median horizontal wind speed {med[j]:.3g} {units}"
                 + (f" = {med[j] * factor:.3g} m/s" if factor != 1.0 else "")
                 + f" is beyond any storm (limit {MAX_WIND_SPEED:g} m/s); it looks like {hint}: set units = {hint} {fix}"
@@ -320,7 +321,7 @@ def check_wind_varies(U_tilde, *, where: str = "wind", labels=None) -> None:
         std = np.atleast_1d(np.nanstd(x, axis=0))
     flat = [lab for lab, s in zip(labels, std) if np.isfinite(s) and s < MIN_WIND_STD]
     if flat:
-        raise ValueError(
+        raise InputError(
             f"{where}: the wind perpendicular to the span never varies at {', '.join(flat)} (standard deviation "
             f"below {MIN_WIND_STD:g} m/s): the library's U terms are collinear with the constant term, so no model "
             f"is identifiable; check the anemometer"

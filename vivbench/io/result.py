@@ -7,6 +7,7 @@ from pathlib import Path
 import xarray as xr
 
 from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.core.errors import InputError
 
 __all__ = ["list_results", "result_path", "read_result"]
 
@@ -20,10 +21,10 @@ def list_results(results_dir) -> list[Path]:
     """
     d = Path(results_dir)
     if not d.is_dir():
-        raise ValueError(f"{d}: not a directory of identification results")
+        raise InputError(f"{d}: not a directory of identification results")
     files = sorted(d.glob("*.identify.nc"))
     if not files:
-        raise ValueError(f"{d}: no identification results (<event_id>.identify.nc) in this directory")
+        raise InputError(f"{d}: no identification results (<event_id>.identify.nc) in this directory")
     return files
 
 
@@ -46,18 +47,18 @@ def read_result(path) -> xr.Dataset:
     """
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such result file")
+        raise InputError(f"{path}: no such result file")
     try:
         with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             ds = ds.load()
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
-        raise ValueError(f"{path}: cannot be read as a NetCDF-4 result ({type(exc).__name__})") from exc
+        raise InputError(f"{path}: cannot be read as a NetCDF-4 result ({type(exc).__name__})") from exc
     if ds.attrs.get("format") != "vivbench-identify":
-        raise ValueError(f"{path}: not an identification result (format attribute is {ds.attrs.get('format')!r})")
+        raise InputError(f"{path}: not an identification result (format attribute is {ds.attrs.get('format')!r})")
     missing = [v for v in _REQUIRED if v not in ds.variables]
     if missing:
-        raise ValueError(f"{path}: result lacks {', '.join(missing)}")
+        raise InputError(f"{path}: result lacks {', '.join(missing)}")
     if ds["coef"].ndim != 3 or ds["coef"].shape[2] != 23 * ds["coef"].shape[1]:
-        raise ValueError(f"{path}: coef must have shape (window, equation, 23 x sections); got {ds['coef'].shape}")
+        raise InputError(f"{path}: coef must have shape (window, equation, 23 x sections); got {ds['coef'].shape}")
     return ds
 

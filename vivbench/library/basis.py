@@ -68,6 +68,7 @@ from math import comb
 import numpy as np
 
 from vivbench.core.terms import section_exponents
+from vivbench.core.errors import InputError
 
 __all__ = [
     "SCALINGS",
@@ -186,7 +187,7 @@ def window_library(
     WindowLibrary
     """
     if scaling not in SCALINGS:
-        raise ValueError(f"scaling must be one of {SCALINGS}; got {scaling!r}")
+        raise InputError(f"scaling must be one of {SCALINGS}; got {scaling!r}")
     A = np.asarray(A, dtype=float)
     U = np.asarray(U, dtype=float)
     if A.shape != U.shape or A.ndim < 2:

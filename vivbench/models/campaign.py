@@ -43,6 +43,7 @@ from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, StlsqSettings, aicc, s
 from vivbench.library.basis import window_library
 from vivbench.core.regime import DEFAULT_TAU, regime_rule
 from vivbench.core.terms import evaluate_library, feature_names, section_exponents
+from vivbench.core.errors import InputError
 
 __all__ = ["PooledSINDy", "pooled_window_stats"]
 
@@ -248,19 +249,19 @@ class PooledSINDy:
 
     def _validate(self) -> None:
         if isinstance(self.n_bootstrap, bool) or not isinstance(self.n_bootstrap, (int, np.integer)) or self.n_bootstrap < 0:
-            raise ValueError(f"n_bootstrap must be an integer >= 0; got {self.n_bootstrap!r}")
+            raise InputError(f"n_bootstrap must be an integer >= 0; got {self.n_bootstrap!r}")
         if not (np.isfinite(self.block_s) and self.block_s > 0):
-            raise ValueError(f"block_s must be a positive number of seconds; got {self.block_s!r}")
+            raise InputError(f"block_s must be a positive number of seconds; got {self.block_s!r}")
         if not 0.0 < self.agreement <= 1.0:
-            raise ValueError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
+            raise InputError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
         if isinstance(self.min_blocks, bool) or not isinstance(self.min_blocks, (int, np.integer)) or self.min_blocks < 1:
-            raise ValueError(f"min_blocks must be an integer >= 1; got {self.min_blocks!r}")
+            raise InputError(f"min_blocks must be an integer >= 1; got {self.min_blocks!r}")
         if not 0.0 < self.confidence < 1.0:
-            raise ValueError(f"confidence must lie strictly between 0 and 1; got {self.confidence!r}")
+            raise InputError(f"confidence must lie strictly between 0 and 1; got {self.confidence!r}")
         if not 0.0 < self.tau < 1.0:
-            raise ValueError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
+            raise InputError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
         if isinstance(self.chunk_size, bool) or not isinstance(self.chunk_size, (int, np.integer)) or self.chunk_size < 1:
-            raise ValueError(f"chunk_size must be an integer >= 1; got {self.chunk_size!r}")
+            raise InputError(f"chunk_size must be an integer >= 1; got {self.chunk_size!r}")
 
     def fit(self, records: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> "PooledSINDy":
         """Fit the campaign model.
@@ -288,13 +289,13 @@ class PooledSINDy:
             As.append(A[ok]), Us.append(U[ok]), dAs.append(dA[ok]), blocks.append(b[ok] + offset)
             offset += int(b.max()) + 1 if ok.any() else 0
         if not As or sum(a.shape[0] for a in As) == 0:
-            raise ValueError("no valid samples to fit a pooled model")
+            raise InputError("no valid samples to fit a pooled model")
         A, U, dA = np.concatenate(As), np.concatenate(Us), np.concatenate(dAs)
         block = np.concatenate(blocks)
         n, S = A.shape
         p = 23 * S
         if n < p + 2:
-            raise ValueError(f"{n} valid samples are too few for the {p}-term library")
+            raise InputError(f"{n} valid samples are too few for the {p}-term library")
         lib = window_library(A[None], U[None], scaling=self.scaling)
         ys = np.sqrt(np.mean(dA**2, axis=0))
         ys = np.where(ys > 0, ys, 1.0)

@@ -69,6 +69,7 @@ import xarray as xr
 
 from vivbench.models.simulate import Simulation, simulate_identified, window_in_force
 from vivbench.core.terms import evaluate_library, feature_exponents, feature_names
+from vivbench.core.errors import InputError
 
 __all__ = ["RefitConfig", "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients",
            "order_rms"]
@@ -137,21 +138,21 @@ class RefitConfig:
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.shooting_interval) and self.shooting_interval > 0):
-            raise ValueError(f"shooting_interval must be a positive number of seconds; got {self.shooting_interval}")
+            raise InputError(f"shooting_interval must be a positive number of seconds; got {self.shooting_interval}")
         if not (isinstance(self.substeps, (int, np.integer)) and self.substeps >= 1):
-            raise ValueError(f"substeps must be an integer >= 1; got {self.substeps!r}")
+            raise InputError(f"substeps must be an integer >= 1; got {self.substeps!r}")
         if not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
-            raise ValueError(f"max_iter must be an integer >= 1; got {self.max_iter!r}")
+            raise InputError(f"max_iter must be an integer >= 1; got {self.max_iter!r}")
         if not (np.isfinite(self.tol) and self.tol > 0):
-            raise ValueError(f"tol must be > 0; got {self.tol}")
+            raise InputError(f"tol must be > 0; got {self.tol}")
         if not (np.isfinite(self.ridge) and self.ridge >= 0):
-            raise ValueError(f"ridge must be >= 0; got {self.ridge}")
+            raise InputError(f"ridge must be >= 0; got {self.ridge}")
         if not (0 <= self.rank_rtol < 1):
-            raise ValueError(f"rank_rtol must be in [0, 1); got {self.rank_rtol}")
+            raise InputError(f"rank_rtol must be in [0, 1); got {self.rank_rtol}")
         if self.hessian not in _HESSIANS:
-            raise ValueError(f"hessian must be one of {_HESSIANS}; got {self.hessian!r}")
+            raise InputError(f"hessian must be one of {_HESSIANS}; got {self.hessian!r}")
         if not (self.bound_factor > 1 and self.negative_tolerance >= 0):
-            raise ValueError(f"need bound_factor > 1 and negative_tolerance >= 0; got {self.bound_factor}, "
+            raise InputError(f"need bound_factor > 1 and negative_tolerance >= 0; got {self.bound_factor}, "
                              f"{self.negative_tolerance}")
 
 
@@ -291,20 +292,20 @@ def _check_inputs(t, A, U, support, coef0):
     if t.ndim != 1 or t.size < 3:
         raise ValueError(f"t must be a 1-D grid of at least 3 samples; got shape {t.shape}")
     if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
-        raise ValueError("t must be finite and strictly increasing")
+        raise InputError("t must be finite and strictly increasing")
     for name, x in (("A", A), ("U", U)):
         if x.shape != (t.size, _N_SEC):
             raise ValueError(f"{name} must have shape (n, 3) = ({t.size}, 3); got {x.shape}")
         if not np.all(np.isfinite(x)):
-            raise ValueError(f"{name} has non-finite values on the segment; refit a gap-free segment")
+            raise InputError(f"{name} has non-finite values on the segment; refit a gap-free segment")
     if support.shape != (_N_SEC, _N_FEAT) or support.dtype != bool:
         raise ValueError(f"support must be a boolean array of shape (3, 69); got {support.dtype} {support.shape}")
     if not support.any():
-        raise ValueError("the support is empty: no coefficient to refit")
+        raise InputError("the support is empty: no coefficient to refit")
     if coef0.shape != (_N_SEC, _N_FEAT) or not np.all(np.isfinite(coef0[support])):
         raise ValueError(f"coef0 must have shape (3, 69) and be finite on the support; got shape {coef0.shape}")
     if np.any(np.sqrt(np.mean(A**2, axis=0)) == 0):
-        raise ValueError("a section's measured A is identically zero; nothing to scale it by")
+        raise InputError("a section's measured A is identically zero; nothing to scale it by")
     return t, A, U, support, coef0
 
 
@@ -320,7 +321,7 @@ def _whitening(theta, support, a, rate, rank_rtol):
         d = np.sqrt(np.mean(theta[:, cols] ** 2, axis=0))
         if np.any(d == 0):
             bad = [feature_names(3)[c] for c in cols[d == 0]]
-            raise ValueError(f"supported terms {bad} of equation {m + 1} vanish on the whole segment")
+            raise InputError(f"supported terms {bad} of equation {m + 1} vanish on the whole segment")
         _w, s, vt = np.linalg.svd(theta[:, cols] / d, full_matrices=False)
         keep = s > rank_rtol * s[0]
         rank[m] = int(keep.sum())
@@ -632,21 +633,21 @@ class EventRefit:
 def _segment(result: xr.Dataset, t0: float, t1: float):
     t_all = np.asarray(result["time"].values, dtype=float)
     if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
-        raise ValueError(f"need finite t0 < t1; got t0={t0}, t1={t1}")
+        raise InputError(f"need finite t0 < t1; got t0={t0}, t1={t1}")
     if t0 < t_all[0] - 1e-9 or t1 > t_all[-1] + 1e-9:
-        raise ValueError(f"[{t0:g}, {t1:g}] s is outside the result's grid [{t_all[0]:g}, {t_all[-1]:g}] s")
+        raise InputError(f"[{t0:g}, {t1:g}] s is outside the result's grid [{t_all[0]:g}, {t_all[-1]:g}] s")
     i0 = int(np.argmin(np.abs(t_all - t0)))
     i1 = int(np.argmin(np.abs(t_all - t1))) + 1
     if i1 - i0 < 3:
-        raise ValueError(f"[{t0:g}, {t1:g}] s holds fewer than three samples of the result's grid")
+        raise InputError(f"[{t0:g}, {t1:g}] s holds fewer than three samples of the result's grid")
     A = np.asarray(result["A"].values, dtype=float)[i0:i1]
     U = np.asarray(result["U"].values, dtype=float)[i0:i1]
     if not (np.all(np.isfinite(A)) and np.all(np.isfinite(U))):
-        raise ValueError(f"[{t0:g}, {t1:g}] s contains missing A or U; choose a gap-free segment")
+        raise InputError(f"[{t0:g}, {t1:g}] s contains missing A or U; choose a gap-free segment")
     if "segment" in result:
         seg = np.asarray(result["segment"].values)[i0:i1]
         if np.any(seg != seg[0]) or seg[0] < 0:
-            raise ValueError(f"[{t0:g}, {t1:g}] s crosses a gap between preprocessing segments")
+            raise InputError(f"[{t0:g}, {t1:g}] s crosses a gap between preprocessing segments")
     return i0, i1, t_all[i0:i1], A, U
 
 
@@ -704,13 +705,13 @@ def refit_event(result: xr.Dataset, *, t0: float | None = None, t1: float | None
     if truth_coef is not None:
         truth_coef = np.asarray(truth_coef, dtype=float)
         if truth_coef.shape != (_N_SEC, _N_FEAT) or not np.all(np.isfinite(truth_coef)):
-            raise ValueError(f"truth_coef must be a finite (3, 69) array; got shape {truth_coef.shape}")
+            raise InputError(f"truth_coef must be a finite (3, 69) array; got shape {truth_coef.shape}")
     coef_w = np.asarray(result["coef"].values, dtype=float)
     in_force = np.unique(window_in_force(result, t[:-1]))
     sindy = coef_w[in_force].mean(axis=0)
     if isinstance(support, str):
         if support not in _SUPPORTS:
-            raise ValueError(f"support must be one of {_SUPPORTS} or a (3, 69) boolean mask; got {support!r}")
+            raise InputError(f"support must be one of {_SUPPORTS} or a (3, 69) boolean mask; got {support!r}")
         kind = support
         if support == "identified":
             mask = np.any(coef_w[in_force] != 0, axis=0)
@@ -720,7 +721,7 @@ def refit_event(result: xr.Dataset, *, t0: float | None = None, t1: float | None
             mask = sindy != 0
         else:
             if truth_coef is None:
-                raise ValueError("support='truth' needs truth_coef (the event file's /truth/coef)")
+                raise InputError("support='truth' needs truth_coef (the event file's /truth/coef)")
             mask = truth_coef != 0
     else:
         kind = "mask"

@@ -76,6 +76,7 @@ import xarray as xr
 from scipy.interpolate import make_interp_spline
 
 from vivbench.core.terms import feature_exponents
+from vivbench.core.errors import InputError
 
 __all__ = ["CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
            "window_in_force"]
@@ -159,10 +160,10 @@ def _window_table(result: xr.Dataset):
     start = np.asarray(result["window_start"].values, dtype=float)
     end = np.asarray(result["window_end"].values, dtype=float)
     if coef.ndim != 3 or coef.shape[1:] != (3, 69):
-        raise ValueError(f"result['coef'] must have shape (window, 3, 69); got {coef.shape}")
+        raise InputError(f"result['coef'] must have shape (window, 3, 69); got {coef.shape}")
     fitted = np.all(np.isfinite(coef), axis=(1, 2))
     if not fitted.any():
-        raise ValueError("the result has no window with a fitted model (all coefficients are NaN)")
+        raise InputError("the result has no window with a fitted model (all coefficients are NaN)")
     return coef, start, end, fitted
 
 
@@ -247,7 +248,7 @@ def forecast_coefficients(result: xr.Dataset, t0: float, d: float = 0.0) -> tupl
         Windows averaged.
     """
     if not (np.isfinite(d) and d >= 0):
-        raise ValueError(f"d must be a finite duration >= 0 s; got {d}")
+        raise InputError(f"d must be a finite duration >= 0 s; got {d}")
     coef, start, _end, fitted = _window_table(result)
     if d == 0:
         w = np.atleast_1d(window_in_force(result, t0))
@@ -255,7 +256,7 @@ def forecast_coefficients(result: xr.Dataset, t0: float, d: float = 0.0) -> tupl
         tol = 1e-6
         w = np.flatnonzero(fitted & (start >= t0 - tol) & (start <= t0 + d + tol))
         if w.size == 0:
-            raise ValueError(f"no fitted window starts in [{t0:g}, {t0 + d:g}] s")
+            raise InputError(f"no fitted window starts in [{t0:g}, {t0 + d:g}] s")
     return coef[w].mean(axis=0), w
 
 
@@ -295,12 +296,12 @@ def model_jacobian(coef, A, U) -> np.ndarray:
 def _grid(result: xr.Dataset, t0: float, t1: float):
     t_all = np.asarray(result["time"].values, dtype=float)
     if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
-        raise ValueError(f"need finite t0 < t1; got t0={t0}, t1={t1}")
+        raise InputError(f"need finite t0 < t1; got t0={t0}, t1={t1}")
     # The grid is the result's: t0 and t1 snap to the nearest samples.
     i0 = int(np.argmin(np.abs(t_all - t0)))
     i1 = int(np.argmin(np.abs(t_all - t1)))
     if i1 - i0 < 1:
-        raise ValueError(f"[{t0:g}, {t1:g}] s holds fewer than two samples of the result's grid")
+        raise InputError(f"[{t0:g}, {t1:g}] s holds fewer than two samples of the result's grid")
     return i0, i1 + 1
 
 
@@ -378,19 +379,19 @@ def _integrate(t, A0, U_stage, n_ok, P, widx, bound, neg, lims=None, clip="none"
 def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_tolerance, windows, coef,
          clip="none", lims=None):
     if clip not in CLIP_MODES:
-        raise ValueError(f"clip must be one of {CLIP_MODES}; got {clip!r}")
+        raise InputError(f"clip must be one of {CLIP_MODES}; got {clip!r}")
     if method not in _METHODS:
-        raise ValueError(f"method must be one of {_METHODS}; got {method!r}")
+        raise InputError(f"method must be one of {_METHODS}; got {method!r}")
     if u_interp not in _U_INTERP:
-        raise ValueError(f"u_interp must be one of {_U_INTERP}; got {u_interp!r}")
+        raise InputError(f"u_interp must be one of {_U_INTERP}; got {u_interp!r}")
     if not (bound_factor > 1 and negative_tolerance >= 0):
-        raise ValueError(f"need bound_factor > 1 and negative_tolerance >= 0; got {bound_factor}, {negative_tolerance}")
+        raise InputError(f"need bound_factor > 1 and negative_tolerance >= 0; got {bound_factor}, {negative_tolerance}")
     A_all = np.asarray(result["A"].values, dtype=float)
     if A_all.ndim != 2 or A_all.shape[1] != 3:
-        raise ValueError(f"result['A'] must have shape (time, 3); got {A_all.shape}")
+        raise InputError(f"result['A'] must have shape (time, 3); got {A_all.shape}")
     a_max = float(np.nanmax(np.abs(A_all))) if np.isfinite(A_all).any() else np.nan
     if not (np.isfinite(a_max) and a_max > 0):
-        raise ValueError("the measured A has no positive finite value to set the blow-up bounds")
+        raise InputError("the measured A has no positive finite value to set the blow-up bounds")
     t = np.asarray(result["time"].values, dtype=float)[i0:i1]
     A_meas = A_all[i0:i1]
     U = np.asarray(result["U"].values, dtype=float)[i0:i1]
@@ -466,7 +467,7 @@ def forecast(result: xr.Dataset, t0: float, horizon: float, *, d: float = 0.0, m
         ``coef`` holds the coefficients used, ``windows`` the windows averaged.
     """
     if not (np.isfinite(horizon) and horizon > 0):
-        raise ValueError(f"horizon must be a finite duration > 0 s; got {horizon}")
+        raise InputError(f"horizon must be a finite duration > 0 s; got {horizon}")
     coef, windows = forecast_coefficients(result, t0, d)
     i0, i1 = _grid(result, float(t0), float(t0) + float(horizon))
     widx = np.zeros(i1 - i0 - 1, dtype=int)

@@ -13,6 +13,7 @@ from vivbench.regression.optimizers import OPTIMIZERS, run_optimizer
 from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, StlsqSettings
 from vivbench.library.basis import SCALINGS, basis_orders, library_cond, order_contributions_basis, window_library
 from vivbench.core.terms import feature_names
+from vivbench.core.errors import InputError
 
 __all__ = ["WindowProblem", "WindowedSINDy"]
 
@@ -214,7 +215,7 @@ class WindowedSINDy:
         """Set constructor parameters (scikit-learn convention)."""
         for name, value in params.items():
             if name not in self._PARAMS:
-                raise ValueError(f"unknown parameter {name!r}; allowed: {', '.join(self._PARAMS)}")
+                raise InputError(f"unknown parameter {name!r}; allowed: {', '.join(self._PARAMS)}")
             setattr(self, name, value)
         return self
 
@@ -259,12 +260,12 @@ class WindowedSINDy:
         """
         settings = self.settings()
         if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"optimizer must be one of {OPTIMIZERS}; got {self.optimizer!r}")
+            raise InputError(f"optimizer must be one of {OPTIMIZERS}; got {self.optimizer!r}")
         if self.scaling not in SCALINGS:
-            raise ValueError(f"scaling must be one of {SCALINGS}; got {self.scaling!r}")
+            raise InputError(f"scaling must be one of {SCALINGS}; got {self.scaling!r}")
         chunk = self.chunk_size
         if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
-            raise ValueError(f"chunk_size must be an integer >= 1; got {self.chunk_size!r}")
+            raise InputError(f"chunk_size must be an integer >= 1; got {self.chunk_size!r}")
         t = np.asarray(t, dtype=float)
         A = np.asarray(A, dtype=float)
         U = np.asarray(U, dtype=float)
@@ -276,7 +277,7 @@ class WindowedSINDy:
             )
         start, end, first, stop = window_bounds(t, self.window, self.step)
         if start.size == 0:
-            raise ValueError(f"the record ({t[-1] - t[0]:.6g} s) is shorter than one window ({self.window} s)")
+            raise InputError(f"the record ({t[-1] - t[0]:.6g} s) is shorter than one window ({self.window} s)")
         n, S = A.shape
         p = 23 * S
         W = start.size

@@ -44,6 +44,7 @@ from scipy import signal
 
 from vivbench.preprocess.band import band_gain
 from vivbench.preprocess.noise_floor import band_noise_std
+from vivbench.core.errors import InputError
 
 __all__ = [
     "PreprocessConfig",
@@ -71,7 +72,7 @@ _SETTLING_TIME_CONSTANTS = 3.0
 
 def _positive(name: str, value: float) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number; got {value!r}")
+        raise InputError(f"{name} must be a positive finite number; got {value!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -152,29 +153,29 @@ class PreprocessConfig:
         _positive("wind_cutoff_hz", self.wind_cutoff_hz)
         order = self.wind_filter_order
         if isinstance(order, bool) or not (isinstance(order, (int, np.integer)) and 1 <= order <= 10):
-            raise ValueError(f"wind_filter_order must be an integer from 1 to 10; got {self.wind_filter_order!r}")
+            raise InputError(f"wind_filter_order must be an integer from 1 to 10; got {self.wind_filter_order!r}")
         if not (isinstance(self.band_half_width, (int, float)) and 0.0 < self.band_half_width < 1.0):
-            raise ValueError(
+            raise InputError(
                 f"band_half_width is a fraction of the modal frequency and must lie strictly between 0 and 1; "
                 f"got {self.band_half_width!r}"
             )
         if self.band_half_width_hz is not None:
             _positive("band_half_width_hz", self.band_half_width_hz)
         if not (isinstance(self.band_taper, (int, float)) and 0.0 < self.band_taper <= 1.0):
-            raise ValueError(f"band_taper must lie in (0, 1]; got {self.band_taper!r}")
+            raise InputError(f"band_taper must lie in (0, 1]; got {self.band_taper!r}")
         if self.modal_frequency_hz is not None:
             _positive("modal_frequency_hz", self.modal_frequency_hz)
         band = tuple(self.search_band_hz)
         if len(band) != 2 or not all(math.isfinite(b) for b in band) or not 0.0 < band[0] < band[1]:
-            raise ValueError(f"search_band_hz must be (low, high) with 0 < low < high, Hz; got {self.search_band_hz!r}")
+            raise InputError(f"search_band_hz must be (low, high) with 0 < low < high, Hz; got {self.search_band_hz!r}")
         object.__setattr__(self, "search_band_hz", (float(band[0]), float(band[1])))
         _positive("welch_segment_s", self.welch_segment_s)
         _positive("grid_step_s", self.grid_step_s)
         _positive("min_segment_s", self.min_segment_s)
         if not (isinstance(self.max_gap_s, (int, float)) and math.isfinite(self.max_gap_s) and self.max_gap_s >= 0):
-            raise ValueError(f"max_gap_s must be a finite number >= 0 (0 bridges no gap); got {self.max_gap_s!r}")
+            raise InputError(f"max_gap_s must be a finite number >= 0 (0 bridges no gap); got {self.max_gap_s!r}")
         if not (isinstance(self.edge_s, (int, float)) and math.isfinite(self.edge_s) and self.edge_s >= 0):
-            raise ValueError(f"edge_s must be a finite number of seconds >= 0; got {self.edge_s!r}")
+            raise InputError(f"edge_s must be a finite number of seconds >= 0; got {self.edge_s!r}")
 
     @property
     def wind_settling_s(self) -> float:
@@ -309,7 +310,7 @@ def perpendicular_speed(V, theta, span_azimuth_deg: float) -> np.ndarray:
 def _lowpass(x: np.ndarray, fs: float, config: PreprocessConfig) -> np.ndarray:
     """Zero-phase Butterworth low-pass along axis 0 of a gap-free run."""
     if config.wind_cutoff_hz >= 0.5 * fs:
-        raise ValueError(
+        raise InputError(
             f"wind_cutoff_hz = {config.wind_cutoff_hz} Hz must lie below the Nyquist frequency {0.5 * fs} Hz"
         )
     sos = signal.butter(config.wind_filter_order, config.wind_cutoff_hz, btype="low", fs=fs, output="sos")
@@ -358,7 +359,7 @@ def _wind_perpendicular(t: np.ndarray, u, v, span_azimuth_deg: float) -> np.ndar
             f"got {u.shape} and {v.shape}"
         )
     if not math.isfinite(float(span_azimuth_deg)):
-        raise ValueError(f"span_azimuth_deg must be finite; got {span_azimuth_deg!r}")
+        raise InputError(f"span_azimuth_deg must be finite; got {span_azimuth_deg!r}")
     V, theta = wind_speed_direction(u, v)
     return _as_2d(perpendicular_speed(V, theta, span_azimuth_deg))
 
@@ -397,14 +398,14 @@ def welch_psd(t_or_fs, acc, segment_s: float, lo: float, hi: float) -> tuple[np.
         fs = 1.0 / float(np.median(np.diff(t)))
         _, starts, ends = _valid_runs(t, acc, 0.0)
     if hi >= 0.5 * fs:
-        raise ValueError(f"band upper edge {hi} Hz must lie below the Nyquist frequency {0.5 * fs} Hz")
+        raise InputError(f"band upper edge {hi} Hz must lie below the Nyquist frequency {0.5 * fs} Hz")
     lengths = ends - starts
     longest = int(lengths.max()) if lengths.size else 0
     nperseg = min(int(round(segment_s * fs)), longest)
     # Three cycles of the lowest frequency searched per section, so that the
     # bins resolve the band.
     if nperseg < 3.0 * fs / lo:
-        raise ValueError(
+        raise InputError(
             f"the longest valid run ({longest / fs:.1f} s) is too short to resolve the band down to {lo} Hz "
             f"(needs at least {3.0 / lo:.1f} s)"
         )
@@ -427,7 +428,7 @@ def spectral_peak(f: np.ndarray, psd: np.ndarray, lo: float, hi: float) -> float
     inside = np.flatnonzero((f >= lo) & (f <= hi))
     k = inside[np.argmax(psd[inside])]
     if k == inside[0] or k == inside[-1] or psd[k] <= 0:
-        raise ValueError(
+        raise InputError(
             f"the acceleration spectrum has no peak strictly inside {lo}-{hi} Hz (its maximum there is at "
             f"{f[k]:.4g} Hz, on the edge); widen the search band or give the modal frequency"
         )
@@ -472,7 +473,7 @@ def modal_frequency(t_or_fs, acc, band: tuple[float, float] = (0.05, 2.0), *, se
     """
     lo, hi = float(band[0]), float(band[1])
     if not 0.0 < lo < hi:
-        raise ValueError(f"band must be (low, high) with 0 < low < high, Hz; got {band!r}")
+        raise InputError(f"band must be (low, high) with 0 < low < high, Hz; got {band!r}")
     f, psd = welch_psd(t_or_fs, acc, segment_s, lo, hi)
     return spectral_peak(f, psd.sum(axis=1), lo, hi)
 
@@ -510,9 +511,9 @@ def displacement(acc, fs: float, f_mode: float, half_width: float, *, taper: flo
     _positive("f_mode", f_mode)
     _positive("half_width", half_width)
     if not 0.0 < taper <= 1.0:
-        raise ValueError(f"taper must lie in (0, 1]; got {taper!r}")
+        raise InputError(f"taper must lie in (0, 1]; got {taper!r}")
     if f_mode - half_width <= 0.0 or f_mode + half_width >= 0.5 * fs:
-        raise ValueError(
+        raise InputError(
             f"the band {f_mode - half_width:.4g}-{f_mode + half_width:.4g} Hz must lie strictly between 0 Hz and "
             f"the Nyquist frequency {0.5 * fs} Hz"
         )
@@ -694,11 +695,11 @@ def to_grid(t_src, x_src, t_grid) -> np.ndarray:
 def _check_time(t, name: str) -> np.ndarray:
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.shape[0] < 2:
-        raise ValueError(f"{name} must be a one-dimensional array of at least 2 times; got shape {t.shape}")
+        raise InputError(f"{name} must be a one-dimensional array of at least 2 times; got shape {t.shape}")
     if not np.all(np.isfinite(t)):
-        raise ValueError(f"{name} must be finite (times are authoritative; gaps are NaN in the data, not in time)")
+        raise InputError(f"{name} must be finite (times are authoritative; gaps are NaN in the data, not in time)")
     if np.any(np.diff(t) <= 0):
-        raise ValueError(f"{name} must be strictly increasing")
+        raise InputError(f"{name} must be strictly increasing")
     return t
 
 

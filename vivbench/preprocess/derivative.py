@@ -132,6 +132,7 @@ import numpy as np
 from scipy.interpolate import make_smoothing_spline
 from scipy.linalg import solveh_banded
 from scipy.signal import savgol_filter
+from vivbench.core.errors import InputError
 
 __all__ = [
     "DERIVATIVE_METHODS",
@@ -248,9 +249,9 @@ def estimate_noise_std(x: np.ndarray, lag: int = 1) -> np.ndarray:
     """
     x = np.asarray(x, dtype=float)
     if isinstance(lag, bool) or not isinstance(lag, (int, np.integer)) or lag < 1:
-        raise ValueError(f"lag must be a positive integer (samples); got {lag!r}")
+        raise InputError(f"lag must be a positive integer (samples); got {lag!r}")
     if x.shape[0] < 4 * lag:
-        raise ValueError(f"need at least 4 * lag = {4 * lag} samples to estimate the noise level; got {x.shape[0]}")
+        raise InputError(f"need at least 4 * lag = {4 * lag} samples to estimate the noise level; got {x.shape[0]}")
     if lag == 1:
         d = np.diff(x, 3, axis=0)
     else:
@@ -325,12 +326,12 @@ def tv_derivative(
     if alpha is not None:
         _check_positive("alpha", alpha)
     if not (math.isfinite(huber) and huber >= 0):
-        raise ValueError(f"huber must be a finite number >= 0; got {huber!r}")
+        raise InputError(f"huber must be a finite number >= 0; got {huber!r}")
     _check_nonnegative("noise_scale", noise_scale)
     if not 0.0 < tol < 1.0:
-        raise ValueError(f"tol must lie strictly between 0 and 1; got {tol!r}")
+        raise InputError(f"tol must lie strictly between 0 and 1; got {tol!r}")
     if int(max_iter) != max_iter or max_iter < 1:
-        raise ValueError(f"max_iter must be a positive integer; got {max_iter!r}")
+        raise InputError(f"max_iter must be a positive integer; got {max_iter!r}")
     x = _as_samples(x, min_samples=5)
     one_d = x.ndim == 1
     f = x.reshape(x.shape[0], -1)
@@ -438,29 +439,29 @@ class Derivative:
 
     def __post_init__(self) -> None:
         if self.method not in DERIVATIVE_METHODS:
-            raise ValueError(f"method must be one of {DERIVATIVE_METHODS}; got {self.method!r}")
+            raise InputError(f"method must be one of {DERIVATIVE_METHODS}; got {self.method!r}")
         for method, names in _METHOD_OPTIONS.items():
             if method == self.method:
                 continue
             for name in names:
                 if getattr(self, name) is not None:
-                    raise ValueError(f"option {name!r} applies only to method={method!r}; got method={self.method!r}")
+                    raise InputError(f"option {name!r} applies only to method={method!r}; got method={self.method!r}")
         for name in ("alpha", "time_scale", "window"):
             value = getattr(self, name)
             if value is not None:
                 _check_positive(name, value)
         if self.huber is not None and not (math.isfinite(self.huber) and self.huber >= 0):
-            raise ValueError(f"huber must be a finite number >= 0; got {self.huber!r}")
+            raise InputError(f"huber must be a finite number >= 0; got {self.huber!r}")
         if self.noise_scale is not None:
             _check_nonnegative("noise_scale", self.noise_scale)
         if self.tol is not None and not 0.0 < self.tol < 1.0:
-            raise ValueError(f"tol must lie strictly between 0 and 1; got {self.tol!r}")
+            raise InputError(f"tol must lie strictly between 0 and 1; got {self.tol!r}")
         if self.smoothing is not None and not (math.isfinite(self.smoothing) and self.smoothing >= 0):
-            raise ValueError(f"smoothing must be a finite number >= 0 (s^3); got {self.smoothing!r}")
+            raise InputError(f"smoothing must be a finite number >= 0 (s^3); got {self.smoothing!r}")
         for name in ("max_iter", "polyorder", "fd_order"):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1):
-                raise ValueError(f"{name} must be a positive integer; got {value!r}")
+                raise InputError(f"{name} must be a positive integer; got {value!r}")
 
     @classmethod
     def for_envelope(cls, method: str = "tv", **options) -> "Derivative":
@@ -694,11 +695,11 @@ def _savgol(x: np.ndarray, dt: float, window: float, polyorder: int) -> tuple[np
     length = int(round(window / dt))
     length += 1 - length % 2  # odd
     if length <= polyorder:
-        raise ValueError(
+        raise InputError(
             f"savgol window of {window} s is {length} samples at dt = {dt} s; it must exceed polyorder = {polyorder}"
         )
     if length > n:
-        raise ValueError(f"savgol window of {window} s is {length} samples, longer than the record ({n} samples)")
+        raise InputError(f"savgol window of {window} s is {length} samples, longer than the record ({n} samples)")
     smooth = savgol_filter(x, length, polyorder, deriv=0, axis=0, mode="interp")
     dxdt = savgol_filter(x, length, polyorder, deriv=1, delta=dt, axis=0, mode="interp")
     return smooth, dxdt
@@ -706,7 +707,7 @@ def _savgol(x: np.ndarray, dt: float, window: float, polyorder: int) -> tuple[np
 
 def _spline(x: np.ndarray, times: np.ndarray, lam: float | None) -> tuple[np.ndarray, np.ndarray]:
     if x.shape[0] < 5:
-        raise ValueError(f"the smoothing spline needs at least 5 samples; got {x.shape[0]}")
+        raise InputError(f"the smoothing spline needs at least 5 samples; got {x.shape[0]}")
     spline = make_smoothing_spline(times, x, lam=lam, axis=0)
     return spline(times), spline.derivative()(times)
 
@@ -715,7 +716,7 @@ def _finite_difference(x: np.ndarray, times: np.ndarray, order: int) -> np.ndarr
     from pysindy import FiniteDifference  # deferred: pysindy is slow to import
 
     if x.shape[0] <= order:
-        raise ValueError(f"finite differences of order {order} need more than {order} samples; got {x.shape[0]}")
+        raise InputError(f"finite differences of order {order} need more than {order} samples; got {x.shape[0]}")
     return np.asarray(FiniteDifference(order=order, axis=0)(x, times), dtype=float)
 
 
@@ -729,16 +730,16 @@ def _default(value, default):
 
 def _check_nonnegative(name: str, value) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a number >= 0; got {value!r}")
+        raise InputError(f"{name} must be a number >= 0; got {value!r}")
     if not (math.isfinite(value) and value >= 0):
-        raise ValueError(f"{name} must be a finite number >= 0; got {value!r}")
+        raise InputError(f"{name} must be a finite number >= 0; got {value!r}")
 
 
 def _check_positive(name: str, value) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a positive number; got {value!r}")
+        raise InputError(f"{name} must be a positive number; got {value!r}")
     if not (math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a finite number > 0; got {value!r}")
+        raise InputError(f"{name} must be a finite number > 0; got {value!r}")
 
 
 def _as_samples(x: np.ndarray, min_samples: int) -> np.ndarray:
@@ -746,7 +747,7 @@ def _as_samples(x: np.ndarray, min_samples: int) -> np.ndarray:
     if x.ndim not in (1, 2):
         raise ValueError(f"x must have shape (n,) or (n, k); got shape {x.shape}")
     if x.shape[0] < min_samples:
-        raise ValueError(f"x needs at least {min_samples} samples along axis 0; got {x.shape[0]}")
+        raise InputError(f"x needs at least {min_samples} samples along axis 0; got {x.shape[0]}")
     bad = ~np.isfinite(x)
     if bad.any():
         first = int(np.argwhere(bad)[0][0])
@@ -767,13 +768,13 @@ def _as_times(t: np.ndarray | float, n: int, *, uniform: bool) -> tuple[np.ndarr
     if times.shape != (n,):
         raise ValueError(f"t must be a step or have shape ({n},) to match x; got shape {times.shape}")
     if not np.all(np.isfinite(times)):
-        raise ValueError("t contains NaN or infinite times")
+        raise InputError("t contains NaN or infinite times")
     steps = np.diff(times)
     if np.any(steps <= 0):
-        raise ValueError("t must be strictly increasing")
+        raise InputError("t must be strictly increasing")
     dt = (times[-1] - times[0]) / (n - 1)
     if uniform and np.max(np.abs(steps - dt)) > _UNIFORM_RTOL * dt:
-        raise ValueError(
+        raise InputError(
             f"this method needs a uniform time grid; steps range from {steps.min()} s to {steps.max()} s "
             "(resample first or use method='spline' or 'finite_difference')"
         )

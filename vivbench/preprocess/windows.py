@@ -4,6 +4,7 @@ from __future__ import annotations
 
 
 import numpy as np
+from vivbench.core.errors import InputError
 
 
 __all__ = ["window_bounds"]
@@ -32,7 +33,7 @@ def window_bounds(t: np.ndarray, window: float, step: float):
     if t.ndim != 1 or t.size < 2 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
         raise ValueError("t must be a 1-D, finite, strictly increasing array of at least two times")
     if not (np.isfinite(window) and window > 0 and np.isfinite(step) and step > 0):
-        raise ValueError(f"window and step must be finite and > 0 s; got window={window}, step={step}")
+        raise InputError(f"window and step must be finite and > 0 s; got window={window}, step={step}")
     dt = float(np.median(np.diff(t)))
     # Boundaries are compared with a tolerance far below the sample interval,
     # so that rounding of shifted time axes cannot move a sample across.

@@ -69,6 +69,7 @@ import scipy.linalg
 from vivbench.regression.stlsq import StlsqPath, StlsqSettings, as_batches, aicc, stlsq_path
 from vivbench.regression.stlsq import empty_path as _engine_empty_path
 from vivbench.library.basis import condition_number
+from vivbench.core.errors import InputError
 
 __all__ = ["OPTIMIZERS", "OptimizerOptions", "run_optimizer", "sr3_path", "ensemble_path"]
 
@@ -107,17 +108,17 @@ class OptimizerOptions:
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.relax_coeff_nu) and self.relax_coeff_nu > 0):
-            raise ValueError(f"relax_coeff_nu must be finite and > 0; got {self.relax_coeff_nu}")
+            raise InputError(f"relax_coeff_nu must be finite and > 0; got {self.relax_coeff_nu}")
         for name, low in (("sr3_max_iter", 1), ("n_models", 2)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-                raise ValueError(f"{name} must be an integer >= {low}; got {value!r}")
+                raise InputError(f"{name} must be an integer >= {low}; got {value!r}")
         if not (np.isfinite(self.sr3_tol) and self.sr3_tol > 0):
-            raise ValueError(f"sr3_tol must be finite and > 0; got {self.sr3_tol}")
+            raise InputError(f"sr3_tol must be finite and > 0; got {self.sr3_tol}")
         if not 0 < self.inclusion_cut <= 1:
-            raise ValueError(f"inclusion_cut must lie in (0, 1]; got {self.inclusion_cut}")
+            raise InputError(f"inclusion_cut must lie in (0, 1]; got {self.inclusion_cut}")
         if self.coef_rule not in COEF_RULES:
-            raise ValueError(f"coef_rule must be one of {COEF_RULES}; got {self.coef_rule!r}")
+            raise InputError(f"coef_rule must be one of {COEF_RULES}; got {self.coef_rule!r}")
 
 
 def _prepare(theta, y):
@@ -344,7 +345,7 @@ def run_optimizer(name: str, theta, y, settings: StlsqSettings, options: Optimiz
         ``"inclusion"`` (W, q, p) and ``"threshold"`` (W, q) for ``"ensemble"``; empty otherwise.
     """
     if name not in OPTIMIZERS:
-        raise ValueError(f"optimizer must be one of {OPTIMIZERS}; got {name!r}")
+        raise InputError(f"optimizer must be one of {OPTIMIZERS}; got {name!r}")
     if name == "stlsq":
         return stlsq_path(theta, y, settings), {}
     if name == "sr3":

@@ -84,6 +84,7 @@ from scipy.linalg.lapack import dgelsd as _dgelsd
 from scipy.linalg.lapack import dgelsd_lwork as _dgelsd_lwork
 from scipy.linalg.lapack import dtrcon as _dtrcon
 from scipy.linalg.lapack import dtrtrs as _dtrtrs
+from vivbench.core.errors import InputError
 
 
 __all__ = ["DEFAULT_THRESHOLDS", "SOLVERS", "StlsqSettings", "StlsqPath", "aicc", "stlsq_path"]
@@ -149,20 +150,20 @@ class StlsqSettings:
     def __post_init__(self) -> None:
         th = np.asarray(self.thresholds, dtype=float).ravel()
         if th.size == 0 or not np.all(np.isfinite(th)) or np.any(th < 0):
-            raise ValueError(f"thresholds must be a non-empty sequence of finite values >= 0; got {self.thresholds!r}")
+            raise InputError(f"thresholds must be a non-empty sequence of finite values >= 0; got {self.thresholds!r}")
         if np.any(np.diff(th) <= 0):
-            raise ValueError("thresholds must be strictly increasing")
+            raise InputError("thresholds must be strictly increasing")
         object.__setattr__(self, "thresholds", tuple(float(x) for x in th))
         if not (np.isfinite(self.alpha) and self.alpha >= 0):
-            raise ValueError(f"alpha must be finite and >= 0; got {self.alpha}")
+            raise InputError(f"alpha must be finite and >= 0; got {self.alpha}")
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
-            raise ValueError(f"max_iter must be an integer >= 1; got {self.max_iter!r}")
+            raise InputError(f"max_iter must be an integer >= 1; got {self.max_iter!r}")
         if not (np.isfinite(self.residual_floor) and 0 <= self.residual_floor < 1):
-            raise ValueError(f"residual_floor must lie in [0, 1); got {self.residual_floor}")
+            raise InputError(f"residual_floor must lie in [0, 1); got {self.residual_floor}")
         if self.refit_rcond is not None and not (np.isfinite(self.refit_rcond) and 0 <= self.refit_rcond < 1):
-            raise ValueError(f"refit_rcond must be None or lie in [0, 1); got {self.refit_rcond}")
+            raise InputError(f"refit_rcond must be None or lie in [0, 1); got {self.refit_rcond}")
         if self.solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {SOLVERS}; got {self.solver!r}")
+            raise InputError(f"solver must be one of {SOLVERS}; got {self.solver!r}")
 
 
 def aicc(rss, n_terms, n_samples, *, floor=0.0) -> np.ndarray:

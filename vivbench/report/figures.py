@@ -29,6 +29,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import matplotlib
+from vivbench.core.errors import InputError
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -87,7 +88,7 @@ def _step(n: int) -> int:
 def _section_index(sections, section: str) -> int:
     names = [str(s) for s in np.asarray(sections).tolist()]
     if section not in names:
-        raise ValueError(f"section {section!r} is not in the data; sections are {names}")
+        raise InputError(f"section {section!r} is not in the data; sections are {names}")
     return names.index(section)
 
 
@@ -102,7 +103,7 @@ def _longest_finite_run(x: np.ndarray) -> slice:
     """Longest run of rows of ``x`` (n, k) that are finite in every column."""
     ok = np.all(np.isfinite(x), axis=1)
     if not ok.any():
-        raise ValueError("the record holds no finite sample")
+        raise InputError("the record holds no finite sample")
     edges = np.diff(np.concatenate(([0], ok.astype(np.int8), [0])))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     k = int(np.argmax(ends - starts))

@@ -29,6 +29,7 @@ from vivbench.io.campaign_model import POOLED_NAME
 from vivbench.analysis.pool import with_campaign_model
 from vivbench.io.netcdf import NETCDF_ENGINE, atomic_path
 from vivbench.io.event import list_events, read_event
+from vivbench.core.errors import InputError
 
 __all__ = ["EXTRA_STEPS", "write_report"]
 
@@ -98,15 +99,15 @@ def _pairs(campaign_dir: Path, results_dir: Path) -> tuple[list[tuple[str, Path,
     """(event id, event file, result file) for events with a result; ids without one."""
     events = list_events(campaign_dir)
     if not events:
-        raise ValueError(f"{campaign_dir}: no event files (<event_id>.nc) in this directory")
+        raise InputError(f"{campaign_dir}: no event files (<event_id>.nc) in this directory")
     if not Path(results_dir).is_dir():
-        raise ValueError(f"{results_dir}: no such results directory")
+        raise InputError(f"{results_dir}: no such results directory")
     pairs, missing = [], []
     for ev in events:
         res = Path(results_dir) / f"{ev.stem}.identify.nc"
         (pairs.append((ev.stem, ev, res)) if res.exists() else missing.append(ev.stem))
     if not pairs:
-        raise ValueError(f"{results_dir}: no identification result (<event_id>.identify.nc) for the events of {campaign_dir}")
+        raise InputError(f"{results_dir}: no identification result (<event_id>.identify.nc) for the events of {campaign_dir}")
     return pairs, missing
 
 
@@ -126,7 +127,7 @@ def _event_info(eid: str, event_path: Path, result_path: Path) -> dict:
             truth = tree["truth"].to_dataset().load() if "truth" in tree.children else None
             t_acc = tree["accel"]["time"].values
     except Exception as exc:  # noqa: BLE001 - any reader failure: not an event file
-        raise ValueError(f"{event_path}: cannot be read as an event file ({type(exc).__name__}: {exc})") from exc
+        raise InputError(f"{event_path}: cannot be read as an event file ({type(exc).__name__}: {exc})") from exc
     seed = None
     if truth is not None and "config_json" in truth.attrs:
         seed = json.loads(truth.attrs["config_json"]).get("seed", {}).get("campaign_seed")
@@ -212,9 +213,9 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
     from vivbench.report.event_figure import event_figure
 
     if not isinstance(name, str) or not _NAME.fullmatch(name):
-        raise ValueError(f"report name {name!r} must be letters, digits, '_', '.' or '-' (it names a directory)")
+        raise InputError(f"report name {name!r} must be letters, digits, '_', '.' or '-' (it names a directory)")
     if not (isinstance(max_rows, int) and max_rows >= 1):
-        raise ValueError(f"max_rows must be a positive integer; got {max_rows!r}")
+        raise InputError(f"max_rows must be a positive integer; got {max_rows!r}")
     campaign_dir, results_dir = Path(campaign_dir), Path(results_dir)
     extra_dirs = dict(extra_dirs or {})
     unknown = sorted(set(extra_dirs) - set(EXTRA_STEPS))
@@ -227,7 +228,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         events = [str(e) for e in events]
         bad = [e for e in events if e not in by_id]
         if not events or bad:
-            raise ValueError(f"events {bad or events} have no event file with a result in {campaign_dir} and "
+            raise InputError(f"events {bad or events} have no event file with a result in {campaign_dir} and "
                              f"{results_dir}; available: {sorted(by_id)}")
     out_dir = Path(out_root) / name
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -529,7 +530,7 @@ def _cluster_figure(inputs: dict, kind: str, path: Path) -> None:
 
     X = coefficient_features(inputs["coef"]) if kind == "coef" else order_features(inputs["order"])
     if X.shape[0] < 3 or X.shape[1] < 2:
-        raise ValueError(f"too few windows or varying features to cluster ({X.shape[0]} windows, {X.shape[1]} features)")
+        raise InputError(f"too few windows or varying features to cluster ({X.shape[0]} windows, {X.shape[1]} features)")
     dp = DensityPeaks().fit(X)
     emb = PCA(n_components=2, svd_solver="full").fit_transform(X)
     decision_graph_figure(dp.rho_, dp.delta_, dp.labels_, dp.centers_, path, embedding=emb, truth=inputs["truth"],
@@ -626,9 +627,9 @@ def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, 
         try:
             summary = json.loads(summary_path.read_text())
         except json.JSONDecodeError as exc:
-            raise ValueError(f"{summary_path}: not valid JSON ({exc})") from None
+            raise InputError(f"{summary_path}: not valid JSON ({exc})") from None
         if not isinstance(summary, dict):
-            raise ValueError(f"{summary_path}: must hold a JSON object of headline numbers; got {type(summary).__name__}")
+            raise InputError(f"{summary_path}: must hold a JSON object of headline numbers; got {type(summary).__name__}")
     cmd, how = _step_command(step, directory, campaign_dir, results_dir, summary)
     out += [f"Output directory: `{directory}`.", ""]
     csvs = sorted(directory.glob("*.csv"))

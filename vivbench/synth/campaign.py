@@ -21,6 +21,7 @@ from vivbench.io.event import write_event
 from vivbench.synth.config import GeneratorConfig
 from vivbench.synth.event import EventSpec, generate_event
 from vivbench.synth.wind import WindScript
+from vivbench.core.errors import InputError, error_line
 
 __all__ = ["SCENARIOS", "CampaignConfig", "draw_script", "campaign_specs", "generate_campaign", "CampaignResult"]
 
@@ -55,16 +56,16 @@ class CampaignConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
         if not 1 <= self.n_events <= 100000:
-            raise ValueError(f"n_events must be in 1..100000; got {self.n_events}")
+            raise InputError(f"n_events must be in 1..100000; got {self.n_events}")
         if self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer; got {self.seed}")
+            raise InputError(f"seed must be a non-negative integer; got {self.seed}")
         lo, hi = self.duration
         if not 120.0 <= lo <= hi <= 6 * 3600.0:
-            raise ValueError(f"duration must be (min, max) seconds with 120 <= min <= max <= 21600; got {self.duration}")
+            raise InputError(f"duration must be (min, max) seconds with 120 <= min <= max <= 21600; got {self.duration}")
         try:
             datetime.fromisoformat(self.start.replace("Z", "+00:00"))
         except ValueError:
-            raise ValueError(f"start must be an ISO 8601 date, e.g. 2026-01-01T00:00:00Z; got {self.start!r}") from None
+            raise InputError(f"start must be an ISO 8601 date, e.g. 2026-01-01T00:00:00Z; got {self.start!r}") from None
 
 
 def draw_script(kind: str, duration: float, rng: np.random.Generator) -> WindScript:
@@ -111,7 +112,7 @@ def draw_script(kind: str, duration: float, rng: np.random.Generator) -> WindScr
         else:
             speeds = tuple(max(s, 10.8) for s in speeds)
     else:
-        raise ValueError(f"unknown scenario {kind!r}; allowed: {', '.join(SCENARIOS)}")
+        raise InputError(f"unknown scenario {kind!r}; allowed: {', '.join(SCENARIOS)}")
     return WindScript(times=times, speeds=speeds, side=side, yaw_deg=yaw)
 
 
@@ -201,7 +202,7 @@ def generate_campaign(campaign: CampaignConfig, out_dir: str | Path, *, workers:
         try:
             rows[spec.event_id] = fn()
         except Exception as exc:  # one bad event must not sink the campaign
-            failures[spec.event_id] = " ".join(f"{type(exc).__name__}: {exc}".split())
+            failures[spec.event_id] = error_line(exc)  # "internal error (...)" unless bad input or OSError
         if progress is not None:
             progress(spec.event_id)
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from vivbench.core.toml import load_toml
 from vivbench.synth.turbulence import TurbulenceConfig
+from vivbench.core.errors import InputError
 
 __all__ = [
     "Polynomial",
@@ -38,7 +39,7 @@ __all__ = [
 
 def _check(cond: bool, msg: str) -> None:
     if not cond:
-        raise ValueError(msg)
+        raise InputError(msg)
 
 
 @dataclass(frozen=True, kw_only=True)

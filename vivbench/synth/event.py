@@ -17,6 +17,7 @@ from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, samp
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, felt_mean_wind, mean_wind
 from vivbench.core.terms import feature_names
+from vivbench.core.errors import InputError
 
 __all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event"]
 
@@ -161,7 +162,7 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     Q = simulate_amplitude(config.initial_amplitude, coefs, ht)[::n_sub]
     if not np.all(Q > 0):
         bad = float(np.min(U_mid[np.argmax(coefs[:, 0] < 0)])) if np.any(coefs[:, 0] < 0) else float("nan")
-        raise ValueError(
+        raise InputError(
             f"event {spec.event_id}: the averaged amplitude reached zero or below at t = "
             f"{truth_time[np.argmax(Q <= 0)]:.0f} s; the locked lift C_L(U) must stay >= 0 over the wind "
             f"range (it is negative near U = {bad:.2f} m/s)")

@@ -42,6 +42,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from vivbench.core.errors import InputError
 
 __all__ = [
     "KAIMAL_LENGTH_FACTORS",
@@ -58,14 +59,14 @@ KAIMAL_LENGTH_FACTORS = (8.1, 2.7, 0.66)
 
 def _check(cond: bool, msg: str) -> None:
     if not cond:
-        raise ValueError(msg)
+        raise InputError(msg)
 
 
 def _finite_number(value, name: str) -> float:
     try:
         out = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a real number; got {value!r}") from None
+        raise InputError(f"{name} must be a real number; got {value!r}") from None
     _check(math.isfinite(out), f"{name} must be finite; got {value!r}")
     return out
 
@@ -118,7 +119,7 @@ class TurbulenceConfig:
         try:
             decay = tuple(_finite_number(c, "coherence_decay entry") for c in self.coherence_decay)
         except TypeError:
-            raise ValueError(f"coherence_decay must be three numbers (C_u, C_v, C_w); got {self.coherence_decay!r}") from None
+            raise InputError(f"coherence_decay must be three numbers (C_u, C_v, C_w); got {self.coherence_decay!r}") from None
         _check(len(decay) == 3, f"coherence_decay must be three numbers (C_u, C_v, C_w); got {self.coherence_decay!r}")
         _check(all(c >= 0.0 for c in decay), f"coherence_decay entries must be >= 0; got {decay}")
         for name in ("double_indexing", "rescale_to_sigma"):

@@ -17,6 +17,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from vivbench.synth.config import StructureConfig, WindConfig
 from vivbench.synth.turbulence import simulate_turbulence
+from vivbench.core.errors import InputError
 
 __all__ = ["WindScript", "MeanWind", "mean_wind", "slow_process", "anemometer_records", "felt_mean_wind"]
 
@@ -43,15 +44,15 @@ class WindScript:
         object.__setattr__(self, "speeds", tuple(float(x) for x in self.speeds))
         t = np.array(self.times)
         if len(t) < 2 or len(t) != len(self.speeds):
-            raise ValueError(f"WindScript needs >= 2 knots with as many speeds as times; got {len(t)} times, {len(self.speeds)} speeds")
+            raise InputError(f"WindScript needs >= 2 knots with as many speeds as times; got {len(t)} times, {len(self.speeds)} speeds")
         if t[0] != 0.0 or np.any(np.diff(t) <= 0):
-            raise ValueError(f"WindScript knot times must start at 0 and increase strictly; got {self.times}")
+            raise InputError(f"WindScript knot times must start at 0 and increase strictly; got {self.times}")
         if min(self.speeds) <= 0:
-            raise ValueError(f"WindScript speeds must be positive (m/s); got {self.speeds}")
+            raise InputError(f"WindScript speeds must be positive (m/s); got {self.speeds}")
         if self.side not in (1, -1):
-            raise ValueError(f"WindScript side must be +1 or -1; got {self.side}")
+            raise InputError(f"WindScript side must be +1 or -1; got {self.side}")
         if abs(self.yaw_deg) >= 60:
-            raise ValueError(f"WindScript yaw_deg must be within +-60 degrees; got {self.yaw_deg}")
+            raise InputError(f"WindScript yaw_deg must be within +-60 degrees; got {self.yaw_deg}")
 
     @property
     def duration(self) -> float:

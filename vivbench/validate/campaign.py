@@ -33,6 +33,7 @@ from vivbench.validate.metrics import (
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.recovery import window_rhs_errors
 from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.core.errors import InputError
 
 __all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables"]
 
@@ -50,10 +51,10 @@ def _open_result(path: Path) -> xr.Dataset:
         with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
             ds = ds.load()
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
-        raise ValueError(f"{path}: cannot be read as an identification result ({type(exc).__name__}: {exc})") from exc
+        raise InputError(f"{path}: cannot be read as an identification result ({type(exc).__name__}: {exc})") from exc
     missing = [v for v in ("coef", "regime", "identifiable", "window_start", "window_end", "A", "U") if v not in ds]
     if ds.attrs.get("format") != "vivbench-identify" or missing:
-        raise ValueError(f"{path}: not an identification result (format {ds.attrs.get('format')!r}, missing {missing})")
+        raise InputError(f"{path}: not an identification result (format {ds.attrs.get('format')!r}, missing {missing})")
     return ds
 
 
@@ -67,13 +68,13 @@ def read_cluster_labels(path) -> list[dict]:
     """
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such cluster labels file")
+        raise InputError(f"{path}: no such cluster labels file")
     need = ("event_id", "window", "equation", "feature_set", "label", "halo")
     with path.open(newline="") as fh:
         reader = csv.DictReader(fh)
         missing = [c for c in need if c not in (reader.fieldnames or [])]
         if missing:
-            raise ValueError(f"{path}: missing columns {missing}; expected {list(need)}")
+            raise InputError(f"{path}: missing columns {missing}; expected {list(need)}")
         rows = []
         for k, row in enumerate(reader, start=2):
             try:
@@ -81,7 +82,7 @@ def read_cluster_labels(path) -> list[dict]:
                              "feature_set": row["feature_set"], "label": int(row["label"]),
                              "halo": row["halo"].strip().lower() in ("1", "true", "yes")})
             except ValueError as exc:
-                raise ValueError(f"{path}: line {k}: {exc}") from None
+                raise InputError(f"{path}: line {k}: {exc}") from None
     return rows
 
 
@@ -101,10 +102,10 @@ def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     """
     directory = Path(directory)
     if not directory.is_dir():
-        raise ValueError(f"{directory}: no such forecast directory")
+        raise InputError(f"{directory}: no such forecast directory")
     files = sorted(directory.glob("forecast_*.csv"))
     if not files:
-        raise ValueError(f"{directory}: no forecast tables (forecast_<event_id>.csv) in this directory")
+        raise InputError(f"{directory}: no forecast tables (forecast_<event_id>.csv) in this directory")
     nmse, stopped, d, ids = [], [], [], []
     for f in files:
         with f.open(newline="") as fh:
@@ -114,7 +115,7 @@ def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray,
             dcol = "d_s" if cli else "d"
             missing = [c for c in (dcol, "nmse", "stopped") if c not in names]
             if missing:
-                raise ValueError(f"{f}: missing columns {missing}; a forecast table needs d (or kind, clip, d_s), "
+                raise InputError(f"{f}: missing columns {missing}; a forecast table needs d (or kind, clip, d_s), "
                                  "nmse and stopped")
             for k, row in enumerate(reader, start=2):
                 if cli and (row["kind"] != "forecast" or row["clip"] != "none"):
@@ -123,7 +124,7 @@ def read_forecast_tables(directory) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                     d.append(float(row[dcol]))
                     nmse.append(float(row["nmse"]) if row["nmse"].strip() else math.nan)
                 except ValueError as exc:
-                    raise ValueError(f"{f}: line {k}: {exc}") from None
+                    raise InputError(f"{f}: line {k}: {exc}") from None
                 stopped.append(row["stopped"].strip().lower() in ("1", "true", "yes"))
                 ids.append(f.stem[len("forecast_"):])
     return np.array(nmse, dtype=float), np.array(stopped, dtype=bool), np.array(d, dtype=float), ids
@@ -182,13 +183,13 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     from vivbench.io.event import read_event
 
     if not 0.0 <= active_share < 1.0:
-        raise ValueError(f"active_share must lie in [0, 1); got {active_share}")
+        raise InputError(f"active_share must lie in [0, 1); got {active_share}")
     if not 0.0 < tau < 1.0:
-        raise ValueError(f"tau must lie strictly between 0 and 1; got {tau}")
+        raise InputError(f"tau must lie strictly between 0 and 1; got {tau}")
     campaign_dir, results_dir = Path(campaign_dir), Path(results_dir)
     for d, what in ((campaign_dir, "campaign"), (results_dir, "results")):
         if not d.is_dir():
-            raise ValueError(f"{d}: no such {what} directory")
+            raise InputError(f"{d}: no such {what} directory")
     from vivbench.io.result import list_results
 
     result_files = list_results(results_dir)
@@ -197,7 +198,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         event_id = rp.name[: -len(".identify.nc")]
         ep = campaign_dir / f"{event_id}.nc"
         if not ep.is_file():
-            raise ValueError(f"{rp}: no event file {ep} for this result")
+            raise InputError(f"{rp}: no event file {ep} for this result")
         pairs.append((event_id, ep, rp))
 
     regimes, truths, flags, errs, actives, per_event = [], [], [], [], [], []
@@ -237,7 +238,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         if pooled is not None:
             sel = pooled["event_id"].values.astype(str) == event_id
             if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
-                raise ValueError(f"{pooled_path}: its windows of {event_id} differ from {rp}; re-run vivbench pool")
+                raise InputError(f"{pooled_path}: its windows of {event_id} differ from {rp}; re-run vivbench pool")
             p_reg.append(pooled["regime"].values[sel].astype(int))
             p_ok.append(pooled["identifiable"].values[sel].astype(bool))
             if "coef" in truth.data_vars:
@@ -267,7 +268,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         pooled_out = {"regime": pr, "rhs": rhs_error_summary(np.concatenate(p_errs), np.concatenate(p_act)) if p_errs else None,
                       "file": str(pooled_path), "n_terms": [int(k) for k in pooled["n_terms"].values]}
     if not regimes:
-        raise ValueError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
+        raise InputError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
                          "validation needs synthetic events")
 
     reg, tru, ok = (np.concatenate(x) for x in (regimes, truths, flags))

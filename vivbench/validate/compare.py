@@ -64,6 +64,7 @@ from vivbench.preprocess.derivative import DERIVATIVE_METHODS
 from vivbench.library.basis import SCALINGS
 from vivbench.core.toml import load_toml
 from vivbench.regression.optimizers import OPTIMIZERS
+from vivbench.core.errors import InputError, error_line
 
 __all__ = ["FACTORS", "DESIGNS", "BASE_LEVELS", "CompareConfig", "CompareResult", "compare_config_from_dict",
            "load_compare_config", "compare_cells", "plan", "run_comparison"]
@@ -102,17 +103,17 @@ def _check_level(factor: str, value, where: str):
     if factor in _CATEGORICAL:
         allowed = _CATEGORICAL[factor]
         if value not in allowed:
-            raise ValueError(f"{where}: {factor} level {value!r} is not one of {', '.join(allowed)}")
+            raise InputError(f"{where}: {factor} level {value!r} is not one of {', '.join(allowed)}")
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"{where}: {factor} levels must be finite numbers; got {value!r}")
+        raise InputError(f"{where}: {factor} levels must be finite numbers; got {value!r}")
     value = float(value)
     if factor == "window" and not value > 0:
-        raise ValueError(f"{where}: window must be > 0 s; got {value}")
+        raise InputError(f"{where}: window must be > 0 s; got {value}")
     if factor in ("accel_noise", "anemometer_noise") and value < 0:
-        raise ValueError(f"{where}: {factor} must be >= 0; got {value}")
+        raise InputError(f"{where}: {factor} must be >= 0; got {value}")
     if factor == "turbulence_intensity" and not 0 <= value < 0.5:
-        raise ValueError(f"{where}: turbulence_intensity must be in [0, 0.5); got {value}")
+        raise InputError(f"{where}: turbulence_intensity must be in [0, 0.5); got {value}")
     return value
 
 
@@ -145,15 +146,15 @@ class CompareConfig:
 
     def __post_init__(self) -> None:
         if self.design not in DESIGNS:
-            raise ValueError(f"design must be one of {', '.join(DESIGNS)}; got {self.design!r}")
+            raise InputError(f"design must be one of {', '.join(DESIGNS)}; got {self.design!r}")
         unknown = sorted(set(self.base) - set(FACTORS))
         if unknown:
-            raise ValueError(f"[base]: unknown factors {unknown}; allowed: {', '.join(FACTORS)}")
+            raise InputError(f"[base]: unknown factors {unknown}; allowed: {', '.join(FACTORS)}")
         unknown = sorted(set(self.grid) - set(FACTORS))
         if unknown:
-            raise ValueError(f"[grid]: unknown factors {unknown}; allowed: {', '.join(FACTORS)}")
+            raise InputError(f"[grid]: unknown factors {unknown}; allowed: {', '.join(FACTORS)}")
         if not self.grid:
-            raise ValueError(f"[grid] must name at least one factor with its levels; factors: {', '.join(FACTORS)}")
+            raise InputError(f"[grid] must name at least one factor with its levels; factors: {', '.join(FACTORS)}")
         base = dict(BASE_LEVELS)
         for k, v in self.base.items():
             base[k] = _check_level(k, v, "[base]")
@@ -163,31 +164,31 @@ class CompareConfig:
                 continue
             levels = self.grid[k]
             if isinstance(levels, (str, bytes)) or not isinstance(levels, (list, tuple)) or not levels:
-                raise ValueError(f"[grid]: {k} must be a non-empty list of levels; got {levels!r}")
+                raise InputError(f"[grid]: {k} must be a non-empty list of levels; got {levels!r}")
             levels = tuple(_check_level(k, v, "[grid]") for v in levels)
             if len(set(levels)) != len(levels):
-                raise ValueError(f"[grid]: {k} has repeated levels {list(levels)}")
+                raise InputError(f"[grid]: {k} has repeated levels {list(levels)}")
             grid[k] = levels
         object.__setattr__(self, "base", base)
         object.__setattr__(self, "grid", grid)
         object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
         if isinstance(self.n_events, bool) or not isinstance(self.n_events, int) or not 1 <= self.n_events <= 1000:
-            raise ValueError(f"[campaign] events must be an integer in 1..1000; got {self.n_events!r}")
+            raise InputError(f"[campaign] events must be an integer in 1..1000; got {self.n_events!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"[campaign] seed must be an integer >= 0; got {self.seed!r}")
+            raise InputError(f"[campaign] seed must be an integer >= 0; got {self.seed!r}")
         lo, hi = self.duration
         if not 120.0 <= lo <= hi <= 21600.0:
-            raise ValueError(f"[campaign] duration must be [min, max] seconds with 120 <= min <= max <= 21600; got {list(self.duration)}")
+            raise InputError(f"[campaign] duration must be [min, max] seconds with 120 <= min <= max <= 21600; got {list(self.duration)}")
         windows = [base["window"]] + list(grid.get("window", ()))
         if max(windows) > lo / 4:
-            raise ValueError(f"window levels must be at most a quarter of the shortest event ({lo:g} s); got {max(windows):g} s")
+            raise InputError(f"window levels must be at most a quarter of the shortest event ({lo:g} s); got {max(windows):g} s")
         if not 0 < self.step_ratio <= 1:
-            raise ValueError(f"step_ratio must be in (0, 1]; got {self.step_ratio}")
+            raise InputError(f"step_ratio must be in (0, 1]; got {self.step_ratio}")
         if not 0 <= self.active_share < 1:
-            raise ValueError(f"active_share must be in [0, 1); got {self.active_share}")
+            raise InputError(f"active_share must be in [0, 1); got {self.active_share}")
         n = len(compare_cells(self))
         if n > self.max_cells:
-            raise ValueError(f"the {self.design} design has {n} cells, more than max_cells = {self.max_cells}; "
+            raise InputError(f"the {self.design} design has {n} cells, more than max_cells = {self.max_cells}; "
                              "use design = \"one_at_a_time\", fewer levels, or raise max_cells")
 
     def to_dict(self) -> dict:
@@ -204,14 +205,14 @@ def compare_config_from_dict(data: dict) -> CompareConfig:
     """The configuration from its TOML layout (see :func:`load_compare_config`)."""
     unknown = sorted(set(data) - _TOP_KEYS)
     if unknown:
-        raise ValueError(f"unknown keys {unknown}; allowed: {sorted(_TOP_KEYS)}")
+        raise InputError(f"unknown keys {unknown}; allowed: {sorted(_TOP_KEYS)}")
     kwargs = {k: data[k] for k in ("design", "base", "grid", "step_ratio", "active_share", "max_cells") if k in data}
     camp = data.get("campaign", {})
     if not isinstance(camp, dict):
-        raise ValueError("[campaign] must be a table with events, duration, seed")
+        raise InputError("[campaign] must be a table with events, duration, seed")
     unknown = sorted(set(camp) - set(_CAMPAIGN_KEYS))
     if unknown:
-        raise ValueError(f"[campaign]: unknown keys {unknown}; allowed: {sorted(_CAMPAIGN_KEYS)}")
+        raise InputError(f"[campaign]: unknown keys {unknown}; allowed: {sorted(_CAMPAIGN_KEYS)}")
     for key, name in _CAMPAIGN_KEYS.items():
         if key in camp:
             kwargs[name] = camp[key]
@@ -219,11 +220,11 @@ def compare_config_from_dict(data: dict) -> CompareConfig:
         d = kwargs["duration"]
         d = [d, d] if isinstance(d, (int, float)) and not isinstance(d, bool) else d
         if not isinstance(d, (list, tuple)) or len(d) != 2:
-            raise ValueError(f"[campaign] duration must be seconds or [min, max] seconds; got {kwargs['duration']!r}")
+            raise InputError(f"[campaign] duration must be seconds or [min, max] seconds; got {kwargs['duration']!r}")
         kwargs["duration"] = tuple(d)
     for key in ("base", "grid"):
         if key in kwargs and not isinstance(kwargs[key], dict):
-            raise ValueError(f"[{key}] must be a table of factors")
+            raise InputError(f"[{key}] must be a table of factors")
     return CompareConfig(**kwargs)
 
 
@@ -313,6 +314,16 @@ def _identify_config(cell: dict, config: CompareConfig):
     return IdentifyConfig(derivative=Derivative.for_envelope(cell["derivative"]), window=cell["window"],
                           step=cell["window"] * config.step_ratio, scaling=cell["scaling"],
                           optimizer=cell["optimizer"], seed=config.seed)
+
+
+def _run_cell_reported(task: dict) -> dict:
+    """:func:`_run_cell`; a failure that is not bad input (or an OSError) is reported as an internal error."""
+    try:
+        return _run_cell(task)
+    except (InputError, OSError):
+        raise
+    except Exception as exc:
+        raise RuntimeError(error_line(exc)) from exc
 
 
 def _run_cell(task: dict) -> dict:
@@ -412,7 +423,7 @@ def run_comparison(config: CompareConfig, out_dir: str | Path, *, workers: int =
             errors[c["cell_id"]] = "campaign failed"
             if progress is not None:
                 progress("cell")
-    for o in run_tasks(_run_cell, tasks, workers=workers, scheduler=scheduler):
+    for o in run_tasks(_run_cell_reported, tasks, workers=workers, scheduler=scheduler):
         cid = runnable[o.index]["cell_id"]
         if o.ok:
             metrics[cid] = o.value

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from vivbench.core.terms import section_exponents
+from vivbench.core.errors import InputError
 
 __all__ = [
     "REGIMES",
@@ -248,7 +249,7 @@ def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: 
     coef_identified = np.asarray(coef_identified, dtype=float)
     coef_true = np.asarray(coef_true, dtype=float)
     if coef_identified.shape[-2:] != coef_true.shape:
-        raise ValueError(f"identified models have shape {coef_identified.shape[-2:]} per window; the truth has {coef_true.shape}")
+        raise InputError(f"identified models have shape {coef_identified.shape[-2:]} per window; the truth has {coef_true.shape}")
     valid = np.isfinite(coef_identified).all(axis=-1)
     if mask is not None:
         valid &= np.asarray(mask, dtype=bool)

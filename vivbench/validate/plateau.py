@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from vivbench.core.errors import InputError
 
 __all__ = ["Plateau", "clearest_plateau", "measured_plateau", "truth_plateau"]
 
@@ -105,11 +106,11 @@ def measured_plateau(result: xr.Dataset, *, level: float = 0.8, section: int = 1
     window : float, s
     """
     if not 0 < level < 1:
-        raise ValueError(f"level must lie in (0, 1); got {level}")
+        raise InputError(f"level must lie in (0, 1); got {level}")
     t = np.asarray(result["time"].values, dtype=float)
     A = np.asarray(result["A"].values, dtype=float)[:, section]
     if not np.isfinite(A).any():
-        raise ValueError("the measured amplitude has no finite value")
+        raise InputError("the measured amplitude has no finite value")
     mask = np.isfinite(A) & (A >= level * np.nanmax(A))
     return _best_run(t, mask, A, str(result.attrs.get("event_id", "")), "measured", window)
 
@@ -139,7 +140,7 @@ def clearest_plateau(campaign_dir, *, section: int = 1, window: float = 50.0) ->
         if p is not None and (best is None or (p.duration, p.amplitude) > (best.duration, best.amplitude)):
             best = p
     if not seen_truth:
-        raise ValueError(f"{campaign_dir}: no event file with a truth group")
+        raise InputError(f"{campaign_dir}: no event file with a truth group")
     if best is None:
-        raise ValueError(f"{campaign_dir}: no event has a run of true regime 4")
+        raise InputError(f"{campaign_dir}: no event has a run of true regime 4")
     return best

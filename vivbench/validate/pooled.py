@@ -8,6 +8,7 @@ import xarray as xr
 from vivbench.validate.recovery import regime_scores, window_rhs_errors
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.core.errors import InputError
 
 __all__ = ["pooled_recovery"]
 
@@ -47,14 +48,14 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     regimes, truths_w, flags, errs, errs_active = [], [], [], [], []
     for event_id in dict.fromkeys(event_of):
         if event_id not in truths:
-            raise ValueError(f"{pooled_file}: event {event_id} has no event file among the {len(truths)} given")
+            raise InputError(f"{pooled_file}: event {event_id} has no event file among the {len(truths)} given")
         if event_id not in results:
-            raise ValueError(f"{pooled_file}: event {event_id} has no identification result among those given")
+            raise InputError(f"{pooled_file}: event {event_id} has no identification result among those given")
         sel = event_of == event_id
         truth = truths[event_id]
         res = results[event_id]
         if not np.array_equal(pooled["window_start"].values[sel], res["window_start"].values):
-            raise ValueError(f"{pooled_file}: its windows of {event_id} differ from the result's; re-run vivbench pool")
+            raise InputError(f"{pooled_file}: its windows of {event_id} differ from the result's; re-run vivbench pool")
         regimes.append(pooled["regime"].values[sel])
         flags.append(pooled["identifiable"].values[sel].astype(bool))
         truths_w.append(truth_window_regimes(truth, res["window_start"].values, res["window_end"].values, tau=tau))

@@ -50,6 +50,7 @@ from vivbench.validate.journal import write_table
 from vivbench.validate.recovery import campaign_recovery
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 from vivbench.validate.sweep_parameters import PARAMETERS, SWEEP_PARAMETERS
+from vivbench.core.errors import InputError, error_line
 
 __all__ = [
     "SWEEP_PARAMETERS",
@@ -92,10 +93,10 @@ COLUMNS = (*_ID_COLUMNS, *PARAMETERS, *METRIC_COLUMNS, "error")
 
 def _number(value: Any, what: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{what} must be a number; got {value!r}")
+        raise InputError(f"{what} must be a number; got {value!r}")
     out = float(value)
     if not math.isfinite(out):
-        raise ValueError(f"{what} must be finite; got {value!r}")
+        raise InputError(f"{what} must be finite; got {value!r}")
     return out
 
 
@@ -104,7 +105,7 @@ def _apply(gen: GeneratorConfig, values: dict[str, float], where: str) -> Genera
         try:
             gen = PARAMETERS[name].apply(gen, value)
         except (ValueError, TypeError) as exc:
-            raise ValueError(f"{where} {name} = {value!r}: {exc}") from None
+            raise InputError(f"{where} {name} = {value!r}: {exc}") from None
     return gen
 
 
@@ -140,15 +141,15 @@ class SweepConfig:
 
     def __post_init__(self) -> None:
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer; got {self.seed!r}")
+            raise InputError(f"seed must be a non-negative integer; got {self.seed!r}")
         if self.seeds is not None:
             seeds = tuple(self.seeds)
             if not seeds or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0 for s in seeds):
-                raise ValueError(f"seeds must be a non-empty list of non-negative integers; got {self.seeds!r}")
+                raise InputError(f"seeds must be a non-empty list of non-negative integers; got {self.seeds!r}")
             if len(set(seeds)) != len(seeds):
-                raise ValueError(f"seeds must be distinct (a repeated seed repeats a campaign); got {list(seeds)}")
+                raise InputError(f"seeds must be distinct (a repeated seed repeats a campaign); got {list(seeds)}")
             if self.n_campaigns is not None and self.n_campaigns != len(seeds):
-                raise ValueError(f"n_campaigns ({self.n_campaigns}) disagrees with the {len(seeds)} seeds given; "
+                raise InputError(f"n_campaigns ({self.n_campaigns}) disagrees with the {len(seeds)} seeds given; "
                                  "give one of them")
             object.__setattr__(self, "seeds", tuple(int(s) for s in seeds))
             object.__setattr__(self, "n_campaigns", len(seeds))
@@ -156,23 +157,23 @@ class SweepConfig:
             object.__setattr__(self, "n_campaigns", 1)
         n = self.n_campaigns
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 100000:
-            raise ValueError(f"n_campaigns (campaigns per grid point) must be an integer in 1..100000; got {n!r}")
+            raise InputError(f"n_campaigns (campaigns per grid point) must be an integer in 1..100000; got {n!r}")
         if isinstance(self.n_events, bool) or not isinstance(self.n_events, (int, np.integer)):
-            raise ValueError(f"n_events (events per campaign) must be an integer; got {self.n_events!r}")
+            raise InputError(f"n_events (events per campaign) must be an integer; got {self.n_events!r}")
         # The campaign's own checks give the messages for the ranges of n_events and duration.
         CampaignConfig(n_events=self.n_events, seed=0, duration=self.duration)
         object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
         for name in ("generator", "identify"):
             expected = GeneratorConfig if name == "generator" else IdentifyConfig
             if not isinstance(getattr(self, name), expected):
-                raise ValueError(f"{name} must be a {expected.__name__}; got {type(getattr(self, name)).__name__}")
+                raise InputError(f"{name} must be a {expected.__name__}; got {type(getattr(self, name)).__name__}")
         object.__setattr__(self, "grid", self._axes(self.grid, "grid"))
         object.__setattr__(self, "ranges", self._axes(self.ranges, "ranges"))
         both = set(dict(self.grid)) & set(dict(self.ranges))
         if both:
-            raise ValueError(f"{sorted(both)} in both [grid] and [ranges]; a parameter is either a grid axis or a range")
+            raise InputError(f"{sorted(both)} in both [grid] and [ranges]; a parameter is either a grid axis or a range")
         if self.n_tasks > 100000:
-            raise ValueError(f"the sweep has {self.n_tasks} campaigns (grid points x n_campaigns); at most 100000")
+            raise InputError(f"the sweep has {self.n_tasks} campaigns (grid points x n_campaigns); at most 100000")
         self._check_values()
         self._check_duration()
 
@@ -184,19 +185,19 @@ class SweepConfig:
             try:
                 name, values = item
             except (TypeError, ValueError):
-                raise ValueError(f"[{kind}] must map parameter names to values; got {item!r}") from None
+                raise InputError(f"[{kind}] must map parameter names to values; got {item!r}") from None
             if name not in PARAMETERS:
-                raise ValueError(f"[{kind}] unknown parameter {name!r}; allowed: {', '.join(PARAMETERS)}")
+                raise InputError(f"[{kind}] unknown parameter {name!r}; allowed: {', '.join(PARAMETERS)}")
             if isinstance(values, (str, bytes)) or not hasattr(values, "__len__"):
-                raise ValueError(f"[{kind}] {name} must be a list of numbers; got {values!r}")
+                raise InputError(f"[{kind}] {name} must be a list of numbers; got {values!r}")
             vals = tuple(_number(v, f"[{kind}] {name} value") for v in values)
             if kind == "grid":
                 if not vals:
-                    raise ValueError(f"[grid] {name} needs at least one value")
+                    raise InputError(f"[grid] {name} needs at least one value")
                 if len(set(vals)) != len(vals):
-                    raise ValueError(f"[grid] {name} values must be distinct; got {list(vals)}")
+                    raise InputError(f"[grid] {name} values must be distinct; got {list(vals)}")
             elif len(vals) != 2 or not vals[0] <= vals[1]:
-                raise ValueError(f"[ranges] {name} must be [low, high] with low <= high; got {list(vals)}")
+                raise InputError(f"[ranges] {name} must be [low, high] with low <= high; got {list(vals)}")
             out.append((name, vals))
         return tuple(out)
 
@@ -214,7 +215,7 @@ class SweepConfig:
         edge = pre.settling_s(f_mode)
         need = 2.0 * edge + max(self.identify.window, pre.min_segment_s)
         if not self.duration[0] > need:
-            raise ValueError(f"duration: events of {self.duration[0]:g} s hold no identification window once "
+            raise InputError(f"duration: events of {self.duration[0]:g} s hold no identification window once "
                              f"{edge:g} s are dropped at each end; the shortest event must be longer than {need:g} s")
 
     @property
@@ -259,10 +260,10 @@ _IDENTIFY_KEYS = ("window", "step", "alpha", "scaling", "tau", "aicc_margin", "f
 
 def _identify_from_dict(data: dict) -> IdentifyConfig:
     if not isinstance(data, dict):
-        raise ValueError(f"[identify] must be a table; got {data!r}")
+        raise InputError(f"[identify] must be a table; got {data!r}")
     unknown = set(data) - set(_IDENTIFY_KEYS)
     if unknown:
-        raise ValueError(f"unknown keys {sorted(unknown)} in [identify]; allowed: {', '.join(_IDENTIFY_KEYS)}")
+        raise InputError(f"unknown keys {sorted(unknown)} in [identify]; allowed: {', '.join(_IDENTIFY_KEYS)}")
     kwargs = dict(data)
     if kwargs.get("spike_mad") is False:  # TOML has no None: false switches despiking off
         kwargs["spike_mad"] = None
@@ -278,37 +279,37 @@ def _identify_from_dict(data: dict) -> IdentifyConfig:
 def sweep_config_from_dict(data: dict[str, Any]) -> SweepConfig:
     """A :class:`SweepConfig` from plain data (the TOML layout of :func:`load_sweep_config`)."""
     if not isinstance(data, dict):
-        raise ValueError(f"a sweep configuration is a table; got {type(data).__name__}")
+        raise InputError(f"a sweep configuration is a table; got {type(data).__name__}")
     unknown = set(data) - set(_TOP_KEYS)
     if unknown:
-        raise ValueError(f"unknown keys {sorted(unknown)}; allowed: {', '.join(_TOP_KEYS)}")
+        raise InputError(f"unknown keys {sorted(unknown)}; allowed: {', '.join(_TOP_KEYS)}")
     kwargs = {k: v for k, v in data.items() if k not in ("generator", "identify", "grid", "ranges")}
     for key in ("grid", "ranges"):
         if key in data:
             if not isinstance(data[key], dict):
-                raise ValueError(f"[{key}] must be a table of parameter = [values]; got {data[key]!r}")
+                raise InputError(f"[{key}] must be a table of parameter = [values]; got {data[key]!r}")
             kwargs[key] = tuple(data[key].items())
     if "duration" in kwargs:
         d = kwargs["duration"]
         if isinstance(d, (int, float)) and not isinstance(d, bool):
             d = (d, d)
         if not isinstance(d, (list, tuple)) or len(d) != 2:
-            raise ValueError(f"duration must be [min, max] seconds (or one number); got {kwargs['duration']!r}")
+            raise InputError(f"duration must be [min, max] seconds (or one number); got {kwargs['duration']!r}")
         kwargs["duration"] = tuple(_number(x, "duration") for x in d)
     if "seeds" in kwargs and not isinstance(kwargs["seeds"], (list, tuple)):
-        raise ValueError(f"seeds must be a list of non-negative integers; got {kwargs['seeds']!r}")
+        raise InputError(f"seeds must be a list of non-negative integers; got {kwargs['seeds']!r}")
     try:
         if "generator" in data:
             if not isinstance(data["generator"], dict):
-                raise ValueError("[generator] must be a table")
+                raise InputError("[generator] must be a table")
             kwargs["generator"] = config_from_dict(data["generator"])
     except (ValueError, TypeError) as exc:
-        raise ValueError(f"[generator]: {exc}") from None
+        raise InputError(f"[generator]: {exc}") from None
     try:
         if "identify" in data:
             kwargs["identify"] = _identify_from_dict(data["identify"])
     except (ValueError, TypeError) as exc:
-        raise ValueError(f"[identify]: {exc}") from None
+        raise InputError(f"[identify]: {exc}") from None
     return SweepConfig(**kwargs)
 
 
@@ -446,7 +447,7 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         if not written:
             reasons = list(made.failures.values()) + list(failures.values())
             first = reasons[0] if reasons else "nothing to identify"
-            raise ValueError(f"no event of campaign seed {task.campaign_seed} could be identified ({first})")
+            raise InputError(f"no event of campaign seed {task.campaign_seed} could be identified ({first})")
         identified = {p.name.removesuffix(".identify.nc") for p in written}
         events = [f for f in made.files if f.stem in identified]
         results = sorted(written, key=lambda p: p.name)
@@ -464,7 +465,7 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
                                                                "rhs_median_rel_error_active")})
     except Exception as exc:
         # Temporary paths differ from run to run; the table must not.
-        message = " ".join(f"{type(exc).__name__}: {exc}".split()).replace(str(root), "<campaign>")
+        message = error_line(exc).replace(str(root), "<campaign>")
         raise CampaignFailed(message) from None
     finally:
         if task.keep_dir is None:
@@ -514,7 +515,7 @@ def _exclusive(out: Path):
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
-            raise ValueError(f"{out}: another sweep is writing to this directory") from None
+            raise InputError(f"{out}: another sweep is writing to this directory") from None
         yield
     finally:
         fh.close()
@@ -529,7 +530,7 @@ def _check_config_record(out: Path, config: SweepConfig) -> None:
         except (json.JSONDecodeError, AttributeError):
             old = None
         if old != config.fingerprint():
-            raise ValueError(f"{record}: this directory holds the results of a different sweep configuration; "
+            raise InputError(f"{record}: this directory holds the results of a different sweep configuration; "
                              "use another --out (or delete the directory to start over)")
         return
     with atomic_path(record) as tmp:

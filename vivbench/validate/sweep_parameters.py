@@ -7,6 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from vivbench.synth.config import GeneratorConfig, Polynomial
+from vivbench.core.errors import InputError
 
 __all__ = ["PARAMETERS", "SWEEP_PARAMETERS", "Parameter"]
 
@@ -23,10 +24,10 @@ def _y1_peak(gen: GeneratorConfig) -> float:
 def _set_y1_peak(gen: GeneratorConfig, value: float) -> GeneratorConfig:
     peak = _y1_peak(gen)
     if not peak > 0:
-        raise ValueError("y1_peak needs the base generator's aero.Y1 to be a bell (a quadratic in U with a positive "
+        raise InputError("y1_peak needs the base generator's aero.Y1 to be a bell (a quadratic in U with a positive "
                          f"peak); got coefficients {gen.aero.Y1.coefficients}")
     if not value >= 0:
-        raise ValueError(f"y1_peak must be >= 0 (the height of the Y1 bell; 0 removes self-excitation); got {value}")
+        raise InputError(f"y1_peak must be >= 0 (the height of the Y1 bell; 0 removes self-excitation); got {value}")
     # Scaling the whole bell keeps its centre and its zero crossings (the lock-in range).
     y1 = Polynomial(coefficients=tuple(value / peak * c for c in gen.aero.Y1.coefficients))
     return dataclasses.replace(gen, aero=dataclasses.replace(gen.aero, Y1=y1))
