@@ -31,8 +31,9 @@ import numpy as np  # noqa: E402
 import pysindy as ps  # noqa: E402
 from scipy.ndimage import gaussian_filter1d  # noqa: E402
 
-from vivbench.regression import stlsq as _engine  # noqa: E402
-from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, aicc
+from vivbench.regression import lstsq as _engine  # noqa: E402
+from vivbench.regression.settings import DEFAULT_THRESHOLDS
+from vivbench.regression.stlsq import aicc
 from vivbench.models.window import WindowedSINDy
 from vivbench.preprocess.windows import window_bounds
 from vivbench.library.basis import condition_number, window_library
@@ -122,7 +123,7 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
     # (lstsq with a singular-value cut) forces on ill-conditioned supports:
     # one LAPACK gelsd each, the part of ours that batching cannot remove.
     svd_time = [0.0]
-    plain = _engine._Factors.truncated_lstsq
+    plain = _engine.NestedFactors.truncated_lstsq
 
     def timed(self, *args, **kwargs):
         s0 = time.perf_counter()
@@ -131,14 +132,14 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
         finally:
             svd_time[0] += time.perf_counter() - s0
 
-    _engine._Factors.truncated_lstsq = timed
+    _engine.NestedFactors.truncated_lstsq = timed
     try:
         t0 = time.perf_counter()
         for ev in events:
             models.append(WindowedSINDy(**est).fit(*ev))
         ours_time = time.perf_counter() - t0
     finally:
-        _engine._Factors.truncated_lstsq = plain
+        _engine.NestedFactors.truncated_lstsq = plain
     n_windows = sum(m.window_start_.size for m in models)
 
     # Reference subset: windows spread evenly over the campaign.

@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 
 from vivbench.cli import main
 from vivbench.analysis.identify import IdentifyConfig, identify_files
-from vivbench.preprocess.chain import PreprocessConfig
+from vivbench.preprocess.config import PreprocessConfig
 from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
 from vivbench.io.quality import G
 from vivbench.synth import CampaignConfig, campaign_specs, generate_event

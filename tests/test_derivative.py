@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.helpers import assert_close, relative_rms
-from vivbench.preprocess.chain import envelope
+from vivbench.preprocess.vibration import envelope
 from vivbench.preprocess.derivative import DERIVATIVE_METHODS, Derivative, estimate_noise_std, tv_derivative
 
 DT = 0.25  # s, a few Hz as in the chain

@@ -20,7 +20,8 @@ from scipy.integrate import solve_ivp
 from scipy.ndimage import gaussian_filter1d
 
 from tests.helpers import assert_close
-from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, StlsqSettings, aicc, stlsq_path
+from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
+from vivbench.regression.stlsq import aicc, stlsq_path
 from vivbench.models.window import WindowedSINDy
 from vivbench.preprocess.windows import window_bounds
 from vivbench.library.basis import condition_number, library_cond, window_library

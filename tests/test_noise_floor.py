@@ -12,9 +12,10 @@ from tests.helpers import assert_close
 from vivbench.preprocess.derivative import Derivative
 from vivbench.analysis.identify import IdentifyConfig, identify_event
 from vivbench.preprocess.noise_floor import band_noise_std, window_amplitude_snr
-from vivbench.preprocess.chain import PreprocessConfig, preprocess_arrays
+from vivbench.preprocess.config import PreprocessConfig
+from vivbench.preprocess.chain import preprocess_arrays
 from vivbench.preprocess.band import band_gain
-from vivbench.preprocess.chain import welch_psd
+from vivbench.preprocess.vibration import welch_psd
 from vivbench.io.event import event_arrays, read_event
 from vivbench.io.quality import G
 from vivbench.synth import CampaignConfig, campaign_specs, generate_event

@@ -7,7 +7,8 @@ import pytest
 
 from tests.helpers import assert_close
 from vivbench.models.campaign import PooledSINDy, pooled_window_stats
-from vivbench.regression.stlsq import StlsqSettings, stlsq_path
+from vivbench.regression.settings import StlsqSettings
+from vivbench.regression.stlsq import stlsq_path
 from vivbench.library.basis import window_library
 from vivbench.regression.stlsq import aicc
 from vivbench.models.campaign import _block_factors, _replicate_fits

@@ -9,7 +9,11 @@ from hypothesis import strategies as st
 from scipy import signal
 
 from tests.helpers import assert_close, relative_rms
-from vivbench.preprocess.chain import PreprocessConfig, common_grid, displacement, envelope, mean_wind, modal_frequency, perpendicular_speed, preprocess_arrays, segments, to_grid, wind_speed_direction
+from vivbench.preprocess.config import PreprocessConfig
+from vivbench.preprocess.runs import common_grid, segments, to_grid
+from vivbench.preprocess.vibration import displacement, envelope, modal_frequency
+from vivbench.preprocess.wind import mean_wind, perpendicular_speed, wind_speed_direction
+from vivbench.preprocess.chain import preprocess_arrays
 
 FS_WIND = 32.0
 FS_ACC = 50.0

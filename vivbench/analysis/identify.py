@@ -22,12 +22,14 @@ import xarray as xr
 
 import vivbench
 from vivbench.preprocess.derivative import Derivative
-from vivbench.regression.stlsq import DEFAULT_THRESHOLDS
+from vivbench.regression.settings import DEFAULT_THRESHOLDS
 from vivbench.models.window import WindowedSINDy
 from vivbench.preprocess.noise_floor import window_amplitude_snr
 from vivbench.regression.optimizers import OPTIMIZERS
 from vivbench.regimes.window import label_windows
-from vivbench.preprocess.chain import PreprocessConfig, perpendicular_speed, preprocess_arrays, wind_speed_direction
+from vivbench.preprocess.config import PreprocessConfig
+from vivbench.preprocess.wind import perpendicular_speed, wind_speed_direction
+from vivbench.preprocess.chain import preprocess_arrays
 from vivbench.io.event import event_arrays, read_event
 from vivbench.io.netcdf import write_netcdf_atomic
 from vivbench.io.result import result_path

@@ -10,7 +10,7 @@ from vivbench.cli.common import DEFAULT_WORKERS, event_paths, progress
 def run(args) -> int:
     from vivbench.preprocess.derivative import Derivative
     from vivbench.analysis.identify import IdentifyConfig, identify_files
-    from vivbench.preprocess.chain import PreprocessConfig
+    from vivbench.preprocess.config import PreprocessConfig
 
     deriv_opts = {}
     if args.tv_time_scale is not None:

@@ -39,7 +39,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, StlsqSettings, aicc, stlsq_path
+from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
+from vivbench.regression.stlsq import aicc, stlsq_path
 from vivbench.library.basis import window_library
 from vivbench.core.regime import DEFAULT_TAU, regime_rule
 from vivbench.core.terms import evaluate_library, feature_names, section_exponents

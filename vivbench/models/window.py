@@ -10,7 +10,7 @@ import numpy as np
 
 from vivbench.preprocess.windows import window_bounds
 from vivbench.regression.optimizers import OPTIMIZERS, run_optimizer
-from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, StlsqSettings
+from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
 from vivbench.library.basis import SCALINGS, basis_orders, library_cond, order_contributions_basis, window_library
 from vivbench.core.terms import feature_names
 from vivbench.core.errors import InputError

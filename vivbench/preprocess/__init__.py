@@ -1,22 +1,8 @@
 """Wind and vibration preprocessing, the envelope, its noise floor, sliding windows and differentiation (DESIGN 3.1)."""
 
 from vivbench.preprocess.band import band_gain
-from vivbench.preprocess.chain import (
-    PreprocessConfig,
-    Preprocessed,
-    wind_speed_direction,
-    perpendicular_speed,
-    mean_wind,
-    modal_frequency,
-    welch_psd,
-    spectral_peak,
-    displacement,
-    envelope,
-    segments,
-    common_grid,
-    to_grid,
-    preprocess_arrays,
-)
+from vivbench.preprocess.chain import Preprocessed, preprocess_arrays
+from vivbench.preprocess.config import PreprocessConfig
 from vivbench.preprocess.derivative import (
     DERIVATIVE_METHODS,
     Derivative,
@@ -25,11 +11,34 @@ from vivbench.preprocess.derivative import (
     tv_derivative,
 )
 from vivbench.preprocess.noise_floor import band_noise_std, window_amplitude_snr
+from vivbench.preprocess.runs import (
+    check_positive,
+    check_time,
+    as_2d,
+    run_rate,
+    valid_runs,
+    trusted_intervals,
+    intersect_intervals,
+    segments,
+    common_grid,
+    grid_of_intervals,
+    to_grid,
+)
+from vivbench.preprocess.vibration import welch_psd, spectral_peak, modal_frequency, displacement, envelope
+from vivbench.preprocess.wind import (
+    wind_speed_direction,
+    perpendicular_speed,
+    mean_wind,
+    perpendicular_wind,
+    mean_wind_runs,
+)
 from vivbench.preprocess.windows import window_bounds
 
 __all__ = [
-    "band_gain", "PreprocessConfig", "Preprocessed", "wind_speed_direction", "perpendicular_speed",
-    "mean_wind", "modal_frequency", "welch_psd", "spectral_peak", "displacement", "envelope", "segments",
-    "common_grid", "to_grid", "preprocess_arrays", "DERIVATIVE_METHODS", "Derivative", "TVDerivativeResult",
-    "estimate_noise_std", "tv_derivative", "band_noise_std", "window_amplitude_snr", "window_bounds",
+    "band_gain", "Preprocessed", "preprocess_arrays", "PreprocessConfig", "DERIVATIVE_METHODS", "Derivative",
+    "TVDerivativeResult", "estimate_noise_std", "tv_derivative", "band_noise_std", "window_amplitude_snr",
+    "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "trusted_intervals",
+    "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid", "welch_psd",
+    "spectral_peak", "modal_frequency", "displacement", "envelope", "wind_speed_direction",
+    "perpendicular_speed", "mean_wind", "perpendicular_wind", "mean_wind_runs", "window_bounds",
 ]

@@ -31,7 +31,8 @@ import dataclasses
 import numpy as np
 
 from vivbench.models.window import WindowedSINDy, WindowProblem
-from vivbench.regression.stlsq import StlsqSettings, stlsq_path
+from vivbench.regression.settings import StlsqSettings
+from vivbench.regression.stlsq import stlsq_path
 from vivbench.core.regime import classify_regime
 from vivbench.library.basis import basis_orders, order_contributions_basis
 

@@ -1,5 +1,6 @@
 """Sparse regression: batched least squares, the STLSQ threshold path with AICc, pysindy-backed optimisers."""
 
+from vivbench.regression.lstsq import NestedFactors, as_batches, empty_path
 from vivbench.regression.optimizers import (
     OPTIMIZERS,
     OptimizerOptions,
@@ -7,9 +8,11 @@ from vivbench.regression.optimizers import (
     sr3_path,
     ensemble_path,
 )
-from vivbench.regression.stlsq import DEFAULT_THRESHOLDS, SOLVERS, StlsqSettings, StlsqPath, aicc, stlsq_path
+from vivbench.regression.settings import DEFAULT_THRESHOLDS, SOLVERS, StlsqSettings
+from vivbench.regression.stlsq import StlsqPath, aicc, stlsq_path
 
 __all__ = [
-    "OPTIMIZERS", "OptimizerOptions", "run_optimizer", "sr3_path", "ensemble_path", "DEFAULT_THRESHOLDS",
-    "SOLVERS", "StlsqSettings", "StlsqPath", "aicc", "stlsq_path",
+    "NestedFactors", "as_batches", "empty_path", "OPTIMIZERS", "OptimizerOptions", "run_optimizer",
+    "sr3_path", "ensemble_path", "DEFAULT_THRESHOLDS", "SOLVERS", "StlsqSettings", "StlsqPath", "aicc",
+    "stlsq_path",
 ]

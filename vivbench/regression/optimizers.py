@@ -66,8 +66,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from vivbench.regression.stlsq import StlsqPath, StlsqSettings, as_batches, aicc, stlsq_path
-from vivbench.regression.stlsq import empty_path as _engine_empty_path
+from vivbench.regression.stlsq import StlsqPath, aicc, stlsq_path
+from vivbench.regression.settings import StlsqSettings
+from vivbench.regression.lstsq import as_batches
+from vivbench.regression.lstsq import empty_path as _engine_empty_path
 from vivbench.library.basis import condition_number
 from vivbench.core.errors import InputError
 

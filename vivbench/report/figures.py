@@ -40,7 +40,9 @@ from matplotlib.patches import Patch  # noqa: E402
 from scipy import signal  # noqa: E402
 
 from vivbench.models.simulate import forecast, simulate_identified
-from vivbench.preprocess.chain import PreprocessConfig, displacement, envelope, mean_wind, modal_frequency, perpendicular_speed, wind_speed_direction
+from vivbench.preprocess.config import PreprocessConfig
+from vivbench.preprocess.vibration import displacement, envelope, modal_frequency
+from vivbench.preprocess.wind import mean_wind, perpendicular_speed, wind_speed_direction
 from vivbench.io.netcdf import atomic_path
 from vivbench.core.terms import evaluate_library, feature_exponents
 

@@ -39,7 +39,7 @@ import numpy as np
 from vivbench.core.toml import load_toml
 from vivbench.preprocess.derivative import Derivative
 from vivbench.analysis.identify import IdentifyConfig, identify_files
-from vivbench.preprocess.chain import PreprocessConfig
+from vivbench.preprocess.config import PreprocessConfig
 from vivbench.io.netcdf import atomic_path
 from vivbench.core.parallel import parse_scheduler, run_tasks
 from vivbench.synth.campaign import CampaignConfig, generate_campaign
