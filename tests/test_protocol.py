@@ -266,3 +266,40 @@ def test_window_model_follows_its_windows(window_fit):
         model.predict(Record(event_id="other", t=rec.t, A=rec.A, U=rec.U))
     sim = model.simulate(rec, rec.t[0], rec.t[0] + 40.0)
     assert sim.A_sim.shape[1] == 2
+
+
+def _fake_result(path, event_id: str, seed: int):
+    """A minimal ``<event_id>.identify.nc``: two sections, two segments, a gap, windows."""
+    import xarray as xr
+
+    t = 0.5 * np.arange(1600)
+    A = 0.1 + 0.05 * np.sin(t[:, None] / np.array([40.0, 55.0]) + seed)
+    U = 8.0 + 2.0 * np.sin(t[:, None] / np.array([90.0, 97.0]) + 2 * seed)
+    dA = evaluate_library(A, U) @ _true_coef(2).T
+    seg = np.where(t < 400, 0, 1)
+    seg[(t > 390) & (t < 410)] = -1
+    dA[seg < 0] = np.nan
+    ws = np.arange(0.0, 750.0, 25.0)
+    ds = xr.Dataset({"A": (("time", "equation"), A), "U": (("time", "equation"), U), "dA": (("time", "equation"), dA),
+                     "segment": (("time",), seg), "window_start": (("window",), ws), "window_end": (("window",), ws + 50)},
+                    coords={"time": t, "equation": ["S1", "S2"]}, attrs={"format": "vivbench-identify", "event_id": event_id})
+    ds.to_netcdf(path)
+    return path
+
+
+def test_records_from_results_feed_the_protocol_and_the_pooled_file_reads(tmp_path):
+    from vivbench.analysis import pool_results, records_from_results
+    from vivbench.io import read_pooled, write_pooled
+    from vivbench.preprocess.derivative import Derivative
+
+    paths = [_fake_result(tmp_path / f"E{k}.identify.nc", f"E{k}", k) for k in range(2)]
+    recs = records_from_results(paths)
+    assert [r.event_id for r in recs] == ["E0", "E1"] and recs[0].A.shape == (1600, 2)
+    fd = records_from_results(paths, derivative=Derivative(method="finite_difference"))
+    assert np.isnan(fd[0].dA[(recs[0].t > 390) & (recs[0].t < 410)]).all()
+    model = PooledSINDy(n_bootstrap=3, block_s=100.0).fit(recs)
+    pooled = read_pooled(write_pooled(pool_results(paths, PooledSINDy(n_bootstrap=3, block_s=100.0), derivative=None),
+                                      tmp_path))
+    assert np.array_equal(pooled["coef"].values, model.coef_)
+    with pytest.raises(ModelFileError, match=r"E0\.identify\.nc: not a pooled result"):
+        read_pooled(paths[0])

@@ -65,6 +65,6 @@ def read_model_dataset(path, *, fmt: str, max_version: int, variables: Mapping[s
     for name, dims in variables.items():
         if tuple(ds[name].dims) != tuple(dims):
             raise ModelFileError(f"{path}: {name} must have dimensions {dims}; got {tuple(ds[name].dims)}")
-        if ds[name].dtype.kind not in "fiub" and np.dtype(ds[name].dtype).kind not in "OUS":
+        if np.dtype(ds[name].dtype).kind not in "fiubOUS":
             raise ModelFileError(f"{path}: {name} has unexpected type {ds[name].dtype}")
     return ds
