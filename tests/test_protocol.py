@@ -140,10 +140,9 @@ def test_campaign_model_recovers_a_known_model(campaign_fit):
     assert_close(via_protocol["order_rms"], own["order_rms"], rtol=1e-9, atol=1e-15, reason="same sums, other order")
 
 
-def test_legacy_tuples_fit_the_same_campaign_model(campaign_fit):
-    S, _coef, recs, model = campaign_fit
-    if S != 1:
-        pytest.skip("one case is enough")
+def test_legacy_tuples_fit_the_same_campaign_model():
+    recs = _records(1, _true_coef(1), n=400)
+    model = PooledSINDy(n_bootstrap=2, block_s=50.0).fit(recs)
     legacy = PooledSINDy(**model.get_params()).fit([(r.t, r.A, r.U, r.dA) for r in recs])
     assert np.array_equal(legacy.coef_, model.coef_)
 
@@ -225,9 +224,11 @@ def test_simulate_reproduces_a_directly_integrated_trajectory(campaign_fit):
     assert rec.n_sections == S
 
 
-def test_equations_parse_back(campaign_fit, window_fit):
+def test_equations_parse_back(campaign_fit, window_fit, capsys):
     S, coef, recs, model = campaign_fit
     eqs = model.equations()
+    model.print()
+    assert capsys.readouterr().out.splitlines() == eqs
     assert len(eqs) == S
     for k, line in enumerate(eqs):
         lhs, rhs = line.split(" = ")
