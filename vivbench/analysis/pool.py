@@ -11,12 +11,13 @@ import numpy as np
 import xarray as xr
 
 import vivbench
+from vivbench.core.record import Record
 from vivbench.models.campaign import PooledSINDy
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.netcdf import NETCDF_ENGINE
 from vivbench.core.errors import InputError
 
-__all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "with_campaign_model"]
+__all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results", "with_campaign_model"]
 
 
 #: dA/dt of the campaign model: exact TV with the white-noise weight, which on
@@ -39,6 +40,47 @@ def _campaign_derivative(ds, derivative: Derivative | None) -> np.ndarray:
         sel = (seg == s) & np.isfinite(stored).all(axis=1)
         if sel.sum() >= 5:
             out[sel] = derivative.differentiate(A[sel], t[sel])
+    return out
+
+
+def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
+    return Record(event_id=str(attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
+                  dA=_campaign_derivative(ds, derivative))
+
+
+def records_from_results(paths: Sequence, *, derivative: Derivative | None = None) -> list[Record]:
+    """The records of identification results, ready for any model of the protocol (DESIGN 7).
+
+    Parameters
+    ----------
+    paths : paths of ``<event_id>.identify.nc``
+        Their ``time``, ``A``, ``U``, ``dA`` and ``segment`` are read.
+    derivative : Derivative or None
+        None (default) keeps the results' own dA (the identification's
+        smoothed derivative); otherwise dA/dt is recomputed from A on each
+        segment as :func:`pool_results` does (e.g. :data:`CAMPAIGN_DERIVATIVE`).
+
+    Returns
+    -------
+    list of Record
+        One per file, ``event_id`` from the file's attribute; dA is NaN
+        outside the identification's segments.
+
+    Raises
+    ------
+    ValueError
+        One line naming a file that is not an identification result.
+    """
+    out = []
+    for path in paths:
+        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
+            if ds.attrs.get("format") != "vivbench-identify":
+                raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
+            missing = [v for v in ("A", "U", "dA", "segment") if v not in ds]
+            missing += [] if "event_id" in ds.attrs else ["the event_id attribute"]
+            if missing:
+                raise ValueError(f"{path}: identification result lacks {', '.join(missing)}")
+            out.append(_result_record(ds[["A", "U", "dA", "segment"]].load(), ds.attrs, derivative))
     return out
 
 
@@ -85,8 +127,7 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     for path, _ds, _attrs, eq in results:
         if eq != sections:
             raise InputError(f"{path}: equations {eq} differ from {sections} of the other results")
-    model.fit([(ds["time"].values, ds["A"].values, ds["U"].values, _campaign_derivative(ds, derivative))
-               for _p, ds, _a, _e in results])
+    model.fit([_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results])
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end", "regime", "identifiable", "agreement", "robust", "order_rms")}
     for _path, ds, attrs, _eq in results:
         s, e = ds["window_start"].values, ds["window_end"].values

@@ -9,6 +9,7 @@ from vivbench.core.terms import (
     feature_names,
     evaluate_library,
 )
+from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU, classify_regime, order_rms, regime_rule
 from vivbench.core.errors import InputError
 from vivbench.core.toml import load_toml
@@ -16,6 +17,6 @@ from vivbench.core.parallel import Outcome, run_tasks, parse_scheduler
 
 __all__ = [
     "A_POWERS", "U_POWERS", "SECTIONS", "section_exponents", "feature_exponents", "feature_names",
-    "evaluate_library", "DEFAULT_TAU", "classify_regime", "order_rms", "regime_rule", "load_toml", "Outcome",
+    "evaluate_library", "Record", "DEFAULT_TAU", "classify_regime", "order_rms", "regime_rule", "load_toml", "Outcome",
     "run_tasks", "parse_scheduler", "InputError",
 ]

@@ -15,7 +15,18 @@ from vivbench.io.event import (
     list_events,
 )
 from vivbench.io.result import list_results, result_path, read_result
-from vivbench.io.campaign_model import POOLED_NAME, write_pooled
+from vivbench.io.model_file import ModelFileError, read_model_dataset
+from vivbench.io.campaign_model import (
+    POOLED_NAME,
+    POOLED_FORMAT,
+    CAMPAIGN_MODEL_FORMAT,
+    CAMPAIGN_MODEL_VERSION,
+    write_pooled,
+    read_pooled,
+    write_campaign_model,
+    read_campaign_model,
+)
+from vivbench.io.window_model import WINDOW_MODEL_FORMAT, WINDOW_MODEL_VERSION, write_window_model, read_window_model
 from vivbench.io.quality import (
     G,
     MAX_ACC_RMS,
@@ -34,7 +45,9 @@ __all__ = [
     "NETCDF_ENGINE", "atomic_path", "write_netcdf_atomic", "EventFormatError", "FORMAT", "FORMAT_VERSION",
     "NOMINAL_RATES", "COEF_UNITS", "build_event", "validate_event", "write_event", "read_event",
     "event_arrays", "list_events", "list_results", "result_path", "read_result", "POOLED_NAME",
-    "write_pooled", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED", "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS",
+    "write_pooled", "ModelFileError", "read_model_dataset", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT",
+    "CAMPAIGN_MODEL_VERSION", "read_pooled", "write_campaign_model", "read_campaign_model", "WINDOW_MODEL_FORMAT",
+    "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED", "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS",
     "despike", "check_acc_magnitude", "check_wind_magnitude", "check_wind_varies", "import_event",
     "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
 ]

@@ -39,14 +39,66 @@ from typing import NamedTuple
 
 import numpy as np
 
+import xarray as xr
+
+import vivbench
+from vivbench.io.campaign_model import read_campaign_model, write_campaign_model
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
 from vivbench.regression.stlsq import aicc, stlsq_path
 from vivbench.library.basis import window_library
+from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU, regime_rule
-from vivbench.core.terms import evaluate_library, feature_names, section_exponents
+from vivbench.core.terms import evaluate_library, feature_exponents, feature_names, section_exponents
 from vivbench.core.errors import InputError
+from vivbench.models.protocol import (
+    ModelBase,
+    as_record,
+    coef_order_contributions,
+    format_equations,
+    section_names,
+    simulate_windows,
+)
+from vivbench.models.simulate import Simulation
 
-__all__ = ["PooledSINDy", "pooled_window_stats"]
+__all__ = ["PooledSINDy", "CampaignSINDy", "pooled_window_stats", "amplitude_ratios", "RATIO_LEVEL"]
+
+#: Samples whose amplitude is below this share of the section's largest amplitude
+#: do not enter the amplitude ratios (there A is mostly noise and ratios scatter).
+RATIO_LEVEL = 0.1
+
+
+def amplitude_ratios(A: np.ndarray, level: float = RATIO_LEVEL) -> np.ndarray:
+    """Median amplitude ratios A_l / A_k over the samples where both sections vibrate.
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, S), m
+        Amplitudes (NaN: no sample).
+    level : float
+        A sample counts for the pair (k, l) when A_k and A_l both exceed this
+        share of their section's largest finite amplitude.
+
+    Returns
+    -------
+    ratios : ndarray, shape (S, S)
+        ratios[k, l] = median of A_l / A_k; 1 on the diagonal; NaN for a pair
+        without such samples.
+    """
+    A = np.asarray(A, dtype=float)
+    S = A.shape[1]
+    finite = np.isfinite(A)
+    top = np.array([np.max(A[finite[:, k], k], initial=0.0) for k in range(S)])
+    big = finite & (A > level * top[None, :]) & (A > 0)
+    both = big[:, :, None] & big[:, None, :]  # (n, k, l)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(both, A[:, None, :] / np.where(big, A, 1.0)[:, :, None], np.nan)
+    out = np.full((S, S), np.nan)
+    has = both.any(axis=0)
+    if has.any():
+        # nanmedian only over pairs with samples (it warns on all-NaN columns)
+        out[has] = np.nanmedian(ratio[:, has], axis=0)
+    np.fill_diagonal(out, 1.0)
+    return out
 
 
 class _Record(NamedTuple):
@@ -179,8 +231,13 @@ def _replicate_fits(factors, mult: np.ndarray, settings: StlsqSettings, chunk_si
     return tuple(np.concatenate([o[k] for o in out]) for k in range(4))
 
 
-class PooledSINDy:
+class PooledSINDy(ModelBase):
     """STLSQ + AICc on all samples of a campaign, with a block bootstrap of the selection.
+
+    The campaign model of the model protocol (:mod:`vivbench.models.protocol`):
+    ``fit(records)``, ``predict``, ``order_contributions``, ``simulate``,
+    ``curves`` (DESIGN 3.5), ``save``/``load`` (NetCDF), ``equations``/``print``.
+    ``CampaignSINDy`` is the same class.
 
     Parameters
     ----------
@@ -221,6 +278,12 @@ class PooledSINDy:
     support_, threshold_, n_terms_, rss_, aicc_ : the selected model per equation
     n_samples_ : int; n_blocks_ : int; cond_ : float (of the scaled pooled library)
     feature_names_ : list of str
+    n_sections_ : int
+    amplitude_ratios_ : ndarray, shape (S, S)
+        Median A_l / A_k of the fitted data (:func:`amplitude_ratios`), which
+        fold the other sections into the curves.
+    event_ids_ : list of str
+        Records fitted.
     """
 
     def __init__(self, *, thresholds: Sequence[float] = DEFAULT_THRESHOLDS, alpha: float = 0.05,
@@ -239,11 +302,8 @@ class PooledSINDy:
         self.seed = seed
         self.chunk_size = chunk_size
 
-    def get_params(self, deep: bool = True) -> dict:
-        return {k: getattr(self, k) for k in ("thresholds", "alpha", "scaling", "n_bootstrap", "block_s",
-                                                "agreement", "confidence", "min_blocks", "tau", "seed", "chunk_size")}
-
     def to_json(self) -> str:
+        """The parameters as a JSON object (sorted keys; thresholds as a list)."""
         params = self.get_params()
         params["thresholds"] = [float(x) for x in params["thresholds"]]
         return json.dumps(params, sort_keys=True)
@@ -264,12 +324,12 @@ class PooledSINDy:
         if isinstance(self.chunk_size, bool) or not isinstance(self.chunk_size, (int, np.integer)) or self.chunk_size < 1:
             raise InputError(f"chunk_size must be an integer >= 1; got {self.chunk_size!r}")
 
-    def fit(self, records: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> "PooledSINDy":
+    def fit(self, records: Sequence[Record | tuple]) -> "PooledSINDy":
         """Fit the campaign model.
 
         Parameters
         ----------
-        records : sequence of (t, A, U, dA)
+        records : sequence of Record (or of legacy (t, A, U, dA) tuples)
             One per event (or segment): t shape (n,), s; A, U, dA shape (n, S)
             in m, m/s and m/s. Samples with a non-finite value are ignored.
 
@@ -279,13 +339,16 @@ class PooledSINDy:
         """
         self._validate()
         settings = StlsqSettings(thresholds=tuple(self.thresholds), alpha=self.alpha)
+        records = [as_record(r, k) for k, r in enumerate(records)]
         As, Us, dAs, blocks = [], [], [], []
         offset = 0
-        for t, A, U, dA in records:
-            t, A, U, dA = (np.asarray(x, dtype=float) for x in (t, A, U, dA))
-            if A.ndim != 2 or A.shape != U.shape or A.shape != dA.shape or t.shape != (A.shape[0],):
-                raise ValueError(f"each record needs t (n,) and A, U, dA (n, S); got {t.shape}, {A.shape}, {U.shape}, {dA.shape}")
-            ok = np.isfinite(A).all(1) & np.isfinite(U).all(1) & np.isfinite(dA).all(1)
+        for rec in records:
+            if rec.dA is None:
+                raise ValueError(f"record {rec.event_id!r} has no dA: the campaign model is fitted to dA/dt")
+            if As and rec.n_sections != As[0].shape[1]:
+                raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the others {As[0].shape[1]}")
+            t, A, U, dA = rec.t, rec.A, rec.U, rec.dA
+            ok = rec.valid(need_dA=True)
             b = _blocks(t, ok, self.block_s)
             As.append(A[ok]), Us.append(U[ok]), dAs.append(dA[ok]), blocks.append(b[ok] + offset)
             offset += int(b.max()) + 1 if ok.any() else 0
@@ -337,7 +400,180 @@ class PooledSINDy:
         self.correlation_samples_ = _integrated_correlation(resid)
         self.feature_names_ = feature_names(S)
         self.n_sections_ = S
+        self.amplitude_ratios_ = amplitude_ratios(A)
+        self.event_ids_ = [r.event_id for r in records]
         return self
+
+    # -- the model protocol -------------------------------------------------------------------------
+
+    def _check_record(self, record) -> Record:
+        self._check_fitted()
+        record = as_record(record)
+        if record.n_sections != self.n_sections_:
+            raise ValueError(f"record {record.event_id!r} has {record.n_sections} sections; "
+                             f"the model was fitted on {self.n_sections_}")
+        return record
+
+    def order_contributions(self, record: Record) -> np.ndarray:
+        """Contributions of the orders of A to dA/dt.
+
+        Parameters
+        ----------
+        record : Record (``dA`` not needed)
+
+        Returns
+        -------
+        r : ndarray, shape (n_samples, n_sections, 4), m/s
+            r[:, k, i] = sum_j of the order-i terms of equation k; NaN where A or U is missing.
+        """
+        record = self._check_record(record)
+        return coef_order_contributions(record.A, record.U, self.coef_)
+
+    def predict(self, record: Record) -> np.ndarray:
+        """dA/dt of the model, shape (n_samples, n_sections), m/s (``evaluate_library(A, U) @ coef_.T``)."""
+        record = self._check_record(record)
+        return evaluate_library(record.A, record.U) @ self.coef_.T
+
+    def simulate(self, record: Record, t0: float | None = None, t1: float | None = None, A0=None,
+                 **kwargs) -> Simulation:
+        """Integrate the model from A0 at t0 to t1 with the record's wind (RK4 of :mod:`vivbench.models.simulate`).
+
+        Parameters
+        ----------
+        record : Record
+        t0, t1 : float, s, optional
+            Span, snapped to the record's samples (default: the whole record).
+        A0 : array_like, shape (S,), m, optional
+            Initial amplitudes (default: the record's A at t0).
+        **kwargs
+            ``u_interp``, ``bound_factor``, ``negative_tolerance`` of
+            :func:`vivbench.models.simulate.simulate_identified`.
+
+        Returns
+        -------
+        Simulation
+        """
+        record = self._check_record(record)
+        t = record.t
+        span = (t[0], t[-1] + 1.0)
+        t0 = float(t[0]) if t0 is None else float(t0)
+        t1 = float(t[-1]) if t1 is None else float(t1)
+        return simulate_windows(record, self.coef_[None], np.array([span[0]]), np.array([span[1]]),
+                                t0=t0, t1=t1, A0=A0, **kwargs)
+
+    def curves(self, wind, level: float = 0.95) -> xr.Dataset:
+        """Coefficient curves a_ki(U) of DESIGN 3.5 with bootstrap bands.
+
+        With every section at the mean wind U and A_l = rho_kl A_k
+        (``amplitude_ratios_``), equation k reads dA_k/dt = sum_i a_ki(U) A_k^i with
+        a_ki(U) = sum_l sum_j xi_k,lij rho_kl^i U^j.
+
+        Parameters
+        ----------
+        wind : array_like, shape (n_wind,), m/s
+        level : float
+            Level of the band: the (1 - level)/2 and (1 + level)/2 percentiles of
+            the bootstrap replicates' curves, widened where needed to contain the
+            point curve (a percentile band need not contain a biased estimate).
+
+        Returns
+        -------
+        xarray.Dataset
+            ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind) in
+            m^(1-i)/s; coordinates ``equation``, ``order`` (0..3), ``wind`` (m/s).
+            Without bootstrap replicates the bands are NaN.
+        """
+        self._check_fitted()
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"level must lie strictly between 0 and 1; got {level!r}")
+        wind = np.atleast_1d(np.asarray(wind, dtype=float))
+        if wind.ndim != 1 or not np.all(np.isfinite(wind)):
+            raise ValueError("wind must be a 1-D array of finite speeds in m/s")
+        point = self._curves(self.coef_[None], wind)[0]
+        if self.coef_bootstrap_.shape[0]:
+            boot = self._curves(self.coef_bootstrap_, wind)
+            q = 50.0 * np.array([1.0 - level, 1.0 + level])
+            with np.errstate(invalid="ignore"):
+                lo, hi = np.nanpercentile(boot, q, axis=0)
+            lower, upper = np.fmin(lo, point), np.fmax(hi, point)
+        else:
+            lower = upper = np.full_like(point, np.nan)
+        dims = ("equation", "order", "wind")
+        attrs = {"units": "m^(1-order) s-1", "long_name": "coefficient of A_k^order at mean wind U (DESIGN 3.5)"}
+        return xr.Dataset(
+            {"curves": (dims, point, attrs),
+             "curves_lower": (dims, lower, {"units": attrs["units"], "long_name": f"lower {level:g} bootstrap band"}),
+             "curves_upper": (dims, upper, {"units": attrs["units"], "long_name": f"upper {level:g} bootstrap band"})},
+            coords={"equation": section_names(self.n_sections_), "order": np.arange(4),
+                    "wind": ("wind", wind, {"units": "m/s"})},
+            attrs={"model": type(self).__name__, "amplitude_ratios": json.dumps(self.amplitude_ratios_.tolist())},
+        )
+
+    def _curves(self, models: np.ndarray, wind: np.ndarray) -> np.ndarray:
+        """Curves (M, S, 4, n_wind) of models (M, S, 23 S)."""
+        S = self.n_sections_
+        ex = feature_exponents(S)
+        P = np.zeros((models.shape[0], S, S, 4, 6))
+        P[:, :, ex[:, 0], ex[:, 1], ex[:, 2]] = models
+        rho = self.amplitude_ratios_[:, :, None] ** np.arange(4)  # (k, l, i); rho^0 = 1 even where rho is NaN
+        rho[..., 0] = 1.0
+        Upow = wind[:, None] ** np.arange(6)
+        return np.einsum("mklij,kli,wj->mkiw", P, rho, Upow)
+
+    def equations(self, precision: int = 3) -> list[str]:
+        """pysindy-like equations, e.g. ``"dA1/dt = 1.20e-3 A1 - 4.00e-2 A1 U1^2"`` (physical units)."""
+        self._check_fitted()
+        lhs = [f"dA{k + 1}/dt" for k in range(self.n_sections_)]
+        return format_equations(self.coef_, self.feature_names_, lhs, precision)
+
+    def to_dataset(self) -> xr.Dataset:
+        """The fitted model as the Dataset of a campaign model file (``vivbench.io.campaign_model``)."""
+        self._check_fitted()
+        S = self.n_sections_
+        eq, feat, boot = ("equation",), ("equation", "feature"), ("bootstrap", "equation", "feature")
+        data = {
+            "coef": (feat, self.coef_, {"units": "m/s per unit of the feature"}),
+            "coef_scaled": (feat, self.coef_scaled_, {"units": "1"}),
+            "coef_bootstrap": (boot, self.coef_bootstrap_, {"units": "m/s per unit of the feature"}),
+            "threshold": (eq, self.threshold_), "n_terms": (eq, self.n_terms_.astype(np.int32)),
+            "rss": (eq, self.rss_, {"units": "m2 s-2"}), "aicc": (eq, self.aicc_),
+            "y_scale": (eq, self.y_scale_, {"units": "m/s"}),
+            "correlation_samples": (eq, self.correlation_samples_), "rss_scaled": (eq, self._rss_scaled_),
+            "amplitude_ratios": (("equation", "section"), self.amplitude_ratios_, {"units": "1"}),
+            "gram_inv": (("basis", "basis_"), self._gram_inv_), "to_physical": (("basis", "basis_"), self._to_physical_),
+        }
+        coords = {"equation": section_names(S), "feature": self.feature_names_, "section": section_names(S),
+                  "bootstrap": np.arange(self.coef_bootstrap_.shape[0])}
+        attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
+                 "n_blocks": self.n_blocks_, "enough_data": int(self.enough_data_), "cond": self.cond_,
+                 "events": json.dumps(self.event_ids_), "vivbench_version": vivbench.__version__}
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
+    def save(self, path):
+        """Write the fitted model as a NetCDF campaign model file; returns the path."""
+        return write_campaign_model(self.to_dataset(), path)
+
+    @classmethod
+    def load(cls, path) -> "PooledSINDy":
+        """A fitted model from a campaign model file (checked by ``read_campaign_model``)."""
+        ds = read_campaign_model(path)
+        params = json.loads(ds.attrs["params_json"])
+        params["thresholds"] = tuple(params["thresholds"])
+        model = cls(**params)
+        g = {k: np.asarray(ds[k].values) for k in ds.data_vars}
+        model.coef_, model.coef_scaled_, model.coef_bootstrap_ = g["coef"], g["coef_scaled"], g["coef_bootstrap"]
+        model.support_ = model.coef_scaled_ != 0
+        model.threshold_, model.n_terms_ = g["threshold"], g["n_terms"].astype(int)
+        model.rss_, model.aicc_, model.y_scale_ = g["rss"], g["aicc"], g["y_scale"]
+        model.correlation_samples_, model._rss_scaled_ = g["correlation_samples"], g["rss_scaled"]
+        model._gram_inv_, model._to_physical_ = g["gram_inv"], g["to_physical"]
+        model.amplitude_ratios_ = g["amplitude_ratios"]
+        model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
+        model.enough_data_, model.cond_ = bool(int(ds.attrs["enough_data"])), float(ds.attrs["cond"])
+        model.n_sections_ = int(ds.sizes["equation"])
+        model.feature_names_ = [str(x) for x in ds["feature"].values]
+        model.event_ids_ = json.loads(ds.attrs.get("events", "[]"))
+        return model
 
     def window_regimes(self, t: np.ndarray, A: np.ndarray, U: np.ndarray,
                        window_start: np.ndarray, window_end: np.ndarray) -> dict:
@@ -421,6 +657,10 @@ class PooledSINDy:
                 dc1 = np.sqrt(budget)[None, :] * np.linalg.norm(v, axis=-1)
         ys = self.y_scale_[None, :]
         return dR * ys[..., None], dc1 * ys
+
+
+#: The campaign model of the model protocol (DESIGN 7); the same class as :class:`PooledSINDy`.
+CampaignSINDy = PooledSINDy
 
 
 def _regime_is_determined(R, dR, c1, dc1, tau):

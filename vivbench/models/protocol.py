@@ -1,0 +1,325 @@
+"""The model protocol (DESIGN 7): one interface for everything that turns data into dynamics.
+
+A *method* has ``fit(records)`` and returns a *fitted model*; a fitted model
+gives at least ``order_contributions(record)``, the contributions r_0..r_3 of
+the powers of A to dA/dt (n_samples, n_sections, 4). It may also give
+``predict(record)`` (dA/dt), ``simulate(record, t0, t1, A0)``,
+``curves(wind)`` (campaign-level models only, DESIGN 3.5), ``save``/``load``
+(NetCDF) and pysindy-like ``equations()``. Regimes, forecasts, validation and
+the report use only these names, so a user's model works wherever a built-in
+one does.
+
+The protocols are :func:`typing.runtime_checkable`: ``isinstance(m, FittedModel)``
+checks that the methods exist (not their signatures). :class:`ModelBase`
+gives scikit-learn's conventions (``get_params``/``set_params`` from the
+keyword-only parameters of ``__init__``, a ``__repr__`` with the parameters
+that differ from their defaults) and ``print()`` on top of ``equations()``.
+The helpers below (:func:`as_record`, :func:`coef_order_contributions`,
+:func:`format_equations`, :func:`simulate_windows`) are shared by the built-in
+models and available to users' models.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import xarray as xr
+
+from vivbench.core.record import Record
+from vivbench.core.terms import evaluate_library, section_exponents
+from vivbench.models.simulate import Simulation, nmse, simulate_identified
+
+__all__ = [
+    "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations",
+    "ModelBase", "NotFittedError", "as_record", "coef_order_contributions", "format_equations",
+    "section_names", "simulate_windows",
+]
+
+
+@runtime_checkable
+class Method(Protocol):
+    """Anything that fits records: ``fit(records) -> FittedModel``."""
+
+    def fit(self, records: Sequence[Record]): ...
+
+
+@runtime_checkable
+class FittedModel(Protocol):
+    """A fitted model: the order contributions are the one required output.
+
+    ``order_contributions(record)`` returns r_i, shape (n_samples, n_sections, 4)
+    in m/s, with sum over i equal to the model's dA/dt (NaN where the record
+    has no sample).
+    """
+
+    def order_contributions(self, record: Record) -> np.ndarray: ...
+
+
+@runtime_checkable
+class Predictor(Protocol):
+    """Optional: ``predict(record)`` -> dA/dt, shape (n_samples, n_sections), m/s."""
+
+    def predict(self, record: Record) -> np.ndarray: ...
+
+
+@runtime_checkable
+class Simulator(Protocol):
+    """Optional: ``simulate(record, t0, t1, A0)`` integrates the model with the record's wind."""
+
+    def simulate(self, record: Record, t0: float, t1: float, A0=None): ...
+
+
+@runtime_checkable
+class CampaignLevel(Protocol):
+    """Optional, campaign-level models only: ``curves(wind)`` (DESIGN 3.5)."""
+
+    def curves(self, wind) -> xr.Dataset: ...
+
+
+@runtime_checkable
+class Persistent(Protocol):
+    """Optional: ``save(path)`` and ``load(path)`` (a class method) to and from NetCDF."""
+
+    def save(self, path): ...
+
+    def load(self, path): ...
+
+
+@runtime_checkable
+class HasEquations(Protocol):
+    """Optional: pysindy-like ``equations()`` (list of str) and ``print()``."""
+
+    def equations(self, precision: int = 3) -> list[str]: ...
+
+
+class NotFittedError(ValueError, AttributeError):
+    """A fitted model's method was called before ``fit`` (scikit-learn's name)."""
+
+
+class ModelBase:
+    """scikit-learn conventions for models of the protocol.
+
+    Subclasses declare their parameters as keyword-only arguments of
+    ``__init__`` and store each as an attribute of the same name; fitted
+    attributes end in ``_``. This base derives ``get_params``,
+    ``set_params`` and ``__repr__`` from that signature and gives
+    ``print()`` on top of the subclass's ``equations()``.
+    """
+
+    #: A fitted attribute whose presence means "fitted" (subclasses override).
+    _fitted_attribute = "coef_"
+
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [p.name for p in sig.parameters.values() if p.kind is inspect.Parameter.KEYWORD_ONLY]
+
+    @classmethod
+    def _param_defaults(cls) -> dict:
+        sig = inspect.signature(cls.__init__)
+        return {p.name: p.default for p in sig.parameters.values() if p.kind is inspect.Parameter.KEYWORD_ONLY}
+
+    def get_params(self, deep: bool = True) -> dict:
+        """Constructor parameters by name (scikit-learn convention; ``deep`` is accepted and unused)."""
+        return {name: getattr(self, name) for name in self._param_names()}
+
+    def set_params(self, **params):
+        """Set constructor parameters by name; returns self. Unknown names raise ValueError."""
+        allowed = self._param_names()
+        for name, value in params.items():
+            if name not in allowed:
+                raise ValueError(f"unknown parameter {name!r} for {type(self).__name__}; allowed: {', '.join(allowed)}")
+            setattr(self, name, value)
+        return self
+
+    def __repr__(self) -> str:
+        defaults = self._param_defaults()
+        shown = []
+        for name, value in self.get_params().items():
+            default = defaults.get(name, inspect.Parameter.empty)
+            try:
+                same = bool(np.all(value == default)) and np.shape(value) == np.shape(default)
+            except (TypeError, ValueError):
+                same = repr(value) == repr(default)
+            if not same:
+                shown.append(f"{name}={value!r}")
+        return f"{type(self).__name__}({', '.join(shown)})"
+
+    @property
+    def is_fitted(self) -> bool:
+        """Whether ``fit`` has run (or the model was loaded)."""
+        return hasattr(self, self._fitted_attribute)
+
+    def _check_fitted(self) -> None:
+        if not self.is_fitted:
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet: call fit(records) or load(path) first")
+
+    def equations(self, precision: int = 3) -> list[str]:  # pragma: no cover - subclasses implement
+        """One string per equation (subclasses implement)."""
+        raise NotImplementedError
+
+    def print(self, precision: int = 3, file=None) -> None:
+        """Print :meth:`equations`, one per line (pysindy's ``print``)."""
+        for line in self.equations(precision=precision):
+            print(line, file=file)
+
+
+def section_names(n_sections: int) -> list[str]:
+    """Names of the sections' equations, ``["S1", ..., "S<n>"]``."""
+    return [f"S{k + 1}" for k in range(n_sections)]
+
+
+def as_record(item, index: int = 0) -> Record:
+    """A :class:`Record` from a record or a legacy ``(t, A, U, dA)`` tuple (event id ``"record<index>"``)."""
+    if isinstance(item, Record):
+        return item
+    try:
+        t, A, U, dA = item
+    except (TypeError, ValueError):
+        raise TypeError(f"record {index} must be a Record or a (t, A, U, dA) tuple; got {type(item).__name__}") from None
+    return Record(event_id=f"record{index}", t=t, A=A, U=U, dA=dA)
+
+
+def coef_order_contributions(A: np.ndarray, U: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """Order contributions of a model on the physical library.
+
+    Parameters
+    ----------
+    A, U : ndarray, shape (n, S), m and m/s
+    coef : ndarray, shape (S, 23 S) or (n, S, 23 S)
+        Coefficients on :func:`vivbench.core.terms.evaluate_library` (one model,
+        or one per sample); dA/dt in m/s.
+
+    Returns
+    -------
+    r : ndarray, shape (n, S, 4), m/s
+        r[:, k, i] = sum over the order-i columns of Theta * coef; NaN where A
+        or U is not finite or the coefficients are NaN.
+    """
+    theta = evaluate_library(A, U)
+    coef = np.asarray(coef, dtype=float)
+    S = A.shape[1]
+    if coef.shape[-2:] != (S, 23 * S) or coef.ndim not in (2, 3):
+        raise ValueError(f"coef must have shape ({S}, {23 * S}) or (n, {S}, {23 * S}); got {coef.shape}")
+    orders = np.tile(section_exponents()[:, 0], S)
+    r = np.empty(A.shape + (4,))
+    for i in range(4):  # four orders, each one matrix product over all samples
+        cols = orders == i
+        if coef.ndim == 2:
+            r[..., i] = theta[:, cols] @ coef[:, cols].T
+        else:
+            r[..., i] = np.einsum("nc,nkc->nk", theta[:, cols], coef[:, :, cols])
+    return r
+
+
+def _number(x: float, precision: int) -> str:
+    mant, _, exp = f"{x:.{max(precision - 1, 0)}e}".partition("e")
+    e = int(exp)
+    return mant if e == 0 else f"{mant}e{e}"
+
+
+def format_equations(coef: np.ndarray, feature_names: Sequence[str], lhs: Sequence[str],
+                     precision: int = 3) -> list[str]:
+    """pysindy-like equation strings, e.g. ``"dA1/dt = 1.20e-3 A1 - 4.00e-2 A1 U1^2"``.
+
+    Parameters
+    ----------
+    coef : ndarray, shape (S, p), physical coefficients
+    feature_names : sequence of str, length p
+    lhs : sequence of str, length S (e.g. ``"dA1/dt"``)
+    precision : int
+        Significant digits of each coefficient.
+
+    Returns
+    -------
+    list of str
+        Terms with a zero coefficient are omitted; an all-zero equation reads
+        ``"... = 0"``, one without a model (NaN) ``"... = nan"``.
+    """
+    coef = np.asarray(coef, dtype=float)
+    out = []
+    for name, row in zip(lhs, coef):
+        if not np.all(np.isfinite(row)):
+            out.append(f"{name} = nan")
+            continue
+        parts = []
+        for c, feat in zip(row, feature_names):
+            if c == 0:
+                continue
+            num = _number(abs(c), precision)
+            if not parts:
+                parts.append(("-" if c < 0 else "") + f"{num} {feat}")
+            else:
+                parts.append(("- " if c < 0 else "+ ") + f"{num} {feat}")
+        out.append(f"{name} = " + (" ".join(parts) if parts else "0"))
+    return out
+
+
+def simulate_windows(record: Record, coef: np.ndarray, window_start, window_end, *, t0: float | None = None,
+                     t1: float | None = None, A0=None, **kwargs) -> Simulation:
+    """Integrate piecewise-constant models over a record with :func:`vivbench.models.simulate.simulate_identified`.
+
+    Parameters
+    ----------
+    record : Record
+    coef : ndarray, shape (W, S, 23 S)
+        Physical coefficients of each window (W = 1 with one window spanning
+        the record for a time-invariant model).
+    window_start, window_end : ndarray, shape (W,), s
+        The window in force at a time is the fitted window with the nearest centre.
+    t0, t1 : float, s, optional
+        Span (snapped to the record's samples); default the windows' span.
+    A0 : array_like, shape (S,), m, optional
+        Initial amplitudes; default the record's A at t0.
+    **kwargs
+        ``u_interp``, ``bound_factor``, ``negative_tolerance``, ``clip`` of
+        :func:`~vivbench.models.simulate.simulate_identified`.
+
+    Returns
+    -------
+    Simulation
+        With S columns; ``A_meas`` is the record's A (not ``A0``).
+
+    Notes
+    -----
+    The integrator of :mod:`vivbench.models.simulate` works on three sections;
+    a model of fewer sections is padded with inert ones (zero A, zero dynamics)
+    that are dropped from the output.
+    """
+    coef = np.asarray(coef, dtype=float)
+    S = record.n_sections
+    Sp = max(S, 3)
+    W = coef.shape[0]
+    P = np.zeros((W, Sp, 23 * Sp))
+    P[:, :S, :23 * S] = coef
+    t = record.t
+    A = np.zeros((t.size, Sp))
+    U = np.ones((t.size, Sp))
+    A[:, :S] = record.A
+    U[:, :S] = record.U
+    start = np.asarray(window_start, dtype=float)
+    end = np.asarray(window_end, dtype=float)
+    fitted = np.all(np.isfinite(coef), axis=(1, 2))
+    t0 = float(start[fitted].min()) if t0 is None and fitted.any() else t0
+    t1 = float(min(end[fitted].max(), t[-1])) if t1 is None and fitted.any() else t1
+    if A0 is not None:
+        A0 = np.asarray(A0, dtype=float)
+        if A0.shape != (S,):
+            raise ValueError(f"A0 must have shape ({S},) (one amplitude per section, m); got {A0.shape}")
+        i0 = int(np.argmin(np.abs(t - float(t0)))) if t0 is not None else 0
+        A[i0, :S] = A0
+    ds = xr.Dataset(
+        {"A": (("time", "equation"), A), "U": (("time", "equation"), U),
+         "coef": (("window", "equation", "feature"), P),
+         "window_start": (("window",), start), "window_end": (("window",), end)},
+        coords={"time": t, "equation": section_names(Sp)},
+    )
+    sim = simulate_identified(ds, t0=t0, t1=t1, **kwargs)
+    i0 = int(np.searchsorted(t, sim.t[0]))
+    A_meas = record.A[i0:i0 + sim.t.size]
+    A_sim = sim.A_sim[:, :S]
+    return dataclasses.replace(sim, A_sim=A_sim, A_meas=A_meas, nmse=nmse(A_sim, A_meas))
