@@ -13,7 +13,7 @@ import xarray as xr
 import vivbench
 from vivbench.models.campaign import PooledSINDy
 from vivbench.preprocess.derivative import Derivative
-from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.io.result import read_result
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "with_campaign_model"]
 
@@ -72,12 +72,8 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     model = model or PooledSINDy()
     results = []
     for path in result_files:
-        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
-            if ds.attrs.get("format") != "vivbench-identify":
-                raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
-            names = ["A", "U", "dA", "segment", "window_start", "window_end"]
-            names += ["amplitude_snr"] if "amplitude_snr" in ds else []
-            results.append((str(path), ds[names].load(), dict(ds.attrs), [str(s) for s in ds["equation"].values]))
+        ds = read_result(path, ["A", "U", "dA", "segment", "window_start", "window_end"], optional=["amplitude_snr"])
+        results.append((str(path), ds, dict(ds.attrs), [str(s) for s in ds["equation"].values]))
     if not results:
         raise ValueError("no identification results to pool")
     sections = results[0][3]
