@@ -281,9 +281,11 @@ def _fake_result(path, event_id: str, seed: int):
     seg[(t > 390) & (t < 410)] = -1
     dA[seg < 0] = np.nan
     ws = np.arange(0.0, 750.0, 25.0)
-    ds = xr.Dataset({"A": (("time", "equation"), A), "U": (("time", "equation"), U), "dA": (("time", "equation"), dA),
-                     "segment": (("time",), seg), "window_start": (("window",), ws), "window_end": (("window",), ws + 50)},
-                    coords={"time": t, "equation": ["S1", "S2"]}, attrs={"format": "vivbench-identify", "event_id": event_id})
+    ds = xr.Dataset({"A": (("time", "section"), A), "U": (("time", "section"), U), "dA": (("time", "section"), dA),
+                     "segment": (("time",), seg.astype(np.int32)), "window_start": (("window",), ws),
+                     "window_end": (("window",), ws + 50)},
+                    coords={"time": t, "equation": ["S1", "S2"], "section": ["S1", "S2"], "window": np.arange(ws.size)},
+                    attrs={"format": "vivbench-identify", "format_version": 1, "event_id": event_id})
     ds.to_netcdf(path)
     return path
 

@@ -4,7 +4,9 @@ Results go to ``<event_id>.identify.nc`` (NetCDF-4): per window and equation
 the selected model in physical units, its AICc, RSS, threshold, regime and
 identifiability flag; per window the library's condition number; and the
 preprocessed series (A, U, dA/dt on the common grid) so that later stages
-(clustering, simulation, forecasting) need not preprocess again.
+(clustering, simulation, forecasting) need not preprocess again. The file
+format (variables, dims, units, version) is owned by :mod:`vivbench.io.result`
+and documented in ``docs/formats.md``.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import h5py
 import numpy as np
 import xarray as xr
 
@@ -30,9 +31,8 @@ from vivbench.regimes.window import label_windows
 from vivbench.preprocess.config import PreprocessConfig
 from vivbench.preprocess.wind import perpendicular_speed, wind_speed_direction
 from vivbench.preprocess.chain import preprocess_arrays
-from vivbench.io.event import event_arrays, read_event
-from vivbench.io.netcdf import write_netcdf_atomic
-from vivbench.io.result import result_path
+from vivbench.io.event import event_arrays, peek_event_id, read_event
+from vivbench.io.result import WINDOW_FIT_VARIABLES, build_result, write_result
 from vivbench.io.quality import check_acc_magnitude, check_wind_magnitude, check_wind_varies, despike
 from vivbench.core.errors import InputError
 
@@ -114,27 +114,15 @@ class IdentifyConfig:
         return json.dumps(dataclasses.asdict(self), sort_keys=True, default=float)
 
 
-_WINDOW_VARS = {
-    # name: (fitted attribute, dims, units, long name)
-    "coef": ("coef_", ("window", "equation", "feature"), "1/s * m^(1-i) (m/s)^(-j)", "selected model on the physical library A_l^i U_l^j"),
-    "threshold": ("threshold_", ("window", "equation"), "1", "STLSQ threshold of the selected model (standardised coefficients)"),
-    "aicc": ("aicc_", ("window", "equation"), "1", "AICc of the selected model"),
-    "rss": ("rss_", ("window", "equation"), "m^2/s^2", "residual sum of squares"),
-    "n_terms": ("n_terms_", ("window", "equation"), "1", "number of terms in the regression basis"),
-    "regime": ("regime_", ("window", "equation"), "1", "regime of the selected model (DESIGN 2.5); 0: no model"),
-    "identifiable": ("identifiable_", ("window", "equation"), "1", "every equally good competing model has the same regime, and the amplitude is above the noise floor (min_snr)"),
-    "regimes_seen": ("regimes_seen_", ("window", "equation"), "1", "bit mask of regimes among equally good models (bit k-1: regime k)"),
-    "n_equivalent": ("n_equivalent_", ("window", "equation"), "1", "equally good competing models found"),
-    "order_rms": ("order_rms_", ("window", "equation", "order"), "m/s", "RMS over the window of each order's contribution to dA/dt"),
-    "cond": ("cond_", ("window",), "1", "condition number of the window's regression library"),
-    "n_samples": ("n_samples_", ("window",), "1", "valid samples in the window"),
-}
+# Attribute of the fitted WindowedSINDy (or verdict of label_windows) behind each window variable of
+# the result; the variables' dims, units and meanings are the result format's (vivbench.io.result).
+_FITTED = {name: f"{name}_" for name in WINDOW_FIT_VARIABLES}
 
 
 def _empty_fit(n_sections: int) -> dict:
     p = 23 * n_sections
     shapes = {"coef": (0, n_sections, p), "order_rms": (0, n_sections, 4), "cond": (0,), "n_samples": (0,)}
-    return {name: np.zeros(shapes.get(name, (0, n_sections))) for name in _WINDOW_VARS}
+    return {name: np.zeros(shapes.get(name, (0, n_sections))) for name in WINDOW_FIT_VARIABLES}
 
 
 def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, source: str = "") -> xr.Dataset:
@@ -185,7 +173,7 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         verdict = label_windows(est, t, pre.A[sel], pre.U[sel], dA[sel], tau=config.tau, margin=config.aicc_margin,
                                 fit_tolerance=config.fit_tolerance)
         parts.append({name: verdict[name] if name in verdict else getattr(est, attr)
-                      for name, (attr, *_rest) in _WINDOW_VARS.items()})
+                      for name, attr in _FITTED.items()})
         if config.optimizer == "ensemble":
             parts[-1]["inclusion"] = est.inclusion_
         starts.append(est.window_start_)
@@ -194,42 +182,19 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     if not parts:
         longest = max((float(np.ptp(pre.t[pre.segment == s])) for s in np.unique(pre.segment[pre.segment >= 0])), default=0.0)
         raise InputError(f"no valid segment is as long as one window ({config.window:g} s); the longest is {longest:.0f} s")
-    fit = {name: np.concatenate([p[name] for p in parts], axis=0) for name in _WINDOW_VARS}
+    fit = {name: np.concatenate([p[name] for p in parts], axis=0) for name in WINDOW_FIT_VARIABLES}
     n_w = fit["cond"].shape[0]
     window_start, window_end = np.concatenate(starts), np.concatenate(ends)
     snr = window_amplitude_snr(pre.t, pre.A, window_start, window_end, pre.noise_std)
     if config.min_snr is not None:
         # Below the noise floor A is the envelope of noise: no regression can give its regime.
         fit["identifiable"] = fit["identifiable"] & ~(snr < config.min_snr)
-    data = {}
-    for name, (_attr, dims, units, long_name) in _WINDOW_VARS.items():
-        values = fit[name]
-        if name in ("regime", "regimes_seen"):
-            values = values.astype(np.int8)
-        elif name == "identifiable":
-            values = values.astype(np.int8)  # NetCDF has no boolean type
-        data[name] = (dims, values, {"units": units, "long_name": long_name})
-    if config.optimizer == "ensemble":
-        data["inclusion"] = (("window", "equation", "feature"), np.concatenate([p["inclusion"] for p in parts]),
-                             {"units": "1", "long_name": "inclusion probability of each regression-basis term over "
-                              "the bootstrap models (ensemble optimiser)"})
-    data["amplitude_snr"] = (("window", "equation"), snr, {"units": "1", "long_name": "mean amplitude over the window "
-                             "divided by the accelerometer noise floor in the vibration band (NaN: floor unknown)"})
-    data["window_start"] = (("window",), window_start, {"units": "s", "long_name": "window start since event start"})
-    data["window_end"] = (("window",), window_end, {"units": "s", "long_name": "window end since event start"})
-    data["window_segment"] = (("window",), np.concatenate(segs).astype(np.int32), {"units": "1", "long_name": "preprocessing segment of the window"})
-    data["A"] = (("time", "section"), pre.A, {"units": "m", "long_name": "vibration amplitude (Hilbert envelope)"})
-    data["U"] = (("time", "section"), pre.U, {"units": "m/s", "long_name": "mean wind speed perpendicular to the span"})
-    data["dA"] = (("time", "section"), dA, {"units": "m/s", "long_name": f"dA/dt ({config.derivative.method})"})
-    data["segment"] = (("time",), pre.segment.astype(np.int32), {"units": "1", "long_name": "contiguous segment (-1: excluded)"})
     quality["quality_segments"] = int(pre.n_segments)
     quality["quality_windows"] = int(n_w)
     quality["quality_windows_without_model"] = int(np.sum(np.any(fit["regime"] == 0, axis=1)))
     ok = fit["regime"] > 0
     coverage = float(fit["identifiable"][ok].mean()) if ok.any() else float("nan")
     attrs = {
-        "format": "vivbench-identify",
-        "format_version": 1,
         "event_id": str(tree.attrs["event_id"]),
         "source_file": source,
         "event_source": str(tree.attrs["source"]),
@@ -245,15 +210,11 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     # Repairs made when the event was imported travel with the result; this run's own come after.
     attrs.update({k: v for k, v in tree.attrs.items() if str(k).startswith("quality_") and k not in quality})
     attrs.update(quality)
-    coords = {
-        "window": np.arange(n_w),
-        "equation": sections,
-        "feature": est.feature_names_ if n_w else [],
-        "order": np.arange(4),
-        "time": ("time", pre.t, {"units": "s", "long_name": "time since event start"}),
-        "section": sections,
-    }
-    return xr.Dataset(data, coords=coords, attrs=attrs)
+    return build_result(
+        fit=fit, window_start=window_start, window_end=window_end, window_segment=np.concatenate(segs),
+        amplitude_snr=snr, time=pre.t, A=pre.A, U=pre.U, dA=dA, segment=pre.segment, sections=sections,
+        features=est.feature_names_ if n_w else [], derivative_method=config.derivative.method, attrs=attrs,
+        inclusion=np.concatenate([p["inclusion"] for p in parts]) if config.optimizer == "ensemble" else None)
 
 
 # Resolution floors of the spike rule's MAD: 0.05 m/s for sonic anemometers (records are
@@ -304,19 +265,7 @@ def _data_quality(arr: dict, span_azimuth_deg: float, config: IdentifyConfig) ->
 def _identify_one(path: str, out_dir: str, config: IdentifyConfig) -> str:
     tree = read_event(path)
     ds = identify_event(tree, config, source=Path(path).name)
-    return str(write_netcdf_atomic(ds, result_path(out_dir, ds.attrs["event_id"])))
-
-
-def _peek_event_id(path) -> str | None:
-    """The root attribute event_id, read cheaply; None when unreadable (read_event then says why)."""
-    try:
-        with h5py.File(path, "r") as f:
-            eid = f.attrs.get("event_id")
-    except Exception:  # noqa: BLE001 - any failure is reported by read_event later
-        return None
-    if isinstance(eid, bytes):
-        eid = eid.decode("utf-8", "replace")
-    return eid if isinstance(eid, str) else None
+    return str(write_result(ds, out_dir))
 
 
 def _file_size(path) -> int:
@@ -355,7 +304,7 @@ def identify_files(paths: Sequence[str | Path], out_dir: str | Path, config: Ide
     # Two events with one id would write one result file over the other.
     first_with: dict[str, str] = {}
     for p in paths:
-        eid = _peek_event_id(p)
+        eid = peek_event_id(p)
         if eid is not None and eid in first_with:
             failures[str(p)] = (f"{p}: event_id {eid!r} is also that of {first_with[eid]}; their results would "
                                 f"overwrite each other (give one of them another event_id)")

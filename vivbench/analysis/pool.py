@@ -14,7 +14,7 @@ import vivbench
 from vivbench.core.record import Record
 from vivbench.models.campaign import PooledSINDy
 from vivbench.preprocess.derivative import Derivative
-from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.io.result import read_result
 from vivbench.core.errors import InputError
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results", "with_campaign_model"]
@@ -68,19 +68,13 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
 
     Raises
     ------
-    ValueError
+    InputError
         One line naming a file that is not an identification result.
     """
     out = []
     for path in paths:
-        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
-            if ds.attrs.get("format") != "vivbench-identify":
-                raise ValueError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
-            missing = [v for v in ("A", "U", "dA", "segment") if v not in ds]
-            missing += [] if "event_id" in ds.attrs else ["the event_id attribute"]
-            if missing:
-                raise ValueError(f"{path}: identification result lacks {', '.join(missing)}")
-            out.append(_result_record(ds[["A", "U", "dA", "segment"]].load(), ds.attrs, derivative))
+        ds = read_result(path, ["A", "U", "dA", "segment"])
+        out.append(_result_record(ds, ds.attrs, derivative))
     return out
 
 
@@ -115,12 +109,8 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     model = model or PooledSINDy()
     results = []
     for path in result_files:
-        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
-            if ds.attrs.get("format") != "vivbench-identify":
-                raise InputError(f"{path}: not an identification result (format attribute {ds.attrs.get('format')!r})")
-            names = ["A", "U", "dA", "segment", "window_start", "window_end"]
-            names += ["amplitude_snr"] if "amplitude_snr" in ds else []
-            results.append((str(path), ds[names].load(), dict(ds.attrs), [str(s) for s in ds["equation"].values]))
+        ds = read_result(path, ["A", "U", "dA", "segment", "window_start", "window_end"], optional=["amplitude_snr"])
+        results.append((str(path), ds, dict(ds.attrs), [str(s) for s in ds["equation"].values]))
     if not results:
         raise InputError("no identification results to pool")
     sections = results[0][3]

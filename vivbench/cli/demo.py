@@ -19,7 +19,6 @@ from pathlib import Path
 
 from vivbench.cli.common import DEFAULT_WORKERS, duration, write_command
 from vivbench.core.errors import InputError
-from vivbench.io.netcdf import NETCDF_ENGINE
 
 
 
@@ -82,10 +81,10 @@ def run(args) -> int:
     t0 = _read_json(out / "forecast" / "summary.json").get("t0_s")
     window = []
     if isinstance(t0, (int, float)):
-        import xarray as xr
+        from vivbench.io.result import read_result
 
-        with xr.open_dataset(result, engine=NETCDF_ENGINE) as ds:
-            lo, hi = float(ds["time"].values[0]), float(ds["time"].values[-1])
+        grid = read_result(result, variables=())["time"].values
+        lo, hi = float(grid[0]), float(grid[-1])
         window = ["--t0", f"{max(lo, t0 - 500.0):g}", "--t1", f"{min(hi, t0 + 300.0):g}"]
     _step(["refit", str(result), "--out", str(out / "refit"), "--event", str(campaign / f"{event_id}.nc"),
            "--terms", REFIT_TERMS, *window], out / "refit", failures)

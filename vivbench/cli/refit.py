@@ -11,28 +11,15 @@ from vivbench.core.errors import InputError
 
 if TYPE_CHECKING:
     import numpy as np
-from vivbench.io.netcdf import NETCDF_ENGINE
 
 _CSV_COLUMNS = ("equation", "feature", "in_support", "sindy", "lsq", "refit", "truth")
 _ORDER_COLUMNS = ("equation", "order", "sindy", "lsq", "refit", "truth")
 
 
 def _load_result(path: str):
-    import xarray as xr
+    from vivbench.io.result import read_result
 
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{path}: no such file")
-    try:
-        ds = xr.load_dataset(p, engine=NETCDF_ENGINE)
-    except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
-        raise InputError(f"{path}: cannot be read as an identification result ({type(exc).__name__})") from None
-    if ds.attrs.get("format") != "vivbench-identify":
-        raise InputError(f"{path}: not an identification result (format attribute is {ds.attrs.get('format')!r})")
-    missing = [v for v in ("coef", "window_start", "window_end", "A", "U") if v not in ds]
-    if missing:
-        raise InputError(f"{path}: missing variables {missing}")
-    return ds
+    return read_result(path)
 
 
 def _truth_coef(path: str, event_id: str):

@@ -1,4 +1,4 @@
-"""Definitions every stage shares: library terms, the regime rule (DESIGN 2.5), TOML and parallel helpers, the user-input error."""
+"""Definitions every stage shares: library terms, the regime rule (DESIGN 2.5), TOML and parallel helpers."""
 
 from vivbench.core.terms import (
     A_POWERS,
@@ -11,12 +11,12 @@ from vivbench.core.terms import (
 )
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU, classify_regime, order_rms, regime_rule
-from vivbench.core.errors import InputError
+from vivbench.core.errors import InputError, error_line
 from vivbench.core.toml import load_toml
 from vivbench.core.parallel import Outcome, run_tasks, parse_scheduler
 
 __all__ = [
     "A_POWERS", "U_POWERS", "SECTIONS", "section_exponents", "feature_exponents", "feature_names",
-    "evaluate_library", "Record", "DEFAULT_TAU", "classify_regime", "order_rms", "regime_rule", "load_toml", "Outcome",
-    "run_tasks", "parse_scheduler", "InputError",
+    "evaluate_library", "Record", "DEFAULT_TAU", "classify_regime", "order_rms", "regime_rule", "InputError",
+    "error_line", "load_toml", "Outcome", "run_tasks", "parse_scheduler",
 ]

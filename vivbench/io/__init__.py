@@ -13,8 +13,26 @@ from vivbench.io.event import (
     read_event,
     event_arrays,
     list_events,
+    EventSummary,
+    read_event_summary,
+    peek_event_id,
 )
-from vivbench.io.result import list_results, result_path, read_result
+from vivbench.io.result import (
+    FEATURES_PER_SECTION,
+    VariableSpec,
+    VARIABLES,
+    COORDINATES,
+    ATTRIBUTES,
+    WINDOW_FIT_VARIABLES,
+    ResultFormatError,
+    build_result,
+    write_result,
+    read_result,
+    list_results,
+    result_path,
+    markdown_table,
+    markdown_attributes,
+)
 from vivbench.io.model_file import ModelFileError, read_model_dataset
 from vivbench.io.campaign_model import (
     POOLED_NAME,
@@ -26,7 +44,12 @@ from vivbench.io.campaign_model import (
     write_campaign_model,
     read_campaign_model,
 )
-from vivbench.io.window_model import WINDOW_MODEL_FORMAT, WINDOW_MODEL_VERSION, write_window_model, read_window_model
+from vivbench.io.window_model import (
+    WINDOW_MODEL_FORMAT,
+    WINDOW_MODEL_VERSION,
+    write_window_model,
+    read_window_model,
+)
 from vivbench.io.quality import (
     G,
     MAX_ACC_RMS,
@@ -44,10 +67,13 @@ from vivbench.io.fieldimport import import_event, load_mapping, export_csv, expo
 __all__ = [
     "NETCDF_ENGINE", "atomic_path", "write_netcdf_atomic", "EventFormatError", "FORMAT", "FORMAT_VERSION",
     "NOMINAL_RATES", "COEF_UNITS", "build_event", "validate_event", "write_event", "read_event",
-    "event_arrays", "list_events", "list_results", "result_path", "read_result", "POOLED_NAME",
-    "write_pooled", "ModelFileError", "read_model_dataset", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT",
-    "CAMPAIGN_MODEL_VERSION", "read_pooled", "write_campaign_model", "read_campaign_model", "WINDOW_MODEL_FORMAT",
-    "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED", "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS",
-    "despike", "check_acc_magnitude", "check_wind_magnitude", "check_wind_varies", "import_event",
-    "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
+    "event_arrays", "list_events", "EventSummary", "read_event_summary", "peek_event_id",
+    "FEATURES_PER_SECTION", "VariableSpec", "VARIABLES", "COORDINATES", "ATTRIBUTES", "WINDOW_FIT_VARIABLES",
+    "ResultFormatError", "build_result", "write_result", "read_result", "list_results", "result_path",
+    "markdown_table", "markdown_attributes", "ModelFileError", "read_model_dataset", "POOLED_NAME",
+    "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "write_pooled", "read_pooled",
+    "write_campaign_model", "read_campaign_model", "WINDOW_MODEL_FORMAT", "WINDOW_MODEL_VERSION",
+    "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED", "MIN_WIND_STD",
+    "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude", "check_wind_varies",
+    "import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
 ]

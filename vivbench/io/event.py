@@ -32,6 +32,7 @@ import math
 import numbers
 import re
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from datetime import datetime, timedelta
 from pathlib import Path
 
@@ -42,7 +43,8 @@ import xarray as xr
 from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
 from vivbench.core.errors import InputError
 
-__all__ = ["EventFormatError", "FORMAT", "FORMAT_VERSION", "NOMINAL_RATES", "COEF_UNITS", "build_event", "validate_event", "write_event", "read_event", "event_arrays", "list_events"]
+__all__ = ["EventFormatError", "FORMAT", "FORMAT_VERSION", "NOMINAL_RATES", "COEF_UNITS", "build_event", "validate_event", "write_event", "read_event", "event_arrays", "list_events",
+           "EventSummary", "read_event_summary", "peek_event_id"]
 
 FORMAT = "vivbench-event"
 FORMAT_VERSION = 1
@@ -379,6 +381,9 @@ def _check_root_attrs(attrs) -> None:
     version = attrs["format_version"]
     if not isinstance(version, numbers.Integral) or isinstance(version, (bool, np.bool_)):
         raise _Breach(f"root attribute format_version is {version!r}, expected the integer {FORMAT_VERSION}")
+    if version > FORMAT_VERSION:
+        raise _Breach(f"format_version {version} is not supported: it is newer than this vivbench reads "
+                      f"(up to version {FORMAT_VERSION}); upgrade vivbench")
     if version != FORMAT_VERSION:
         raise _Breach(f"format_version {version} is not supported; this reader knows version {FORMAT_VERSION}")
     event_id = attrs["event_id"]
@@ -621,6 +626,102 @@ def _check_stored_shapes(path: Path) -> None:
                         f"{ds.name} has shape {ds.shape}: {ds.shape[axis]} entries along "
                         f"{scale.name.rsplit('/', 1)[-1]}, but {scale.name} has {scale.shape[0]}"
                     )
+
+
+@dataclass(frozen=True)
+class EventSummary:
+    """The small parts of an event file, read without its sensor records.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The file.
+    attrs : dict
+        Root attributes (format, format_version, event_id, start_time, source,
+        span_azimuth_deg and any extra ones).
+    truth : xarray.Dataset or None
+        The ``/truth`` group in memory (synthetic events), None for field events.
+    accel_time : numpy.ndarray, shape (n_acc,), s
+        Accelerometer times since ``start_time``.
+    """
+
+    path: Path
+    attrs: dict
+    truth: xr.Dataset | None
+    accel_time: np.ndarray
+
+    @property
+    def duration_s(self) -> float:
+        """Span of the accelerometer record, s (0 when it is empty)."""
+        t = self.accel_time
+        return float(t[-1] - t[0]) if t.size else 0.0
+
+
+def read_event_summary(path) -> EventSummary:
+    """Read an event's root attributes, ``/truth`` and accelerometer times, not its sensor records.
+
+    The root attributes are checked (format, a supported ``format_version``,
+    event_id, start_time, source, span azimuth); the groups are not validated
+    as :func:`read_event` does. The 32 Hz wind and 50 Hz acceleration values
+    stay on disk, which makes this cheap for reports over many events.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    EventSummary
+
+    Raises
+    ------
+    EventFormatError
+        Missing or unreadable file, another format, a newer format_version or
+        a broken root attribute; the message starts with the file name.
+    """
+    path = Path(path)
+    name = str(path)
+    if not path.is_file():
+        raise EventFormatError(name, "no such event file")
+    try:
+        with xr.open_datatree(path, engine=NETCDF_ENGINE, decode_times=False, decode_timedelta=False) as tree:
+            attrs = dict(tree.attrs)
+            _check_root_attrs(attrs)
+            truth = tree["truth"].to_dataset().load() if "truth" in tree.children else None
+            if "accel" not in tree.children:
+                raise _Breach("missing group /accel")
+            accel_time = np.asarray(tree["accel"]["time"].values)
+    except _Breach as breach:
+        raise EventFormatError(name, str(breach)) from None
+    except Exception as exc:  # noqa: BLE001 - any reader failure means "not an event file"
+        raise EventFormatError(name, f"cannot be read as NetCDF-4/HDF5 ({type(exc).__name__}: {exc})") from exc
+    return EventSummary(path=path, attrs=attrs, truth=truth, accel_time=accel_time)
+
+
+def peek_event_id(path) -> str | None:
+    """The root attribute ``event_id`` of an event file, read cheaply (HDF5 attributes only).
+
+    Nothing is validated: use it to plan work (say, to find two files with one
+    id), then :func:`read_event` to read.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    str or None
+        None when the file cannot be opened or has no string ``event_id``
+        (:func:`read_event` then says why).
+    """
+    try:
+        with h5py.File(path, "r") as f:
+            eid = f.attrs.get("event_id")
+    except Exception:  # noqa: BLE001 - any failure is reported by read_event later
+        return None
+    if isinstance(eid, bytes):
+        eid = eid.decode("utf-8", "replace")
+    return eid if isinstance(eid, str) else None
 
 
 # ------------------------------------------------------------------------- helpers

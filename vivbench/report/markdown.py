@@ -28,7 +28,8 @@ import vivbench
 from vivbench.io.campaign_model import POOLED_NAME
 from vivbench.analysis.pool import with_campaign_model
 from vivbench.io.netcdf import NETCDF_ENGINE, atomic_path
-from vivbench.io.event import list_events, read_event
+from vivbench.io.event import list_events, read_event, read_event_summary
+from vivbench.io.result import read_result
 from vivbench.core.errors import InputError
 
 __all__ = ["EXTRA_STEPS", "write_report"]
@@ -111,29 +112,18 @@ def _pairs(campaign_dir: Path, results_dir: Path) -> tuple[list[tuple[str, Path,
     return pairs, missing
 
 
-def _load_result(path: Path) -> xr.Dataset:
-    with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
-        return ds.load()
-
-
 def _event_info(eid: str, event_path: Path, result_path: Path) -> dict:
     """What the report needs of one event, read once: attributes, truth, duration, seed and the result.
 
     Only the small groups are loaded (the 32 Hz and 50 Hz records stay on disk).
     """
-    try:
-        with xr.open_datatree(event_path, engine=NETCDF_ENGINE, decode_times=False) as tree:
-            attrs = dict(tree.attrs)
-            truth = tree["truth"].to_dataset().load() if "truth" in tree.children else None
-            t_acc = tree["accel"]["time"].values
-    except Exception as exc:  # noqa: BLE001 - any reader failure: not an event file
-        raise InputError(f"{event_path}: cannot be read as an event file ({type(exc).__name__}: {exc})") from exc
+    summary = read_event_summary(event_path)
+    truth = summary.truth
     seed = None
     if truth is not None and "config_json" in truth.attrs:
         seed = json.loads(truth.attrs["config_json"]).get("seed", {}).get("campaign_seed")
-    return {"event_id": eid, "event": event_path, "result": result_path, "attrs": attrs, "truth": truth,
-            "duration": float(t_acc[-1] - t_acc[0]) if t_acc.size else 0.0, "seed": seed,
-            "res": _load_result(result_path)}
+    return {"event_id": eid, "event": event_path, "result": result_path, "attrs": summary.attrs, "truth": truth,
+            "duration": summary.duration_s, "seed": seed, "res": read_result(result_path)}
 
 
 def _catalogue(campaign_dir: Path) -> dict[str, dict]:

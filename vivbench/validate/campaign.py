@@ -46,18 +46,6 @@ _NOTES = (
 )
 
 
-def _open_result(path: Path) -> xr.Dataset:
-    try:
-        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
-            ds = ds.load()
-    except Exception as exc:  # noqa: BLE001 - any reader failure means "not a result file"
-        raise InputError(f"{path}: cannot be read as an identification result ({type(exc).__name__}: {exc})") from exc
-    missing = [v for v in ("coef", "regime", "identifiable", "window_start", "window_end", "A", "U") if v not in ds]
-    if ds.attrs.get("format") != "vivbench-identify" or missing:
-        raise InputError(f"{path}: not an identification result (format {ds.attrs.get('format')!r}, missing {missing})")
-    return ds
-
-
 def read_cluster_labels(path) -> list[dict]:
     """Rows of ``cluster_labels.csv`` (see ``vivbench cluster``), typed.
 
@@ -190,7 +178,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     for d, what in ((campaign_dir, "campaign"), (results_dir, "results")):
         if not d.is_dir():
             raise InputError(f"{d}: no such {what} directory")
-    from vivbench.io.result import list_results
+    from vivbench.io.result import list_results, read_result
 
     result_files = list_results(results_dir)
     pairs = []
@@ -220,7 +208,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
             skipped[str(ep)] = "no /truth group (field data): nothing to validate against"
             continue
         truth = tree["truth"].ds
-        res = _open_result(rp)
+        res = read_result(rp)
         start, end = res["window_start"].values, res["window_end"].values
         reg = res["regime"].values.astype(int)
         tru = truth_window_regimes(truth, start, end, tau=tau).astype(int)

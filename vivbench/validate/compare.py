@@ -329,9 +329,8 @@ def _run_cell_reported(task: dict) -> dict:
 def _run_cell(task: dict) -> dict:
     """Identify one cell's campaign with its settings and score it; returns the metrics."""
     from vivbench.analysis.identify import identify_event
-    from vivbench.io.result import result_path
+    from vivbench.io.result import write_result
     from vivbench.io.event import read_event
-    from vivbench.io.netcdf import write_netcdf_atomic
     from vivbench.validate.recovery import campaign_recovery
 
     cell, config = task["cell"], task["config"]
@@ -344,7 +343,7 @@ def _run_cell(task: dict) -> dict:
         reg = ds["regime"].values
         no_model += int(np.sum(reg == 0))
         total += reg.size
-        results.append(write_netcdf_atomic(ds, result_path(out, ds.attrs["event_id"])))
+        results.append(write_result(ds, out))
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     scores = campaign_recovery(task["files"], results, active_share=config.active_share)
     return {

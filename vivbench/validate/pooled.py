@@ -33,6 +33,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     """
     from vivbench.analysis.pool import with_campaign_model
     from vivbench.io.event import read_event
+    from vivbench.io.result import read_result
 
     with xr.open_dataset(pooled_file, engine=NETCDF_ENGINE) as ds:
         pooled = ds.load()
@@ -42,8 +43,8 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         truths[str(tree.attrs["event_id"])] = tree["truth"].ds
     results = {}
     for path in result_files:
-        with xr.open_dataset(path, engine=NETCDF_ENGINE) as ds:
-            results[str(ds.attrs["event_id"])] = ds.load()
+        ds = read_result(path)
+        results[str(ds.attrs["event_id"])] = ds
     event_of = pooled["event_id"].values.astype(str)
     regimes, truths_w, flags, errs, errs_active = [], [], [], [], []
     for event_id in dict.fromkeys(event_of):

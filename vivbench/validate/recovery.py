@@ -12,7 +12,6 @@ import numpy as np
 import xarray as xr
 
 from vivbench.core.terms import evaluate_library
-from vivbench.io.netcdf import NETCDF_ENGINE
 from vivbench.regimes.truth import truth_window_regimes
 
 __all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
@@ -140,12 +139,12 @@ def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -
     events : list of dict, the same scores per event, in the order of the files
     """
     from vivbench.io.event import read_event
+    from vivbench.io.result import read_result
 
     parts = []
     for ev_path, res_path in zip(event_files, result_files):
         truth = read_event(ev_path)["truth"].ds
-        with xr.open_dataset(res_path, engine=NETCDF_ENGINE) as res:
-            res = res.load()
+        res = read_result(res_path)
         start, end = res["window_start"].values, res["window_end"].values
         e, active = window_rhs_errors(res, truth["coef"].values, truth["r"].values, active_share=active_share)
         parts.append({"regime": res["regime"].values, "truth": truth_window_regimes(truth, start, end),
