@@ -129,8 +129,8 @@ def load_mapping(path) -> dict:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{name}: not valid TOML ({exc})") from None
 
-    def bad(problem: str) -> ValueError:
-        return ValueError(f"{name}: {' '.join(problem.split())}")
+    def bad(problem: str) -> InputError:
+        return InputError(f"{name}: {' '.join(problem.split())}")
 
     unknown = sorted(set(raw) - set(_ROOT_KEYS))
     if unknown:
@@ -253,9 +253,9 @@ class _Table:
         except Exception as exc:  # noqa: BLE001 - any reader failure: not a file of this kind
             raise InputError(f"{self.name}: cannot be read as {self.kind.upper()} ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
 
-    def _missing(self, column: str) -> ValueError:
+    def _missing(self, column: str) -> InputError:
         kind = "column" if self.kind == "csv" else "variable"
-        return ValueError(f"{self.name}: no {kind} {column!r}; it has {self.names[:20]}")
+        return InputError(f"{self.name}: no {kind} {column!r}; it has {self.names[:20]}")
 
     def values(self, column: str, index: int | None = None) -> np.ndarray:
         if column not in self.names:
