@@ -38,6 +38,7 @@ def _fmt(x):
 
 def _choose_t0(args, result):
     """t0 from --t0, else the truth's regime-4 run (--campaign), else the measured plateau."""
+    from vivbench.core.terms import reference_section
     from vivbench.validate import measured_plateau, truth_plateau
 
     if args.t0 is not None:
@@ -52,7 +53,8 @@ def _choose_t0(args, result):
             if p is not None:
                 return p.t0, f"truth regime-4 run {p.start:.0f}-{p.end:.0f} s"
     p = measured_plateau(result)
-    return p.t0, f"measured plateau {p.start:.0f}-{p.end:.0f} s (A2 >= 0.8 max)"
+    ref = reference_section(result["A"].shape[1])
+    return p.t0, f"measured plateau {p.start:.0f}-{p.end:.0f} s (A{ref + 1} >= 0.8 max)"
 
 
 def _truth_growth(args, result, t0):
@@ -69,22 +71,29 @@ def _truth_growth(args, result, t0):
     return float(np.linalg.eigvals(J).real.max())
 
 
-def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None):
+# One colour per section (tab:red is the campaign model's); more sections cycle through them.
+_SECTION_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:gray",
+                    "tab:olive", "tab:cyan")
+
+
+def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None, ref=1, sections=("S1", "S2", "S3")):
+    """Whole-event simulation (every section) and the forecasts at section ``ref`` (index into ``sections``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, (ax0, ax1) = plt.subplots(2, 1, figsize=(8, 7))
-    colors = ("tab:blue", "tab:orange", "tab:green")
-    for s in range(3):
+    name = sections[ref]
+    for s in range(sim.A_sim.shape[1]):
         ax0.plot(sim.t, sim.A_meas[:, s], color="0.6", lw=1.0, label="measured" if s == 0 else None)
-        ax0.plot(sim.t, sim.A_sim[:, s], color=colors[s], lw=1.0, label=f"simulated S{s + 1}")
+        ax0.plot(sim.t, sim.A_sim[:, s], color=_SECTION_COLOURS[s % len(_SECTION_COLOURS)], lw=1.0,
+                 label=f"simulated {sections[s]}")
     if sim.stopped:
         ax0.axvline(sim.stopped_at, color="k", ls=":", lw=1, label=f"stopped at {sim.stopped_at:.0f} s")
     if campaign is not None:
-        ax0.plot(campaign[0].t, campaign[0].A_sim[:, 1], color="tab:red", lw=1.0, ls="--",
-                 label=f"campaign model S2, NMSE {campaign[0].nmse[1]:.3g}")
+        ax0.plot(campaign[0].t, campaign[0].A_sim[:, ref], color="tab:red", lw=1.0, ls="--",
+                 label=f"campaign model {name}, NMSE {campaign[0].nmse[ref]:.3g}")
     ax0.axvspan(t0, t0 + horizon, color="0.9", zorder=0)
     ax0.set_title(f"{event_id}: whole event with the time-varying window models"
                   + (" and the campaign model" if campaign is not None else ""))
@@ -92,26 +101,26 @@ def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None):
     ax0.set_ylabel("amplitude A (m)")
     ax0.legend(loc="best", fontsize=7)
     first = fcs[0][1]
-    ax1.plot(first.t, first.A_meas[:, 1], color="k", lw=1.5, label="measured S2")
+    ax1.plot(first.t, first.A_meas[:, ref], color="k", lw=1.5, label=f"measured {name}")
     cmap = plt.get_cmap("viridis")
     for n, (d, fc) in enumerate(fcs):
         c = cmap(n / max(len(fcs) - 1, 1))
-        label = f"d = {d:g} s, NMSE {fc.nmse[1]:.3g}" + (f" (stopped {fc.stopped_at:.0f} s)" if fc.stopped else "")
-        ax1.plot(fc.t, fc.A_sim[:, 1], color=c, lw=1.0, label=label)
+        label = f"d = {d:g} s, NMSE {fc.nmse[ref]:.3g}" + (f" (stopped {fc.stopped_at:.0f} s)" if fc.stopped else "")
+        ax1.plot(fc.t, fc.A_sim[:, ref], color=c, lw=1.0, label=label)
         if fc.stopped:
-            last = np.flatnonzero(np.isfinite(fc.A_sim[:, 1]))
+            last = np.flatnonzero(np.isfinite(fc.A_sim[:, ref]))
             if last.size:
-                ax1.plot(fc.t[last[-1]], fc.A_sim[last[-1], 1], "x", color=c, ms=8)
+                ax1.plot(fc.t[last[-1]], fc.A_sim[last[-1], ref], "x", color=c, ms=8)
     if campaign is not None:
         cf = campaign[1]
-        ax1.plot(cf.t, cf.A_sim[:, 1], color="tab:red", lw=1.2, ls="--",
-                 label=f"campaign model (vivbench pool), NMSE {cf.nmse[1]:.3g}" + (" (stopped)" if cf.stopped else ""))
-    lo, hi = np.nanmin(first.A_meas[:, 1]), np.nanmax(first.A_meas[:, 1])
+        ax1.plot(cf.t, cf.A_sim[:, ref], color="tab:red", lw=1.2, ls="--",
+                 label=f"campaign model (vivbench pool), NMSE {cf.nmse[ref]:.3g}" + (" (stopped)" if cf.stopped else ""))
+    lo, hi = np.nanmin(first.A_meas[:, ref]), np.nanmax(first.A_meas[:, ref])
     pad = 0.5 * (hi - lo) + 1e-6
     ax1.set_ylim(lo - pad, hi + pad)  # forecasts that leave this range were stopped or are off scale
     ax1.set_title(f"forecasts from t0 = {t0:.0f} s with fixed coefficients (mean over [t0, t0 + d])")
     ax1.set_xlabel("time since event start (s)")
-    ax1.set_ylabel("amplitude A2 (m)")
+    ax1.set_ylabel(f"amplitude A{ref + 1} (m)")
     ax1.legend(loc="best", fontsize=7)
     fig.tight_layout()
     fig.savefig(path, format="png", metadata={"Software": None})
@@ -127,6 +136,7 @@ def run(args) -> int:
     from vivbench.analysis.pool import with_campaign_model
     from vivbench.models.simulate import model_jacobian
     from vivbench.io.netcdf import atomic_path
+    from vivbench.core.terms import reference_section
 
     result = read_result(args.result)
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))
@@ -138,6 +148,9 @@ def run(args) -> int:
         raise InputError(f"{args.result}: t0 = {t0:g} s lies outside the record (0-{t_end:.0f} s)")
     horizon = min(float(args.horizon), t_end - t0)
     sections = [str(s) for s in result["equation"].values]
+    # headline numbers (summary keys, printout, lower panel) at the middle section: S2 of three
+    ref = reference_section(len(sections))
+    key = sections[ref]
     i0 = int(np.argmin(np.abs(result["time"].values - t0)))
     A0, U0 = result["A"].values[i0], result["U"].values[i0]
 
@@ -150,7 +163,7 @@ def run(args) -> int:
                          "stopped": sim.stopped, "stopped_at_s": sim.stopped_at, "covered": sim.covered,
                          "n_windows": int(np.unique(sim.windows).size), "growth_rate_per_s": None, "reason": sim.reason})
         tag = "" if clip == "none" else f"_clip_{clip}"
-        summary[f"simulation_nmse_S2{tag}"] = float(sim.nmse[1])
+        summary[f"simulation_nmse_{key}{tag}"] = float(sim.nmse[ref])
         summary[f"simulation_covered{tag}"] = sim.covered
         if clip == "none":
             whole = sim
@@ -161,7 +174,7 @@ def run(args) -> int:
                 rows.append({"kind": "forecast", "clip": clip, "d_s": d, "section": name, "nmse": fc.nmse[s],
                              "stopped": fc.stopped, "stopped_at_s": fc.stopped_at, "covered": fc.covered,
                              "n_windows": int(fc.windows.size), "growth_rate_per_s": growth, "reason": fc.reason})
-            summary[f"nmse_S2_d{d:g}{tag}"] = float(fc.nmse[1])
+            summary[f"nmse_{key}_d{d:g}{tag}"] = float(fc.nmse[ref])
             summary[f"covered_d{d:g}{tag}"] = fc.covered
             if clip == "none":
                 summary[f"growth_rate_per_s_d{d:g}"] = growth
@@ -181,15 +194,15 @@ def run(args) -> int:
                 rows.append({"kind": kind, "clip": "none", "d_s": "", "section": name, "nmse": run_.nmse[s],
                              "stopped": run_.stopped, "stopped_at_s": run_.stopped_at, "covered": run_.covered,
                              "n_windows": 1, "growth_rate_per_s": None, "reason": run_.reason})
-        summary["campaign_model_simulation_nmse_S2"] = float(csim.nmse[1])
-        summary["campaign_model_forecast_nmse_S2"] = float(cfc.nmse[1])
+        summary[f"campaign_model_simulation_nmse_{key}"] = float(csim.nmse[ref])
+        summary[f"campaign_model_forecast_nmse_{key}"] = float(cfc.nmse[ref])
         summary["campaign_model_forecast_stopped"] = bool(cfc.stopped)
         campaign = (csim, cfc)
     truth_growth = _truth_growth(args, result, t0)
     if truth_growth is not None:
         summary["growth_rate_per_s_truth"] = truth_growth
     complete = all(not fc.stopped for _d, fc in paper)
-    nm = [fc.nmse[1] for _d, fc in paper]
+    nm = [fc.nmse[ref] for _d, fc in paper]
     falls = bool(complete and all(b <= a for a, b in zip(nm, nm[1:])))
     summary["forecasts_complete"] = complete
     summary["nmse_falls_with_d"] = falls
@@ -208,15 +221,15 @@ def run(args) -> int:
             w.writeheader()
             w.writerows({k: _fmt(v) for k, v in r.items()} for r in rows)
     with atomic_path(out / f"forecast_{event_id}.png", suffix=".png") as tmp:
-        _figure(tmp, event_id, whole, paper, t0, horizon, campaign)
+        _figure(tmp, event_id, whole, paper, t0, horizon, campaign, ref=ref, sections=sections)
     with atomic_path(out / "summary.json") as tmp:
         clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in summary.items()}
         tmp.write_text(json.dumps(clean, indent=1, sort_keys=True) + "\n")
     if campaign is not None:
-        print(f"{event_id}: campaign model: whole-event NMSE(S2) {campaign[0].nmse[1]:.3g}, forecast NMSE(S2) "
-              f"{campaign[1].nmse[1]:.3g}" + (" (stopped)" if campaign[1].stopped else ""))
+        print(f"{event_id}: campaign model: whole-event NMSE({key}) {campaign[0].nmse[ref]:.3g}, forecast NMSE({key}) "
+              f"{campaign[1].nmse[ref]:.3g}" + (" (stopped)" if campaign[1].stopped else ""))
     print(f"{event_id}: forecasts from t0 = {t0:.0f} s ({t0_source}) over {horizon:.0f} s written to {out}; "
-          + ", ".join(f"d={d:g} s NMSE(S2) {fc.nmse[1]:.3g}" + (" (stopped)" if fc.stopped else "") for d, fc in paper))
+          + ", ".join(f"d={d:g} s NMSE({key}) {fc.nmse[ref]:.3g}" + (" (stopped)" if fc.stopped else "") for d, fc in paper))
     return 0
 
 

@@ -16,5 +16,6 @@ def register(sub) -> None:
     s = sub.add_parser("plot-event", help="overview figure of one event file")
     s.add_argument("event", help="event file (.nc)")
     s.add_argument("--out", required=True, help="output PNG")
-    s.add_argument("--section", default="S2", choices=("S1", "S2", "S3"))
+    s.add_argument("--section", default=None,
+                   help="section shown, e.g. S1 (default: the middle one, S2 of three)")
     s.set_defaults(func=run)

@@ -4,6 +4,7 @@ from vivbench.core.terms import (
     A_POWERS,
     U_POWERS,
     SECTIONS,
+    reference_section,
     section_exponents,
     feature_exponents,
     feature_names,
@@ -16,7 +17,7 @@ from vivbench.core.toml import load_toml
 from vivbench.core.parallel import Outcome, run_tasks, parse_scheduler
 
 __all__ = [
-    "A_POWERS", "U_POWERS", "SECTIONS", "section_exponents", "feature_exponents", "feature_names",
-    "evaluate_library", "Record", "DEFAULT_TAU", "classify_regime", "order_rms", "regime_rule", "InputError",
-    "error_line", "load_toml", "Outcome", "run_tasks", "parse_scheduler",
+    "A_POWERS", "U_POWERS", "SECTIONS", "reference_section", "section_exponents", "feature_exponents",
+    "feature_names", "evaluate_library", "Record", "DEFAULT_TAU", "classify_regime", "order_rms",
+    "regime_rule", "InputError", "error_line", "load_toml", "Outcome", "run_tasks", "parse_scheduler",
 ]

@@ -16,6 +16,7 @@ __all__ = [
     "A_POWERS",
     "U_POWERS",
     "SECTIONS",
+    "reference_section",
     "section_exponents",
     "feature_exponents",
     "feature_names",
@@ -25,6 +26,29 @@ __all__ = [
 A_POWERS = (0, 1, 2, 3)
 U_POWERS = (0, 1, 2, 3, 4, 5)
 SECTIONS = ("S1", "S2", "S3")
+
+
+def reference_section(n_sections: int) -> int:
+    """Index of the section that single-section figures and headline numbers use.
+
+    The middle section (the lower of the two middle ones for an even count):
+    the mode's antinode on a symmetric bridge, S2 of the default three, S1 of
+    one or two, S2 of four. Any number of sections >= 1 is allowed.
+
+    Parameters
+    ----------
+    n_sections : int
+        Number of instrumented sections, >= 1.
+
+    Returns
+    -------
+    int
+        0-based index, ``(n_sections - 1) // 2``.
+    """
+    n = int(n_sections)
+    if n < 1:
+        raise ValueError(f"need at least one section; got {n_sections}")
+    return (n - 1) // 2
 
 
 def section_exponents() -> np.ndarray:

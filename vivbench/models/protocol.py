@@ -284,23 +284,12 @@ def simulate_windows(record: Record, coef: np.ndarray, window_start, window_end,
     Simulation
         With S columns; ``A_meas`` is the record's A (not ``A0``).
 
-    Notes
-    -----
-    The integrator of :mod:`vivbench.models.simulate` works on three sections;
-    a model of fewer sections is padded with inert ones (zero A, zero dynamics)
-    that are dropped from the output.
     """
     coef = np.asarray(coef, dtype=float)
     S = record.n_sections
-    Sp = max(S, 3)
-    W = coef.shape[0]
-    P = np.zeros((W, Sp, 23 * Sp))
-    P[:, :S, :23 * S] = coef
     t = record.t
-    A = np.zeros((t.size, Sp))
-    U = np.ones((t.size, Sp))
-    A[:, :S] = record.A
-    U[:, :S] = record.U
+    A = np.array(record.A, dtype=float)
+    U = np.array(record.U, dtype=float)
     start = np.asarray(window_start, dtype=float)
     end = np.asarray(window_end, dtype=float)
     fitted = np.all(np.isfinite(coef), axis=(1, 2))
@@ -314,12 +303,11 @@ def simulate_windows(record: Record, coef: np.ndarray, window_start, window_end,
         A[i0, :S] = A0
     ds = xr.Dataset(
         {"A": (("time", "equation"), A), "U": (("time", "equation"), U),
-         "coef": (("window", "equation", "feature"), P),
+         "coef": (("window", "equation", "feature"), coef),
          "window_start": (("window",), start), "window_end": (("window",), end)},
-        coords={"time": t, "equation": section_names(Sp)},
+        coords={"time": t, "equation": section_names(S)},
     )
     sim = simulate_identified(ds, t0=t0, t1=t1, **kwargs)
     i0 = int(np.searchsorted(t, sim.t[0]))
     A_meas = record.A[i0:i0 + sim.t.size]
-    A_sim = sim.A_sim[:, :S]
-    return dataclasses.replace(sim, A_sim=A_sim, A_meas=A_meas, nmse=nmse(A_sim, A_meas))
+    return dataclasses.replace(sim, A_meas=A_meas, nmse=nmse(sim.A_sim, A_meas))

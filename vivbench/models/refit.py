@@ -68,7 +68,7 @@ import numpy as np
 import xarray as xr
 
 from vivbench.models.simulate import Simulation, simulate_identified, window_in_force
-from vivbench.core.terms import evaluate_library, feature_exponents, feature_names
+from vivbench.core.terms import evaluate_library, feature_exponents, feature_names, section_exponents
 from vivbench.core.errors import InputError
 
 __all__ = ["RefitConfig", "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients",
@@ -79,8 +79,8 @@ _HESSIANS = ("auto", "exact", "limited-memory")
 #: it, CasADi's exact Hessian of the expanded intervals costs gigabytes.
 _EXACT_HESSIAN_MAX_TERMS = 24
 _SUPPORTS = ("identified", "window", "truth")
-_N_SEC = 3
-_N_FEAT = 69
+#: Library terms per section (A^i U^j, i <= 3, j <= 5, not both 0): S sections give 23 S columns.
+_TERMS_PER_SECTION = section_exponents().shape[0]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -162,9 +162,9 @@ class RefitResult:
 
     Attributes
     ----------
-    coef : ndarray, shape (3, 69)
-        Refit coefficients in physical units (zeros off the support).
-    support : ndarray of bool, shape (3, 69)
+    coef : ndarray, shape (S, 23 S)
+        Refit coefficients in physical units (zeros off the support), S sections.
+    support : ndarray of bool, shape (S, 23 S)
     success : bool
         IPOPT reported success.
     status : str
@@ -175,11 +175,11 @@ class RefitResult:
         Final objective (scaled, see module docstring).
     simulation : Simulation
         The refit model simulated from the first measured A over the whole grid.
-    nmse : ndarray, shape (3,)
+    nmse : ndarray, shape (S,)
         ``simulation.nmse``.
-    support_size, rank : ndarray of int, shape (3,)
+    support_size, rank : ndarray of int, shape (S,)
         Supported terms and fitted (whitened) directions per equation.
-    cond : ndarray, shape (3,)
+    cond : ndarray, shape (S,)
         Condition number of each equation's supported library on the measured
         (A, U), columns scaled to unit RMS (inf when rank deficient, NaN for an
         empty support).
@@ -221,7 +221,7 @@ class RefitResult:
 
 
 def _one_window_result(t, A, U, coef) -> xr.Dataset:
-    sections = ["S1", "S2", "S3"]
+    sections = [f"S{k + 1}" for k in range(A.shape[1])]
     return xr.Dataset(
         {
             "coef": (("window", "equation", "feature"), np.asarray(coef, dtype=float)[None]),
@@ -230,7 +230,8 @@ def _one_window_result(t, A, U, coef) -> xr.Dataset:
             "A": (("time", "section"), A),
             "U": (("time", "section"), U),
         },
-        coords={"window": [0], "equation": sections, "feature": feature_names(3), "time": t, "section": sections},
+        coords={"window": [0], "equation": sections, "feature": feature_names(len(sections)), "time": t,
+                "section": sections},
     )
 
 
@@ -244,8 +245,8 @@ def simulate_coefficients(t, A, U, coef, *, bound_factor: float = 10.0, negative
     Parameters
     ----------
     t : ndarray, shape (n,), s
-    A, U : ndarray, shape (n, 3), m and m/s
-    coef : ndarray, shape (3, 69)
+    A, U : ndarray, shape (n, S), m and m/s
+    coef : ndarray, shape (S, 23 S)
 
     Returns
     -------
@@ -262,20 +263,21 @@ def order_rms(A, U, coef) -> np.ndarray:
 
     Parameters
     ----------
-    A, U : ndarray, shape (n, 3)
-    coef : ndarray, shape (3, 69)
+    A, U : ndarray, shape (n, S), m and m/s
+    coef : ndarray, shape (S, 23 S)
 
     Returns
     -------
-    ndarray, shape (3, 4), m/s
+    ndarray, shape (S, 4), m/s
         [m, i]: RMS of sum over the columns with A-power i of Theta_c xi_mc.
     """
     theta = evaluate_library(A, U)
-    power = feature_exponents(3)[:, 1]
-    out = np.zeros((_N_SEC, 4))
+    coef = np.asarray(coef, dtype=float)
+    power = feature_exponents(coef.shape[0])[:, 1]
+    out = np.zeros((coef.shape[0], 4))
     for i in range(4):
         sel = power == i
-        contrib = theta[:, sel] @ np.asarray(coef, dtype=float)[:, sel].T
+        contrib = theta[:, sel] @ coef[:, sel].T
         out[:, i] = np.sqrt(np.mean(contrib**2, axis=0))
     return out
 
@@ -293,17 +295,23 @@ def _check_inputs(t, A, U, support, coef0):
         raise ValueError(f"t must be a 1-D grid of at least 3 samples; got shape {t.shape}")
     if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
         raise InputError("t must be finite and strictly increasing")
+    if A.ndim != 2 or A.shape[1] < 1:
+        raise ValueError(f"A must have shape (n, S), one column per section; got {A.shape}")
+    n_sec = A.shape[1]
+    n_feat = _TERMS_PER_SECTION * n_sec
     for name, x in (("A", A), ("U", U)):
-        if x.shape != (t.size, _N_SEC):
-            raise ValueError(f"{name} must have shape (n, 3) = ({t.size}, 3); got {x.shape}")
+        if x.shape != (t.size, n_sec):
+            raise ValueError(f"{name} must have shape (n, S) = ({t.size}, {n_sec}); got {x.shape}")
         if not np.all(np.isfinite(x)):
             raise InputError(f"{name} has non-finite values on the segment; refit a gap-free segment")
-    if support.shape != (_N_SEC, _N_FEAT) or support.dtype != bool:
-        raise ValueError(f"support must be a boolean array of shape (3, 69); got {support.dtype} {support.shape}")
+    if support.shape != (n_sec, n_feat) or support.dtype != bool:
+        raise ValueError(f"support must be a boolean array of shape (S, 23 S) = ({n_sec}, {n_feat}); "
+                         f"got {support.dtype} {support.shape}")
     if not support.any():
         raise InputError("the support is empty: no coefficient to refit")
-    if coef0.shape != (_N_SEC, _N_FEAT) or not np.all(np.isfinite(coef0[support])):
-        raise ValueError(f"coef0 must have shape (3, 69) and be finite on the support; got shape {coef0.shape}")
+    if coef0.shape != (n_sec, n_feat) or not np.all(np.isfinite(coef0[support])):
+        raise ValueError(f"coef0 must have shape (S, 23 S) = ({n_sec}, {n_feat}) and be finite on the support; "
+                         f"got shape {coef0.shape}")
     if np.any(np.sqrt(np.mean(A**2, axis=0)) == 0):
         raise InputError("a section's measured A is identically zero; nothing to scale it by")
     return t, A, U, support, coef0
@@ -311,16 +319,16 @@ def _check_inputs(t, A, U, support, coef0):
 
 def _whitening(theta, support, a, rate, rank_rtol):
     """Per equation: G (|S_m|, r_m) mapping scaled p_m to physical xi_m[S_m], rank, cond."""
-    n = theta.shape[0]
-    G, rank, cond = [], np.zeros(_N_SEC, dtype=int), np.full(_N_SEC, np.nan)
-    for m in range(_N_SEC):
+    n, n_sec = theta.shape[0], support.shape[0]
+    G, rank, cond = [], np.zeros(n_sec, dtype=int), np.full(n_sec, np.nan)
+    for m in range(n_sec):
         cols = np.flatnonzero(support[m])
         if cols.size == 0:
             G.append(np.zeros((0, 0)))
             continue
         d = np.sqrt(np.mean(theta[:, cols] ** 2, axis=0))
         if np.any(d == 0):
-            bad = [feature_names(3)[c] for c in cols[d == 0]]
+            bad = [feature_names(n_sec)[c] for c in cols[d == 0]]
             raise InputError(f"supported terms {bad} of equation {m + 1} vanish on the whole segment")
         _w, s, vt = np.linalg.svd(theta[:, cols] / d, full_matrices=False)
         keep = s > rank_rtol * s[0]
@@ -332,7 +340,7 @@ def _whitening(theta, support, a, rate, rank_rtol):
 
 
 def _build_rhs(support, a):
-    """CasADi Function f(x (3), u (3), c) -> dx/dt (3) in scaled state x = A / a.
+    """CasADi Function f(x (S), u (S), c) -> dx/dt (S) in scaled state x = A / a, S sections.
 
     c holds the physical coefficients on the support, equation by equation
     (row-major order of ``support``); the map from the scaled decision
@@ -341,10 +349,11 @@ def _build_rhs(support, a):
     """
     import casadi as ca
 
-    ex = feature_exponents(3)
+    n_sec = support.shape[0]
+    ex = feature_exponents(n_sec)
     n_c = int(support.sum())
-    x = ca.SX.sym("x", _N_SEC)
-    u = ca.SX.sym("u", _N_SEC)
+    x = ca.SX.sym("x", n_sec)
+    u = ca.SX.sym("u", n_sec)
     c = ca.SX.sym("c", n_c)
     A = x * ca.DM(a)
     theta = {}
@@ -352,7 +361,7 @@ def _build_rhs(support, a):
         s, i, j = (int(v) for v in ex[col])
         theta[col] = A[s] ** i * u[s] ** j if i and j else (A[s] ** i if i else u[s] ** j)
     rhs, k = [], 0
-    for m in range(_N_SEC):
+    for m in range(n_sec):
         cols = np.flatnonzero(support[m])
         terms = [theta[col] * c[k + q] for q, col in enumerate(cols)]
         k += cols.size
@@ -381,9 +390,10 @@ def _build_step(rhs, n_c, substeps):
     """One grid step: RK4 substeps with U linear between the grid samples."""
     import casadi as ca
 
-    x = ca.SX.sym("x", _N_SEC)
-    u0 = ca.SX.sym("u0", _N_SEC)
-    u1 = ca.SX.sym("u1", _N_SEC)
+    n_sec = rhs.size1_in(0)  # the state: one scaled amplitude per section
+    x = ca.SX.sym("x", n_sec)
+    u0 = ca.SX.sym("u0", n_sec)
+    u1 = ca.SX.sym("u1", n_sec)
     h = ca.SX.sym("h")
     p = ca.SX.sym("c", n_c)
     dt = h / substeps
@@ -413,22 +423,23 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
     J = starts.size
 
     n_c, n_p = Gblk.shape
-    X = ca.MX.sym("X", _N_SEC, J)
+    n_sec = x_meas.shape[1]
+    X = ca.MX.sym("X", n_sec, J)
     p = ca.MX.sym("p", n_p)
     c = ca.mtimes(ca.DM(Gblk), p)  # physical coefficients on the support
     ssq, ends = [], []
 
     def block(n_int, first_interval, n_j):
-        """n_j intervals of n_int steps each: (sum of squared residuals, end states (3, n_j))."""
+        """n_j intervals of n_int steps each: (sum of squared residuals, end states (S, n_j))."""
         acc = step.mapaccum("acc", n_int)
-        x0 = ca.MX.sym("x0", _N_SEC)
-        ua = ca.MX.sym("ua", _N_SEC, n_int)
-        ub = ca.MX.sym("ub", _N_SEC, n_int)
+        x0 = ca.MX.sym("x0", n_sec)
+        ua = ca.MX.sym("ua", n_sec, n_int)
+        ub = ca.MX.sym("ub", n_sec, n_int)
         hh = ca.MX.sym("h", 1, n_int)
-        meas = ca.MX.sym("meas", _N_SEC, n_int + 1)
+        meas = ca.MX.sym("meas", n_sec, n_int + 1)
         w_end = ca.MX.sym("w_end")
         pp = ca.MX.sym("c", n_c)
-        xs = acc(x0, ua, ub, hh, pp)  # states after each step, (3, n_int)
+        xs = acc(x0, ua, ub, hh, pp)  # states after each step, (S, n_int)
         traj = ca.horzcat(x0, xs)
         # the end sample belongs to the next interval, except at the end of the segment
         r = ca.sumsqr(traj[:, :n_int] - meas[:, :n_int]) + w_end * ca.sumsqr(traj[:, n_int] - meas[:, n_int])
@@ -452,7 +463,7 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
         block(N, 0, J_full)
     if rem:
         block(rem, J_full, 1)
-    end_states = ca.horzcat(*ends)  # (3, J)
+    end_states = ca.horzcat(*ends)  # (S, J)
     # a plain sum, not a mean: a mean makes the gradients so small that IPOPT stops at once
     obj = sum(ssq) + config.ridge * ca.sumsqr(p)
     g = ca.vec(end_states[:, :J - 1] - X[:, 1:]) if J > 1 else ca.MX(0, 1)
@@ -474,11 +485,11 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
     ubx = np.full(w0.size, np.inf)
     if not config.free_initial_state:
         # the first node is the measured A, as in the simulations that score the fit
-        lbx[:_N_SEC] = ubx[:_N_SEC] = w0[:_N_SEC] = x_meas[0]
+        lbx[:n_sec] = ubx[:n_sec] = w0[:n_sec] = x_meas[0]
     sol = solver(x0=w0, lbg=0.0, ubg=0.0, lbx=lbx, ubx=ubx)
     stats = solver.stats()
     w_opt = np.asarray(sol["x"]).ravel()
-    return w_opt[_N_SEC * J:], stats, float(sol["f"]), start
+    return w_opt[n_sec * J:], stats, float(sol["f"]), start
 
 
 def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = None) -> RefitResult:
@@ -488,14 +499,14 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     ----------
     t : ndarray, shape (n,), s
         Time grid (strictly increasing, gap-free segment).
-    A : ndarray, shape (n, 3), m
-        Measured amplitudes.
-    U : ndarray, shape (n, 3), m/s
+    A : ndarray, shape (n, S), m
+        Measured amplitudes at the S sections.
+    U : ndarray, shape (n, S), m/s
         Measured wind, linear between the samples.
-    support : ndarray of bool, shape (3, 69)
+    support : ndarray of bool, shape (S, 23 S)
         Terms each equation may use (library order of :mod:`vivbench.core.terms`).
         An equation with no term has dA/dt = 0.
-    coef0 : ndarray, shape (3, 69)
+    coef0 : ndarray, shape (S, 23 S)
         Starting coefficients (projected onto the fitted directions).
     config : RefitConfig
 
@@ -518,7 +529,7 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     n_p = Gblk.shape[1]
     # Starting point: least-squares projection of coef0 onto the fitted directions.
     p0 = np.concatenate([np.linalg.lstsq(G[m], coef0[m, support[m]], rcond=None)[0]
-                         for m in range(_N_SEC) if G[m].size]) if n_p else np.zeros(0)
+                         for m in range(support.shape[0]) if G[m].size]) if n_p else np.zeros(0)
     # Nodes start on coef0's own trajectory when it stays bounded (a feasible start,
     # so IPOPT cannot end worse than coef0 by drifting to another local minimum).
     sim0 = simulate_coefficients(t, A, U, coef0 * support, bound_factor=config.bound_factor,
@@ -527,9 +538,9 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     p_opt, stats, objective, start = _solve(t, x_meas, x_init, U, step, Gblk, p0, config)
     if start == "coef0" and not sim0.stopped:
         start = "coef0-trajectory"
-    coef = np.zeros((_N_SEC, _N_FEAT))
+    coef = np.zeros(support.shape)
     k = 0
-    for m in range(_N_SEC):
+    for m in range(support.shape[0]):
         r = G[m].shape[1] if G[m].size else 0
         if r:
             coef[m, support[m]] = G[m] @ p_opt[k:k + r]
@@ -550,7 +561,7 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
 class EventRefit:
     """Side-by-side comparison of coefficient sets over one segment of an identification result.
 
-    Coefficient sets (each (3, 69), physical units): ``sindy`` (SINDy's, see
+    Coefficient sets (each (S, 23 S) for S sections, physical units): ``sindy`` (SINDy's, see
     :func:`refit_event`), ``lsq`` (equation-error least squares on the same
     support with the result's dA/dt: the refit's starting point), ``refit``
     and, when given, ``truth``. ``sindy_tv`` is the time-varying SINDy model
@@ -562,11 +573,11 @@ class EventRefit:
     t0, t1 : float, s
         Segment, snapped to the result's grid.
     support_kind : str
-    support : ndarray of bool, shape (3, 69)
-    coef : dict of str -> ndarray (3, 69)
+    support : ndarray of bool, shape (S, 23 S)
+    coef : dict of str -> ndarray (S, 23 S)
     simulations : dict of str -> Simulation
         Every set (and ``sindy_tv``) simulated from the first measured A of the segment.
-    orders : dict of str -> ndarray (3, 4), m/s
+    orders : dict of str -> ndarray (S, 4), m/s
         RMS over the segment of each order's contribution to dA_m/dt on the measured (A, U).
     fit : RefitResult
     sindy_windows : ndarray of int
@@ -586,9 +597,9 @@ class EventRefit:
 
     def rows(self) -> list[dict]:
         """One row per (equation, feature) nonzero in any coefficient set."""
-        names = feature_names(3)
+        names = feature_names(self.support.shape[0])
         sets = [k for k in ("sindy", "lsq", "refit", "truth") if k in self.coef]
-        nonzero = np.zeros((_N_SEC, _N_FEAT), dtype=bool)
+        nonzero = np.zeros(self.support.shape, dtype=bool)
         for k in sets:
             nonzero |= self.coef[k] != 0
         out = []
@@ -602,7 +613,7 @@ class EventRefit:
     def order_rows(self) -> list[dict]:
         """One row per (equation, order): RMS contribution of each set, m/s."""
         out = []
-        for m in range(_N_SEC):
+        for m in range(self.support.shape[0]):
             for i in range(4):
                 row = {"equation": f"S{m + 1}", "order": i}
                 for k in ("sindy", "lsq", "refit", "truth"):
@@ -617,14 +628,15 @@ class EventRefit:
              "ipopt_status": f.status, "ipopt_success": f.success, "ipopt_iterations": f.iterations,
              "objective": f.objective, "wall_time_s": f.wall_time, "refit_start": f.start,
              "coefficients_identifiable": f.identifiable}
-        for m in range(_N_SEC):
+        n_sec = self.support.shape[0]
+        for m in range(n_sec):
             s[f"support_size_S{m + 1}"] = int(f.support_size[m])
             s[f"support_rank_S{m + 1}"] = int(f.rank[m])
             s[f"support_cond_S{m + 1}"] = float(f.cond[m])
         for name, sim in self.simulations.items():
             s[f"stopped_{name}"] = sim.stopped
             s[f"stopped_at_{name}_s"] = sim.stopped_at
-            for m in range(_N_SEC):
+            for m in range(n_sec):
                 s[f"nmse_{name}_S{m + 1}"] = None if sim.stopped else float(sim.nmse[m])
             s[f"nmse_{name}_mean"] = None if sim.stopped else float(np.mean(sim.nmse))
         return s
@@ -653,8 +665,8 @@ def _segment(result: xr.Dataset, t0: float, t1: float):
 
 def _equation_error_fit(theta, dA, support):
     """Least squares of dA_m/dt on each equation's supported columns (columns scaled to unit RMS)."""
-    coef = np.zeros((_N_SEC, _N_FEAT))
-    for m in range(_N_SEC):
+    coef = np.zeros(support.shape)
+    for m in range(support.shape[0]):
         cols = np.flatnonzero(support[m])
         ok = np.isfinite(dA[:, m])
         if cols.size == 0 or ok.sum() < 1:
@@ -678,7 +690,7 @@ def refit_event(result: xr.Dataset, *, t0: float | None = None, t1: float | None
     t0, t1 : float, s, optional
         Segment (snapped to the grid); default the whole grid. It must be
         gap-free (one preprocessing segment, finite A and U).
-    support : {"identified", "window", "truth"} or ndarray of bool (3, 69)
+    support : {"identified", "window", "truth"} or ndarray of bool (S, 23 S)
         ``"identified"``: the union of the supports of every window in force
         during the segment (the truth is one fixed model, so one fixed support
         over the segment is what a refit should use); SINDy's coefficients are
@@ -687,7 +699,7 @@ def refit_event(result: xr.Dataset, *, t0: float | None = None, t1: float | None
         ``"truth"``: the nonzero entries of ``truth_coef``. An array: that mask.
         In all but ``"window"`` SINDy's coefficients are the mean over the
         windows in force during the segment.
-    truth_coef : ndarray (3, 69), optional
+    truth_coef : ndarray (S, 23 S), optional
         Exact coefficients (the event file's ``/truth/coef``).
     config : RefitConfig
 
@@ -702,16 +714,18 @@ def refit_event(result: xr.Dataset, *, t0: float | None = None, t1: float | None
     t0 = float(t_grid[0]) if t0 is None else float(t0)
     t1 = float(t_grid[-1]) if t1 is None else float(t1)
     i0, i1, t, A, U = _segment(result, t0, t1)
+    coef_w = np.asarray(result["coef"].values, dtype=float)
+    shape = coef_w.shape[1:]  # (S, 23 S)
     if truth_coef is not None:
         truth_coef = np.asarray(truth_coef, dtype=float)
-        if truth_coef.shape != (_N_SEC, _N_FEAT) or not np.all(np.isfinite(truth_coef)):
-            raise InputError(f"truth_coef must be a finite (3, 69) array; got shape {truth_coef.shape}")
-    coef_w = np.asarray(result["coef"].values, dtype=float)
+        if truth_coef.shape != shape or not np.all(np.isfinite(truth_coef)):
+            raise ValueError(f"truth_coef must be a finite {shape} array, as the result's coefficients; "
+                             f"got shape {truth_coef.shape}")
     in_force = np.unique(window_in_force(result, t[:-1]))
     sindy = coef_w[in_force].mean(axis=0)
     if isinstance(support, str):
         if support not in _SUPPORTS:
-            raise InputError(f"support must be one of {_SUPPORTS} or a (3, 69) boolean mask; got {support!r}")
+            raise InputError(f"support must be one of {_SUPPORTS} or a {shape} boolean mask; got {support!r}")
         kind = support
         if support == "identified":
             mask = np.any(coef_w[in_force] != 0, axis=0)
@@ -726,8 +740,8 @@ def refit_event(result: xr.Dataset, *, t0: float | None = None, t1: float | None
     else:
         kind = "mask"
         mask = np.asarray(support)
-        if mask.shape != (_N_SEC, _N_FEAT) or mask.dtype != bool:
-            raise ValueError(f"a support mask must be a boolean (3, 69) array; got {mask.dtype} {mask.shape}")
+        if mask.shape != shape or mask.dtype != bool:
+            raise ValueError(f"a support mask must be a boolean {shape} array; got {mask.dtype} {mask.shape}")
     theta = evaluate_library(A, U)
     dA = np.asarray(result["dA"].values, dtype=float)[i0:i1] if "dA" in result else np.full_like(A, np.nan)
     lsq = _equation_error_fit(theta, dA, mask)

@@ -3,7 +3,7 @@
 An identification result (:func:`vivbench.analysis.identify_event`) holds one
 coefficient matrix Xi_w per window, with dA/dt = Theta(A, U) Xi_w^T on the
 physical library :func:`vivbench.core.terms.evaluate_library`. This module
-integrates that model for the three sections with the measured wind U(t):
+integrates that model for the S sections (any S >= 1) with the measured wind U(t):
 
 - :func:`simulate_identified` uses the time-varying coefficients: the window in
   force at time t is the fitted window whose centre (start + end) / 2 is
@@ -20,9 +20,9 @@ Integration is a classical fixed-step RK4 on the result's own time grid
 coefficients are constant over a step (those in force at its start) and U is
 interpolated at the stages (cubic spline by default). Every U-dependent
 quantity is precomputed for all steps in one vectorised pass: for each step
-and stage the model reduces to a (3, 3, 4) array C with
+and stage the model reduces to an (S, S, 4) array C with
 dA_m/dt = sum_{k,i} C[m, k, i] A_k^i, so the remaining Python loop over steps
-does one 3 x 12 matrix-vector product per stage (~0.1 s for 10^4 steps).
+does one S x 4S matrix-vector product per stage (~0.1 s for 10^4 steps).
 A step cost that small makes the loop acceptable; an adaptive solver would
 not be faster here because the model is stiff-free and the grid is fine.
 
@@ -75,7 +75,7 @@ import numpy as np
 import xarray as xr
 from scipy.interpolate import make_interp_spline
 
-from vivbench.core.terms import feature_exponents
+from vivbench.core.terms import feature_exponents, section_exponents
 from vivbench.core.errors import InputError
 
 __all__ = ["CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
@@ -94,15 +94,15 @@ class Simulation:
     ----------
     t : ndarray, shape (n,), s
         Grid of the simulation (samples of the result's time grid).
-    A_sim : ndarray, shape (n, 3), m
+    A_sim : ndarray, shape (n, S), m
         Simulated amplitudes; NaN from the sample at which the run was stopped.
-    A_meas : ndarray, shape (n, 3), m
+    A_meas : ndarray, shape (n, S), m
         Measured amplitudes on the same grid.
     stopped_at : float or None, s
         Time of the first invalid sample, None when the run reached the end.
     reason : str or None
         Why the run stopped (None when it did not).
-    nmse : ndarray, shape (3,)
+    nmse : ndarray, shape (S,)
         Per-section NMSE over the valid part (see module docstring); NaN for a
         section with fewer than two compared samples.
     covered : float
@@ -110,7 +110,7 @@ class Simulation:
     windows : ndarray of int
         simulate_identified: window in force at each step, shape (n - 1,);
         forecast: windows whose coefficients were averaged.
-    coef : ndarray, shape (3, 69) or None
+    coef : ndarray, shape (S, 23 S) or None
         The fixed coefficients of a forecast (None for simulate_identified).
     """
 
@@ -159,8 +159,8 @@ def _window_table(result: xr.Dataset):
     coef = np.asarray(result["coef"].values, dtype=float)
     start = np.asarray(result["window_start"].values, dtype=float)
     end = np.asarray(result["window_end"].values, dtype=float)
-    if coef.ndim != 3 or coef.shape[1:] != (3, 69):
-        raise InputError(f"result['coef'] must have shape (window, 3, 69); got {coef.shape}")
+    if coef.ndim != 3 or coef.shape[1] < 1 or coef.shape[2] != section_exponents().shape[0] * coef.shape[1]:
+        raise InputError(f"result['coef'] must have shape (window, S, 23 S) for S sections; got {coef.shape}")
     fitted = np.all(np.isfinite(coef), axis=(1, 2))
     if not fitted.any():
         raise InputError("the result has no window with a fitted model (all coefficients are NaN)")
@@ -206,9 +206,9 @@ def window_ranges(result: xr.Dataset) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
     Returns
     -------
-    a_lo, a_hi : ndarray, shape (W, 3), m
+    a_lo, a_hi : ndarray, shape (W, S), m
         Smallest and largest finite A of each section over each window [start, end).
-    u_lo, u_hi : ndarray, shape (W, 3), m/s
+    u_lo, u_hi : ndarray, shape (W, S), m/s
         The same for U. NaN for a window without finite samples.
     """
     t = np.asarray(result["time"].values, dtype=float)
@@ -224,7 +224,7 @@ def window_ranges(result: xr.Dataset) -> tuple[np.ndarray, np.ndarray, np.ndarra
     idx = np.minimum(first[:, None] + offs[None, :], t.size - 1)
     out = []
     for name in ("A", "U"):
-        x = np.asarray(result[name].values, dtype=float)[idx]  # (W, n_max, 3)
+        x = np.asarray(result[name].values, dtype=float)[idx]  # (W, n_max, S)
         ok = inwin[..., None] & np.isfinite(x)
         with np.errstate(invalid="ignore"):
             lo = np.where(ok, x, np.inf).min(axis=1)
@@ -243,7 +243,7 @@ def forecast_coefficients(result: xr.Dataset, t0: float, d: float = 0.0) -> tupl
 
     Returns
     -------
-    coef : ndarray, shape (3, 69)
+    coef : ndarray, shape (S, 23 S)
     windows : ndarray of int
         Windows averaged.
     """
@@ -261,9 +261,10 @@ def forecast_coefficients(result: xr.Dataset, t0: float, d: float = 0.0) -> tupl
 
 
 def _polynomials(coef: np.ndarray) -> np.ndarray:
-    """Coefficients (W, 3, 3, 4, 6): equation m, section k, power of A i, power of U j."""
-    ex = feature_exponents(3)
-    P = np.zeros(coef.shape[:2] + (3, 4, 6))
+    """Coefficients (W, S, S, 4, 6): equation m, section k, power of A i, power of U j."""
+    n_sec = coef.shape[1]
+    ex = feature_exponents(n_sec)
+    P = np.zeros(coef.shape[:2] + (n_sec, 4, 6))
     P[:, :, ex[:, 0], ex[:, 1], ex[:, 2]] = coef
     return P
 
@@ -273,13 +274,13 @@ def model_jacobian(coef, A, U) -> np.ndarray:
 
     Parameters
     ----------
-    coef : ndarray, shape (3, 69)
+    coef : ndarray, shape (S, 23 S)
         Coefficients on :func:`vivbench.core.terms.evaluate_library`.
-    A, U : ndarray, shape (3,), m and m/s
+    A, U : ndarray, shape (S,), m and m/s
 
     Returns
     -------
-    ndarray, shape (3, 3), 1/s
+    ndarray, shape (S, S), 1/s
         J[m, k] = d f_m / d A_k. Its largest real eigenvalue is the growth rate
         of small deviations of A from the trajectory (the true VIV dynamics
         have rates of order 1e-3..1e-2 1/s).
@@ -306,7 +307,7 @@ def _grid(result: xr.Dataset, t0: float, t1: float):
 
 
 def _stage_U(t: np.ndarray, U: np.ndarray, u_interp: str) -> tuple[np.ndarray, int]:
-    """U at t_k, t_k + h/2, t_k + h for every step: (n - 1, 3, S), and the usable steps.
+    """U at t_k, t_k + h/2, t_k + h for every step: (n - 1, 3 stages, S), and the usable steps.
 
     The spline is built on the samples before the first non-finite U; steps
     past it are reported as unusable so that the run stops there.
@@ -328,15 +329,15 @@ def _stage_U(t: np.ndarray, U: np.ndarray, u_interp: str) -> tuple[np.ndarray, i
 
 
 def _integrate(t, A0, U_stage, n_ok, P, widx, bound, neg, lims=None, clip="none"):
-    """Fixed-step RK4; returns A (n, 3), index of the first invalid sample (or None), reason.
+    """Fixed-step RK4; returns A (n, S), index of the first invalid sample (or None), reason.
 
-    ``lims`` = (a_lo, a_hi, u_lo, u_hi), each (n_models, 3), indexed like ``P``
+    ``lims`` = (a_lo, a_hi, u_lo, u_hi), each (n_models, S), indexed like ``P``
     by ``widx``: with ``clip`` "u" the model sees U clipped to its model's
     range, with "au" also A (the state itself is not clipped, only the
     argument of the right-hand side).
     """
-    n = t.size
-    A = np.full((n, 3), np.nan)
+    n, n_sec = t.size, P.shape[1]
+    A = np.full((n, n_sec), np.nan)
     A[0] = A0
     if not np.all(np.isfinite(A0)):
         return A, 0, "measured A at t0 is not finite"
@@ -346,12 +347,12 @@ def _integrate(t, A0, U_stage, n_ok, P, widx, bound, neg, lims=None, clip="none"
         U_use = np.clip(U_use, lims[2][w][:, None, :], lims[3][w][:, None, :])
     # C[step, stage, m, k*4 + i] = sum_j P[m, k, i, j] U_k^j, all steps at once.
     Upow = U_use[:, :, :, None] ** np.arange(6)
-    C = np.einsum("wmkij,wskj->wsmki", P[w], Upow).reshape(n_ok, 3, 3, 12)
+    C = np.einsum("wmkij,wskj->wsmki", P[w], Upow).reshape(n_ok, 3, n_sec, 4 * n_sec)
     if clip == "au":
         a_lo, a_hi = lims[0][w], lims[1][w]
     else:
-        a_lo = np.full((n_ok, 3), -np.inf)
-        a_hi = np.full((n_ok, 3), np.inf)
+        a_lo = np.full((n_ok, n_sec), -np.inf)
+        a_hi = np.full((n_ok, n_sec), np.inf)
     pw = np.arange(4)
     h = np.diff(t)
     a = A[0].copy()
@@ -387,8 +388,9 @@ def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_to
     if not (bound_factor > 1 and negative_tolerance >= 0):
         raise InputError(f"need bound_factor > 1 and negative_tolerance >= 0; got {bound_factor}, {negative_tolerance}")
     A_all = np.asarray(result["A"].values, dtype=float)
-    if A_all.ndim != 2 or A_all.shape[1] != 3:
-        raise InputError(f"result['A'] must have shape (time, 3); got {A_all.shape}")
+    if A_all.ndim != 2 or A_all.shape[1] != P.shape[1]:
+        raise InputError(f"result['A'] must have shape (time, {P.shape[1]}), one column per section of "
+                         f"result['coef']; got {A_all.shape}")
     a_max = float(np.nanmax(np.abs(A_all))) if np.isfinite(A_all).any() else np.nan
     if not (np.isfinite(a_max) and a_max > 0):
         raise InputError("the measured A has no positive finite value to set the blow-up bounds")
@@ -415,8 +417,8 @@ def simulate_identified(result: xr.Dataset, *, t0: float | None = None, t1: floa
     Parameters
     ----------
     result : xarray.Dataset
-        Identification result (``coef`` (window, 3, 69), ``window_start``,
-        ``window_end``, ``A`` and ``U`` (time, 3) on coordinate ``time``).
+        Identification result (``coef`` (window, S, 23 S), ``window_start``,
+        ``window_end``, ``A`` and ``U`` (time, S) on coordinate ``time``).
     t0, t1 : float, s, optional
         Span; default the first fitted window's start to the last one's end.
         Both snap to the nearest sample of the result's grid.
@@ -500,7 +502,8 @@ def forecast_table(result: xr.Dataset, t0: float, horizon: float, ds=(0, 50, 150
         A stopped run keeps its partial NMSE and is flagged, never given a
         made-up value.
     """
-    sections = [str(s) for s in result["equation"].values] if "equation" in result.coords else ["S1", "S2", "S3"]
+    sections = ([str(s) for s in result["equation"].values] if "equation" in result.coords
+                else [f"S{k + 1}" for k in range(result["A"].shape[1])])
     rows = []
     for d in ds:
         sim = forecast(result, t0, horizon, d=float(d), **kwargs)

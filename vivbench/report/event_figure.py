@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
+from vivbench.core.terms import reference_section
 from vivbench.io.netcdf import atomic_path
 
 __all__ = ["event_figure"]
@@ -18,14 +19,14 @@ __all__ = ["event_figure"]
 _REGIME_COLOURS = {1: "#9e9e9e", 2: "#4c9be8", 3: "#f0a030", 4: "#d62728"}
 
 
-def event_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2") -> Path:
+def event_figure(tree: xr.DataTree, path: str | Path, *, section: str | None = None) -> Path:
     """Write a PNG with wind speed and direction, acceleration, amplitude and regime.
 
     Parameters
     ----------
     tree : an event (DESIGN 4)
     path : output PNG (written atomically)
-    section : which section's acceleration and amplitude to show
+    section : which section's acceleration and amplitude to show (default the middle one, S2 of three)
 
     Returns
     -------
@@ -33,6 +34,11 @@ def event_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2") ->
     """
     wind = tree["wind"].ds
     accel = tree["accel"].ds
+    names = [str(s) for s in accel["section"].values.tolist()]
+    if section is None:
+        section = names[reference_section(len(names))]
+    elif section not in names:
+        raise ValueError(f"section {section!r} is not in the event; its sections are {names}")
     truth = tree["truth"].ds if "truth" in tree.children else None
     az = float(tree.attrs["span_azimuth_deg"])
     tw = wind["time"].values

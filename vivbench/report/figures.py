@@ -44,7 +44,7 @@ from vivbench.preprocess.config import PreprocessConfig
 from vivbench.preprocess.vibration import displacement, envelope, modal_frequency
 from vivbench.preprocess.wind import mean_wind, perpendicular_speed, wind_speed_direction
 from vivbench.io.netcdf import atomic_path
-from vivbench.core.terms import evaluate_library, feature_exponents
+from vivbench.core.terms import evaluate_library, feature_exponents, reference_section
 
 __all__ = [
     "DPI",
@@ -87,8 +87,19 @@ def _step(n: int) -> int:
     return max(1, n // _MAX_POINTS)
 
 
-def _section_index(sections, section: str) -> int:
+_COUNT_WORDS = ("one", "two", "three", "four", "five", "six", "seven", "eight", "nine", "ten")
+
+
+def count_word(n: int) -> str:
+    """A count in words for captions and titles: 'three' for 3, digits above ten."""
+    return _COUNT_WORDS[n - 1] if 1 <= n <= len(_COUNT_WORDS) else str(n)
+
+
+def _section_index(sections, section: str | None) -> int:
+    """Index of ``section`` among ``sections``; None: the middle section (S2 of three)."""
     names = [str(s) for s in np.asarray(sections).tolist()]
+    if section is None:
+        return reference_section(len(names))
     if section not in names:
         raise InputError(f"section {section!r} is not in the data; sections are {names}")
     return names.index(section)
@@ -116,7 +127,7 @@ def _longest_finite_run(x: np.ndarray) -> slice:
 
 
 def sensor_layout_figure(tree: xr.DataTree, path: str | Path) -> Path:
-    """Sketch of the deck with the sensors at S1-S3 and the mode shape (paper Figs. 1 and 3a).
+    """Sketch of the deck with the sensors at S1..Sn and the mode shape (paper Figs. 1 and 3a).
 
     Parameters
     ----------
@@ -183,7 +194,7 @@ def sensor_layout_figure(tree: xr.DataTree, path: str | Path) -> Path:
 # ------------------------------------------------------------------ Fig. 2: wind
 
 
-def wind_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2",
+def wind_figure(tree: xr.DataTree, path: str | Path, *, section: str | None = None,
                 config: PreprocessConfig | None = None) -> Path:
     """Wind preprocessing of one section (paper Fig. 2).
 
@@ -196,12 +207,13 @@ def wind_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2",
     ----------
     tree : an event (DESIGN 4)
     path : output PNG
-    section : section shown
+    section : section shown (default the middle one, S2 of three)
     config : preprocessing settings (low-pass cut-off), default PreprocessConfig()
     """
     config = config or PreprocessConfig()
     wind = tree["wind"].ds
     k = _section_index(wind["section"].values, section)
+    section = str(wind["section"].values[k])
     t = wind["time"].values
     u, v, w = (wind[c].values[:, k].astype(float) for c in ("u", "v", "w"))
     az = float(tree.attrs["span_azimuth_deg"])
@@ -250,7 +262,7 @@ def wind_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2",
 # -------------------------------------------------------- Fig. 3: time-frequency
 
 
-def time_frequency_figure(tree: xr.DataTree, path: str | Path, *, section: str = "S2",
+def time_frequency_figure(tree: xr.DataTree, path: str | Path, *, section: str | None = None,
                           f_mode: float | None = None, f_max: float = 1.0, segment_s: float = 60.0) -> Path:
     """Acceleration history and its spectrogram with the modal frequency marked (paper Fig. 3b, c).
 
@@ -263,7 +275,7 @@ def time_frequency_figure(tree: xr.DataTree, path: str | Path, *, section: str =
     ----------
     tree : an event (DESIGN 4)
     path : output PNG
-    section : section shown
+    section : section shown (default the middle one, S2 of three)
     f_mode : modal frequency, Hz (None: from the Welch spectrum,
         :func:`vivbench.preprocess.chain.modal_frequency`)
     f_max : upper frequency shown, Hz
@@ -271,6 +283,7 @@ def time_frequency_figure(tree: xr.DataTree, path: str | Path, *, section: str =
     """
     accel = tree["accel"].ds
     k = _section_index(accel["section"].values, section)
+    section = str(accel["section"].values[k])
     t = accel["time"].values
     acc_all = accel["acc"].values.astype(float)
     if f_mode is None:
@@ -305,7 +318,8 @@ def time_frequency_figure(tree: xr.DataTree, path: str | Path, *, section: str =
 # ------------------------------------------------- Fig. 4: displacement, envelope
 
 
-def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path, *, section: str = "S2") -> Path:
+def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path, *,
+                        section: str | None = None) -> Path:
     """Displacement and its envelope, amplitudes of all sections, dA/dt (paper Fig. 4).
 
     Panel (a) integrates the longest gap-free run of the acceleration in the
@@ -320,7 +334,7 @@ def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path,
     tree : an event (DESIGN 4)
     result : its identification result (``vivbench identify``)
     path : output PNG
-    section : section of panel (a)
+    section : section of panel (a) (default the middle one, S2 of three)
     """
     cfg = json.loads(result.attrs["identify_config_json"])["preprocess"]
     known = {f.name for f in dataclasses.fields(PreprocessConfig)}
@@ -329,6 +343,7 @@ def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path,
     edge = float(result.attrs["edge_s"])
     accel = tree["accel"].ds
     k = _section_index(accel["section"].values, section)
+    section = str(accel["section"].values[k])
     t_all = accel["time"].values
     run = _longest_finite_run(accel["acc"].values.astype(float))
     t = t_all[run]
@@ -357,7 +372,7 @@ def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path,
             if truth is not None:
                 ax.plot(truth["time"].values / 60.0, truth["A"].values[:, i], lw=0.9, ls="--", color=c)
         ax.set_ylabel("amplitude A (m)")
-        ax.set_title("(b) amplitudes of the three sections" + (" (dashed: truth)" if truth is not None else ""),
+        ax.set_title(f"(b) amplitudes of the {count_word(len(sections))} section{'s' if len(sections) > 1 else ''}" + (" (dashed: truth)" if truth is not None else ""),
                      fontsize=10, loc="left")
         ax.legend(loc="upper left", fontsize=8, ncol=3)
         ax = axes[2]
@@ -389,7 +404,7 @@ def term_scale(result: xr.Dataset) -> np.ndarray:
     return np.sqrt(np.mean(theta**2, axis=0))
 
 
-def coefficient_map_figure(result: xr.Dataset, path: str | Path, *, equation: str = "S2",
+def coefficient_map_figure(result: xr.Dataset, path: str | Path, *, equation: str | None = None,
                            lock_in: tuple[float, float] | None = (5.5, 10.5)) -> Path:
     """Time-varying model of one equation: windows x library terms (paper Figs. 5c, 7).
 
@@ -404,10 +419,11 @@ def coefficient_map_figure(result: xr.Dataset, path: str | Path, *, equation: st
     ----------
     result : identification result
     path : output PNG
-    equation : which equation (dA_k/dt) to map
+    equation : which equation (dA_k/dt) to map (default the middle section's, S2 of three)
     lock_in : (low, high) lock-in range drawn on the wind panel, m/s (None: not drawn)
     """
     e = _section_index(result["equation"].values, equation)
+    equation = str(result["equation"].values[e])
     coef = result["coef"].values[:, e, :]
     scaled = coef * term_scale(result)[None, :]
     t0 = result["window_start"].values
@@ -499,7 +515,7 @@ def _symlog_ticks(linthresh: float, vmax: float, per_side: int = 4) -> list[floa
 
 
 def regime_timeline_figure(results: Sequence[xr.Dataset], truth_regimes: Sequence[np.ndarray | None],
-                           path: str | Path, *, equation: str = "S2") -> Path:
+                           path: str | Path, *, equation: str | None = None) -> Path:
     """Identified regime per window against the truth, for a few events (paper Fig. 6, Table 1).
 
     Parameters
@@ -508,7 +524,7 @@ def regime_timeline_figure(results: Sequence[xr.Dataset], truth_regimes: Sequenc
     truth_regimes : per result, the true regime of each window, shape (n_windows, n_sections)
         (:func:`vivbench.validate.truth_window_regimes`), or None for field data
     path : output PNG
-    equation : which equation's regime is shown
+    equation : which equation's regime is shown (default the middle section's, S2 of three)
 
     Notes
     -----
@@ -526,6 +542,7 @@ def regime_timeline_figure(results: Sequence[xr.Dataset], truth_regimes: Sequenc
     with _figure(path, n, 1, figsize=(9, 1.0 + 1.45 * n), constrained_layout=True, squeeze=False) as (fig, axes):
         for ax, res, truth in zip(axes[:, 0], results, truth_regimes):
             e = _section_index(res["equation"].values, equation)
+            name = str(res["equation"].values[e])
             t0 = res["window_start"].values
             t1 = res["window_end"].values
             step = float(np.median(np.diff(t0))) if t0.size > 1 else float(t1[0] - t0[0])
@@ -545,7 +562,7 @@ def regime_timeline_figure(results: Sequence[xr.Dataset], truth_regimes: Sequenc
             ax.set_yticks([1.5, 0.5][: len(rows)])
             ax.set_yticklabels(["identified", "truth"][: len(rows)])
             ax.set_ylim(0 if truth is not None else 1, 2)
-            title = f"event {res.attrs['event_id']}, equation {equation}: identifiable {ident.mean():.0%} of windows"
+            title = f"event {res.attrs['event_id']}, equation {name}: identifiable {ident.mean():.0%} of windows"
             if truth is not None:
                 tr = np.asarray(truth)[:, e]
                 scored = (tr > 0) & (reg > 0)
@@ -649,7 +666,7 @@ def decision_graph_figure(rho, delta, labels, centers, path: str | Path, *, embe
 
 
 def forecast_figure(result: xr.Dataset, path: str | Path, *, t0: float | None = None, horizon: float = 300.0,
-                    ds: Sequence[float] = (0.0, 50.0, 150.0, 300.0), equation: str = "S2") -> Path:
+                    ds: Sequence[float] = (0.0, 50.0, 150.0, 300.0), equation: str | None = None) -> Path:
     """Simulation with the time-varying model and fixed-coefficient forecasts (paper Figs. 11-12).
 
     Panel (a): the measured amplitudes against the simulation of the whole
@@ -668,13 +685,14 @@ def forecast_figure(result: xr.Dataset, path: str | Path, *, t0: float | None = 
     t0 : forecast start, s (None: the window start nearest to 40 % of the identified span)
     horizon : forecast horizon, s (shortened to the end of the record)
     ds : averaging durations d, s
-    equation : section shown in panel (b)
+    equation : section shown in panel (b) (default the middle one, S2 of three)
 
     Returns
     -------
     Path
     """
     e = _section_index(result["equation"].values, equation)
+    equation = str(result["equation"].values[e])
     sections = [str(s) for s in result["section"].values.tolist()]
     starts = result["window_start"].values
     t_first, t_last = float(starts.min()), float(result["window_end"].values.max())

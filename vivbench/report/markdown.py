@@ -28,7 +28,9 @@ import vivbench
 from vivbench.io.campaign_model import POOLED_NAME
 from vivbench.analysis.pool import with_campaign_model
 from vivbench.io.netcdf import NETCDF_ENGINE, atomic_path
-from vivbench.io.event import list_events, read_event, read_event_summary
+from vivbench.io.event import list_events, read_event
+from vivbench.core.terms import reference_section, section_exponents
+from vivbench.io.event import read_event_summary
 from vivbench.io.result import read_result
 from vivbench.core.errors import InputError
 
@@ -266,6 +268,12 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
 
     e0 = events[0]
     tree0, res0 = trees[e0], results[e0]
+    # Any number of sections: captions name them; single-section panels show the middle one (S2 of three).
+    sec_names = [str(s) for s in res0["equation"].values.tolist()]
+    n_sec = len(sec_names)
+    ref_name = sec_names[reference_section(n_sec)]
+    n_feat = section_exponents().shape[0] * n_sec
+    the_sections = "the section" if n_sec == 1 else f"the {F.count_word(n_sec)} sections"
     md += ["## Figures", "",
            f"Single-event figures show event {e0}"
            + (f"; the regime timeline shows {', '.join(events)}." if len(events) > 1 else "."), ""]
@@ -275,11 +283,14 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
            "amplitude growing while the wind is in the lock-in band and decaying after it leaves.",
            lambda p: event_figure(tree0, p), "event_figure")
     figure("fig01_sensor_layout.png", "Fig. 1: sensor layout and mode shape",
-           "Paper Fig. 1 and Fig. 3(a). Sections S1, S2, S3 at 1/4, 1/2 and 3/4 of the main span, each with one "
+           f"Paper Fig. 1 and Fig. 3(a). {_layout_phrase(sec_names)} of the main span, each with one "
            "3-D anemometer and one vertical accelerometer. The mode shape values are those of the generator "
-           "configuration stored in the event (only the three section values enter the model; the dashed line "
-           "between them is a guide). Sections in phase with phi(S1) = phi(S3) give identical amplitudes at S1 and "
-           "S3 in the figures below.",
+           f"configuration stored in the event (only "
+           + ("the section value enters" if n_sec == 1 else f"the {F.count_word(n_sec)} section values enter")
+           + " the model; the dashed line "
+           "between them is a guide)."
+           + (f" Sections in phase with phi({sec_names[0]}) = phi({sec_names[-1]}) give identical amplitudes at "
+              f"{sec_names[0]} and {sec_names[-1]} in the figures below." if n_sec > 1 else ""),
            lambda p: F.sensor_layout_figure(tree0, p), "sensor_layout_figure")
     figure("fig02_wind.png", "Fig. 2: wind preprocessing",
            "Paper Fig. 2. (a) the measured components; (b) horizontal speed V and direction theta, with the two "
@@ -297,12 +308,12 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
            "time_frequency_figure")
     figure("fig04_displacement.png", "Fig. 4: displacement, envelope and derivative",
            "Paper Fig. 4. (a) displacement from band-limited frequency-domain integration of the acceleration, "
-           "and its Hilbert envelope A; the shaded edges are dropped by the identification. (b) A at the three "
-           "sections on the identification grid; (c) dA/dt by the configured differentiation. Dashed lines are "
+           "and its Hilbert envelope A; the shaded edges are dropped by the identification. (b) A at "
+           f"{the_sections} on the identification grid; (c) dA/dt by the configured differentiation. Dashed lines are "
            "the truth of the averaged model (synthetic events): compare A and dA/dt with them.",
            lambda p: F.displacement_figure(tree0, res0, p), "displacement_figure")
     figure("fig05_coefficients.png", "Fig. 5-7: the time-varying model of an event",
-           "Paper Figs. 5(c) and 7. (a) each column is one window's model of dA/dt at S2, each row one of the 69 "
+           f"Paper Figs. 5(c) and 7. (a) each column is one window's model of dA/dt at {ref_name}, each row one of the {n_feat} "
            "library terms A_l^i U_l^j. Colour: coefficient times the RMS of its library term over the event "
            "(m/s, the size of that term's contribution to dA/dt), on a symmetric log scale, linear below 1 % of "
            "the RMS of dA/dt. Contributions many decades larger than dA/dt itself that change sign between "
@@ -320,7 +331,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                                                tau=json.loads(results[e].attrs["identify_config_json"])["tau"])
                           for e in events]
     figure("fig06_regimes.png", "Fig. 6: regimes of three events against the truth",
-           "Paper Fig. 6 and Table 1. For each event, the regime of the selected window model of dA/dt at S2 "
+           f"Paper Fig. 6 and Table 1. For each event, the regime of the selected window model of dA/dt at {ref_name} "
            "(top row; hatched: not identifiable, i.e. an equally good sparse model has another regime) and the "
            "true regime of the same window by the same rule (bottom row). The titles give the share of "
            "identifiable windows and the agreement with the truth; agreement on unflagged windows is not a "
@@ -330,14 +341,14 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
            "regime_timeline_figure")
 
     cluster_inputs = _cluster_inputs(info, with_truth=has_truth)
-    for kind, label in (("coef", "standardised coefficients (207 per window)"),
-                        ("order", "shares of the order contributions (12 per window)")):
+    for kind, label in (("coef", f"standardised coefficients ({n_sec * n_feat} per window)"),
+                        ("order", f"shares of the order contributions ({4 * n_sec} per window)")):
         figure(f"fig08_decision_graph_{kind}.png", f"Fig. 8-10: decision graph and clusters ({kind} features)",
                "Paper Figs. 8-10. Density-peaks clustering (Rodriguez and Laio 2014; "
                "`vivbench.analysis.DensityPeaks` with its defaults) of the window models of all events, one point "
                f"per window, features: {label}. (a) decision graph: centres are points with both a high density "
                "and a large distance to any denser point; (b) the clusters on the first two principal components; "
-               "(c) how each cluster's windows split between the true regimes (of S2) - a cluster that matches a "
+               f"(c) how each cluster's windows split between the true regimes (of {ref_name}) - a cluster that matches a "
                "regime has one dark cell. "
                + cluster_inputs.get("note", ""),
                lambda p, kind=kind: _cluster_figure(cluster_inputs, kind, p),
@@ -479,11 +490,22 @@ def _settings_table(cfg: dict) -> str:
     return "\n".join("  " + line for line in _table(["setting", "value"], rows).splitlines())
 
 
+def _layout_phrase(names: Sequence[str]) -> str:
+    """'Sections S1, S2, S3 at 1/4, 1/2 and 3/4': section k of n sits at k / (n + 1) of the span."""
+    from fractions import Fraction
+
+    n = len(names)
+    where = [str(Fraction(k, n + 1)) for k in range(1, n + 1)]
+    if n == 1:
+        return f"Section {names[0]} at {where[0]}"
+    return f"Sections {', '.join(names)} at {', '.join(where[:-1])} and {where[-1]}"
+
+
 # ------------------------------------------------------------------- clusters
 
 
 def _cluster_inputs(info: Sequence[dict], *, with_truth: bool) -> dict:
-    """Window features, true regimes (S2) and a deterministic subsample for the decision graphs."""
+    """Window features, true regimes (middle section, S2 of three) and a deterministic subsample for the decision graphs."""
     from vivbench.regimes.truth import truth_window_regimes
 
     coefs, orders, truths = [], [], []
@@ -498,7 +520,7 @@ def _cluster_inputs(info: Sequence[dict], *, with_truth: bool) -> dict:
             tau = json.loads(res.attrs["identify_config_json"])["tau"]
             tw = truth_window_regimes(truth, res["window_start"].values, res["window_end"].values, tau=tau)
             names = [str(s) for s in res["equation"].values.tolist()]
-            truths.append(tw[fitted, names.index("S2") if "S2" in names else 0])
+            truths.append(tw[fitted, reference_section(len(names))])
     coef = np.concatenate(coefs)
     order = np.concatenate(orders)
     truth = np.concatenate(truths) if truths else None

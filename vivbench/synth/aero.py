@@ -40,8 +40,8 @@ def modal_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConf
 
     Parameters
     ----------
-    U : ndarray, shape (n, 3), m/s
-        Mean perpendicular wind speed at the sections.
+    U : ndarray, shape (n, S), m/s
+        Mean perpendicular wind speed at the S sections.
 
     Returns
     -------
@@ -71,7 +71,7 @@ def amplitude_polynomials(structure: StructureConfig, aero: AeroConfig) -> np.nd
 
     Returns
     -------
-    P : ndarray, shape (3, 4, n_coef)
+    P : ndarray, shape (S, 4, n_coef)
         Coefficients in ascending powers of U_k (m/s), for section k and order i.
     """
     s = structure
@@ -85,9 +85,9 @@ def amplitude_polynomials(structure: StructureConfig, aero: AeroConfig) -> np.nd
         -rho * D / m * (2.0 / (3.0 * math.pi)) / D * P.polymul(UY1, aero.e1.coefficients),
         -rho * D / m * (1.0 / 8.0) / D**2 * P.polymul(UY1, aero.e2.coefficients),
     ]
-    section_factor = np.stack([beta, beta * phi, beta * phi * np.abs(phi), beta * phi**3], axis=1)  # (3, 4)
+    section_factor = np.stack([beta, beta * phi, beta * phi * np.abs(phi), beta * phi**3], axis=1)  # (S, 4)
     n_coef = max(len(gi) for gi in g)
-    out = np.zeros((3, 4, n_coef))
+    out = np.zeros((phi.size, 4, n_coef))
     for i, gi in enumerate(g):
         out[:, i, : len(gi)] = section_factor[:, i : i + 1] * np.asarray(gi)[None, :]
     return out
@@ -98,7 +98,7 @@ def amplitude_coefficients(U: np.ndarray, structure: StructureConfig, aero: Aero
 
     Parameters
     ----------
-    U : ndarray, shape (n, 3), m/s
+    U : ndarray, shape (n, S), m/s
 
     Returns
     -------
@@ -120,7 +120,7 @@ def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig
     ----------
     Q : ndarray, shape (n,), m
         Modal amplitude.
-    U : ndarray, shape (n, 3), m/s
+    U : ndarray, shape (n, S), m/s
 
     Returns
     -------
@@ -133,30 +133,31 @@ def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig
 
 
 def exact_coefficients(structure: StructureConfig, aero: AeroConfig) -> np.ndarray | None:
-    """The averaged truth as a coefficient matrix over the 69-term library.
+    """The averaged truth as a coefficient matrix over the 23 S-term library (S sections).
 
     Equation m is dA_m/dt = phi_m dQ/dt; section k's part of order i is written
     with Q = A_k / phi_k, so it uses section k's own terms A_k^i U_k^j, and the
     structural damping -zeta w A_m sits in equation m's own A_m column. Because
-    A_1 : A_2 : A_3 = phi_1 : phi_2 : phi_3 exactly in the averaged model, this is
+    A_1 : ... : A_S = phi_1 : ... : phi_S exactly in the averaged model, this is
     one representative of a family of matrices that give the same dynamics; the
     order contributions (and so the regimes) are the same for all of them.
 
     Returns
     -------
-    Xi : ndarray, shape (3, 69), or None
+    Xi : ndarray, shape (S, 23 S), or None
         None when the parameter polynomials have too high a degree for the library.
     """
     if not aero.exact_in_library:
         return None
     poly = amplitude_polynomials(structure, aero)
     phi = np.array(structure.mode_shape)
-    ex = feature_exponents(3)
-    Xi = np.zeros((3, ex.shape[0]))
+    n_sec = phi.size
+    ex = feature_exponents(n_sec)
+    Xi = np.zeros((n_sec, ex.shape[0]))
     for col, (k, i, j) in enumerate(ex):
         c = poly[k, i, j] if j < poly.shape[2] else 0.0
         Xi[:, col] = phi * c / phi[k] ** i
-    for m in range(3):
+    for m in range(n_sec):
         col = int(np.flatnonzero((ex[:, 0] == m) & (ex[:, 1] == 1) & (ex[:, 2] == 0))[0])
         Xi[m, col] -= structure.damping_ratio * structure.omega
     return Xi

@@ -80,15 +80,22 @@ def _linear(value: float, slope: float, center: float) -> Polynomial:
 
 @dataclass(frozen=True, kw_only=True)
 class StructureConfig:
-    """One vertical bending mode seen at three deck sections (DESIGN 2.1).
+    """One vertical bending mode seen at n >= 1 deck sections (DESIGN 2.1).
+
+    The number of instrumented sections is ``len(mode_shape)``; the sections are
+    named S1..Sn and sit at k / (n + 1) of the span (1/4, 1/2, 3/4 for the
+    default three). A TOML configuration for two sections says, for example,
+    ``[structure]`` ``mode_shape = [0.866, 0.866]`` and
+    ``tributary_lengths = [825.0, 825.0]``.
 
     Attributes
     ----------
     frequency : float, Hz
     damping_ratio : float, structural damping ratio zeta
-    mode_shape : tuple of float, phi_k at S1, S2, S3 (positive: the sections move in phase)
-    span_length : float, m; sections at 1/4, 1/2, 3/4 of it
-    tributary_lengths : tuple of float, m; strip lengths L_k of the sections
+    mode_shape : tuple of float, phi_k at S1..Sn (positive: the sections move in phase);
+        its length is the number of sections
+    span_length : float, m; section k of n at k / (n + 1) of it
+    tributary_lengths : tuple of float, m; strip lengths L_k of the sections, one per section
     depth : float, m; deck depth D
     mass : float, kg/m; equivalent mass per unit length
     air_density : float, kg/m^3
@@ -108,11 +115,14 @@ class StructureConfig:
         object.__setattr__(self, "tributary_lengths", tuple(float(x) for x in self.tributary_lengths))
         _check(0.01 <= self.frequency <= 20.0, f"frequency must be in [0.01, 20] Hz; got {self.frequency}")
         _check(0.0 <= self.damping_ratio < 0.2, f"damping_ratio must be in [0, 0.2); got {self.damping_ratio}")
-        _check(len(self.mode_shape) == 3, f"mode_shape needs 3 values (S1, S2, S3); got {len(self.mode_shape)}")
+        _check(len(self.mode_shape) >= 1, "mode_shape needs one value per section (at least one); got none")
         _check(all(x > 0 for x in self.mode_shape),
                f"mode_shape values must be positive (sections in phase, as the truth formulas assume); got {self.mode_shape}")
-        _check(len(self.tributary_lengths) == 3 and all(x > 0 for x in self.tributary_lengths),
-               f"tributary_lengths needs 3 positive values in m; got {self.tributary_lengths}")
+        n = len(self.mode_shape)
+        _check(len(self.tributary_lengths) == n,
+               f"tributary_lengths needs one value per section ({n}, as mode_shape); got {len(self.tributary_lengths)}")
+        _check(all(x > 0 for x in self.tributary_lengths),
+               f"tributary_lengths must be positive (m); got {self.tributary_lengths}")
         for name in ("span_length", "depth", "mass", "air_density"):
             _check(getattr(self, name) > 0, f"{name} must be positive; got {getattr(self, name)}")
 
@@ -121,9 +131,20 @@ class StructureConfig:
         return 2.0 * math.pi * self.frequency
 
     @property
+    def n_sections(self) -> int:
+        """Number of instrumented sections, ``len(mode_shape)``."""
+        return len(self.mode_shape)
+
+    @property
+    def sections(self) -> tuple[str, ...]:
+        """Section labels S1..Sn."""
+        return tuple(f"S{k + 1}" for k in range(self.n_sections))
+
+    @property
     def positions(self) -> np.ndarray:
-        """Spanwise positions of S1, S2, S3, m."""
-        return self.span_length * np.array([0.25, 0.5, 0.75])
+        """Spanwise positions of S1..Sn, m, shape (n,): k / (n + 1) of the span."""
+        n = self.n_sections
+        return self.span_length * (np.arange(1, n + 1) / (n + 1))
 
     @property
     def participation(self) -> np.ndarray:

@@ -44,11 +44,11 @@ class EventSpec:
 class SimulatedEvent:
     """Everything the generator computed for one event, before it becomes a file.
 
-    Arrays: ``wind_time`` (n_w,) s; ``u, v, w`` (n_w, 3) m/s float32; ``accel_time``
-    (n_a,) s; ``acc`` (n_a, 3) m/s^2 float32; ``acc_true`` (n_a, 3) m/s^2 noise-free;
+    Arrays (S sections): ``wind_time`` (n_w,) s; ``u, v, w`` (n_w, S) m/s float32; ``accel_time``
+    (n_a,) s; ``acc`` (n_a, S) m/s^2 float32; ``acc_true`` (n_a, S) m/s^2 noise-free;
     ``q``, ``qd`` (n_a,) modal displacement (m) and velocity (m/s) at the accelerometer samples; ``truth_time``
-    (n_t,) s; ``U`` (n_t, 3) m/s; ``Q`` (n_t,) m averaged modal amplitude; ``r``
-    (n_t, 3, 4) m/s; ``regime`` (n_t, 3); ``coef`` (3, 69) or None; ``defects`` dict.
+    (n_t,) s; ``U`` (n_t, S) m/s; ``Q`` (n_t,) m averaged modal amplitude; ``r``
+    (n_t, S, 4) m/s; ``regime`` (n_t, S); ``coef`` (S, 23 S) or None; ``defects`` dict.
     """
 
     wind_time: np.ndarray
@@ -73,7 +73,7 @@ _WIND_PAD = 64.0  # s
 
 
 def _interp_wind(mw: MeanWind, t: np.ndarray) -> np.ndarray:
-    return np.stack([np.interp(t, mw.t, mw.U[:, k]) for k in range(3)], axis=1)
+    return np.stack([np.interp(t, mw.t, mw.U[:, k]) for k in range(mw.U.shape[1])], axis=1)
 
 
 def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phase: np.ndarray,
@@ -83,9 +83,10 @@ def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phas
     rho, D, m = s.air_density, s.depth, s.mass
     beta = s.participation
     U = _interp_wind(mw, t)
-    up = np.stack([np.interp(t, mw.t, turb[:, k, 0]) for k in range(3)], axis=1)
-    wp = np.stack([np.interp(t, mw.t, turb[:, k, 2]) for k in range(3)], axis=1)
-    phase = np.stack([np.interp(t, mw.t, shedding_phase[:, k]) for k in range(3)], axis=1)
+    n_sec = U.shape[1]
+    up = np.stack([np.interp(t, mw.t, turb[:, k, 0]) for k in range(n_sec)], axis=1)
+    wp = np.stack([np.interp(t, mw.t, turb[:, k, 2]) for k in range(n_sec)], axis=1)
+    phase = np.stack([np.interp(t, mw.t, shedding_phase[:, k]) for k in range(n_sec)], axis=1)
     buffet = rho * U * D * (a.buffeting_u * up + a.buffeting_w * wp)
     detuning = a.strouhal * U / D - s.frequency
     # Shedding near resonance is locked (counted in r0); the rest runs free and averages out.
@@ -130,11 +131,11 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     n_w = sample_times(T, wcfg.anemometer_rate).size
     n_w_ext = int(np.ceil((T + pad) * wcfg.anemometer_rate))
     t_w_ext = np.arange(n_w_ext) / wcfg.anemometer_rate
-    mw = mean_wind(spec.script, t_w_ext, wcfg, rng_mean)
+    mw = mean_wind(spec.script, t_w_ext, wcfg, rng_mean, s.n_sections)
     u, v, w, turb = anemometer_records(mw, s, wcfg, rng_turb)
     mw = felt_mean_wind(mw, turb, wcfg)
     f_shed = config.aero.strouhal * mw.U / s.depth
-    shedding_phase = 2 * np.pi * cumulative_trapezoid(f_shed, mw.t, axis=0, initial=0.0) + rng_shed.uniform(0, 2 * np.pi, 3)
+    shedding_phase = 2 * np.pi * cumulative_trapezoid(f_shed, mw.t, axis=0, initial=0.0) + rng_shed.uniform(0, 2 * np.pi, s.n_sections)
 
     # Full simulation on the accelerometer's own (possibly offset and drifting) clock.
     # The integration starts at (or just before) true time 0, so the bridge moves
@@ -219,11 +220,12 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     }
     if ev.coef is not None:
         truth["coef"] = ev.coef
-        truth["feature"] = feature_names(3)
+        truth["feature"] = feature_names(config.structure.n_sections)
     return build_event(
         event_id=spec.event_id, start_time=spec.start_time, source="synthetic",
         span_azimuth_deg=config.wind.span_azimuth_deg,
         wind_time=ev.wind_time, u=ev.u, v=ev.v, w=ev.w,
         accel_time=ev.accel_time, acc=ev.acc, truth=truth,
         attrs={"scenario": spec.kind, "generator": "vivbench.synth"},
+        sections=config.structure.sections,
     )

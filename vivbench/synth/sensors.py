@@ -16,12 +16,12 @@ def accelerometer(acc: np.ndarray, sensors: SensorConfig, rng: np.random.Generat
 
     Parameters
     ----------
-    acc : ndarray, shape (n, 3), m/s^2
+    acc : ndarray, shape (n, S), m/s^2
         True vertical acceleration at the sections.
 
     Returns
     -------
-    ndarray, shape (n, 3), float32, m/s^2
+    ndarray, shape (n, S), float32, m/s^2
     """
     sigma = sensors.noise_density * 1e-6 * G * np.sqrt(sensors.rate / 2.0)
     out = acc + sigma * rng.standard_normal(acc.shape)

@@ -66,8 +66,8 @@ class MeanWind:
     Attributes
     ----------
     t : ndarray, shape (n,), s
-    U : ndarray, shape (n, 3), m/s; mean speed perpendicular to the span per section
-    V : ndarray, shape (n, 3), m/s; mean horizontal speed per section
+    U : ndarray, shape (n, S), m/s; mean speed perpendicular to the span per section
+    V : ndarray, shape (n, S), m/s; mean horizontal speed per section
     direction : ndarray, shape (n,), degrees from north the wind blows from
     """
 
@@ -91,13 +91,14 @@ def slow_process(t: np.ndarray, rms: float, timescales: tuple[float, float], rng
     return (amps[None, :] * np.cos(2 * np.pi * t[:, None] / periods[None, :] + phases[None, :])).sum(axis=1)
 
 
-def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.random.Generator) -> MeanWind:
-    """Evaluate the scripted mean wind with its random wander at times ``t`` (s)."""
+def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.random.Generator,
+              n_sections: int = 3) -> MeanWind:
+    """Evaluate the scripted mean wind with its random wander at times ``t`` (s) at ``n_sections`` sections."""
     t = np.asarray(t, dtype=float)
     base = PchipInterpolator(script.times, script.speeds)(np.clip(t, 0.0, script.duration))
     common = slow_process(t, wind.speed_wander, wind.slow_timescales, rng)
-    offsets = rng.normal(0.0, wind.section_offset, size=3)
-    wander = np.stack([slow_process(t, wind.section_wander, wind.slow_timescales, rng) for _ in range(3)], axis=1)
+    offsets = rng.normal(0.0, wind.section_offset, size=n_sections)
+    wander = np.stack([slow_process(t, wind.section_wander, wind.slow_timescales, rng) for _ in range(n_sections)], axis=1)
     U = (base + common)[:, None] * (1.0 + offsets[None, :] + wander)
     U = np.maximum(U, wind.min_speed)
     yaw = script.yaw_deg + slow_process(t, wind.direction_wander_deg, wind.slow_timescales, rng)
@@ -119,9 +120,9 @@ def anemometer_records(mw: MeanWind, structure: StructureConfig, wind: WindConfi
 
     Returns
     -------
-    u, v, w : ndarray, shape (n, 3), float32, m/s
+    u, v, w : ndarray, shape (n, S), float32, m/s
         Measured components with noise and resolution applied.
-    turb : ndarray, shape (n, 3, 3), m/s
+    turb : ndarray, shape (n, S, 3), m/s
         Turbulence (along-wind, lateral, vertical) per section, before the sensor.
     """
     n = mw.t.size
@@ -158,7 +159,7 @@ def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind
     Parameters
     ----------
     mw : MeanWind on the uniform anemometer grid
-    turb : ndarray, shape (n, 3, 3), m/s; along-wind, lateral, vertical turbulence
+    turb : ndarray, shape (n, S, 3), m/s; along-wind, lateral, vertical turbulence
 
     Returns
     -------

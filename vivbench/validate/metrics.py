@@ -214,7 +214,7 @@ def _pr(tp, fp, fn) -> dict:
 
 
 def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: np.ndarray | None = None,
-                   n_sections: int = 3, tol: float = 0.0) -> dict:
+                   n_sections: int | None = None, tol: float = 0.0) -> dict:
     """Support precision and recall of identified models against the truth matrix.
 
     Counts are pooled (micro-averaged) over the scored models: precision =
@@ -223,13 +223,14 @@ def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: 
     Parameters
     ----------
     coef_identified : ndarray, shape (..., n_equations, n_features)
-        E.g. (n_windows, 3, 69). A model with any non-finite coefficient (no
+        E.g. (n_windows, S, 23 S) for S sections. A model with any non-finite coefficient (no
         model fitted) is left out.
     coef_true : ndarray, shape (n_equations, n_features)
         The exact truth (one representative of a family, see the module notes).
     mask : ndarray of bool, shape (..., n_equations), optional
         Score only these models (e.g. the identifiable ones).
-    n_sections : int
+    n_sections : int, optional
+        Number of sections S; default ``n_features // 23`` (the library has 23 terms per section).
     tol : float
         A coefficient counts as present when ``|coef| > tol`` (physical units).
 
@@ -250,6 +251,8 @@ def support_scores(coef_identified: np.ndarray, coef_true: np.ndarray, *, mask: 
     coef_true = np.asarray(coef_true, dtype=float)
     if coef_identified.shape[-2:] != coef_true.shape:
         raise InputError(f"identified models have shape {coef_identified.shape[-2:]} per window; the truth has {coef_true.shape}")
+    if n_sections is None:
+        n_sections = coef_true.shape[-1] // section_exponents().shape[0]
     valid = np.isfinite(coef_identified).all(axis=-1)
     if mask is not None:
         valid &= np.asarray(mask, dtype=bool)

@@ -6,11 +6,11 @@ stretch is chosen by a rule, from the truth when there is one:
 
 - truth (:func:`truth_plateau`): the longest contiguous run of true regime 4
   (DESIGN 2.5: the A^3 order matters, a VIV plateau) at the middle section
-  S2 (the antinode of the mode); ties go to the run with the larger mean true
-  amplitude. The campaign's clearest plateau (:func:`clearest_plateau`) is the
+  (S2 of three, :func:`vivbench.core.terms.reference_section`; the antinode
+  of the mode); ties go to the run with the larger mean true amplitude. The campaign's clearest plateau (:func:`clearest_plateau`) is the
   longest such run over all events (ties: larger amplitude, then event id).
 - measurement only (:func:`measured_plateau`): the longest run in which the
-  measured amplitude of S2 stays at or above ``level`` times its maximum.
+  measured amplitude of the middle section stays at or above ``level`` times its maximum.
 
 The default forecast start is one window width (50 s) after the start of the
 run, so that the window models in force at t0 lie inside the plateau, unless
@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 from vivbench.core.errors import InputError
+
+from vivbench.core.terms import reference_section
 
 __all__ = ["Plateau", "clearest_plateau", "measured_plateau", "truth_plateau"]
 
@@ -77,37 +79,44 @@ def _best_run(t, mask, amp, event_id, source, window):
     return Plateau(event_id=event_id, start=start, end=end, t0=t0, amplitude=float(mean_amp[k]), source=source)
 
 
-def truth_plateau(truth: xr.Dataset, event_id: str = "", *, section: int = 1, window: float = 50.0) -> Plateau | None:
-    """Longest run of true regime 4 at one section (default S2); None if there is none.
+def truth_plateau(truth: xr.Dataset, event_id: str = "", *, section: int | None = None,
+                  window: float = 50.0) -> Plateau | None:
+    """Longest run of true regime 4 at one section (default the middle one, S2 of three); None if there is none.
 
     Parameters
     ----------
     truth : the ``/truth`` group of an event (``time``, ``regime``, ``A``)
     event_id : str
-    section : int
-        Index of the section (1: S2).
+    section : int, optional
+        Index of the section (1: S2); default :func:`vivbench.core.terms.reference_section`.
     window : float, s
         Offset of the default t0 from the start of the run.
     """
     t = np.asarray(truth["time"].values, dtype=float)
+    if section is None:
+        section = reference_section(truth["A"].shape[1])
     regime = np.asarray(truth["regime"].values)[:, section]
     A = np.asarray(truth["A"].values, dtype=float)[:, section]
     return _best_run(t, regime == 4, A, event_id, "truth", window)
 
 
-def measured_plateau(result: xr.Dataset, *, level: float = 0.8, section: int = 1, window: float = 50.0) -> Plateau:
+def measured_plateau(result: xr.Dataset, *, level: float = 0.8, section: int | None = None,
+                     window: float = 50.0) -> Plateau:
     """Longest run with measured A at or above ``level`` times its maximum.
 
     Parameters
     ----------
     result : identification result (``A`` on ``time``)
     level : float in (0, 1)
-    section : int
+    section : int, optional
+        Index of the section; default the middle one (:func:`vivbench.core.terms.reference_section`).
     window : float, s
     """
     if not 0 < level < 1:
         raise InputError(f"level must lie in (0, 1); got {level}")
     t = np.asarray(result["time"].values, dtype=float)
+    if section is None:
+        section = reference_section(result["A"].shape[1])
     A = np.asarray(result["A"].values, dtype=float)[:, section]
     if not np.isfinite(A).any():
         raise InputError("the measured amplitude has no finite value")
@@ -115,7 +124,7 @@ def measured_plateau(result: xr.Dataset, *, level: float = 0.8, section: int = 1
     return _best_run(t, mask, A, str(result.attrs.get("event_id", "")), "measured", window)
 
 
-def clearest_plateau(campaign_dir, *, section: int = 1, window: float = 50.0) -> Plateau:
+def clearest_plateau(campaign_dir, *, section: int | None = None, window: float = 50.0) -> Plateau:
     """The event of a synthetic campaign with the longest true regime-4 run.
 
     Parameters
