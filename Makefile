@@ -23,7 +23,7 @@ demo: $(VENV)/.installed-test
 	$(BIN)/vivbench demo --out demo
 
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -m "not slow" -q
+	$(BIN)/python -m pytest -m "not slow" -q -n auto --dist loadfile
 
 test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m slow -q
