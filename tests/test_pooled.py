@@ -7,6 +7,7 @@ import pytest
 
 from tests.helpers import assert_close
 from vivbench.models.campaign import PooledSINDy, pooled_window_stats
+from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.regression.settings import StlsqSettings
 from vivbench.regression.stlsq import stlsq_path
 from vivbench.library.basis import window_library
@@ -89,7 +90,7 @@ def test_pooled_model_recovers_the_true_regimes(event1):
     model = PooledSINDy(n_bootstrap=20, block_s=100.0, seed=1).fit([(t, A, U, dA)])
     start = np.arange(t[0], t[-1] - 50.0, 25.0)
     end = start + 50.0
-    out = model.window_regimes(t, A, U, start, end)
+    out = campaign_window_verdicts(model, t, A, U, start, end)
     truth = truth_window_regimes(truth_ds, start, end)
     assert np.array_equal(out["regime"], truth)
     assert out["identifiable"].mean() > 0.9
@@ -107,7 +108,7 @@ def test_a_plateau_alone_is_not_identifiable():
     dA = 1e-4 * rng.standard_normal((n, 3))
     model = PooledSINDy(n_bootstrap=30, block_s=100.0, seed=0).fit([(t, A, U, dA)])
     start = np.arange(0.0, t[-1] - 50.0, 25.0)
-    out = model.window_regimes(t, A, U, start, start + 50.0)
+    out = campaign_window_verdicts(model, t, A, U, start, start + 50.0)
     assert out["identifiable"].mean() < 0.5
     # the near-null-space test alone must see it: the bootstrap agrees on a stable but arbitrary split
     assert out["robust"].mean() < 0.5, out["robust"].mean()
@@ -170,7 +171,7 @@ def test_too_little_data_gives_no_verdict():
     dA = 0.01 * A - 0.2 * A**3 + 1e-6 * rng.standard_normal((n, 3))
     model = PooledSINDy(n_bootstrap=10, block_s=300.0, min_blocks=20).fit([(t, A, U, dA)])
     assert not model.enough_data_ and model.n_blocks_ == 2
-    out = model.window_regimes(t, A, U, np.array([0.0, 100.0]), np.array([50.0, 150.0]))
+    out = campaign_window_verdicts(model, t, A, U, np.array([0.0, 100.0]), np.array([50.0, 150.0]))
     assert not out["identifiable"].any()
 
 

@@ -25,7 +25,7 @@ from vivbench.models import (
     WindowedSINDy,
     WindowSINDy,
 )
-from vivbench.regimes import label_windows, model_window_regimes
+from vivbench.regimes import campaign_window_verdicts, label_windows, model_window_regimes
 
 
 def _true_coef(S: int) -> np.ndarray:
@@ -135,7 +135,7 @@ def test_campaign_model_recovers_a_known_model(campaign_fit):
     # the regime rule through the protocol agrees with the campaign model's own window regimes
     ws = rec.t[0] + 50.0 * np.arange(12)
     via_protocol = model_window_regimes(model, rec, ws, ws + 50.0, tau=model.tau)
-    own = model.window_regimes(rec.t, rec.A, rec.U, ws, ws + 50.0)
+    own = campaign_window_verdicts(model, rec.t, rec.A, rec.U, ws, ws + 50.0)
     assert np.array_equal(via_protocol["regime"], own["regime"])
     assert_close(via_protocol["order_rms"], own["order_rms"], rtol=1e-9, atol=1e-15, reason="same sums, other order")
 
@@ -155,7 +155,7 @@ def test_save_and_load_give_identical_predictions(campaign_fit, window_fit, tmp_
     assert np.array_equal(back.predict(recs[0]), model.predict(recs[0]))
     assert back.equations() == model.equations()
     ws = recs[0].t[0] + 100.0 * np.arange(5)
-    a, b = model.window_regimes(recs[0].t, recs[0].A, recs[0].U, ws, ws + 100), back.window_regimes(recs[0].t, recs[0].A, recs[0].U, ws, ws + 100)
+    a, b = campaign_window_verdicts(model, recs[0].t, recs[0].A, recs[0].U, ws, ws + 100), campaign_window_verdicts(back, recs[0].t, recs[0].A, recs[0].U, ws, ws + 100)
     assert all(np.array_equal(a[k], b[k], equal_nan=True) for k in a)
     _c, wrecs, wmodel = window_fit
     wpath = wmodel.save(tmp_path / "window.model.nc")

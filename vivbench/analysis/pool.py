@@ -13,6 +13,7 @@ import xarray as xr
 import vivbench
 from vivbench.core.record import Record
 from vivbench.models.campaign import PooledSINDy
+from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.result import read_result
 from vivbench.core.errors import InputError
@@ -121,7 +122,7 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end", "regime", "identifiable", "agreement", "robust", "order_rms")}
     for _path, ds, attrs, _eq in results:
         s, e = ds["window_start"].values, ds["window_end"].values
-        out = model.window_regimes(ds["time"].values, ds["A"].values, ds["U"].values, s, e)
+        out = campaign_window_verdicts(model, ds["time"].values, ds["A"].values, ds["U"].values, s, e)
         min_snr = json.loads(attrs.get("identify_config_json", "{}")).get("min_snr")
         if min_snr is not None and "amplitude_snr" in ds:
             # The identification's noise-floor test holds for any model: below the floor A is noise.

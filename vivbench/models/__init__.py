@@ -1,5 +1,16 @@
 """Models that turn data into dynamics: window SINDy, the campaign model, simulation and forecasts, refits."""
 
+from vivbench.models.campaign import (
+    PooledSINDy,
+    CampaignSINDy,
+    WindowRecord,
+    amplitude_ratios,
+    pooled_window_stats,
+    window_record,
+    window_stats,
+    window_sums,
+    RATIO_LEVEL,
+)
 from vivbench.models.protocol import (
     Method,
     FittedModel,
@@ -16,7 +27,6 @@ from vivbench.models.protocol import (
     section_names,
     simulate_windows,
 )
-from vivbench.models.campaign import PooledSINDy, CampaignSINDy, pooled_window_stats, amplitude_ratios, RATIO_LEVEL
 from vivbench.models.refit import (
     RefitConfig,
     RefitResult,
@@ -42,11 +52,12 @@ from vivbench.models.window import WindowProblem, WindowedSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
-    "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations", "ModelBase",
-    "NotFittedError", "as_record", "coef_order_contributions", "format_equations", "section_names",
-    "simulate_windows", "CampaignSINDy", "amplitude_ratios", "RATIO_LEVEL", "WindowSINDy", "nearest_window",
-    "PooledSINDy", "pooled_window_stats", "RefitConfig", "RefitResult", "EventRefit", "refit_coefficients",
-    "refit_event", "simulate_coefficients", "order_rms", "CLIP_MODES", "Simulation", "model_jacobian",
-    "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
-    "window_in_force", "WindowProblem", "WindowedSINDy",
+    "PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
+    "window_record", "window_stats", "window_sums", "RATIO_LEVEL", "Method", "FittedModel", "Predictor",
+    "Simulator", "CampaignLevel", "Persistent", "HasEquations", "ModelBase", "NotFittedError", "as_record",
+    "coef_order_contributions", "format_equations", "section_names", "simulate_windows", "RefitConfig",
+    "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients", "order_rms",
+    "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",
+    "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "WindowedSINDy",
+    "WindowSINDy", "nearest_window",
 ]

@@ -47,7 +47,7 @@ from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
 from vivbench.regression.stlsq import aicc, stlsq_path
 from vivbench.library.basis import window_library
 from vivbench.core.record import Record
-from vivbench.core.regime import DEFAULT_TAU, regime_rule
+from vivbench.core.regime import DEFAULT_TAU
 from vivbench.core.terms import evaluate_library, feature_exponents, feature_names, section_exponents
 from vivbench.core.errors import InputError
 from vivbench.models.protocol import (
@@ -60,7 +60,8 @@ from vivbench.models.protocol import (
 )
 from vivbench.models.simulate import Simulation
 
-__all__ = ["PooledSINDy", "CampaignSINDy", "pooled_window_stats", "amplitude_ratios", "RATIO_LEVEL"]
+__all__ = ["PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats", "window_record",
+           "window_stats", "window_sums", "RATIO_LEVEL"]
 
 #: Samples whose amplitude is below this share of the section's largest amplitude
 #: do not enter the amplitude ratios (there A is mostly noise and ratios scatter).
@@ -101,7 +102,7 @@ def amplitude_ratios(A: np.ndarray, level: float = RATIO_LEVEL) -> np.ndarray:
     return out
 
 
-class _Record(NamedTuple):
+class WindowRecord(NamedTuple):
     """One record's library (zero on samples with a non-finite term) and its windows' sample ranges."""
 
     A: np.ndarray
@@ -111,16 +112,17 @@ class _Record(NamedTuple):
     hi: np.ndarray
 
 
-def _record(t, A, U, window_start, window_end) -> _Record:
+def window_record(t, A, U, window_start, window_end) -> WindowRecord:
+    """A record's physical library (zero where a term is not finite) and its windows' sample ranges."""
     t = np.asarray(t, dtype=float)
     A = np.asarray(A, dtype=float)
     theta = evaluate_library(A, np.asarray(U, dtype=float))
     ok = np.isfinite(theta).all(axis=1)
-    return _Record(A=A, theta=np.where(ok[:, None], theta, 0.0), ok=ok,
+    return WindowRecord(A=A, theta=np.where(ok[:, None], theta, 0.0), ok=ok,
                    lo=np.searchsorted(t, window_start, side="left"), hi=np.searchsorted(t, window_end, side="left"))
 
 
-def _window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Sums of x over samples lo[w] <= i < hi[w] along axis 0, by one cumulative sum."""
     c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)], axis=0)
     return c[hi] - c[lo]
@@ -393,9 +395,9 @@ class PooledSINDy(ModelBase):
         self.cond_ = float(np.linalg.cond(R.reshape(-1, p)))
         self.y_scale_ = ys
         gram = np.einsum("bki,bkj->ij", R, R) + self.alpha * np.eye(p)
-        self._gram_inv_ = np.linalg.inv(gram)
-        self._to_physical_ = lib.to_physical[0]
-        self._rss_scaled_ = best_rss[0]
+        self.gram_inv_ = np.linalg.inv(gram)
+        self.to_physical_ = lib.to_physical[0]
+        self.rss_scaled_ = best_rss[0]
         resid = y - lib.theta[0] @ np.nan_to_num(coef_scaled[0]).T
         self.correlation_samples_ = _integrated_correlation(resid)
         self.feature_names_ = feature_names(S)
@@ -538,9 +540,9 @@ class PooledSINDy(ModelBase):
             "threshold": (eq, self.threshold_), "n_terms": (eq, self.n_terms_.astype(np.int32)),
             "rss": (eq, self.rss_, {"units": "m2 s-2"}), "aicc": (eq, self.aicc_),
             "y_scale": (eq, self.y_scale_, {"units": "m/s"}),
-            "correlation_samples": (eq, self.correlation_samples_), "rss_scaled": (eq, self._rss_scaled_),
+            "correlation_samples": (eq, self.correlation_samples_), "rss_scaled": (eq, self.rss_scaled_),
             "amplitude_ratios": (("equation", "section"), self.amplitude_ratios_, {"units": "1"}),
-            "gram_inv": (("basis", "basis_"), self._gram_inv_), "to_physical": (("basis", "basis_"), self._to_physical_),
+            "gram_inv": (("basis", "basis_"), self.gram_inv_), "to_physical": (("basis", "basis_"), self.to_physical_),
         }
         coords = {"equation": section_names(S), "feature": self.feature_names_, "section": section_names(S),
                   "bootstrap": np.arange(self.coef_bootstrap_.shape[0])}
@@ -565,8 +567,8 @@ class PooledSINDy(ModelBase):
         model.support_ = model.coef_scaled_ != 0
         model.threshold_, model.n_terms_ = g["threshold"], g["n_terms"].astype(int)
         model.rss_, model.aicc_, model.y_scale_ = g["rss"], g["aicc"], g["y_scale"]
-        model.correlation_samples_, model._rss_scaled_ = g["correlation_samples"], g["rss_scaled"]
-        model._gram_inv_, model._to_physical_ = g["gram_inv"], g["to_physical"]
+        model.correlation_samples_, model.rss_scaled_ = g["correlation_samples"], g["rss_scaled"]
+        model.gram_inv_, model.to_physical_ = g["gram_inv"], g["to_physical"]
         model.amplitude_ratios_ = g["amplitude_ratios"]
         model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
         model.enough_data_, model.cond_ = bool(int(ds.attrs["enough_data"])), float(ds.attrs["cond"])
@@ -575,111 +577,9 @@ class PooledSINDy(ModelBase):
         model.event_ids_ = json.loads(ds.attrs.get("events", "[]"))
         return model
 
-    def window_regimes(self, t: np.ndarray, A: np.ndarray, U: np.ndarray,
-                       window_start: np.ndarray, window_end: np.ndarray) -> dict:
-        """Regimes of the pooled model over the windows of one record, and their identifiability.
-
-        Parameters
-        ----------
-        t : ndarray, shape (n,), s
-        A, U : ndarray, shape (n, S), m and m/s
-        window_start, window_end : ndarray, shape (W,), s; a window holds t0 <= t < t1
-
-        Returns
-        -------
-        dict
-            ``regime`` (W, S) int8 (0: no valid sample), ``identifiable`` (W, S)
-            bool, ``agreement`` (W, S) share of bootstrap replicates with the same
-            regime (NaN without replicates), ``order_rms`` (W, S, 4) m/s.
-        """
-        models = np.concatenate([self.coef_[None], self.coef_bootstrap_], axis=0)
-        rec = _record(t, A, U, window_start, window_end)  # evaluated once for the statistics and the margins
-        R, c1, nv = _window_stats(models, rec)
-        reg = regime_rule(R, c1, self.tau)  # (B+1, W, S)
-        reg = np.where(nv[None, :, None] > 0, reg, 0).astype(np.int8)
-        point = reg[0]
-        dR, dc1 = self._margins(rec)
-        robust = _regime_is_determined(R[0], dR, c1[0], dc1, self.tau) & (point > 0)
-        if models.shape[0] > 1 and self.enough_data_:
-            agree = (reg[1:] == point[None]).mean(axis=0)
-            identifiable = robust & (agree >= self.agreement)
-        else:
-            agree = np.full(point.shape, np.nan)
-            identifiable = np.zeros(point.shape, dtype=bool)
-        return {"regime": point, "identifiable": identifiable, "agreement": agree, "robust": robust,
-                "order_rms": R[0], "order_rms_margin": dR}
-
-    def _margins(self, rec: _Record):
-        """How far models that fit equally well can move each window's order RMS and c1.
-
-        Over all models xi + delta with ||X delta||^2 <= b (X the pooled scaled
-        library, b = chi2_p(confidence) sigma^2 n_corr, sigma^2 = RSS / N and
-        n_corr the residuals' integrated correlation time in samples), the
-        largest change of the window RMS of order i's contribution is
-        sqrt(b lambda_max(C_i^T X_wi^T X_wi C_i) / n_w), with C_i C_i^T
-        the order-i block of (X^T X + alpha I)^-1; the largest change of the
-        window mean of r_1/A is the same bound on a linear functional. Both
-        are in m/s and 1/s after scaling by the target's RMS.
-        """
-        A, ok, lo, hi = rec.A, rec.ok, rec.lo, rec.hi
-        S = A.shape[1]
-        X = rec.theta @ self._to_physical_
-        orders = np.tile(section_exponents()[:, 0], S)
-
-        def wsum(x):
-            return _window_sums(x, lo, hi)
-
-        nv = np.maximum(wsum(ok.astype(float)), 1.0)
-        n_max = int(max((hi - lo).max(initial=0), 1))
-        idx = lo[:, None] + np.arange(n_max)[None, :]
-        inwin = idx < hi[:, None]
-        idx = np.minimum(idx, A.shape[0] - 1)
-        # Models the data cannot reject: a chi-square region in p dimensions with the
-        # residual variance inflated by the residuals' integrated correlation time.
-        from scipy.stats import chi2
-
-        p = X.shape[1]
-        budget = chi2.ppf(self.confidence, p) * self._rss_scaled_ / self.n_samples_ * self.correlation_samples_
-        dR = np.empty((lo.size, S, 4))
-        dc1 = None
-        okA = ok[:, None] & (A > 0)
-        invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
-        for i in range(4):
-            cols = orders == i
-            C = np.linalg.cholesky(self._gram_inv_[np.ix_(cols, cols)])
-            Z = X[:, cols] @ C
-            Zw = Z[idx] * inwin[..., None]  # (W, n_max, k); rows outside a window are zero
-            gw = np.matmul(np.swapaxes(Zw, 1, 2), Zw)
-            lam = np.linalg.eigvalsh(gw)[:, -1]
-            dR[:, :, i] = np.sqrt(np.maximum(lam, 0.0)[:, None] / nv[:, None] * budget[None, :])
-            if i == 1:
-                v = wsum(Z[:, None, :] * invA[:, :, None]) / np.maximum(wsum(okA.astype(float)), 1.0)[:, :, None]
-                dc1 = np.sqrt(budget)[None, :] * np.linalg.norm(v, axis=-1)
-        ys = self.y_scale_[None, :]
-        return dR * ys[..., None], dc1 * ys
-
 
 #: The campaign model of the model protocol (DESIGN 7); the same class as :class:`PooledSINDy`.
 CampaignSINDy = PooledSINDy
-
-
-def _regime_is_determined(R, dR, c1, dc1, tau):
-    """Whether every order RMS in [R - dR, R + dR] and c1 in [c1 - dc1, c1 + dc1] give one regime.
-
-    Orders are bounded one at a time (conservative: a joint move is smaller).
-    """
-    lo = np.maximum(R - dR, 0.0)
-    hi = R + dR
-    m_lo = lo.max(axis=-1)
-    m_hi = hi.max(axis=-1)
-    can4 = hi[..., 3] >= tau * m_lo
-    not4 = lo[..., 3] < tau * m_hi
-    can3 = not4 & (hi[..., 2] >= tau * m_lo)
-    below = not4 & (lo[..., 2] < tau * m_hi)
-    with np.errstate(invalid="ignore"):
-        can2 = below & ~(c1 + dc1 <= 0)
-        can1 = below & ~(c1 - dc1 > 0)
-    return (can4.astype(int) + can3 + can2 + can1) == 1
 
 
 def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
@@ -697,10 +597,10 @@ def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
     R : ndarray, shape (M, W, S, 4), m/s; c1 : ndarray, shape (M, W, S), 1/s;
     n_valid : ndarray, shape (W,)
     """
-    return _window_stats(models, _record(t, A, U, window_start, window_end))
+    return window_stats(models, window_record(t, A, U, window_start, window_end))
 
 
-def _window_stats(models: np.ndarray, rec: _Record):
+def window_stats(models: np.ndarray, rec: WindowRecord):
     A, theta, ok, lo, hi = rec
     S = A.shape[1]
     orders = np.tile(section_exponents()[:, 0], S)
@@ -710,7 +610,7 @@ def _window_stats(models: np.ndarray, rec: _Record):
     invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
 
     def wsum(x):
-        return _window_sums(x, lo, hi)
+        return window_sums(x, lo, hi)
 
     nv = wsum(ok.astype(float))
     sq = np.empty((lo.size, M, S, 4))
