@@ -8,6 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from vivbench.models.protocol import ModelBase
 from vivbench.preprocess.windows import window_bounds
 from vivbench.regression.optimizers import OPTIMIZERS, run_optimizer
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
@@ -50,7 +51,7 @@ class WindowProblem(NamedTuple):
     settings: StlsqSettings
 
 
-class WindowedSINDy:
+class WindowedSINDy(ModelBase):
     """Time-varying SINDy: STLSQ with AICc selection on sliding windows (DESIGN 3.2).
 
     Each window's library (:func:`vivbench.library.basis.window_library`,
@@ -186,42 +187,6 @@ class WindowedSINDy:
         self.optimizer = optimizer
         self.optimizer_options = optimizer_options
         self.random_state = random_state
-
-    _PARAMS = (
-        "window",
-        "step",
-        "thresholds",
-        "alpha",
-        "max_iter",
-        "scaling",
-        "unbias",
-        "allow_empty",
-        "residual_floor",
-        "refit_rcond",
-        "solver",
-        "chunk_size",
-        "keep_path",
-        "raw_cond",
-        "optimizer",
-        "optimizer_options",
-        "random_state",
-    )
-
-    def get_params(self, deep: bool = True) -> dict:
-        """Constructor parameters (scikit-learn convention)."""
-        return {name: getattr(self, name) for name in self._PARAMS}
-
-    def set_params(self, **params) -> "WindowedSINDy":
-        """Set constructor parameters (scikit-learn convention)."""
-        for name, value in params.items():
-            if name not in self._PARAMS:
-                raise InputError(f"unknown parameter {name!r}; allowed: {', '.join(self._PARAMS)}")
-            setattr(self, name, value)
-        return self
-
-    def __repr__(self) -> str:
-        args = ", ".join(f"{k}={getattr(self, k)!r}" for k in self._PARAMS)
-        return f"WindowedSINDy({args})"
 
     def settings(self) -> StlsqSettings:
         """The :class:`StlsqSettings` these parameters define (validated)."""

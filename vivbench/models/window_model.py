@@ -77,8 +77,9 @@ class WindowSINDy(ModelBase):
     ----------
     window, step, thresholds, alpha, max_iter, scaling, unbias, allow_empty, residual_floor,
     refit_rcond, solver, chunk_size, keep_path, raw_cond, optimizer, optimizer_options, random_state
-        Those of :class:`vivbench.models.window.WindowedSINDy` (``keep_path``
-        defaults to False here: the threshold paths are diagnostics of one fit).
+        Those of :class:`vivbench.models.window.WindowedSINDy`, with the same
+        defaults (``keep_path=True`` keeps each event's threshold path in
+        ``estimators_``; pass False to save memory on long campaigns).
 
     Attributes
     ----------
@@ -97,28 +98,8 @@ class WindowSINDy(ModelBase):
     feature_names_ : list of str
     """
 
-    def __init__(self, *, window: float = 50.0, step: float = 25.0, thresholds=None, alpha: float = 0.05,
-                 max_iter: int = 20, scaling: str = "scaled", unbias: bool = True, allow_empty: bool = False,
-                 residual_floor: float = 1e-8, refit_rcond: float | None = 1e-6, solver: str = "auto",
-                 chunk_size: int = 128, keep_path: bool = False, raw_cond: bool = False, optimizer: str = "stlsq",
-                 optimizer_options=None, random_state: int = 0):
-        self.window = window
-        self.step = step
-        self.thresholds = thresholds
-        self.alpha = alpha
-        self.max_iter = max_iter
-        self.scaling = scaling
-        self.unbias = unbias
-        self.allow_empty = allow_empty
-        self.residual_floor = residual_floor
-        self.refit_rcond = refit_rcond
-        self.solver = solver
-        self.chunk_size = chunk_size
-        self.keep_path = keep_path
-        self.raw_cond = raw_cond
-        self.optimizer = optimizer
-        self.optimizer_options = optimizer_options
-        self.random_state = random_state
+    # The same parameters as the single-record estimator, so the two cannot drift apart.
+    __init__ = WindowedSINDy.__init__
 
     def estimator(self) -> WindowedSINDy:
         """A fresh single-record estimator with these parameters."""
