@@ -78,7 +78,7 @@ def run(args) -> int:
     support = _own_section_mask(args.terms, result["feature"].values) if args.terms else args.support
     try:
         ev = refit_event(result, t0=args.t0, t1=args.t1, support=support, truth_coef=truth, config=config)
-    except ValueError as exc:
+    except InputError as exc:  # a bad segment or support: name the result; anything else is a bug
         raise InputError(f"{args.result}: {exc}") from None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
