@@ -13,7 +13,10 @@ held in memory as an :class:`xarray.DataTree`::
                       time (time) float64 s; section; order (order) 0..3
                       U, A (time, section) m/s and m; r (time, section, order) m/s;
                       regime (time, section) int 1..4; optional coef
-                      (equation, feature); attributes config_json, optional tau
+                      (equation, feature); optional slow changes
+                      damping_ratio, mass_factor (time) and aero_factor
+                      (time, order), dimensionless; attributes config_json,
+                      optional tau
 
 Times are seconds since ``start_time`` and are authoritative: a gap in the
 data is a run of NaN values, never a missing time. Section labels are
@@ -64,7 +67,14 @@ _UNIT_SPELLINGS = {
     "m": ("m",),
     "1": ("1",),
 }
-_TRUTH_KEYS = ("time", "U", "A", "r", "regime", "config", "coef", "feature", "tau")
+_TRUTH_KEYS = ("time", "U", "A", "r", "regime", "config", "coef", "feature", "tau",
+               "damping_ratio", "mass_factor", "aero_factor")
+#: Optional /truth variables of the generator's slow changes (DESIGN 2.8): name -> (dims, long_name).
+_CHANGE_VARS = {
+    "damping_ratio": (("time",), "structural damping ratio zeta of the mode"),
+    "mass_factor": (("time",), "mass per unit length relative to the configured structure"),
+    "aero_factor": (("time", "order"), "factor of the aerodynamic part of the order-i terms relative to the configured aerodynamics"),
+}
 
 
 class EventFormatError(InputError):
@@ -135,7 +145,9 @@ def build_event(
         ``config`` the generator configuration as a JSON string (or a mapping,
         dumped with sorted keys); optional ``coef`` (n_sec, n_features) float64
         exact coefficient matrix (row k gives dA_k/dt) with ``feature`` the
-        n_features term names; optional ``tau`` regime threshold.
+        n_features term names; optional ``tau`` regime threshold; optional slow
+        changes (all three or none), dimensionless: ``damping_ratio`` (n_t,),
+        ``mass_factor`` (n_t,) and ``aero_factor`` (n_t, 4).
     attrs : mapping, optional
         Extra root attributes: str, int or float scalars; names must not start
         with ``_`` nor replace the format's own attributes.
@@ -311,6 +323,14 @@ def _truth_dataset(truth: Mapping, sections: list[str]) -> xr.Dataset:
         )
     elif truth.get("feature") is not None:
         raise ValueError("truth['feature'] given without truth['coef']")
+    given = [k for k in _CHANGE_VARS if truth.get(k) is not None]
+    if given and len(given) != len(_CHANGE_VARS):
+        raise ValueError(f"truth has {given} but the slow changes need all of {list(_CHANGE_VARS)}")
+    for name in given:
+        dims, long_name = _CHANGE_VARS[name]
+        shape = (n_t,) if dims == ("time",) else (n_t, 4)
+        values = _as_float(truth[name], f"truth[{name!r}]", shape, "(n_t,)" if dims == ("time",) else "(n_t, 4)")
+        ds[name] = (dims, values.astype(np.float64), {"units": "1", "long_name": long_name})
     return ds
 
 
@@ -528,6 +548,13 @@ def _check_truth(ds: xr.Dataset, sections: tuple) -> None:
             raise _Breach("/truth/feature must hold distinct non-empty strings")
     elif "feature" in ds.coords or "equation" in ds.coords:
         raise _Breach("/truth has feature/equation coordinates but no coef variable")
+    present = [k for k in _CHANGE_VARS if k in ds.data_vars]
+    if present and len(present) != len(_CHANGE_VARS):
+        raise _Breach(f"/truth has {present} but the slow changes need all of {list(_CHANGE_VARS)}")
+    for name in present:
+        values = _check_variable(ds, "truth", name, _CHANGE_VARS[name][0], "1").values
+        if not np.all(np.isfinite(values)) or np.any(values < 0):
+            raise _Breach(f"/truth/{name} must be finite and >= 0")
 
 
 # -------------------------------------------------------------------- write / read
@@ -743,7 +770,9 @@ def event_arrays(tree: xr.DataTree) -> dict:
         (n_acc, n_sec) m/s^2; and, if the event has a truth,
         ``truth_time`` (n_t,) s; ``U`` (n_t, n_sec) m/s; ``A`` (n_t, n_sec) m;
         ``r`` (n_t, n_sec, 4) m/s; ``regime`` (n_t, n_sec) int; plus ``coef``
-        (n_sec, n_features) and ``feature`` (tuple of str) when stored.
+        (n_sec, n_features) and ``feature`` (tuple of str) when stored, and the
+        slow changes ``damping_ratio``, ``mass_factor`` (n_t,) and ``aero_factor``
+        (n_t, 4), dimensionless, when stored.
     """
     wind = tree["wind"]
     accel = tree["accel"]
@@ -768,6 +797,9 @@ def event_arrays(tree: xr.DataTree) -> dict:
         if "coef" in truth.data_vars:
             out["coef"] = truth["coef"].values
             out["feature"] = tuple(truth["feature"].values.tolist())
+        for name in _CHANGE_VARS:
+            if name in truth.data_vars:
+                out[name] = truth[name].values
     return out
 
 

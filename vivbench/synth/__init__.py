@@ -4,6 +4,7 @@ from vivbench.synth.aero import amplitude_coefficients, amplitude_polynomials, e
 from vivbench.synth.campaign import SCENARIOS, CampaignConfig, CampaignResult, campaign_specs, draw_script, generate_campaign
 from vivbench.synth.config import (
     AeroConfig,
+    ChangesConfig,
     DefectConfig,
     GeneratorConfig,
     Polynomial,
@@ -20,7 +21,7 @@ from vivbench.synth.turbulence import TurbulenceConfig, davenport_coherence, kai
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
 
 __all__ = [
-    "AeroConfig", "CampaignConfig", "amplitude_coefficients", "CampaignResult", "DefectConfig", "EventSpec", "GeneratorConfig",
+    "AeroConfig", "CampaignConfig", "ChangesConfig", "amplitude_coefficients", "CampaignResult", "DefectConfig", "EventSpec", "GeneratorConfig",
     "MeanWind", "Polynomial", "SCENARIOS", "SensorConfig", "SimulatedEvent", "StructureConfig",
     "TurbulenceConfig", "WindConfig", "WindScript", "amplitude_polynomials", "anemometer_records",
     "bell_polynomial", "campaign_specs", "config_from_dict", "config_to_dict", "davenport_coherence",

@@ -136,6 +136,8 @@ def campaign_specs(campaign: CampaignConfig) -> list[tuple[EventSpec, np.random.
             start_time=begin.strftime("%Y-%m-%dT%H:%M:%SZ"),
             kind=kind,
             script=draw_script(kind, duration, rng),
+            number=i + 1,
+            campaign_time=(begin - start).total_seconds(),
         )
         specs.append((spec, child))
     return specs
@@ -165,6 +167,21 @@ def _catalogue_row(spec: EventSpec, path: Path, tree) -> dict:
         "U_max": f"{float(truth['U'].max()):.2f}",
         "A_max_m": f"{float(truth['A'].max()):.4f}",
         **{f"share_regime{k}": f"{c / total:.3f}" for k, c in zip((1, 2, 3, 4), counts)},
+        **_changes_columns(truth),
+    }
+
+
+def _changes_columns(truth) -> dict:
+    """Catalogue columns of the slow changes (DESIGN 2.8); none when the truth does not record them."""
+    if "damping_ratio" not in truth.data_vars:
+        return {}
+    zeta = truth["damping_ratio"].values
+    aero = truth["aero_factor"].values
+    return {
+        "damping_ratio_min": f"{float(zeta.min()):.6f}",
+        "damping_ratio_max": f"{float(zeta.max()):.6f}",
+        "mass_factor": f"{float(truth['mass_factor'].values.mean()):.4f}",
+        **{f"aero_factor_r{i}": f"{float(aero[:, i].mean()):.4f}" for i in range(4)},
     }
 
 

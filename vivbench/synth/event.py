@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 import xarray as xr
@@ -12,11 +13,11 @@ from scipy.integrate import cumulative_trapezoid
 from vivbench.io.event import build_event
 from vivbench.core.regime import classify_regime
 from vivbench.synth.aero import amplitude_coefficients, exact_coefficients, modal_coefficients, order_contributions
-from vivbench.synth.config import GeneratorConfig, config_to_dict
+from vivbench.synth.config import ChangesConfig, GeneratorConfig, StructureConfig, config_to_dict
 from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, felt_mean_wind, mean_wind
-from vivbench.core.terms import feature_names
+from vivbench.core.terms import feature_exponents, feature_names
 from vivbench.core.errors import InputError
 
 __all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event"]
@@ -32,12 +33,18 @@ class EventSpec:
     start_time : ISO 8601 UTC
     kind : name of the scenario the script was drawn from (informational)
     script : the scripted mean wind
+    number : event number in its campaign, counted from 1 (E001 is 1); selects the
+        slow changes' steps (:class:`~vivbench.synth.config.ChangesConfig`)
+    campaign_time : s; start of the event since the campaign's start, the time
+        origin of the damping drift
     """
 
     event_id: str
     start_time: str
     kind: str
     script: WindScript
+    number: int = 1
+    campaign_time: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,9 @@ class SimulatedEvent:
     ``q``, ``qd`` (n_a,) modal displacement (m) and velocity (m/s) at the accelerometer samples; ``truth_time``
     (n_t,) s; ``U`` (n_t, S) m/s; ``Q`` (n_t,) m averaged modal amplitude; ``r``
     (n_t, S, 4) m/s; ``regime`` (n_t, S); ``coef`` (S, 23 S) or None; ``defects`` dict.
+    With slow changes configured (else None): ``damping_ratio`` (n_t,) structural damping
+    ratio, ``mass_factor`` (n_t,) mass multiplier and ``aero_factor`` (n_t, 4) multipliers of
+    the aerodynamic parts of the orders 0..3, all dimensionless, on the truth grid.
     """
 
     wind_time: np.ndarray
@@ -67,6 +77,9 @@ class SimulatedEvent:
     regime: np.ndarray
     coef: np.ndarray | None
     defects: dict
+    damping_ratio: np.ndarray | None = None
+    mass_factor: np.ndarray | None = None
+    aero_factor: np.ndarray | None = None
 
 
 _WIND_PAD = 64.0  # s
@@ -101,6 +114,66 @@ def _modal_params(t: np.ndarray, mw: MeanWind, turb, shedding_phase, config: Gen
     return np.stack([c["c_lin"], c["n1"], c["n2"], c["k_aero"], c["f_lock"], f_ext], axis=1)
 
 
+# ------------------------------------------------------------ slow changes (DESIGN 2.8)
+
+
+def _changed_structure(structure: StructureConfig, changes: ChangesConfig, number: int) -> StructureConfig:
+    """The structure of event ``number`` after the steps: damping and mass scaled, frequency / sqrt(mass factor)."""
+    mf = changes.mass_factor(number)
+    return replace(structure, damping_ratio=structure.damping_ratio * changes.damping_factor(number),
+                   mass=structure.mass * mf, frequency=structure.frequency / math.sqrt(mf))
+
+
+def _drift(t: np.ndarray, spec: EventSpec, changes: ChangesConfig) -> np.ndarray:
+    """Relative damping drift zeta(t) / zeta_e at event times t (s), shape of t."""
+    return changes.drift(spec.campaign_time + np.asarray(t, dtype=float))
+
+
+def _changed_modal_params(params: np.ndarray, t: np.ndarray, spec: EventSpec, changes: ChangesConfig,
+                          structure: StructureConfig) -> np.ndarray:
+    """Modal coefficients (n, 6) with the retrofit's aero factors and the drift's extra damping.
+
+    The integrator holds the event's constant damping ratio zeta_e; the drift adds
+    -2 zeta_e (drift(t) - 1) w1 to c_lin, so the total is -2 zeta(t) w1.
+    """
+    f = changes.aero_factors(spec.number)
+    out = params.copy()
+    out[:, 0] *= f[1]  # c_lin ~ Y1
+    out[:, 1] *= f[2]  # n1 ~ Y1 e1
+    out[:, 2] *= f[3]  # n2 ~ Y1 e2
+    out[:, 4] *= f[0]  # f_lock ~ C_L
+    if changes.drift_amplitude:
+        out[:, 0] -= 2.0 * structure.damping_ratio * structure.omega * (_drift(t, spec, changes) - 1.0)
+    return out
+
+
+def _changed_amplitude_coefficients(U: np.ndarray, t: np.ndarray, spec: EventSpec, changes: ChangesConfig,
+                                    structure: StructureConfig, config: GeneratorConfig) -> np.ndarray:
+    """p_0..p_3 of the averaged equation (n, 4) with the same aero factors and zeta(t) as the full model."""
+    aero = amplitude_coefficients(U, replace(structure, damping_ratio=0.0), config.aero)
+    coefs = aero * changes.aero_factors(spec.number)[None, :]
+    coefs[:, 1] -= structure.damping_ratio * _drift(t, spec, changes) * structure.omega
+    return coefs
+
+
+def _changed_exact_coefficients(structure: StructureConfig, changes: ChangesConfig, spec: EventSpec,
+                                config: GeneratorConfig) -> np.ndarray | None:
+    """Exact coefficient matrix (S, 23 S) of an event with steps or a retrofit; None with a drift.
+
+    A damping that drifts within the event has no constant coefficient matrix
+    (the truth's r and damping_ratio stay exact).
+    """
+    Xi = exact_coefficients(replace(structure, damping_ratio=0.0), config.aero)
+    if Xi is None or changes.drift_amplitude:
+        return None
+    ex = feature_exponents(structure.n_sections)
+    Xi = Xi * changes.aero_factors(spec.number)[ex[:, 1]][None, :]
+    for m in range(structure.n_sections):
+        col = int(np.flatnonzero((ex[:, 0] == m) & (ex[:, 1] == 1) & (ex[:, 2] == 0))[0])
+        Xi[m, col] -= structure.damping_ratio * structure.omega
+    return Xi
+
+
 def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.SeedSequence | int) -> SimulatedEvent:
     """Simulate one event (no file written).
 
@@ -112,8 +185,16 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
         Independent child streams are drawn for the mean wind, the turbulence,
         the shedding phases, the sensors and the defects, so switching on a
         defect does not change the wind or the structure's response.
+
+    With slow changes (``config.changes``), the event's steps (``spec.number``)
+    give its damping ratio, mass and frequency and its aero factors, and the
+    damping drift runs on the campaign time ``spec.campaign_time + t``; the full
+    simulation and the averaged truth use the same parameters.
     """
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    changes = config.changes
+    if changes.any:
+        config = replace(config, structure=_changed_structure(config.structure, changes, spec.number))
     rng_mean, rng_turb, rng_shed, rng_sens, rng_def = (np.random.default_rng(c) for c in ss.spawn(5))
     s, wcfg, sens = config.structure, config.wind, config.sensors
     T = spec.script.duration
@@ -146,9 +227,14 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     n_steps = lead + (n_acc - 1) * sub
     t_grid = t_first - lead * h + h * np.arange(n_steps + 1)
     params_mid = _modal_params(t_grid[:-1] + h / 2, mw, turb, shedding_phase, config)
+    if changes.any:
+        params_mid = _changed_modal_params(params_mid, t_grid[:-1] + h / 2, spec, changes, s)
     x = simulate_modal((config.initial_amplitude, 0.0), params_mid, h, s.omega, s.damping_ratio)[lead::sub]
     t_acc_true = t_grid[lead::sub]
-    qdd = modal_acceleration(x, _modal_params(t_acc_true, mw, turb, shedding_phase, config), s.omega, s.damping_ratio)
+    params_acc = _modal_params(t_acc_true, mw, turb, shedding_phase, config)
+    if changes.any:
+        params_acc = _changed_modal_params(params_acc, t_acc_true, spec, changes, s)
+    qdd = modal_acceleration(x, params_acc, s.omega, s.damping_ratio)
     phi = np.array(s.mode_shape)
     acc_true = qdd[:, None] * phi[None, :]
     acc = accelerometer(acc_true, sens, rng_sens)
@@ -159,7 +245,10 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     ht = config.truth_step / n_sub
     t_mid = ht * (np.arange((truth_time.size - 1) * n_sub) + 0.5)
     U_mid = _interp_wind(mw, t_mid)
-    coefs = amplitude_coefficients(U_mid, s, config.aero)
+    if changes.any:
+        coefs = _changed_amplitude_coefficients(U_mid, t_mid, spec, changes, s, config)
+    else:
+        coefs = amplitude_coefficients(U_mid, s, config.aero)
     Q = simulate_amplitude(config.initial_amplitude, coefs, ht)[::n_sub]
     if not np.all(Q > 0):
         bad = float(np.min(U_mid[np.argmax(coefs[:, 0] < 0)])) if np.any(coefs[:, 0] < 0) else float("nan")
@@ -168,7 +257,10 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
             f"{truth_time[np.argmax(Q <= 0)]:.0f} s; the locked lift C_L(U) must stay >= 0 over the wind "
             f"range (it is negative near U = {bad:.2f} m/s)")
     U_truth = _interp_wind(mw, truth_time)
-    r_modal = order_contributions(Q, U_truth, s, config.aero)  # (n_t, 4)
+    if changes.any:
+        r_modal = _changed_amplitude_coefficients(U_truth, truth_time, spec, changes, s, config) * Q[:, None] ** np.arange(4)
+    else:
+        r_modal = order_contributions(Q, U_truth, s, config.aero)  # (n_t, 4)
     r = phi[None, :, None] * r_modal[:, None, :]
     A_truth = Q[:, None] * phi[None, :]
     regime = classify_regime(r[None], A_truth[None], tau=config.tau, axis=0)
@@ -186,16 +278,31 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
         (u, n1), (v, n2), (w, n3) = spiked
         info["wind_spikes"] = n1 + n2 + n3
 
+    recorded = {}
+    if changes.any:
+        n_t = truth_time.size
+        recorded = {
+            "damping_ratio": s.damping_ratio * _drift(truth_time, spec, changes),
+            "mass_factor": np.full(n_t, changes.mass_factor(spec.number)),
+            "aero_factor": np.repeat(changes.aero_factors(spec.number)[None, :], n_t, axis=0),
+        }
+        coef = _changed_exact_coefficients(s, changes, spec, config)
+    else:
+        coef = exact_coefficients(s, config.aero)
     return SimulatedEvent(
         wind_time=wind_time, u=u, v=v, w=w,
         accel_time=np.arange(n_acc) * accel_period, acc=acc, acc_true=acc_true, q=x[:, 0], qd=x[:, 1],
         truth_time=truth_time, U=U_truth, Q=Q, r=r, regime=regime,
-        coef=exact_coefficients(s, config.aero), defects=info,
+        coef=coef, defects=info, **recorded,
     )
 
 
-def _script_dict(spec: EventSpec) -> dict:
-    return json.loads(json.dumps(asdict(spec)))
+def _script_dict(spec: EventSpec, with_place: bool) -> dict:
+    """The spec as plain data; its place in the campaign only when slow changes use it."""
+    data = json.loads(json.dumps(asdict(spec)))
+    if not with_place:
+        del data["number"], data["campaign_time"]
+    return data
 
 
 def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.SeedSequence | int,
@@ -204,13 +311,14 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
 
     The generator configuration, the event's script and its seed are stored as
     JSON in the ``/truth`` attribute ``config_json`` so that the file says how
-    it was made.
+    it was made. With slow changes, ``/truth`` also records the damping ratio,
+    the mass factor and the aero factors on the truth grid.
     """
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     ev = simulate_event(spec, config, ss)
     meta = {
         "generator": config_to_dict(config),
-        "event": _script_dict(spec),
+        "event": _script_dict(spec, config.changes.any),
         "seed": {"entropy": str(ss.entropy), "spawn_key": list(ss.spawn_key), "campaign_seed": campaign_seed},
         "defects": ev.defects,
     }
@@ -218,6 +326,8 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
         "time": ev.truth_time, "U": ev.U, "A": ev.Q[:, None] * np.array(config.structure.mode_shape)[None, :],
         "r": ev.r, "regime": ev.regime, "config": json.dumps(meta, sort_keys=True), "tau": config.tau,
     }
+    if ev.damping_ratio is not None:
+        truth.update(damping_ratio=ev.damping_ratio, mass_factor=ev.mass_factor, aero_factor=ev.aero_factor)
     if ev.coef is not None:
         truth["coef"] = ev.coef
         truth["feature"] = feature_names(config.structure.n_sections)
