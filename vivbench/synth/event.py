@@ -76,6 +76,13 @@ def _interp_wind(mw: MeanWind, t: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t, mw.t, mw.U[:, k]) for k in range(mw.U.shape[1])], axis=1)
 
 
+def _interp_yaw(mw: MeanWind, t: np.ndarray, config: GeneratorConfig) -> np.ndarray | None:
+    """Each section's yaw (degrees, shape (n, S)) at times t when the aerodynamics depend on it, else None."""
+    if config.aero.yaw is None or mw.yaw is None:
+        return None
+    return np.stack([np.interp(t, mw.t, mw.yaw[:, k]) for k in range(mw.yaw.shape[1])], axis=1)
+
+
 def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phase: np.ndarray,
                     config: GeneratorConfig) -> np.ndarray:
     """Buffeting plus unlocked Strouhal shedding, modal force per unit modal mass (m/s^2)."""
@@ -96,7 +103,7 @@ def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phas
 
 
 def _modal_params(t: np.ndarray, mw: MeanWind, turb, shedding_phase, config: GeneratorConfig) -> np.ndarray:
-    c = modal_coefficients(_interp_wind(mw, t), config.structure, config.aero)
+    c = modal_coefficients(_interp_wind(mw, t), config.structure, config.aero, _interp_yaw(mw, t, config))
     f_ext = _external_force(t, mw, turb, shedding_phase, config)
     return np.stack([c["c_lin"], c["n1"], c["n2"], c["k_aero"], c["f_lock"], f_ext], axis=1)
 
@@ -159,7 +166,8 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     ht = config.truth_step / n_sub
     t_mid = ht * (np.arange((truth_time.size - 1) * n_sub) + 0.5)
     U_mid = _interp_wind(mw, t_mid)
-    coefs = amplitude_coefficients(U_mid, s, config.aero)
+    # the truth sees the wind speed and yaw the full simulation sees
+    coefs = amplitude_coefficients(U_mid, s, config.aero, _interp_yaw(mw, t_mid, config))
     Q = simulate_amplitude(config.initial_amplitude, coefs, ht)[::n_sub]
     if not np.all(Q > 0):
         bad = float(np.min(U_mid[np.argmax(coefs[:, 0] < 0)])) if np.any(coefs[:, 0] < 0) else float("nan")
@@ -168,7 +176,7 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
             f"{truth_time[np.argmax(Q <= 0)]:.0f} s; the locked lift C_L(U) must stay >= 0 over the wind "
             f"range (it is negative near U = {bad:.2f} m/s)")
     U_truth = _interp_wind(mw, truth_time)
-    r_modal = order_contributions(Q, U_truth, s, config.aero)  # (n_t, 4)
+    r_modal = order_contributions(Q, U_truth, s, config.aero, _interp_yaw(mw, truth_time, config))  # (n_t, 4)
     r = phi[None, :, None] * r_modal[:, None, :]
     A_truth = Q[:, None] * phi[None, :]
     regime = classify_regime(r[None], A_truth[None], tau=config.tau, axis=0)
