@@ -1,8 +1,17 @@
 """The synthetic bridge: wind, aeroelastic force, structure, sensors, truth, campaigns."""
 
-from vivbench.synth.aero import amplitude_coefficients, amplitude_polynomials, exact_coefficients, modal_coefficients, order_contributions
+from vivbench.synth.aero import (
+    aero_functions,
+    amplitude_coefficients,
+    amplitude_polynomials,
+    exact_coefficients,
+    modal_coefficients,
+    order_contributions,
+    truth_curves,
+)
 from vivbench.synth.campaign import SCENARIOS, CampaignConfig, CampaignResult, campaign_specs, draw_script, generate_campaign
 from vivbench.synth.config import (
+    AERO_MODES,
     AeroConfig,
     ChangesConfig,
     DefectConfig,
@@ -16,6 +25,17 @@ from vivbench.synth.config import (
     config_to_dict,
     load_config,
 )
+from vivbench.synth.curves import (
+    CURVE_KINDS,
+    Constant,
+    GaussianBell,
+    LogisticStep,
+    LorentzianBell,
+    YawFactor,
+    curve_from_data,
+    reduced_velocity,
+)
+from vivbench.synth.draw import draw_aero
 from vivbench.synth.event import EventSpec, SimulatedEvent, generate_event, simulate_event
 from vivbench.synth.turbulence import TurbulenceConfig, davenport_coherence, kaimal_psd, simulate_turbulence
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
@@ -27,4 +47,6 @@ __all__ = [
     "bell_polynomial", "campaign_specs", "config_from_dict", "config_to_dict", "davenport_coherence",
     "draw_script", "exact_coefficients", "generate_campaign", "generate_event", "kaimal_psd", "load_config",
     "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
+    "AERO_MODES", "CURVE_KINDS", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
+    "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
 ]

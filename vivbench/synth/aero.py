@@ -2,8 +2,12 @@
 
 The full model (DESIGN 2.2) enters the modal equation through five slowly
 varying coefficients; first-order averaging of the same model (DESIGN 2.3)
-gives the amplitude equation Q' = r0 + r1 + r2 + r3, whose per-section
-polynomial parts are computed here once and shared by the truth, the exact
+gives the amplitude equation Q' = r0 + r1 + r2 + r3. First-order averaging
+holds for any smooth functions Y1, e1, e2, C_L of the wind (and of its angle to
+the span): the amplitude coefficients are computed from the curves' values at
+the slowly varying wind, the same values the full simulation uses. When the
+functions are polynomials in U (the ``in_library`` mode), the per-section
+polynomial parts are also computed once and shared by the truth, the exact
 coefficient matrix and the tests.
 
 With q = Q cos(phi), q' = -Q w sin(phi), a modal force f gives
@@ -16,21 +20,55 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import xarray as xr
 from numpy.polynomial import polynomial as P
 
 from vivbench.synth.config import AeroConfig, StructureConfig
 from vivbench.core.terms import feature_exponents
 
 __all__ = [
+    "aero_functions",
     "modal_coefficients",
     "amplitude_polynomials",
     "amplitude_coefficients",
     "order_contributions",
     "exact_coefficients",
+    "truth_curves",
 ]
 
 
-def modal_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConfig) -> dict[str, np.ndarray]:
+def aero_functions(U: np.ndarray, structure: StructureConfig, aero: AeroConfig,
+                   yaw: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Values of Y1, e1, e2, Y2 and C_L at the local mean wind, yaw factor included.
+
+    Parameters
+    ----------
+    U : ndarray, any shape (usually (n, S)), m/s
+        Mean perpendicular wind speed; curves of reduced velocity use
+        Ur = U / (f1 D) with the structure's frequency and depth.
+    yaw : ndarray, the shape of U, degrees, or None
+        Angle between the mean wind and the span's normal. Ignored when the
+        configuration has no yaw factor; None means 0 (wind perpendicular).
+
+    Returns
+    -------
+    dict of ndarray, the shape of U
+        ``Y1``, ``e1``, ``e2``, ``Y2``, ``C_L`` (dimensionless).
+    """
+    U = np.asarray(U, dtype=float)
+    f, D = structure.frequency, structure.depth
+    out = {name: np.asarray(getattr(aero, name).at_wind(U, f, D), dtype=float)
+           for name in ("Y1", "e1", "e2", "Y2", "C_L")}
+    if aero.yaw is not None and yaw is not None:
+        factor = aero.yaw(np.broadcast_to(yaw, U.shape))
+        for name in aero.yaw.applies_to:
+            out[name] = out[name] * factor
+    return out
+
+
+
+def modal_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConfig,
+                       yaw: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Coefficients of the aeroelastic terms of the modal equation.
 
     The modal equation is
@@ -42,6 +80,9 @@ def modal_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConf
     ----------
     U : ndarray, shape (n, S), m/s
         Mean perpendicular wind speed at the S sections.
+    yaw : ndarray, shape (n, S), degrees, or None
+        Angle between the mean wind and the span's normal at the sections
+        (used only with a yaw factor; None: perpendicular wind).
 
     Returns
     -------
@@ -53,7 +94,8 @@ def modal_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConf
     phi = np.array(s.mode_shape)
     beta = s.participation
     rho, D, m = s.air_density, s.depth, s.mass
-    Y1, e1, e2, Y2, CL = (aero.Y1(U), aero.e1(U), aero.e2(U), aero.Y2(U), aero.C_L(U))
+    F = aero_functions(U, s, aero, yaw)
+    Y1, e1, e2, Y2, CL = F["Y1"], F["e1"], F["e2"], F["Y2"], F["C_L"]
     damp = beta * rho * D * U * Y1 * phi / m
     return {
         "c_lin": damp.sum(axis=-1),
@@ -65,7 +107,7 @@ def modal_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConf
 
 
 def amplitude_polynomials(structure: StructureConfig, aero: AeroConfig) -> np.ndarray:
-    """Per-section polynomials in U of the averaged amplitude equation.
+    """Per-section polynomials in U of the averaged amplitude equation (``in_library`` mode).
 
     Q' = sum_k sum_i P[k, i](U_k) Q^i  -  zeta w Q.
 
@@ -73,17 +115,26 @@ def amplitude_polynomials(structure: StructureConfig, aero: AeroConfig) -> np.nd
     -------
     P : ndarray, shape (S, 4, n_coef)
         Coefficients in ascending powers of U_k (m/s), for section k and order i.
+
+    Raises
+    ------
+    ValueError
+        When Y1, e1, e2 or C_L is not a polynomial in U or a yaw factor applies.
     """
+    polys = aero.polynomials()
+    if polys is None:
+        raise ValueError("amplitude_polynomials needs Y1, e1, e2 and C_L as polynomials in U and no yaw factor "
+                         "(the in_library mode); use amplitude_coefficients for any curves")
     s = structure
     phi = np.array(s.mode_shape)
     beta = s.participation
     rho, D, m, w = s.air_density, s.depth, s.mass, s.omega
-    UY1 = P.polymul([0.0, 1.0], aero.Y1.coefficients)
+    UY1 = P.polymul([0.0, 1.0], polys["Y1"].coefficients)
     g = [
-        P.polymul([0.0, 0.0, rho * D / (4.0 * m * w)], aero.C_L.coefficients),
+        P.polymul([0.0, 0.0, rho * D / (4.0 * m * w)], polys["C_L"].coefficients),
         rho * D / (2.0 * m) * UY1,
-        -rho * D / m * (2.0 / (3.0 * math.pi)) / D * P.polymul(UY1, aero.e1.coefficients),
-        -rho * D / m * (1.0 / 8.0) / D**2 * P.polymul(UY1, aero.e2.coefficients),
+        -rho * D / m * (2.0 / (3.0 * math.pi)) / D * P.polymul(UY1, polys["e1"].coefficients),
+        -rho * D / m * (1.0 / 8.0) / D**2 * P.polymul(UY1, polys["e2"].coefficients),
     ]
     section_factor = np.stack([beta, beta * phi, beta * phi * np.abs(phi), beta * phi**3], axis=1)  # (S, 4)
     n_coef = max(len(gi) for gi in g)
@@ -93,12 +144,23 @@ def amplitude_polynomials(structure: StructureConfig, aero: AeroConfig) -> np.nd
     return out
 
 
-def amplitude_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConfig) -> np.ndarray:
+def amplitude_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConfig,
+                           yaw: np.ndarray | None = None) -> np.ndarray:
     """Coefficients p_i of the averaged amplitude equation Q' = sum_i p_i Q^i.
+
+    Averaging the modal equation of :func:`modal_coefficients` over one cycle
+    of q = Q cos(w t + psi) gives p_0 = f_lock / (2 w), p_1 = c_lin / 2 - zeta w,
+    p_2 = -(2 / (3 pi)) n1 and p_3 = -n2 / 8, whatever the shapes of the
+    aerodynamic functions (first-order averaging needs only that they vary
+    slowly with the wind). Polynomial configurations without a yaw factor take
+    the per-section polynomials of :func:`amplitude_polynomials` (the same
+    numbers up to rounding; the saved ``in_library`` truth stays bit for bit).
 
     Parameters
     ----------
     U : ndarray, shape (n, S), m/s
+    yaw : ndarray, shape (n, S), degrees, or None
+        The wind's angle to the span's normal, as given to the full simulation.
 
     Returns
     -------
@@ -106,14 +168,20 @@ def amplitude_coefficients(U: np.ndarray, structure: StructureConfig, aero: Aero
         Units m/s, 1/s, 1/(m s), 1/(m^2 s); p_1 includes the structural damping -zeta w.
     """
     U = np.asarray(U, dtype=float)
+    zw = structure.damping_ratio * structure.omega
+    if aero.polynomials() is None:
+        c = modal_coefficients(U, structure, aero, yaw)
+        return np.stack([c["f_lock"] / (2.0 * structure.omega), 0.5 * c["c_lin"] - zw,
+                         -(2.0 / (3.0 * math.pi)) * c["n1"], -0.125 * c["n2"]], axis=1)
     poly = amplitude_polynomials(structure, aero)
     # every section's polynomial at its own wind speed, summed over the sections
     coef = np.stack([sum(P.polyval(U[:, k], poly[k, i]) for k in range(poly.shape[0])) for i in range(4)], axis=1)
-    coef[:, 1] -= structure.damping_ratio * structure.omega
+    coef[:, 1] -= zw
     return coef
 
 
-def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig, aero: AeroConfig) -> np.ndarray:
+def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig, aero: AeroConfig,
+                        yaw: np.ndarray | None = None) -> np.ndarray:
     """Order contributions r_0..r_3 to dQ/dt of the averaged model.
 
     Parameters
@@ -121,6 +189,8 @@ def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig
     Q : ndarray, shape (n,), m
         Modal amplitude.
     U : ndarray, shape (n, S), m/s
+    yaw : ndarray, shape (n, S), degrees, or None
+        The wind's angle to the span's normal (only used with a yaw factor).
 
     Returns
     -------
@@ -129,7 +199,41 @@ def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig
         section k's contributions to dA_k/dt.
     """
     Q = np.asarray(Q, dtype=float)
-    return amplitude_coefficients(U, structure, aero) * Q[:, None] ** np.arange(4)
+    return amplitude_coefficients(U, structure, aero, yaw) * Q[:, None] ** np.arange(4)
+
+
+def truth_curves(structure: StructureConfig, aero: AeroConfig, wind_grid) -> xr.DataArray:
+    """The truth's coefficient curves a_ki(U) of DESIGN 3.5.
+
+    With every section at the mean wind U and the wind perpendicular to the
+    span (yaw 0), equation k reads dA_k/dt = sum_i a_ki(U) A_k^i. Since
+    A_l = (phi_l / phi_k) A_k, the other sections' parts are folded in through
+    the mode-shape ratios: a_ki = phi_k^(1 - i) p_i(U) with p_i of
+    :func:`amplitude_coefficients` (a_k1 includes the damping -zeta w1).
+
+    Parameters
+    ----------
+    wind_grid : array_like, shape (n_wind,), m/s
+
+    Returns
+    -------
+    xarray.DataArray ``curves``, shape (S, 4, n_wind), dims (equation, order, wind)
+        Units m^(1-i)/s; coordinates ``equation`` (section names), ``order``
+        (0..3) and ``wind`` (m/s).
+    """
+    wind = np.atleast_1d(np.asarray(wind_grid, dtype=float))
+    if wind.ndim != 1 or not np.all(np.isfinite(wind)) or np.any(wind <= 0):
+        raise ValueError("wind_grid must be a 1-D array of finite positive speeds in m/s")
+    phi = np.array(structure.mode_shape)
+    U = np.broadcast_to(wind[:, None], (wind.size, phi.size))
+    p = amplitude_coefficients(U, structure, aero, np.zeros_like(U))  # (n_wind, 4)
+    a = phi[:, None, None] ** (1 - np.arange(4))[None, :, None] * p.T[None, :, :]
+    return xr.DataArray(
+        a, dims=("equation", "order", "wind"), name="curves",
+        coords={"equation": list(structure.sections), "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})},
+        attrs={"units": "m^(1-order) s-1",
+               "long_name": "true coefficient of A_k^order at mean wind U, yaw 0 (DESIGN 3.5)"},
+    )
 
 
 def exact_coefficients(structure: StructureConfig, aero: AeroConfig) -> np.ndarray | None:

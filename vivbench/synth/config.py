@@ -19,6 +19,15 @@ from typing import Any
 import numpy as np
 
 from vivbench.core.toml import load_toml
+from vivbench.synth.curves import (
+    Constant,
+    Curve,
+    GaussianBell,
+    LogisticStep,
+    Polynomial,
+    YawFactor,
+    curve_from_data,
+)
 from vivbench.synth.turbulence import TurbulenceConfig
 from vivbench.core.errors import InputError
 
@@ -27,6 +36,7 @@ __all__ = [
     "bell_polynomial",
     "StructureConfig",
     "AeroConfig",
+    "AERO_MODES",
     "WindConfig",
     "SensorConfig",
     "DefectConfig",
@@ -41,26 +51,6 @@ __all__ = [
 def _check(cond: bool, msg: str) -> None:
     if not cond:
         raise InputError(msg)
-
-
-@dataclass(frozen=True, kw_only=True)
-class Polynomial:
-    """A polynomial in the wind speed U (m/s), coefficients in ascending powers."""
-
-    coefficients: tuple[float, ...]
-
-    def __post_init__(self) -> None:
-        coefs = tuple(float(c) for c in self.coefficients)
-        _check(len(coefs) >= 1, "Polynomial needs at least one coefficient")
-        _check(all(math.isfinite(c) for c in coefs), f"Polynomial coefficients must be finite; got {coefs}")
-        object.__setattr__(self, "coefficients", coefs)
-
-    @property
-    def degree(self) -> int:
-        return len(self.coefficients) - 1
-
-    def __call__(self, U):
-        return np.polynomial.polynomial.polyval(np.asarray(U, dtype=float), self.coefficients)
 
 
 def bell_polynomial(peak: float, center: float, half_width: float) -> Polynomial:
@@ -155,19 +145,34 @@ class StructureConfig:
         return L * phi / np.sum(L * phi**2)
 
 
+_AERO_CURVES = ("Y1", "e1", "e2", "Y2", "C_L")
+AERO_MODES = ("in_library", "realistic")
+
+
 @dataclass(frozen=True, kw_only=True)
 class AeroConfig:
     """Generalised Simiu-Scanlan force per section (DESIGN 2.2).
 
-    ``Y1``, ``e1``, ``e2``, ``Y2`` and ``C_L`` are polynomials in the local mean
-    perpendicular wind speed U (m/s); polynomial forms keep the averaged truth
-    inside the A^i U^j library so that an exact coefficient matrix exists when
-    deg(U Y1 e) <= 5 and deg(U^2 C_L) <= 5. The defaults make the nonlinear
-    e1 and e2 positive and linear in U (a Simiu-Scanlan lambda with a gentle
-    trend): the |y| term (regime 3) dominates the plateaus below the centre of
-    lock-in and the cubic term (regime 4) those above it. Outside lock-in, where
-    Y1 < 0, the same terms slightly weaken the aerodynamic damping at large
-    amplitude, as in the classical model.
+    ``Y1``, ``e1``, ``e2``, ``Y2`` and ``C_L`` are curves of the local mean
+    perpendicular wind speed U (m/s) (:mod:`vivbench.synth.curves`): either
+    polynomials in U or non-polynomial shapes in the reduced velocity
+    Ur = U / (f1 D) (Gaussian or Lorentzian bells, logistic steps, constants).
+    ``yaw``, when given, makes some of them depend on the wind's angle to the
+    span as well.
+
+    Two named modes (DESIGN 2.8), each a constructor:
+
+    - :meth:`in_library` (the defaults, ``AeroConfig()``): polynomials in U that
+      keep the averaged truth inside the A^i U^j library, so that an exact
+      coefficient matrix exists when deg(U Y1 e) <= 5 and deg(U^2 C_L) <= 5.
+      The nonlinear e1 and e2 are positive and linear in U (a Simiu-Scanlan
+      lambda with a gentle trend): the |y| term (regime 3) dominates the
+      plateaus below the centre of lock-in and the cubic term (regime 4) those
+      above it. Outside lock-in, where Y1 < 0, the same terms slightly weaken
+      the aerodynamic damping at large amplitude, as in the classical model.
+    - :meth:`realistic`: a box girder's functions of reduced velocity that are
+      not polynomials (a Gaussian lock-in bell for Y1 centred near Ur = 1/St,
+      logistic e1 and e2, a Gaussian bell of C_L >= 0) and a Gaussian yaw factor.
 
     Attributes
     ----------
@@ -175,7 +180,9 @@ class AeroConfig:
     e1 : coefficient of the |y/D| term (gives A^2 in the amplitude equation)
     e2 : Simiu-Scanlan lambda, coefficient of (y/D)^2 (gives A^3)
     Y2 : aerodynamic stiffness derivative (shifts the frequency only)
-    C_L : lift coefficient of the shedding force locked to the motion (>= 0 over the wind range)
+    C_L : lift coefficient of the shedding force locked to the motion (>= 0 over the wind range;
+        checked everywhere for the non-polynomial shapes)
+    yaw : YawFactor or None; dependence on the wind's angle to the span (None: none)
     strouhal : Strouhal number St; unlocked shedding runs at St U / D
     cl_unlocked : amplitude of the unlocked (Strouhal-frequency) lift coefficient; it is
         faded out near resonance with the mode, so it averages out of the amplitude equation
@@ -183,11 +190,12 @@ class AeroConfig:
     buffeting_u, buffeting_w : buffeting force F = rho U D (b_u u' + b_w w') per unit length
     """
 
-    Y1: Polynomial = _Y1
-    e1: Polynomial = _linear(E1, -0.12, 8.0)
-    e2: Polynomial = _linear(E2, 0.12, 8.0)
-    Y2: Polynomial = Polynomial(coefficients=(0.5,))
-    C_L: Polynomial = bell_polynomial(0.04, 8.0, 8.0)
+    Y1: Curve = _Y1
+    e1: Curve = _linear(E1, -0.12, 8.0)
+    e2: Curve = _linear(E2, 0.12, 8.0)
+    Y2: Curve = Polynomial(coefficients=(0.5,))
+    C_L: Curve = bell_polynomial(0.04, 8.0, 8.0)
+    yaw: YawFactor | None = field(default=None, metadata={"omit_if_none": True})
     strouhal: float = 0.143
     cl_unlocked: float = 0.05
     lock_bandwidth: float = 0.03
@@ -195,24 +203,73 @@ class AeroConfig:
     buffeting_w: float = 0.6
 
     def __post_init__(self) -> None:
-        for name in ("Y1", "e1", "e2", "Y2", "C_L"):
-            value = getattr(self, name)
-            if isinstance(value, dict):
-                value = Polynomial(**value)
-            elif not isinstance(value, Polynomial):
-                value = Polynomial(coefficients=tuple(value))
-            object.__setattr__(self, name, value)
+        for name in _AERO_CURVES:
+            object.__setattr__(self, name, curve_from_data(getattr(self, name), name))
+        if isinstance(self.yaw, dict):
+            object.__setattr__(self, "yaw", YawFactor(**_tuples(self.yaw)))
+        _check(self.yaw is None or isinstance(self.yaw, YawFactor),
+               f"yaw must be a YawFactor table (shape, exponent, width_deg, applies_to) or absent; got {self.yaw!r}")
+        if not isinstance(self.C_L, Polynomial):
+            _check(self.C_L.lower_bound >= 0,
+                   f"C_L must be >= 0 at every wind speed; {self.C_L.kind} C_L reaches {self.C_L.lower_bound}")
         _check(0.01 <= self.strouhal <= 1.0, f"strouhal must be in [0.01, 1]; got {self.strouhal}")
         _check(self.cl_unlocked >= 0, f"cl_unlocked must be >= 0; got {self.cl_unlocked}")
         _check(self.lock_bandwidth > 0, f"lock_bandwidth must be positive (Hz); got {self.lock_bandwidth}")
         _check(self.buffeting_u >= 0 and self.buffeting_w >= 0, "buffeting coefficients must be >= 0")
 
+    @classmethod
+    def in_library(cls, **overrides) -> AeroConfig:
+        """The ``in_library`` mode: polynomials in U (today's defaults), no yaw factor; keywords override."""
+        return cls(**overrides)
+
+    @classmethod
+    def realistic(cls, **overrides) -> AeroConfig:
+        """The ``realistic`` mode: non-polynomial functions of reduced velocity typical of a box girder.
+
+        Reduced velocities Ur = U / (f1 D); with the default structure (f1 = 0.327 Hz,
+        D = 3.5 m) Ur = U / (1.14 m/s). Y1 is a Gaussian bell of peak 20 centred on
+        Ur0 = 7.0 (about 1/St, i.e. 8 m/s) with width 1.1, over a baseline of -4:
+        positive for Ur in about [4.9, 9.1] (lock-in 5.6-10.4 m/s), aerodynamic
+        damping outside. e1 falls from 36 to 20 and e2 rises from 300 to 520
+        across lock-in (logistic steps, centre 7.0, width 1.5), so the |y| term
+        leads below the centre and the cubic term above it, as in the
+        ``in_library`` mode. C_L is a Gaussian bell (0.04 at Ur = 7.0, width 2.0)
+        over a floor of 0.003, >= 0 everywhere. Y1 and C_L fall off with the yaw
+        angle as exp(-psi^2 / (2 (20 deg)^2)). Keywords override any of these.
+        """
+        base = dict(
+            Y1=GaussianBell(peak=20.0, center=7.0, width=1.1, baseline=-4.0),
+            e1=LogisticStep(start=36.0, end=20.0, center=7.0, width=1.5),
+            e2=LogisticStep(start=300.0, end=520.0, center=7.0, width=1.5),
+            Y2=Constant(value=0.5),
+            C_L=GaussianBell(peak=0.04, center=7.0, width=2.0, baseline=0.003),
+            yaw=YawFactor(shape="gaussian", width_deg=20.0),
+        )
+        base.update(overrides)
+        return cls(**base)
+
+    @classmethod
+    def from_mode(cls, mode: str, **overrides) -> AeroConfig:
+        """The named mode ``"in_library"`` or ``"realistic"`` with keyword overrides."""
+        _check(mode in AERO_MODES, f"aero mode must be one of {list(AERO_MODES)}; got {mode!r}")
+        return cls.in_library(**overrides) if mode == "in_library" else cls.realistic(**overrides)
+
+    def polynomials(self) -> dict[str, Polynomial] | None:
+        """Y1, e1, e2, C_L as polynomials in U, or None when one is not a polynomial or a yaw factor applies."""
+        if self.yaw is not None:
+            return None
+        polys = {name: getattr(self, name).as_polynomial() for name in ("Y1", "e1", "e2", "C_L")}
+        return None if any(p is None for p in polys.values()) else polys
+
     @property
     def exact_in_library(self) -> bool:
         """True when the averaged truth is a combination of A^i U^j, i <= 3, j <= 5."""
-        d1 = 1 + self.Y1.degree
-        return (d1 <= 5 and d1 + self.e1.degree <= 5 and d1 + self.e2.degree <= 5
-                and 2 + self.C_L.degree <= 5)
+        p = self.polynomials()
+        if p is None:
+            return False
+        d1 = 1 + p["Y1"].degree
+        return (d1 <= 5 and d1 + p["e1"].degree <= 5 and d1 + p["e2"].degree <= 5
+                and 2 + p["C_L"].degree <= 5)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -469,7 +526,7 @@ class GeneratorConfig:
                           ("changes", ChangesConfig)):
             value = getattr(self, name)
             if isinstance(value, dict):
-                object.__setattr__(self, name, cls(**_tuples(value)))
+                object.__setattr__(self, name, _aero_from_dict(value) if name == "aero" else cls(**_tuples(value)))
         # a lighter deck after a mass step vibrates faster: the step must resolve that mode too
         period = math.sqrt(min(1.0, self.changes.step_mass_factor)) / self.structure.frequency
         _check(0 < self.integration_step <= period / 20,
@@ -486,14 +543,30 @@ def _tuples(d: dict) -> dict:
     return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
 
 
+def _plain(obj: Any) -> Any:
+    """Dataclasses as dicts in field order, tuples as lists; a field whose metadata says
+    ``omit_if_none`` is left out while it is None (so that adding an optional field
+    leaves the saved form of existing configurations unchanged)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                if not (f.metadata.get("omit_if_none") and getattr(obj, f.name) is None)}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(x) for x in obj]
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    return obj
+
+
 def config_to_dict(config) -> dict[str, Any]:
     """Plain-data form (JSON- and TOML-ready) of any configuration dataclass.
 
+    Curves of reduced velocity carry their ``kind``; polynomials are written as
+    ``{"coefficients": [...]}`` as before; an absent ``aero.yaw`` is left out.
     A generator configuration without slow changes leaves out its ``changes``
     section (it takes its default when read back), so files generated without
     changes are the same as before the option existed.
     """
-    data = json.loads(json.dumps(dataclasses.asdict(config)))
+    data = json.loads(json.dumps(_plain(config)))
     if isinstance(config, GeneratorConfig) and not config.changes.any:
         del data["changes"]
     return data
@@ -511,17 +584,32 @@ def config_from_dict(data: dict[str, Any]) -> GeneratorConfig:
     kwargs = {}
     for key, value in data.items():
         if key in _SECTIONS:
-            sub_allowed = {f.name for f in dataclasses.fields(_SECTIONS[key])}
+            sub_allowed = {f.name for f in dataclasses.fields(_SECTIONS[key])} | ({"mode"} if key == "aero" else set())
             sub_unknown = set(value) - sub_allowed
             _check(not sub_unknown, f"unknown keys {sorted(sub_unknown)} in [{key}]; allowed: {sorted(sub_allowed)}")
             if key == "aero":
-                value = {k: (Polynomial(**v) if isinstance(v, dict) else v) for k, v in value.items()}
+                value = _aero_from_dict(value)
         kwargs[key] = value
     return GeneratorConfig(**kwargs)
 
 
+def _aero_from_dict(data: dict[str, Any]) -> AeroConfig:
+    """The ``[aero]`` table: an optional ``mode`` (``in_library`` by default) whose values the other keys override."""
+    data = dict(data)
+    mode = data.pop("mode", "in_library")
+    overrides = {k: (curve_from_data(v, k) if k in _AERO_CURVES else v) for k, v in data.items()}
+    if overrides.get("yaw") is False:  # TOML has no null: `yaw = false` removes the mode's yaw factor
+        overrides["yaw"] = None
+    if isinstance(overrides.get("yaw"), dict):
+        overrides["yaw"] = YawFactor(**_tuples(overrides["yaw"]))
+    return AeroConfig.from_mode(mode, **overrides)
+
+
 def load_config(path: str | Path) -> GeneratorConfig:
     """Read a generator configuration from TOML (sections as in :func:`config_to_dict`).
+
+    ``[aero]`` may also name a mode, ``mode = "realistic"`` (or ``"in_library"``,
+    the default); its other keys then override that mode's values.
 
     Missing keys take their defaults. Errors name the file.
     """

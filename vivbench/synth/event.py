@@ -89,6 +89,13 @@ def _interp_wind(mw: MeanWind, t: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t, mw.t, mw.U[:, k]) for k in range(mw.U.shape[1])], axis=1)
 
 
+def _interp_yaw(mw: MeanWind, t: np.ndarray, config: GeneratorConfig) -> np.ndarray | None:
+    """Each section's yaw (degrees, shape (n, S)) at times t when the aerodynamics depend on it, else None."""
+    if config.aero.yaw is None or mw.yaw is None:
+        return None
+    return np.stack([np.interp(t, mw.t, mw.yaw[:, k]) for k in range(mw.yaw.shape[1])], axis=1)
+
+
 def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phase: np.ndarray,
                     config: GeneratorConfig) -> np.ndarray:
     """Buffeting plus unlocked Strouhal shedding, modal force per unit modal mass (m/s^2)."""
@@ -109,7 +116,7 @@ def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phas
 
 
 def _modal_params(t: np.ndarray, mw: MeanWind, turb, shedding_phase, config: GeneratorConfig) -> np.ndarray:
-    c = modal_coefficients(_interp_wind(mw, t), config.structure, config.aero)
+    c = modal_coefficients(_interp_wind(mw, t), config.structure, config.aero, _interp_yaw(mw, t, config))
     f_ext = _external_force(t, mw, turb, shedding_phase, config)
     return np.stack([c["c_lin"], c["n1"], c["n2"], c["k_aero"], c["f_lock"], f_ext], axis=1)
 
@@ -148,9 +155,10 @@ def _changed_modal_params(params: np.ndarray, t: np.ndarray, spec: EventSpec, ch
 
 
 def _changed_amplitude_coefficients(U: np.ndarray, t: np.ndarray, spec: EventSpec, changes: ChangesConfig,
-                                    structure: StructureConfig, config: GeneratorConfig) -> np.ndarray:
-    """p_0..p_3 of the averaged equation (n, 4) with the same aero factors and zeta(t) as the full model."""
-    aero = amplitude_coefficients(U, replace(structure, damping_ratio=0.0), config.aero)
+                                    structure: StructureConfig, config: GeneratorConfig,
+                                    yaw: np.ndarray | None = None) -> np.ndarray:
+    """p_0..p_3 of the averaged equation (n, 4) with the same aero factors, yaw and zeta(t) as the full model."""
+    aero = amplitude_coefficients(U, replace(structure, damping_ratio=0.0), config.aero, yaw)
     coefs = aero * changes.aero_factors(spec.number)[None, :]
     coefs[:, 1] -= structure.damping_ratio * _drift(t, spec, changes) * structure.omega
     return coefs
@@ -245,10 +253,12 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     ht = config.truth_step / n_sub
     t_mid = ht * (np.arange((truth_time.size - 1) * n_sub) + 0.5)
     U_mid = _interp_wind(mw, t_mid)
+    # the truth sees the wind speed and yaw the full simulation sees
+    yaw_mid = _interp_yaw(mw, t_mid, config)
     if changes.any:
-        coefs = _changed_amplitude_coefficients(U_mid, t_mid, spec, changes, s, config)
+        coefs = _changed_amplitude_coefficients(U_mid, t_mid, spec, changes, s, config, yaw_mid)
     else:
-        coefs = amplitude_coefficients(U_mid, s, config.aero)
+        coefs = amplitude_coefficients(U_mid, s, config.aero, yaw_mid)
     Q = simulate_amplitude(config.initial_amplitude, coefs, ht)[::n_sub]
     if not np.all(Q > 0):
         bad = float(np.min(U_mid[np.argmax(coefs[:, 0] < 0)])) if np.any(coefs[:, 0] < 0) else float("nan")
@@ -257,10 +267,12 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
             f"{truth_time[np.argmax(Q <= 0)]:.0f} s; the locked lift C_L(U) must stay >= 0 over the wind "
             f"range (it is negative near U = {bad:.2f} m/s)")
     U_truth = _interp_wind(mw, truth_time)
+    yaw_truth = _interp_yaw(mw, truth_time, config)
     if changes.any:
-        r_modal = _changed_amplitude_coefficients(U_truth, truth_time, spec, changes, s, config) * Q[:, None] ** np.arange(4)
+        r_modal = (_changed_amplitude_coefficients(U_truth, truth_time, spec, changes, s, config, yaw_truth)
+                   * Q[:, None] ** np.arange(4))
     else:
-        r_modal = order_contributions(Q, U_truth, s, config.aero)  # (n_t, 4)
+        r_modal = order_contributions(Q, U_truth, s, config.aero, yaw_truth)  # (n_t, 4)
     r = phi[None, :, None] * r_modal[:, None, :]
     A_truth = Q[:, None] * phi[None, :]
     regime = classify_regime(r[None], A_truth[None], tau=config.tau, axis=0)

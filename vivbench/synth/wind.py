@@ -69,12 +69,16 @@ class MeanWind:
     U : ndarray, shape (n, S), m/s; mean speed perpendicular to the span per section
     V : ndarray, shape (n, S), m/s; mean horizontal speed per section
     direction : ndarray, shape (n,), degrees from north the wind blows from
+    yaw : ndarray, shape (n, S), degrees, or None; angle between each section's mean
+        wind and the span's normal (0: perpendicular), the angle the aerodynamic
+        functions' yaw factor sees
     """
 
     t: np.ndarray
     U: np.ndarray
     V: np.ndarray
     direction: np.ndarray
+    yaw: np.ndarray | None = None
 
 
 def slow_process(t: np.ndarray, rms: float, timescales: tuple[float, float], rng: np.random.Generator, n_modes: int = 8) -> np.ndarray:
@@ -104,7 +108,7 @@ def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.rando
     yaw = script.yaw_deg + slow_process(t, wind.direction_wander_deg, wind.slow_timescales, rng)
     V = U / np.cos(np.radians(yaw))[:, None]
     direction = np.mod(wind.span_azimuth_deg + 90.0 * script.side + yaw, 360.0)
-    return MeanWind(t=t, U=U, V=V, direction=direction)
+    return MeanWind(t=t, U=U, V=V, direction=direction, yaw=np.repeat(np.abs(yaw)[:, None], n_sections, axis=1))
 
 
 def anemometer_records(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -163,7 +167,8 @@ def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind
 
     Returns
     -------
-    MeanWind with ``U`` and ``V`` replaced (``direction`` stays the scripted one).
+    MeanWind with ``U``, ``V`` and ``yaw`` replaced (``direction`` stays the scripted one;
+    ``yaw`` is the angle of the slow wind vector to the span's normal, in [0, 90] degrees).
     """
     sos = butter(4, wind.felt_cutoff_hz, fs=wind.anemometer_rate, output="sos")
     slow = sosfiltfilt(sos, turb[:, :, :2], axis=0)
@@ -174,5 +179,7 @@ def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind
     az = np.radians(wind.span_azimuth_deg)
     span = np.array([np.sin(az), np.cos(az)])
     U = np.abs(vec[..., 0] * span[1] - vec[..., 1] * span[0])
+    along_span = np.abs(vec[..., 0] * span[0] + vec[..., 1] * span[1])
+    yaw = np.degrees(np.arctan2(along_span, U))
     U = np.maximum(U, wind.min_speed)
-    return MeanWind(t=mw.t, U=U, V=np.hypot(vec[..., 0], vec[..., 1]), direction=mw.direction)
+    return MeanWind(t=mw.t, U=U, V=np.hypot(vec[..., 0], vec[..., 1]), direction=mw.direction, yaw=yaw)

@@ -14,8 +14,11 @@ __all__ = ["PARAMETERS", "SWEEP_PARAMETERS", "Parameter"]
 
 
 def _y1_peak(gen: GeneratorConfig) -> float:
-    """Peak of a bell-shaped (downward quadratic) Y1(U); NaN for any other form."""
-    c = gen.aero.Y1.coefficients
+    """Peak of a bell-shaped Y1 (a downward quadratic in U, or a Gaussian or Lorentzian bell); NaN for any other form."""
+    y1 = gen.aero.Y1
+    if getattr(y1, "kind", None) in ("gaussian", "lorentzian"):
+        return y1.peak
+    c = getattr(y1, "coefficients", ())
     if len(c) != 3 or not c[2] < 0:
         return float("nan")
     return float(c[0] - c[1] ** 2 / (4.0 * c[2]))
@@ -24,11 +27,14 @@ def _y1_peak(gen: GeneratorConfig) -> float:
 def _set_y1_peak(gen: GeneratorConfig, value: float) -> GeneratorConfig:
     peak = _y1_peak(gen)
     if not peak > 0:
-        raise InputError("y1_peak needs the base generator's aero.Y1 to be a bell (a quadratic in U with a positive "
-                         f"peak); got coefficients {gen.aero.Y1.coefficients}")
+        raise InputError("y1_peak needs the base generator's aero.Y1 to be a bell (a quadratic in U, or a gaussian or "
+                         f"lorentzian curve, with a positive peak); got {gen.aero.Y1}")
     if not value >= 0:
         raise InputError(f"y1_peak must be >= 0 (the height of the Y1 bell; 0 removes self-excitation); got {value}")
     # Scaling the whole bell keeps its centre and its zero crossings (the lock-in range).
+    if getattr(gen.aero.Y1, "kind", None) in ("gaussian", "lorentzian"):
+        y1 = dataclasses.replace(gen.aero.Y1, peak=value, baseline=gen.aero.Y1.baseline * value / peak)
+        return dataclasses.replace(gen, aero=dataclasses.replace(gen.aero, Y1=y1))
     y1 = Polynomial(coefficients=tuple(value / peak * c for c in gen.aero.Y1.coefficients))
     return dataclasses.replace(gen, aero=dataclasses.replace(gen.aero, Y1=y1))
 
