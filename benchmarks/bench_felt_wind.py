@@ -7,7 +7,8 @@ mode: turbulence at the 3 anemometers only) and ``felt_wind = "tributary"``
 (3 anemometers + 3 sections x 5 tributary points = 18 points, one coherent
 field). The turbulence field alone is also timed against its number of points
 (double-indexed: one inverse FFT per point and component, cost ~ linear in the
-points).
+points), double- and single-indexed (the tributary field is single-indexed:
+the Markov recursion keeps it O(points x samples) too).
 
 Run: ``.venv/bin/python benchmarks/bench_felt_wind.py``.
 """
@@ -52,23 +53,27 @@ def main(repeats: int = 3) -> dict:
     times = {name: best_of(lambda cfg=cfg: simulate_event(spec, cfg, SEED), repeats)[0] for name, cfg in configs.items()}
 
     field_times = {}
-    cfg = TurbulenceConfig()
-    for n in POINT_COUNTS:
-        xs = np.linspace(137.5, 1512.5, n)
-        field_times[n], _ = best_of(lambda xs=xs: simulate_turbulence(xs, 8.0, DURATION, 32.0, cfg, np.random.default_rng(SEED)), repeats)
+    for scheme, double in (("double", True), ("single", False)):
+        cfg = TurbulenceConfig(double_indexing=double)
+        for n in POINT_COUNTS:
+            xs = np.linspace(137.5, 1512.5, n)
+            field_times[(scheme, n)], _ = best_of(
+                lambda xs=xs, cfg=cfg: simulate_turbulence(xs, 8.0, DURATION, 32.0, cfg, np.random.default_rng(SEED)), repeats)
 
     ratio = times["tributary"] / times["anemometer"]
     print(f"one {DURATION / 60:.0f}-min event (simulate_event, best of {repeats}):")
-    print(f"  felt_wind = 'anemometer' (3 points)            {times['anemometer']:8.3f} s")
-    print(f"  felt_wind = 'tributary'  (3 + 3 x 5 = 18 points) {times['tributary']:8.3f} s")
+    print(f"  felt_wind = 'anemometer' (3 points, double-indexed)          {times['anemometer']:7.3f} s")
+    print(f"  felt_wind = 'tributary'  (3 + 3 x 5 = 18 points, single-indexed) {times['tributary']:7.3f} s")
     print(f"  ratio tributary / anemometer: {ratio:.2f}")
-    print("turbulence field alone, 1 h at 32 Hz: " + ", ".join(f"{n} points {t:.3f} s" for n, t in field_times.items()))
+    for scheme in ("double", "single"):
+        print(f"turbulence field alone, 1 h at 32 Hz, {scheme}-indexed: "
+              + ", ".join(f"{n} points {field_times[(scheme, n)]:.3f} s" for n in POINT_COUNTS))
     return {
         "event_duration_s": DURATION,
         "time_anemometer_s": times["anemometer"],
         "time_tributary_s": times["tributary"],
         "ratio": ratio,
-        "field_time_s": {int(n): t for n, t in field_times.items()},
+        "field_time_s": {f"{scheme}_{n}": t for (scheme, n), t in field_times.items()},
     }
 
 
