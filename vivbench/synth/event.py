@@ -16,7 +16,7 @@ from vivbench.synth.aero import amplitude_coefficients, exact_coefficients, moda
 from vivbench.synth.config import ChangesConfig, GeneratorConfig, StructureConfig, config_to_dict
 from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
-from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, felt_mean_wind, mean_wind
+from vivbench.synth.wind import MeanWind, WindScript, felt_mean_wind, mean_wind, measure_wind, wind_field
 from vivbench.core.terms import feature_exponents, feature_names
 from vivbench.core.errors import InputError
 
@@ -98,7 +98,12 @@ def _interp_yaw(mw: MeanWind, t: np.ndarray, config: GeneratorConfig) -> np.ndar
 
 def _external_force(t: np.ndarray, mw: MeanWind, turb: np.ndarray, shedding_phase: np.ndarray,
                     config: GeneratorConfig) -> np.ndarray:
-    """Buffeting plus unlocked Strouhal shedding, modal force per unit modal mass (m/s^2)."""
+    """Buffeting plus unlocked Strouhal shedding, modal force per unit modal mass (m/s^2).
+
+    ``mw`` is the felt mean wind (U_k) and ``turb`` (n_w, S, 3) the turbulence the deck
+    feels (``WindField.deck``: the tributary average, or the anemometer's own turbulence
+    in the ``in_library`` mode), both on the anemometer grid.
+    """
     s, a = config.structure, config.aero
     rho, D, m = s.air_density, s.depth, s.mass
     beta = s.participation
@@ -192,7 +197,11 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     seed : SeedSequence or int
         Independent child streams are drawn for the mean wind, the turbulence,
         the shedding phases, the sensors and the defects, so switching on a
-        defect does not change the wind or the structure's response.
+        defect does not change the wind or the structure's response. The
+        turbulence stream draws the phases of the whole field (anemometers and,
+        with ``felt_wind = "tributary"``, the tributary points, in one coherent
+        simulation) and then the anemometer errors; no stream is added for the
+        tributary field, so the other streams are the same in both modes.
 
     With slow changes (``config.changes``), the event's steps (``spec.number``)
     give its damping ratio, mass and frequency and its aero factors, and the
@@ -221,7 +230,13 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     n_w_ext = int(np.ceil((T + pad) * wcfg.anemometer_rate))
     t_w_ext = np.arange(n_w_ext) / wcfg.anemometer_rate
     mw = mean_wind(spec.script, t_w_ext, wcfg, rng_mean, s.n_sections)
-    u, v, w, turb = anemometer_records(mw, s, wcfg, rng_turb)
+    # One coherent field for the anemometers (single points) and, with felt_wind = "tributary",
+    # the points of each section's tributary length; the anemometer records carry the former
+    # plus the sensor errors, the deck (buffeting and the felt mean wind U_k of the aeroelastic
+    # force and of the truth) the latter's average per section.
+    field = wind_field(mw, s, wcfg, rng_turb)
+    u, v, w = measure_wind(mw, field.anemometer, wcfg, rng_turb)
+    turb = field.deck
     mw = felt_mean_wind(mw, turb, wcfg)
     f_shed = config.aero.strouhal * mw.U / s.depth
     shedding_phase = 2 * np.pi * cumulative_trapezoid(f_shed, mw.t, axis=0, initial=0.0) + rng_shed.uniform(0, 2 * np.pi, s.n_sections)

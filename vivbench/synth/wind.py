@@ -5,10 +5,28 @@ curve through a few knots (so that the event passes into, through and out of
 the lock-in range as intended); a slow random wander with time scales of 10 to
 60 min, small per-section offsets and a slowly turning direction make it
 realistic. Turbulence comes from the spectral representation method.
+
+Which signal is which (``WindConfig.felt_wind``, DESIGN 2.8):
+
+- anemometer records (``u, v, w`` of the event file): the section's mean wind
+  plus the turbulence at ONE point, the anemometer (``WindField.anemometer``),
+  plus the sensor errors (:func:`measure_wind`);
+- deck turbulence (``WindField.deck``): with ``"tributary"`` the field averaged
+  over ``points_per_section`` points spread over the section's tributary
+  length, simulated together with the anemometers (Davenport coherence over
+  all points); with ``"anemometer"`` (``in_library``) the anemometer's own
+  turbulence. Buffeting uses it;
+- felt mean wind U_k (:func:`felt_mean_wind`): the scripted mean plus the
+  deck turbulence low-passed at ``felt_cutoff_hz``. The aeroelastic force of
+  the full simulation and the averaged truth (``/truth/U``) both use it, so the
+  truth is exact; the identification only sees the anemometer records, whose
+  low-passed perpendicular wind differs from U_k in ``"tributary"`` mode (the
+  errors-in-variables of field data).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,7 +37,8 @@ from vivbench.synth.config import StructureConfig, WindConfig
 from vivbench.synth.turbulence import simulate_turbulence
 from vivbench.core.errors import InputError
 
-__all__ = ["WindScript", "MeanWind", "mean_wind", "slow_process", "anemometer_records", "felt_mean_wind"]
+__all__ = ["WindScript", "MeanWind", "WindField", "mean_wind", "slow_process", "anemometer_positions", "tributary_points",
+           "wind_field", "measure_wind", "anemometer_records", "felt_mean_wind"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -111,29 +130,123 @@ def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.rando
     return MeanWind(t=t, U=U, V=V, direction=direction, yaw=np.repeat(np.abs(yaw)[:, None], n_sections, axis=1))
 
 
-def anemometer_records(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Anemometer u (east), v (north), w (up) at the sections and the turbulence itself.
+@dataclass(frozen=True)
+class WindField:
+    """Turbulence of an event at the anemometers and as the deck feels it.
 
-    The turbulence is simulated stationary at the event's mean horizontal speed
-    and its amplitude then follows the mean speed (turbulence intensity stays
-    constant as the wind changes).
+    Both arrays are the zero-mean fluctuations (along-wind u', lateral v',
+    vertical w') on the uniform anemometer grid, amplitude-modulated by the
+    section's mean horizontal speed ``V_k(t) / V_ref``; neither carries sensor
+    errors.
+
+    Attributes
+    ----------
+    anemometer : ndarray, shape (n, S, 3), m/s
+        Turbulence at each section's anemometer, a single point. The anemometer
+        records are the mean wind plus this plus the sensor errors.
+    deck : ndarray, shape (n, S, 3), m/s
+        Turbulence the deck of section k feels: with ``felt_wind = "tributary"``
+        the average of the field over the points of the section's tributary
+        length; with ``"anemometer"`` (the ``in_library`` mode) the very array
+        ``anemometer``. Buffeting uses it whole; its slow part (below
+        ``felt_cutoff_hz``) enters the felt mean wind U_k of the aeroelastic
+        force and of the truth (:func:`felt_mean_wind`).
+    positions : ndarray, shape (n_points,), m
+        Spanwise coordinates simulated: the S anemometers first, then the
+        tributary points section by section (S * points_per_section); only the
+        S anemometers in ``"anemometer"`` mode.
+    """
+
+    anemometer: np.ndarray
+    deck: np.ndarray
+    positions: np.ndarray
+
+
+def anemometer_positions(structure: StructureConfig, wind: WindConfig) -> np.ndarray:
+    """Spanwise coordinates of the anemometers, m, shape (S,).
+
+    The section's position (k / (n + 1) of the span) plus ``wind.anemometer_offset``
+    in ``"tributary"`` mode; the section's position in ``"anemometer"`` mode.
+    """
+    if wind.felt_wind == "anemometer":
+        return structure.positions
+    return structure.positions + wind.anemometer_offset
+
+
+def tributary_points(structure: StructureConfig, wind: WindConfig) -> np.ndarray:
+    """Spanwise coordinates of the points over which each section's deck wind is averaged.
+
+    Section k's tributary length L_k, centred on its position x_k, is cut into
+    P = ``wind.points_per_section`` equal strips and the field is taken at their
+    midpoints, x_k + L_k ((j + 1/2) / P - 1/2), j = 0..P-1; the average over the
+    points is then the midpoint rule for the strip average (1 / L_k) int u' dx.
+
+    Returns
+    -------
+    ndarray, shape (S, P), m
+    """
+    P = wind.points_per_section
+    frac = (np.arange(P) + 0.5) / P - 0.5
+    return structure.positions[:, None] + np.asarray(structure.tributary_lengths)[:, None] * frac[None, :]
+
+
+def wind_field(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: np.random.Generator) -> WindField:
+    """Simulate the turbulence of an event at the anemometers and over the deck.
+
+    The field is simulated stationary at the event's mean horizontal speed
+    V_ref (the mean of ``mw.V`` over time and sections), with Davenport
+    coherence between all points, by one call of :func:`simulate_turbulence`
+    (vectorised, one inverse FFT per point and component; single-indexed in
+    ``"tributary"`` mode whatever ``turbulence.double_indexing`` says, see the
+    turbulence module's docstring; as configured in ``"anemometer"`` mode); its amplitude then
+    follows each section's mean speed, V_k(t) / V_ref (turbulence intensity
+    stays constant as the wind changes). All points of section k (its
+    anemometer and its tributary points) follow V_k.
 
     Parameters
     ----------
-    mw : MeanWind on the anemometer time grid (uniform, ``wind.anemometer_rate``)
+    mw : MeanWind on the uniform anemometer grid (``wind.anemometer_rate``), n samples, S sections
+    structure, wind : configurations; ``wind.felt_wind`` selects the deck's wind
+    rng : numpy.random.Generator; its draws are the random phases of the field only
+
+    Returns
+    -------
+    WindField
+    """
+    n = mw.t.size
+    S = mw.V.shape[1]
+    V_ref = float(np.mean(mw.V))
+    scale = (mw.V / V_ref)[:, :, None]  # (n, S, 1)
+    anemo = anemometer_positions(structure, wind)
+    if wind.felt_wind == "anemometer":
+        turb = simulate_turbulence(anemo, V_ref, n / wind.anemometer_rate, wind.anemometer_rate, wind.turbulence, rng)[:n]
+        turb = turb * scale
+        return WindField(anemometer=turb, deck=turb, positions=anemo)
+    trib = tributary_points(structure, wind)  # (S, P)
+    positions = np.concatenate([anemo, trib.ravel()])
+    # Single indexing: with double indexing each of the n points' sources is resolved only every
+    # n / T Hz, coarser than the Davenport coherence of points hundreds of metres apart varies.
+    single = dataclasses.replace(wind.turbulence, double_indexing=False)
+    field_ = simulate_turbulence(positions, V_ref, n / wind.anemometer_rate, wind.anemometer_rate, single, rng)[:n]
+    deck = field_[:, S:].reshape(n, S, wind.points_per_section, 3).mean(axis=2)
+    return WindField(anemometer=field_[:, :S] * scale, deck=deck * scale, positions=positions)
+
+
+def measure_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Anemometer records: mean wind plus the point's turbulence plus the sensor errors.
+
+    Parameters
+    ----------
+    mw : MeanWind on the anemometer grid, n samples, S sections
+    turb : ndarray, shape (n, S, 3), m/s; turbulence at the anemometers (``WindField.anemometer``)
+    rng : numpy.random.Generator; draws the sensor noise, u then v then w
 
     Returns
     -------
     u, v, w : ndarray, shape (n, S), float32, m/s
-        Measured components with noise and resolution applied.
-    turb : ndarray, shape (n, S, 3), m/s
-        Turbulence (along-wind, lateral, vertical) per section, before the sensor.
+        East, north and up components with a white error of rms ``wind.noise`` times
+        the mean speed and rounded to ``wind.resolution``.
     """
-    n = mw.t.size
-    V_ref = float(np.mean(mw.V))
-    turb = simulate_turbulence(structure.positions, V_ref, n / wind.anemometer_rate, wind.anemometer_rate,
-                               wind.turbulence, rng)[:n]
-    turb = turb * (mw.V / V_ref)[:, :, None]
     # Meteorological direction: the wind blows from `direction`, so it moves towards direction + 180.
     d = np.radians(mw.direction)[:, None]
     along_e, along_n = -np.sin(d), -np.cos(d)
@@ -148,11 +261,34 @@ def anemometer_records(mw: MeanWind, structure: StructureConfig, wind: WindConfi
         if wind.resolution > 0:
             comp = np.round(comp / wind.resolution) * wind.resolution
         out.append(comp.astype(np.float32))
-    return out[0], out[1], out[2], turb
+    return out[0], out[1], out[2]
+
+
+def anemometer_records(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Anemometer u (east), v (north), w (up) at the sections and the turbulence itself.
+
+    :func:`wind_field` then :func:`measure_wind` with the same ``rng``; the
+    deck's turbulence (different from the anemometers' in ``"tributary"``
+    mode) is not returned: use :func:`wind_field` for it.
+
+    Parameters
+    ----------
+    mw : MeanWind on the anemometer time grid (uniform, ``wind.anemometer_rate``)
+
+    Returns
+    -------
+    u, v, w : ndarray, shape (n, S), float32, m/s
+        Measured components with noise and resolution applied.
+    turb : ndarray, shape (n, S, 3), m/s
+        Turbulence (along-wind, lateral, vertical) at the anemometers, before the sensor.
+    """
+    field_ = wind_field(mw, structure, wind, rng)
+    u, v, w = measure_wind(mw, field_.anemometer, wind, rng)
+    return u, v, w, field_.anemometer
 
 
 def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind:
-    """The mean wind the deck feels: scripted mean plus the slow part of the turbulence.
+    """The mean wind the deck feels: scripted mean plus the slow part of the deck's turbulence.
 
     Turbulence slower than ``wind.felt_cutoff_hz`` changes the wind over the
     time scale of the aeroelastic dynamics (minutes), so the deck responds to it
@@ -163,12 +299,15 @@ def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind
     Parameters
     ----------
     mw : MeanWind on the uniform anemometer grid
-    turb : ndarray, shape (n, S, 3), m/s; along-wind, lateral, vertical turbulence
+    turb : ndarray, shape (n, S, 3), m/s; along-wind, lateral, vertical turbulence the
+        deck feels (``WindField.deck``: the tributary average, or the anemometer's own
+        turbulence in ``"anemometer"`` mode)
 
     Returns
     -------
     MeanWind with ``U``, ``V`` and ``yaw`` replaced (``direction`` stays the scripted one;
-    ``yaw`` is the angle of the slow wind vector to the span's normal, in [0, 90] degrees).
+    ``yaw`` is the angle of the slow wind vector to the span's normal, in [0, 90] degrees):
+    ``U`` (n, S), m/s, is the U_k of the aeroelastic force and of the truth.
     """
     sos = butter(4, wind.felt_cutoff_hz, fs=wind.anemometer_rate, output="sos")
     slow = sosfiltfilt(sos, turb[:, :, :2], axis=0)
