@@ -218,7 +218,8 @@ def test_cli_demo_small(tmp_path):
                           "--duration", "8", "--workers", "1"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     assert "report:" in run.stdout and "campaign model" in run.stdout and "coverage" in run.stdout
-    assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == ["E001.identify.nc", "E002.identify.nc", "campaign.pooled.nc"]
+    assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == [
+        "E001.identify.nc", "E002.identify.nc", "campaign.model.nc", "campaign.pooled.nc"]
     report = tmp_path / "reports" / "demo" / "report.md"
     text = report.read_text()
     links = re.findall(r"\]\(([^)\s]+)\)", text)

@@ -152,6 +152,80 @@ def test_cli_pool_and_validation_of_the_campaign_model(small_results, tmp_path):
     assert {r["group"] for r in v["regime_confusion"]} >= {"pooled_identifiable", "pooled_all"}
 
 
+def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_use(small_results, tmp_path):
+    """campaign.model.nc loads and predicts the pooled coef; forecast and validate use it, or the pooled coef without it."""
+    import json
+    import shutil
+
+    from vivbench.analysis import campaign_model_file, load_campaign_model, with_campaign_model
+    from vivbench.cli import main
+    from vivbench.core.errors import InputError
+    from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, read_pooled
+    from vivbench.io.result import read_result, result_record
+    from vivbench.models import CampaignSINDy
+    from vivbench.models.simulate import forecast, simulate_identified
+    from vivbench.validate import validate_campaign
+
+    camp, res_dir, _results = small_results
+    res = tmp_path / "res"
+    shutil.copytree(res_dir, res)
+    before = {f.name for f in res.iterdir()}
+    assert main(["pool", str(res), "--bootstrap", "4", "--block", "20"]) == 0
+    assert {f.name for f in res.iterdir()} - before == {POOLED_NAME, MODEL_NAME}
+    pooled = read_pooled(res / POOLED_NAME)
+    model = CampaignSINDy.load(res / MODEL_NAME)
+    assert campaign_model_file(res) == res / MODEL_NAME
+    assert np.array_equal(model.coef_, pooled["coef"].values)
+    result = read_result(sorted(res.glob("*.identify.nc"))[0])
+    record = result_record(result)
+    assert record.event_id == result.attrs["event_id"] and np.array_equal(record.dA, result["dA"].values, equal_nan=True)
+    expected = evaluate_library(record.A, record.U) @ pooled["coef"].values.T
+    assert np.array_equal(model.predict(record), expected, equal_nan=True)
+    # The protocol's simulation is the old route through result files (coef copied into every window).
+    start, end = result["window_start"].values, result["window_end"].values
+    cm = with_campaign_model(result, pooled)
+    t0 = float(start[start.size // 2])
+    assert np.array_equal(model.simulate(record, float(start.min()), float(end.max())).A_sim,
+                          simulate_identified(cm).A_sim, equal_nan=True)
+    assert np.array_equal(model.simulate(record, t0, t0 + 200.0).A_sim, forecast(cm, t0, 200.0).A_sim, equal_nan=True)
+
+    def run_forecast(out):
+        assert main(["forecast", str(sorted(res.glob("*.identify.nc"))[0]),
+                     "--out", str(out), "--t0", str(t0), "--horizon", "200", "--d", "0"]) == 0
+        return json.loads((out / "summary.json").read_text())
+
+    with_model = run_forecast(tmp_path / "fc_model")
+    from vivbench.report.figures import model_forecast_figure
+
+    png = model_forecast_figure(model, record, tmp_path / "fc.png", t0=t0, horizon=200.0, name="campaign model")
+    assert png.stat().st_size > 0
+    with pytest.raises(InputError, match="lacks dA"):
+        result_record(result.drop_vars("dA"))
+    v_model = validate_campaign(camp.files[0].parent, res)
+    assert v_model["pooled"]["model_file"] == str(res / MODEL_NAME)
+
+    # Older outputs (no campaign.model.nc): the model is rebuilt from the pooled result's coef.
+    (res / MODEL_NAME).unlink()
+    fallback = load_campaign_model(res)
+    assert np.array_equal(fallback.predict(record), expected, equal_nan=True)
+    assert fallback.equations() == model.equations()
+    with pytest.raises(InputError, match=f"{POOLED_NAME}.*re-run vivbench pool"):
+        fallback.curves([8.0, 10.0])
+    assert model.curves([8.0, 10.0])["curves"].shape == (3, 4, 2)
+    without = run_forecast(tmp_path / "fc_pooled")
+    keys = [k for k in with_model if k.startswith("campaign_model_")]
+    assert len(keys) == 3 and all(with_model[k] == without[k] for k in keys)
+    v_pooled = validate_campaign(camp.files[0].parent, res)
+    assert v_pooled["pooled"]["model_file"] == str(res / POOLED_NAME)
+    assert json.dumps(v_pooled["summary"], sort_keys=True) == json.dumps(v_model["summary"], sort_keys=True)
+    # Neither file: load_campaign_model refuses in one line naming the directory.
+    (res / POOLED_NAME).unlink()
+    with pytest.raises(InputError, match="no campaign model"):
+        load_campaign_model(res)
+    with pytest.raises(InputError, match="not a campaign model"):
+        load_campaign_model(sorted(res.glob("*.identify.nc"))[0])
+
+
 def test_cli_pool_bad_input(tmp_path, capsys):
     from vivbench.cli import main
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -16,9 +17,12 @@ from vivbench.models.campaign import PooledSINDy
 from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.result import read_result
+from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, read_pooled
+from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
 
-__all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results", "with_campaign_model"]
+__all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results", "with_campaign_model",
+           "campaign_model_file", "load_campaign_model"]
 
 
 #: dA/dt of the campaign model: exact TV with the white-noise weight, which on
@@ -175,11 +179,74 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
+def campaign_model_file(directory) -> Path | None:
+    """The campaign model that ``vivbench pool`` left in a directory, if any.
+
+    Parameters
+    ----------
+    directory : path of a results directory
+
+    Returns
+    -------
+    Path or None
+        ``campaign.model.nc`` when present, else ``campaign.pooled.nc`` (outputs
+        written before the model file existed; :func:`load_campaign_model` then
+        rebuilds the model from its ``coef``), else None.
+    """
+    for name in (MODEL_NAME, POOLED_NAME):
+        path = Path(directory) / name
+        if path.is_file():
+            return path
+    return None
+
+
+def load_campaign_model(path) -> PooledSINDy:
+    """The campaign model of ``vivbench pool`` as a model of the protocol (DESIGN 7).
+
+    Parameters
+    ----------
+    path : path
+        A campaign model file (``campaign.model.nc``, :meth:`PooledSINDy.save`),
+        a pooled result (``campaign.pooled.nc``) or a directory holding one of
+        them (the model file first, see :func:`campaign_model_file`).
+
+    Returns
+    -------
+    PooledSINDy
+        Loaded with :meth:`PooledSINDy.load`; from a pooled result (older outputs)
+        rebuilt with :meth:`PooledSINDy.from_pooled`, which predicts, gives order
+        contributions, simulates and prints equations but has no ``curves``.
+
+    Raises
+    ------
+    InputError
+        One line naming the file or directory: nothing of ``vivbench pool``
+        there, or a file that is neither a campaign model nor a pooled result.
+    """
+    path = Path(path)
+    if path.is_dir():
+        found = campaign_model_file(path)
+        if found is None:
+            raise InputError(f"{path}: no campaign model ({MODEL_NAME} or {POOLED_NAME}) in this directory; "
+                             "run vivbench pool first")
+        path = found
+    try:
+        return PooledSINDy.load(path)
+    except ModelFileError as exc:
+        try:
+            pooled = read_pooled(path)
+        except ModelFileError:
+            raise exc from None
+    return PooledSINDy.from_pooled(pooled)
+
+
 def with_campaign_model(result, pooled):
     """A copy of an identification result whose every window holds the campaign model's coefficients.
 
     With it the simulation and forecasting functions of ``vivbench.models.simulate``
-    run the pooled model (a forecast with it does not depend on d).
+    run the pooled model (a forecast with it does not depend on d). The
+    commands use the model object instead (:func:`load_campaign_model`, then
+    ``predict``, ``simulate``); this stays for code written against result files.
 
     Parameters
     ----------

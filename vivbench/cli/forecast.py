@@ -7,7 +7,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-from vivbench.io.netcdf import NETCDF_ENGINE
 from vivbench.core.errors import InputError
 
 _COLUMNS = ("kind", "clip", "d_s", "section", "nmse", "stopped", "stopped_at_s", "covered", "n_windows",
@@ -128,12 +127,9 @@ def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None, ref=1, section
 
 
 def run(args) -> int:
-    import xarray as xr
-
-    from vivbench.io.campaign_model import POOLED_NAME
     from vivbench.models.simulate import CLIP_MODES, forecast, simulate_identified
-    from vivbench.io.result import read_result
-    from vivbench.analysis.pool import with_campaign_model
+    from vivbench.io.result import read_result, result_record
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model
     from vivbench.models.simulate import model_jacobian
     from vivbench.io.netcdf import atomic_path
     from vivbench.core.terms import reference_section
@@ -180,15 +176,20 @@ def run(args) -> int:
                 summary[f"growth_rate_per_s_d{d:g}"] = growth
                 paper.append((d, fc))
     campaign = None
-    pooled_path = Path(args.pooled) if args.pooled else Path(args.result).with_name(POOLED_NAME)
-    if args.pooled and not pooled_path.is_file():
-        raise InputError(f"{pooled_path}: no such campaign model file")
-    if pooled_path.is_file():
-        # The campaign model of ``vivbench pool``: one model for all windows, so d plays no role.
-        with xr.open_dataset(pooled_path, engine=NETCDF_ENGINE) as ds:
-            cm = with_campaign_model(result, ds.load())
-        csim = simulate_identified(cm)
-        cfc = forecast(cm, t0, horizon)
+    model_path = Path(args.pooled) if args.pooled else campaign_model_file(Path(args.result).parent)
+    if args.pooled and not model_path.is_file():
+        raise InputError(f"{model_path}: no such campaign model file")
+    if model_path is not None:
+        # The campaign model of ``vivbench pool`` through the model protocol: one model for the
+        # whole event, so d plays no role. The whole-event run spans the result's windows.
+        model = load_campaign_model(model_path)
+        if model.n_sections_ != len(sections):
+            raise InputError(f"{model_path}: the campaign model has {model.n_sections_} sections, "
+                             f"{args.result} {len(sections)}")
+        record = result_record(result)
+        span = (float(result["window_start"].values.min()), float(result["window_end"].values.max()))
+        csim = model.simulate(record, *span)
+        cfc = model.simulate(record, t0, t0 + horizon)
         for kind, run_ in (("campaign_model_simulation", csim), ("campaign_model_forecast", cfc)):
             for s, name in enumerate(sections):
                 rows.append({"kind": kind, "clip": "none", "d_s": "", "section": name, "nmse": run_.nmse[s],
@@ -244,6 +245,7 @@ def register(sub) -> None:
     s.add_argument("--d", type=_ds, default=(0.0, 50.0, 150.0, 300.0),
                    help="averaging durations, s, comma-separated (default 0,50,150,300)")
     s.add_argument("--pooled", default=None,
-                   help="campaign model file of vivbench pool (default: campaign.pooled.nc beside the result, if any)")
+                   help="campaign model of vivbench pool: campaign.model.nc, or campaign.pooled.nc of older outputs "
+                        "(default: whichever lies beside the result, the model file first)")
     s.add_argument("--campaign", default=None, help="campaign directory with the event file (truth: t0, growth rate)")
     s.set_defaults(func=run)

@@ -10,18 +10,23 @@ def run(args) -> int:
     from vivbench.models.campaign import PooledSINDy
     from vivbench.io.result import list_results
     from vivbench.analysis.pool import pool_results
-    from vivbench.io.campaign_model import write_pooled
+    from vivbench.io.campaign_model import MODEL_NAME, write_pooled
 
     results_dir = Path(args.results)
     files = list_results(results_dir)
     model = PooledSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement, tau=args.tau,
                         seed=args.seed)
-    ds = pool_results(files, model)
-    out = write_pooled(ds, args.out or results_dir)
+    ds = pool_results(files, model)  # fits ``model`` in place
+    out_dir = Path(args.out) if args.out else results_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out = write_pooled(ds, out_dir)
+    # The fitted model itself, for forecast, validate and the report (the model protocol's load).
+    model_out = model.save(out_dir / MODEL_NAME)
     if ds.attrs.get("note"):
         print(f"vivbench pool: {ds.attrs['note']}", file=sys.stderr)
     print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, terms per equation "
           f"{', '.join(str(int(k)) for k in ds['n_terms'].values)}, regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
+    print(f"wrote {model_out}: the fitted campaign model (vivbench.models.CampaignSINDy.load)")
     return 0
 
 

@@ -30,12 +30,14 @@ from vivbench.io.result import (
     read_result,
     list_results,
     result_path,
+    result_record,
     markdown_table,
     markdown_attributes,
 )
 from vivbench.io.model_file import ModelFileError, read_model_dataset
 from vivbench.io.campaign_model import (
     POOLED_NAME,
+    MODEL_NAME,
     POOLED_FORMAT,
     CAMPAIGN_MODEL_FORMAT,
     CAMPAIGN_MODEL_VERSION,
@@ -70,10 +72,10 @@ __all__ = [
     "event_arrays", "list_events", "EventSummary", "read_event_summary", "peek_event_id",
     "FEATURES_PER_SECTION", "VariableSpec", "VARIABLES", "COORDINATES", "ATTRIBUTES", "WINDOW_FIT_VARIABLES",
     "ResultFormatError", "build_result", "write_result", "read_result", "list_results", "result_path",
-    "markdown_table", "markdown_attributes", "ModelFileError", "read_model_dataset", "POOLED_NAME",
-    "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "write_pooled", "read_pooled",
-    "write_campaign_model", "read_campaign_model", "WINDOW_MODEL_FORMAT", "WINDOW_MODEL_VERSION",
-    "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED", "MIN_WIND_STD",
-    "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude", "check_wind_varies",
-    "import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
+    "result_record", "markdown_table", "markdown_attributes", "ModelFileError", "read_model_dataset",
+    "POOLED_NAME", "MODEL_NAME", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION",
+    "write_pooled", "read_pooled", "write_campaign_model", "read_campaign_model", "WINDOW_MODEL_FORMAT",
+    "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
+    "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude",
+    "check_wind_varies", "import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
 ]

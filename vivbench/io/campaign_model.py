@@ -6,7 +6,8 @@ Two schemas, one owner:
   :data:`CAMPAIGN_MODEL_VERSION`): everything a fitted
   :class:`vivbench.models.PooledSINDy` needs to predict, simulate, draw its
   curves and label windows. Written by :func:`write_campaign_model`, read and
-  checked by :func:`read_campaign_model`.
+  checked by :func:`read_campaign_model`; ``vivbench pool`` saves it as
+  :data:`MODEL_NAME` (``campaign.model.nc``) beside the pooled result.
 - the *pooled result* ``campaign.pooled.nc`` of ``vivbench pool`` (format
   ``"vivbench-pooled"``): the model's coefficients with every window's regime.
   Written by :func:`write_pooled`, read by :func:`read_pooled`.
@@ -22,11 +23,13 @@ from vivbench.io.model_file import ModelFileError, read_model_dataset
 from vivbench.io.netcdf import write_netcdf_atomic
 
 __all__ = [
-    "POOLED_NAME", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "write_pooled",
+    "POOLED_NAME", "MODEL_NAME", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "write_pooled",
     "read_pooled", "write_campaign_model", "read_campaign_model",
 ]
 
 POOLED_NAME = "campaign.pooled.nc"
+#: File name of the fitted campaign model that ``vivbench pool`` saves beside :data:`POOLED_NAME`.
+MODEL_NAME = "campaign.model.nc"
 POOLED_FORMAT = "vivbench-pooled"
 CAMPAIGN_MODEL_FORMAT = "vivbench-campaign-model"
 CAMPAIGN_MODEL_VERSION = 1

@@ -38,12 +38,13 @@ import numpy as np
 import xarray as xr
 
 from vivbench.core.errors import InputError
+from vivbench.core.record import Record
 from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
 
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "FEATURES_PER_SECTION", "VariableSpec", "VARIABLES", "COORDINATES", "ATTRIBUTES",
     "WINDOW_FIT_VARIABLES", "ResultFormatError", "build_result", "write_result", "read_result", "list_results",
-    "result_path", "markdown_table", "markdown_attributes",
+    "result_path", "result_record", "markdown_table", "markdown_attributes",
 ]
 
 FORMAT = "vivbench-identify"
@@ -355,6 +356,37 @@ def read_result(path, variables: Iterable[str] | None = None, *, optional: Itera
     except _Breach as breach:
         raise ResultFormatError(path, str(breach)) from None
     return ds
+
+
+def result_record(ds: xr.Dataset) -> Record:
+    """The record of an identification result, for any model of the protocol (DESIGN 7).
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A result read by :func:`read_result` with at least ``time`` (s), ``A``
+        (m), ``U`` (m/s) and ``dA`` (m/s), each (time, section) but ``time``,
+        and the attribute ``event_id``.
+
+    Returns
+    -------
+    Record
+        ``event_id`` from the attribute; ``t``, ``A``, ``U``, ``dA`` copied from
+        the result (dA is NaN outside the identification's segments).
+
+    Raises
+    ------
+    InputError
+        One line naming the result's file (or "result" when it has none) when
+        a variable or the event id is missing.
+    """
+    source = ds.encoding.get("source", "result")
+    missing = [n for n in ("A", "U", "dA") if n not in ds.data_vars] + (["time"] if "time" not in ds.coords else [])
+    if missing or "event_id" not in ds.attrs:
+        what = ", ".join(missing + ([] if "event_id" in ds.attrs else ["the event_id attribute"]))
+        raise InputError(f"{source}: cannot make a record of this result: it lacks {what}")
+    return Record(event_id=str(ds.attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
+                  dA=ds["dA"].values)
 
 
 class _Breach(Exception):

@@ -577,6 +577,64 @@ class PooledSINDy(ModelBase):
         model.event_ids_ = json.loads(ds.attrs.get("events", "[]"))
         return model
 
+    @classmethod
+    def from_pooled(cls, ds: xr.Dataset) -> "PooledSINDy":
+        """The campaign model of a pooled result (``campaign.pooled.nc``), for outputs without a model file.
+
+        ``vivbench pool`` saves the fitted model as ``campaign.model.nc``
+        (:meth:`save`); directories written before it hold only the pooled
+        result, whose ``coef`` is the same model. This rebuilds what
+        :meth:`predict`, :meth:`order_contributions`, :meth:`simulate` and
+        :meth:`equations` need (and the selection summaries: ``coef_bootstrap_``,
+        ``n_terms_``, ``threshold_``, ``rss_``, ``aicc_``, ``n_samples_``,
+        ``n_blocks_``, ``cond_``, ``enough_data_``, ``event_ids_``).
+
+        Parameters
+        ----------
+        ds : xarray.Dataset
+            A pooled result read by :func:`vivbench.io.campaign_model.read_pooled`:
+            ``coef`` (equation, feature) in physical units (dA/dt in m/s),
+            ``coef_bootstrap``, ``n_terms``, ``threshold``, ``rss``, ``aicc`` and
+            the attributes ``pooled_config_json``, ``n_samples``, ``n_blocks``,
+            ``enough_data``, ``cond``, ``events``.
+
+        Returns
+        -------
+        PooledSINDy
+            Fitted for evaluation only: ``curves``, ``save`` and ``to_dataset``
+            raise :class:`~vivbench.core.errors.InputError`
+            naming the file, because the pooled result holds neither the
+            amplitude ratios of the curves nor the regression basis (the
+            windows' identifiability verdicts are in the pooled result itself).
+        """
+        source = ds.encoding.get("source", "the pooled result")
+        try:
+            params = json.loads(ds.attrs["pooled_config_json"])
+            params["thresholds"] = tuple(params["thresholds"])
+            model = cls(**params)
+            model.coef_ = np.asarray(ds["coef"].values, dtype=float)
+            model.coef_bootstrap_ = np.asarray(ds["coef_bootstrap"].values, dtype=float)
+            model.threshold_ = np.asarray(ds["threshold"].values, dtype=float)
+            model.n_terms_ = np.asarray(ds["n_terms"].values).astype(int)
+            model.rss_, model.aicc_ = np.asarray(ds["rss"].values), np.asarray(ds["aicc"].values)
+            model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
+            model.enough_data_, model.cond_ = bool(int(ds.attrs["enough_data"])), float(ds.attrs["cond"])
+            model.event_ids_ = json.loads(ds.attrs.get("events", "[]"))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"{source}: not a pooled result of vivbench pool ({type(exc).__name__}: {exc})") from None
+        model.support_ = model.coef_ != 0
+        model.n_sections_ = int(ds.sizes["equation"])
+        model.feature_names_ = [str(x) for x in ds["feature"].values]
+
+        def unavailable(*_args, **_kwargs):
+            raise InputError(f"{source}: a campaign model rebuilt from the pooled result has no amplitude ratios "
+                             "or regression basis (no curves, window verdicts or save); re-run vivbench pool to "
+                             "write campaign.model.nc")
+
+        for name in ("curves", "save", "to_dataset"):
+            setattr(model, name, unavailable)
+        return model
+
 
 #: The campaign model of the model protocol (DESIGN 7); the same class as :class:`PooledSINDy`.
 CampaignSINDy = PooledSINDy

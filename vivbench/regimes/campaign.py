@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2
 
+from vivbench.core.errors import InputError
 from vivbench.core.regime import regime_rule
 from vivbench.core.terms import section_exponents
 from vivbench.models.campaign import PooledSINDy, WindowRecord, window_record, window_stats, window_sums
@@ -40,6 +41,9 @@ def campaign_window_verdicts(model: PooledSINDy, t: np.ndarray, A: np.ndarray, U
         bool, ``agreement`` (W, S) share of bootstrap replicates with the same
         regime (NaN without replicates), ``order_rms`` (W, S, 4) m/s.
     """
+    if not hasattr(model, "gram_inv_"):
+        raise InputError("this campaign model was rebuilt from a pooled result, which holds no regression basis; "
+                         "re-run vivbench pool (it writes campaign.model.nc) for window verdicts")
     models = np.concatenate([model.coef_[None], model.coef_bootstrap_], axis=0)
     rec = window_record(t, A, U, window_start, window_end)  # evaluated once for the statistics and the margins
     R, c1, nv = window_stats(models, rec)

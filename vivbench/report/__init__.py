@@ -8,6 +8,7 @@ from vivbench.report.figures import (
     decision_graph_figure,
     displacement_figure,
     forecast_figure,
+    model_forecast_figure,
     regime_timeline_figure,
     sensor_layout_figure,
     term_scale,
@@ -18,6 +19,6 @@ from vivbench.report.markdown import EXTRA_STEPS, write_report
 
 __all__ = [
     "DPI", "EXTRA_STEPS", "REGIME_COLOURS", "coefficient_map_figure", "decision_graph_figure", "displacement_figure",
-    "event_figure", "forecast_figure", "regime_timeline_figure", "sensor_layout_figure", "term_scale",
+    "event_figure", "forecast_figure", "model_forecast_figure", "regime_timeline_figure", "sensor_layout_figure", "term_scale",
     "time_frequency_figure", "wind_figure", "write_report",
 ]

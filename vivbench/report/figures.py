@@ -17,6 +17,7 @@ coefficient_map_figure     Figs. 5(c), 6, 7 (time-varying model of an event)
 regime_timeline_figure     Fig. 6 and Table 1 (regimes of three events), with truth
 decision_graph_figure      Figs. 8-10 (decision graph, clusters)
 forecast_figure            Figs. 11-12 (simulation and forecasts)
+model_forecast_figure      Figs. 11-12 for any model of the protocol (``simulate``)
 =========================  =====================================================
 """
 
@@ -57,6 +58,7 @@ __all__ = [
     "regime_timeline_figure",
     "decision_graph_figure",
     "forecast_figure",
+    "model_forecast_figure",
     "term_scale",
 ]
 
@@ -736,6 +738,82 @@ def forecast_figure(result: xr.Dataset, path: str | Path, *, t0: float | None = 
         ax2.set_ylabel(f"amplitude A at {equation} (m)")
         ax2.set_title(f"(b) forecasts from t0 = {t0:.0f} s with fixed coefficients (x: blow-up, run stopped)",
                       fontsize=10, loc="left")
+        ax2.legend(loc="best", fontsize=7)
+    return Path(path)
+
+
+def model_forecast_figure(model, record, path: str | Path, *, t0: float, horizon: float = 300.0,
+                          span: tuple[float, float] | None = None, equation: str | None = None,
+                          name: str = "the model") -> Path:
+    """Simulation and forecast of one record with a model of the protocol (paper Figs. 11-12).
+
+    Panel (a): the measured amplitudes against ``model.simulate(record, *span)``,
+    from the measured A at the span's start with the measured wind. Panel (b):
+    the measured amplitude of ``equation`` against
+    ``model.simulate(record, t0, t0 + horizon)``, the forecast from the
+    measured A at t0. A run that blew up is drawn only up to where it was
+    stopped and marked with a cross. A time-invariant model (the campaign
+    model) has one forecast: the averaging duration d of the window models
+    plays no role.
+
+    Parameters
+    ----------
+    model : fitted model with ``simulate(record, t0, t1)`` returning a
+        :class:`vivbench.models.simulate.Simulation`
+    record : vivbench.core.Record
+        t (s), A (m), U (m/s) of shape (n_samples, S); section names S1..Sn.
+    path : output PNG
+    t0 : forecast start, s
+    horizon : forecast length, s (shortened to the end of the record)
+    span : (start, end), s, optional
+        Span of panel (a) (default: the whole record).
+    equation : section shown in panel (b) (default the middle one, S2 of three)
+    name : how the model is named in the titles
+
+    Returns
+    -------
+    Path
+    """
+    sections = [f"S{k + 1}" for k in range(record.n_sections)]
+    e = _section_index(sections, equation)
+    equation = sections[e]
+    t, A = record.t, record.A
+    horizon = min(float(horizon), float(t[-1]) - float(t0))
+    if not horizon > 0:
+        raise InputError(f"t0 = {t0:g} s leaves no forecast horizon before the record ends at {t[-1]:g} s")
+    span = (float(t[0]), float(t[-1])) if span is None else (float(span[0]), float(span[1]))
+    sim = model.simulate(record, *span)
+    fc = model.simulate(record, float(t0), float(t0) + horizon)
+    with _figure(path, 2, 1, figsize=(9, 7.5), constrained_layout=True) as (fig, (ax, ax2)):
+        for i, sec in enumerate(sections):
+            c = _SECTION_COLOURS.get(sec)
+            ax.plot(t / 60.0, A[:, i], lw=1.2, color=c, label=f"measured {sec}")
+            ax.plot(sim.t / 60.0, sim.A_sim[:, i], lw=1.0, ls="--", color=c,
+                    label=f"simulated {sec} (NMSE {sim.nmse[i]:.3g})")
+        _mark_stop(ax, sim, None)
+        ax.axvspan(t0 / 60.0, (t0 + horizon) / 60.0, color="0.9", lw=0, zorder=0, label="forecast span of (b)")
+        ax.set_ylabel("amplitude A (m)")
+        ax.set_xlabel("time since event start (min)")
+        ax.set_title(f"(a) event {record.event_id}: {name} from the measured A(t = {sim.t[0]:.0f} s) and U",
+                     fontsize=10, loc="left")
+        if sim.stopped:
+            ax.text(0.99, 0.03, f"simulation stopped (x): {sim.reason}", transform=ax.transAxes, ha="right",
+                    va="bottom", fontsize=7, wrap=True)
+        ax.legend(loc="upper left", fontsize=7, ncol=2)
+        sel = (t >= t0 - 1e-9) & (t <= t0 + horizon + 1e-9)
+        ax2.plot(t[sel], A[sel, e], lw=2.0, color="k", label=f"measured {equation}")
+        if not fc.stopped:
+            status = f"NMSE {fc.nmse[e]:.3g}"
+        elif np.isfinite(fc.nmse[e]):
+            status = f"NMSE {fc.nmse[e]:.3g} before the stop at {fc.stopped_at:.0f} s"
+        else:
+            status = f"stopped at {fc.stopped_at:.0f} s, no valid interval"
+        c = plt.get_cmap("viridis")(0.0)
+        ax2.plot(fc.t, fc.A_sim[:, e], lw=1.2, color=c, label=f"{name}: {status}")
+        _mark_stop(ax2, fc, e, colour=c, minutes=False)
+        ax2.set_xlabel("time since event start (s)")
+        ax2.set_ylabel(f"amplitude A at {equation} (m)")
+        ax2.set_title(f"(b) forecast from t0 = {t0:.0f} s (x: blow-up, run stopped)", fontsize=10, loc="left")
         ax2.legend(loc="best", fontsize=7)
     return Path(path)
 

@@ -22,16 +22,17 @@ from pathlib import Path
 from urllib.parse import quote
 
 import numpy as np
-import xarray as xr
 
 import vivbench
-from vivbench.io.campaign_model import POOLED_NAME
-from vivbench.analysis.pool import with_campaign_model
-from vivbench.io.netcdf import NETCDF_ENGINE, atomic_path
+from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+from vivbench.analysis.pool import campaign_model_file, load_campaign_model
+from vivbench.io.netcdf import atomic_path
+from vivbench.regimes.model import model_window_regimes
 from vivbench.io.event import list_events, read_event
+from vivbench.core.regime import DEFAULT_TAU
 from vivbench.core.terms import reference_section, section_exponents
 from vivbench.io.event import read_event_summary
-from vivbench.io.result import read_result
+from vivbench.io.result import read_result, result_record
 from vivbench.core.errors import InputError
 
 __all__ = ["EXTRA_STEPS", "write_report"]
@@ -365,8 +366,11 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
 
     pooled_path = results_dir / POOLED_NAME
     if pooled_path.is_file():
-        with xr.open_dataset(pooled_path, engine=NETCDF_ENGINE) as ds:
-            pooled = ds.load()
+        # The campaign model through the model protocol (campaign.model.nc, or rebuilt from the pooled
+        # result's coef for older outputs); the windows' identifiability verdicts from the pooled result.
+        pooled = read_pooled(pooled_path)
+        model_path = campaign_model_file(results_dir)
+        model = load_campaign_model(model_path)
         md += ["## The campaign model (`vivbench pool`)", "",
                "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
                "AICc on all samples of all events (`vivbench.models.campaign`). A window's regime is the rule of "
@@ -379,13 +383,20 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
                f"coverage {float(pooled.attrs['coverage']):.3f}."
                + (f" **{pooled.attrs['note']}**" if pooled.attrs.get("note") else ""), "",
+               f"Model file: `{model_path.name}`"
+               + ("" if model_path.name != POOLED_NAME else
+                  " (no campaign.model.nc: the model is rebuilt from the pooled result's coefficients)") + ".", "",
                _produced_by(f"vivbench pool {results_dir}"), ""]
         ev_of = pooled["event_id"].values.astype(str)
         pres = []
         for e in events:
             r = results[e].copy()
             sel = ev_of == e
-            r["regime"] = (r["regime"].dims, pooled["regime"].values[sel])
+            start, end = r["window_start"].values, r["window_end"].values
+            if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
+                raise InputError(f"{pooled_path}: its windows of {e} differ from the result's; re-run vivbench pool")
+            reg = model_window_regimes(model, result_record(r), start, end, tau=float(getattr(model, "tau", DEFAULT_TAU)))
+            r["regime"] = (r["regime"].dims, reg["regime"])
             r["identifiable"] = (r["identifiable"].dims, pooled["identifiable"].values[sel])
             pres.append(r)
         figure("fig06b_regimes_campaign_model.png", "Fig. 6b: regimes of the campaign model against the truth",
@@ -393,11 +404,15 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                "and bootstrap tests) instead of the window models'.",
                lambda p: F.regime_timeline_figure(pres, timeline_truth or [None] * len(events), p),
                "regime_timeline_figure")
-        cm0 = with_campaign_model(res0, pooled)
-        figure("fig11b_forecast_campaign_model.png", "Fig. 11b: simulation and forecasts with the campaign model",
-               "As Fig. 11, with the campaign model in every window: one fixed model, so the forecasts for "
-               "different d coincide.",
-               lambda p: F.forecast_figure(cm0, p), "forecast_figure")
+        starts0 = res0["window_start"].values
+        span0 = (float(starts0.min()), float(res0["window_end"].values.max()))
+        t0_cm = float(starts0[np.argmin(np.abs(starts0 - (span0[0] + 0.4 * (span0[1] - span0[0]))))])
+        figure("fig11b_forecast_campaign_model.png", "Fig. 11b: simulation and forecast with the campaign model",
+               "As Fig. 11, with the campaign model (`model.simulate(record, t0, t1)`) over the span of the "
+               "windows and from the same t0: one fixed model, so there is one forecast (d plays no role).",
+               lambda p: F.model_forecast_figure(model, result_record(res0), p, t0=t0_cm, span=span0,
+                                                 name="campaign model"),
+               "model_forecast_figure")
 
     md += _recovery_section(info, command)
     say("recovery")

@@ -31,7 +31,14 @@ from vivbench.validate.metrics import (
 )
 from vivbench.validate.plateau import Plateau, clearest_plateau, measured_plateau, truth_plateau
 from vivbench.validate.pooled import pooled_recovery
-from vivbench.validate.recovery import campaign_recovery, recovery_by_event, regime_scores, rhs_relative_error, window_rhs_errors
+from vivbench.validate.recovery import (
+    campaign_recovery,
+    model_window_rhs_errors,
+    recovery_by_event,
+    regime_scores,
+    rhs_relative_error,
+    window_rhs_errors,
+)
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.sweep import (
     METRIC_COLUMNS,
@@ -80,5 +87,6 @@ __all__ = [
     "truth_window_regimes",
     "validate_campaign",
     "window_rhs_errors",
+    "model_window_rhs_errors",
     "write_validation",
 ]

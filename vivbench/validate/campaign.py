@@ -17,7 +17,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import xarray as xr
 
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.validate.metrics import (
@@ -30,9 +29,9 @@ from vivbench.validate.metrics import (
     rhs_error_summary,
     support_scores,
 )
+from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
-from vivbench.validate.recovery import window_rhs_errors
-from vivbench.io.netcdf import NETCDF_ENGINE
+from vivbench.validate.recovery import model_window_rhs_errors, window_rhs_errors
 from vivbench.core.errors import InputError
 
 __all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables"]
@@ -157,8 +156,12 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         models and for identifiable ones), ``support_table`` (rows), ``per_event``
         (rows), ``clusters`` (rows, or None), ``forecast`` (rows of
         :func:`forecast_summary` per d, or None), ``truth_regime_shares``,
-        ``pooled`` (regime report and RHS errors of the campaign model in
-        ``results_dir/campaign.pooled.nc`` when present, else None),
+        ``pooled`` (regime report and RHS errors of the campaign model when
+        ``results_dir/campaign.pooled.nc`` is present, else None: regimes and
+        dA/dt of the model object of ``campaign.model.nc`` through the model
+        protocol, or of the model rebuilt from the pooled result's ``coef``
+        for outputs without that file; identifiability verdicts from the
+        pooled result),
         ``skipped`` (event file -> reason), ``notes``, ``settings``, ``summary``
         (flat headline numbers).
 
@@ -178,7 +181,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     for d, what in ((campaign_dir, "campaign"), (results_dir, "results")):
         if not d.is_dir():
             raise InputError(f"{d}: no such {what} directory")
-    from vivbench.io.result import list_results, read_result
+    from vivbench.io.result import list_results, read_result, result_record
 
     result_files = list_results(results_dir)
     pairs = []
@@ -192,15 +195,19 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     regimes, truths, flags, errs, actives, per_event = [], [], [], [], [], []
     sup_all, sup_ok = [], []
     skipped, truth_by_key = {}, {}
-    # The campaign model of ``vivbench pool``, scored beside the window models when present.
-    from vivbench.io.campaign_model import POOLED_NAME
-    from vivbench.analysis.pool import with_campaign_model
+    # The campaign model of ``vivbench pool``, scored beside the window models when present: the
+    # model object (campaign.model.nc, or rebuilt from the pooled result's coef for older outputs)
+    # through the protocol, the windows' identifiability verdicts from the pooled result.
+    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model
 
     pooled_path = results_dir / POOLED_NAME
-    pooled = None
+    pooled = model = model_path = None
     if pooled_path.is_file():
-        with xr.open_dataset(pooled_path, engine=NETCDF_ENGINE) as ds:
-            pooled = ds.load()
+        pooled = read_pooled(pooled_path)
+        model_path = campaign_model_file(results_dir)
+        model = load_campaign_model(model_path)
+        model_tau = float(getattr(model, "tau", DEFAULT_TAU))
     p_reg, p_ok, p_errs, p_act = [], [], [], []
     for event_id, ep, rp in pairs:
         tree = read_event(ep)
@@ -227,11 +234,12 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
             sel = pooled["event_id"].values.astype(str) == event_id
             if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
                 raise InputError(f"{pooled_path}: its windows of {event_id} differ from {rp}; re-run vivbench pool")
-            p_reg.append(pooled["regime"].values[sel].astype(int))
+            record = result_record(res)
+            p_reg.append(model_window_regimes(model, record, start, end, tau=model_tau)["regime"].astype(int))
             p_ok.append(pooled["identifiable"].values[sel].astype(bool))
             if "coef" in truth.data_vars:
-                pe, pact = window_rhs_errors(with_campaign_model(res, pooled), truth["coef"].values, truth["r"].values,
-                                             active_share=active_share)
+                pe, pact = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
+                                                   active_share=active_share)
                 p_errs.append(pe.ravel())
                 p_act.append(pact.ravel())
         if "coef" in truth.data_vars:
@@ -254,7 +262,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     if pooled is not None and p_reg:
         pr = regime_report(np.concatenate(p_reg), np.concatenate(truths), np.concatenate(p_ok))
         pooled_out = {"regime": pr, "rhs": rhs_error_summary(np.concatenate(p_errs), np.concatenate(p_act)) if p_errs else None,
-                      "file": str(pooled_path), "n_terms": [int(k) for k in pooled["n_terms"].values]}
+                      "file": str(pooled_path), "model_file": str(model_path),
+                      "n_terms": [int(k) for k in model.n_terms_]}
     if not regimes:
         raise InputError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
                          "validation needs synthetic events")

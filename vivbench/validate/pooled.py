@@ -1,42 +1,61 @@
-"""Recovery of the truth by the pooled campaign model (``vivbench.models.campaign``)."""
+"""Recovery of the truth by the campaign model of ``vivbench pool`` (``vivbench.models.campaign``).
+
+The model is used through the model protocol (DESIGN 7): regimes by
+:func:`vivbench.regimes.model_window_regimes` on its order contributions,
+right-hand sides by its ``predict``. The identifiability verdict of each
+window (bootstrap agreement, confidence-region margins) is the one written in
+the pooled result ``campaign.pooled.nc``.
+"""
 
 from __future__ import annotations
 
-import numpy as np
-import xarray as xr
+from pathlib import Path
 
-from vivbench.validate.recovery import regime_scores, window_rhs_errors
+import numpy as np
+
+from vivbench.core.regime import DEFAULT_TAU
+from vivbench.validate.recovery import model_window_rhs_errors, regime_scores
+from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
-from vivbench.io.netcdf import NETCDF_ENGINE
 from vivbench.core.errors import InputError
 
 __all__ = ["pooled_recovery"]
 
 
-def pooled_recovery(event_files, pooled_file, result_files, *, active_share: float = 0.1, tau: float = 0.2) -> dict:
-    """Regime scores and right-hand-side errors of the pooled model against the truth.
+def pooled_recovery(event_files, pooled_file, result_files, *, active_share: float = 0.1, tau: float = 0.2,
+                    model=None) -> dict:
+    """Regime scores and right-hand-side errors of the campaign model against the truth.
 
     Parameters
     ----------
     event_files : synthetic event files (with ``/truth``)
-    pooled_file : ``campaign.pooled.nc``
-    result_files : the ``<event_id>.identify.nc`` the pooled model was fitted on
+    pooled_file : ``campaign.pooled.nc`` (windows and their identifiability verdicts)
+    result_files : the ``<event_id>.identify.nc`` the campaign model was fitted on
         (their A and U are where the right-hand sides are compared)
     active_share : as in :func:`vivbench.validate.campaign_recovery`
+    tau : regime threshold of the truth's window regimes (DESIGN 2.5)
+    model : fitted model of the protocol, optional
+        Default: ``campaign.model.nc`` beside ``pooled_file``, or, for outputs
+        without it, the model rebuilt from ``pooled_file``'s ``coef``
+        (:func:`vivbench.analysis.load_campaign_model`). Its regimes use its own
+        ``tau`` (the one it labelled the windows with).
 
     Returns
     -------
     dict
-        :func:`vivbench.validate.regime_scores` of the pooled regimes plus
+        :func:`vivbench.validate.regime_scores` of the model's regimes plus
         ``rhs_median_rel_error`` and ``rhs_median_rel_error_active`` (the one
-        pooled model evaluated over every window).
+        model evaluated over every window).
     """
-    from vivbench.analysis.pool import with_campaign_model
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model
+    from vivbench.io.campaign_model import read_pooled
     from vivbench.io.event import read_event
-    from vivbench.io.result import read_result
+    from vivbench.io.result import read_result, result_record
 
-    with xr.open_dataset(pooled_file, engine=NETCDF_ENGINE) as ds:
-        pooled = ds.load()
+    pooled = read_pooled(pooled_file)
+    if model is None:
+        model = load_campaign_model(campaign_model_file(Path(pooled_file).parent) or pooled_file)
+    model_tau = float(getattr(model, "tau", DEFAULT_TAU))
     truths = {}
     for path in event_files:
         tree = read_event(path)
@@ -55,13 +74,15 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         sel = event_of == event_id
         truth = truths[event_id]
         res = results[event_id]
-        if not np.array_equal(pooled["window_start"].values[sel], res["window_start"].values):
+        start, end = res["window_start"].values, res["window_end"].values
+        if not np.array_equal(pooled["window_start"].values[sel], start):
             raise InputError(f"{pooled_file}: its windows of {event_id} differ from the result's; re-run vivbench pool")
-        regimes.append(pooled["regime"].values[sel])
+        record = result_record(res)
+        regimes.append(model_window_regimes(model, record, start, end, tau=model_tau)["regime"])
         flags.append(pooled["identifiable"].values[sel].astype(bool))
-        truths_w.append(truth_window_regimes(truth, res["window_start"].values, res["window_end"].values, tau=tau))
-        e, act = window_rhs_errors(with_campaign_model(res, pooled), truth["coef"].values, truth["r"].values,
-                                   active_share=active_share)
+        truths_w.append(truth_window_regimes(truth, start, end, tau=tau))
+        e, act = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
+                                         active_share=active_share)
         errs.append(e.ravel())
         errs_active.append(np.where(act, e, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))

@@ -14,7 +14,8 @@ import xarray as xr
 from vivbench.core.terms import evaluate_library
 from vivbench.regimes.truth import truth_window_regimes
 
-__all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "regime_scores", "campaign_recovery"]
+__all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
+           "campaign_recovery"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -105,6 +106,55 @@ def window_rhs_errors(result: xr.Dataset, coef_true: np.ndarray, truth_r: np.nda
             errors[w] = rhs_relative_error(coef[w], coef_true, A[sel], U[sel])
             f_true = evaluate_library(A[sel], U[sel]) @ coef_true.T
             active[w] = np.sqrt(np.mean(f_true**2, axis=0)) >= active_share * scale
+    return errors, active
+
+
+def model_window_rhs_errors(model, record, coef_true: np.ndarray, truth_r: np.ndarray, window_start, window_end, *,
+                            active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Relative RHS error of any model of the protocol over every window of one record.
+
+    The model's ``predict(record)`` and the truth's right-hand side are both
+    evaluated on the record's A and U (the model's own inputs), so the error is
+    that of the dynamics, as in :func:`window_rhs_errors` for window models.
+
+    Parameters
+    ----------
+    model : fitted model with ``predict(record)`` -> dA/dt, shape (n_samples, S), m/s
+    record : vivbench.core.Record
+        Typically an identification result's record (:func:`vivbench.io.result.result_record`).
+    coef_true : ndarray, shape (S, 23 S), the exact truth matrix on the physical library
+    truth_r : ndarray, shape (n_t, S, 4), m/s
+        The truth's order contributions; their sum sets the event's scale of dA/dt.
+    window_start, window_end : array_like, shape (W,), s
+        A window holds the samples with start <= t < end.
+    active_share : float
+        As in :func:`window_rhs_errors`.
+
+    Returns
+    -------
+    errors : ndarray, shape (W, S)
+        rms(f_model - f_true) / rms(f_true) over each window (NaN where the
+        model's prediction or the data are missing on a sample of the window,
+        or without true dynamics).
+    active : ndarray of bool, shape (W, S)
+    """
+    f_model = np.asarray(model.predict(record), dtype=float)
+    A, U, t = record.A, record.U, record.t
+    if f_model.shape != A.shape:
+        raise ValueError(f"predict must return shape {A.shape} (n_samples, n_sections); got {f_model.shape}")
+    f_truth = evaluate_library(A, U) @ np.asarray(coef_true, dtype=float).T
+    start = np.atleast_1d(np.asarray(window_start, dtype=float))
+    end = np.atleast_1d(np.asarray(window_end, dtype=float))
+    scale = np.sqrt(np.mean(np.asarray(truth_r).sum(-1) ** 2, axis=0))
+    errors = np.full((start.size, f_truth.shape[1]), np.nan)
+    active = np.zeros(errors.shape, dtype=bool)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for w in range(start.size):
+            sel = (t >= start[w]) & (t < end[w])
+            f_id, f_true = f_model[sel], f_truth[sel]
+            rms_true = np.sqrt(np.mean(f_true**2, axis=0))
+            errors[w] = np.sqrt(np.mean((f_id - f_true) ** 2, axis=0)) / rms_true
+            active[w] = rms_true >= active_share * scale
     return errors, active
 
 
