@@ -21,8 +21,36 @@ from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, read_pooled
 from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
 
-__all__ = ["CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results", "with_campaign_model",
-           "campaign_model_file", "load_campaign_model"]
+__all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
+           "with_campaign_model", "campaign_model_file", "load_campaign_model"]
+
+#: Spacing of the wind grid of the campaign model's coefficient curves, m/s.
+CURVE_STEP = 0.1
+
+
+def curve_wind_grid(U, step: float = CURVE_STEP) -> np.ndarray:
+    """The wind grid of a campaign model's curves: the data's wind range on multiples of ``step``.
+
+    Parameters
+    ----------
+    U : array_like, m/s
+        The winds the model was fitted on (NaN ignored).
+    step : float, m/s
+
+    Returns
+    -------
+    ndarray, shape (n_wind,), m/s
+        From the largest multiple of ``step`` at or below the smallest finite
+        positive U to the smallest at or above the largest (a polynomial model
+        says nothing beyond its data); at least two points.
+    """
+    U = np.asarray(U, dtype=float)
+    U = U[np.isfinite(U) & (U > 0)]
+    if U.size == 0:
+        raise InputError("no finite positive wind speed: the campaign model's curves have no wind range")
+    lo = max(int(np.floor(U.min() / step + 1e-9)), 1)
+    hi = max(int(np.ceil(U.max() / step - 1e-9)), lo + 1)
+    return np.arange(lo, hi + 1) * step
 
 
 #: dA/dt of the campaign model: exact TV with the white-noise weight, which on
@@ -108,7 +136,11 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
         (equation, feature) in physical units (dA/dt in m/s), ``coef_bootstrap``,
         ``n_terms``, ``threshold``, ``rss``, ``aicc``; per window ``event_id``,
         ``window``, ``window_start``, ``window_end``, ``regime``,
-        ``identifiable``, ``agreement``, ``order_rms``. Written by
+        ``identifiable``, ``agreement``, ``order_rms``; the coefficient curves
+        (DESIGN 3.5, :meth:`PooledSINDy.curves` at its default 95 % level)
+        ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind)
+        in m^(1-i)/s on the coordinate ``wind`` (m/s, :func:`curve_wind_grid`
+        of the results' U). Written by
         :func:`write_pooled` as ``campaign.pooled.nc``.
     """
     model = model or PooledSINDy()
@@ -158,8 +190,12 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
                    {"long_name": "no model within the fit tolerance gives the window another regime (near-null-space test)"}),
         "order_rms": (("window_all", "equation", "order"), cat["order_rms"], {"units": "m/s"}),
     }
+    curves = model.curves(curve_wind_grid(np.concatenate([ds["U"].values.ravel() for _p, ds, _a, _e in results])))
+    for name in ("curves", "curves_lower", "curves_upper"):
+        data[name] = (("equation", "order", "wind"), curves[name].values, curves[name].attrs)
     coords = {"equation": sections, "feature": model.feature_names_, "bootstrap": np.arange(model.coef_bootstrap_.shape[0]),
-              "order": np.arange(4), "window_all": np.arange(cat["window"].size)}
+              "order": np.arange(4), "window_all": np.arange(cat["window"].size),
+              "wind": ("wind", curves["wind"].values, {"units": "m/s", "long_name": "mean wind speed of the curves"})}
     attrs = {
         "format": "vivbench-pooled",
         "format_version": 1,

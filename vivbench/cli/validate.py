@@ -21,15 +21,25 @@ def run(args) -> int:
         x = s.get(key, math.nan)
         return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.3f}"
 
+    support = (f"support recall {f('support_recall_terms')} terms / {f('support_recall_pooled_terms')} "
+               f"section-pooled / {f('support_recall_orders')} orders" if v["support"] is not None
+               else f"support {v['support_note']}")
     print(f"validate: {s['n_events']} events, {s['n_window_equations']} window-equations; regime coverage "
           f"{f('regime_coverage')}, accuracy {f('regime_accuracy_identifiable')} identifiable / "
-          f"{f('regime_accuracy_all')} all; median RHS rel. error {f('median_rhs_rel_error_active')} (active); "
-          f"support recall {f('support_recall_terms')} terms / {f('support_recall_pooled_terms')} section-pooled / "
-          f"{f('support_recall_orders')} orders")
+          f"{f('regime_accuracy_all')} all; median dA/dt rel. error on the true (A, U) "
+          f"{f('median_rhs_error_true_AU_active')} (active)"
+          + (f", on the measured (A, U) {f('median_rhs_rel_error_active')} (active)" if v["rhs"] is not None else "")
+          + f"; {support}")
     if "pooled_regime_coverage" in s:
+        curves = v["pooled"]["curves"]
+        curve_text = (f"curve error over lock-in ({curves['reference_equation']}): a_k1 {f('pooled_curve_error_linear')}, "
+                      f"total {f('pooled_curve_error_total')}" if curves.get("scored")
+                      else f"curves not scored: {curves.get('reason')}")
         print(f"campaign model (vivbench pool): regime coverage {f('pooled_regime_coverage')}, accuracy "
               f"{f('pooled_regime_accuracy_identifiable')} identifiable / {f('pooled_regime_accuracy_all')} all; "
-              f"median RHS rel. error {f('pooled_median_rhs_rel_error_active')} (active)")
+              f"median dA/dt rel. error on the true (A, U) {f('pooled_median_rhs_error_true_AU_active')} (active)"
+              + (f", on the measured (A, U) {f('pooled_median_rhs_rel_error_active')} (active)"
+                 if v["pooled"]["rhs"] is not None else "") + f"; {curve_text}")
     print(f"wrote {len(written)} files to {args.out}")
     return 0
 

@@ -13,7 +13,9 @@ held in memory as an :class:`xarray.DataTree`::
                       time (time) float64 s; section; order (order) 0..3
                       U, A (time, section) m/s and m; r (time, section, order) m/s;
                       regime (time, section) int 1..4; optional coef
-                      (equation, feature); optional slow changes
+                      (equation, feature); optional coefficient curves
+                      curves (equation, order, wind) m^(1-i)/s with
+                      wind (wind) m/s (DESIGN 3.5); optional slow changes
                       damping_ratio, mass_factor (time) and aero_factor
                       (time, order), dimensionless; attributes config_json,
                       optional tau
@@ -55,6 +57,8 @@ FORMAT_VERSION = 1
 NOMINAL_RATES = {"wind": 32.0, "accel": 50.0}
 #: Units of the exact coefficient matrix: column (i, j) multiplies A^i U^j.
 COEF_UNITS = "1/s * m^(1-i) (m/s)^(-j)"
+#: Units of coefficient curves a_ki(U): the coefficient of A^i in dA/dt (m/s).
+CURVE_UNITS = "m^(1-order) s-1"
 
 _RATE_TOLERANCE = 0.10
 _SOURCES = ("synthetic", "field")
@@ -68,7 +72,7 @@ _UNIT_SPELLINGS = {
     "1": ("1",),
 }
 _TRUTH_KEYS = ("time", "U", "A", "r", "regime", "config", "coef", "feature", "tau",
-               "damping_ratio", "mass_factor", "aero_factor")
+               "damping_ratio", "mass_factor", "aero_factor", "curves", "wind")
 #: Optional /truth variables of the generator's slow changes (DESIGN 2.8): name -> (dims, long_name).
 _CHANGE_VARS = {
     "damping_ratio": (("time",), "structural damping ratio zeta of the mode"),
@@ -147,7 +151,10 @@ def build_event(
         exact coefficient matrix (row k gives dA_k/dt) with ``feature`` the
         n_features term names; optional ``tau`` regime threshold; optional slow
         changes (all three or none), dimensionless: ``damping_ratio`` (n_t,),
-        ``mass_factor`` (n_t,) and ``aero_factor`` (n_t, 4).
+        ``mass_factor`` (n_t,) and ``aero_factor`` (n_t, 4); optional exact
+        coefficient curves (DESIGN 3.5) ``curves`` (n_sec, 4, n_wind) in
+        m^(1-i)/s with ``wind`` (n_wind,) m/s, finite, positive and
+        increasing.
     attrs : mapping, optional
         Extra root attributes: str, int or float scalars; names must not start
         with ``_`` nor replace the format's own attributes.
@@ -323,6 +330,24 @@ def _truth_dataset(truth: Mapping, sections: list[str]) -> xr.Dataset:
         )
     elif truth.get("feature") is not None:
         raise ValueError("truth['feature'] given without truth['coef']")
+    if (truth.get("curves") is None) != (truth.get("wind") is None):
+        raise ValueError("truth['curves'] and truth['wind'] come together: the curves and their wind grid (m/s)")
+    if truth.get("curves") is not None:
+        wind = np.asarray(truth["wind"], dtype=np.float64)
+        if wind.ndim != 1 or wind.size < 2 or not np.all(np.isfinite(wind)) or np.any(wind <= 0) \
+                or np.any(np.diff(wind) <= 0):
+            raise ValueError("truth['wind'] must be a 1-D increasing array of at least 2 finite positive speeds (m/s)")
+        curves = _as_float(truth["curves"], "truth['curves']", (n_sec, 4, wind.size), "(n_sections, 4, n_wind)")
+        ds["curves"] = (
+            ("equation", "order", "wind"),
+            curves.astype(np.float64),
+            {"units": CURVE_UNITS,
+             "long_name": "exact coefficient of A_k^order in dA_k/dt at mean wind U, yaw 0 (DESIGN 3.5)"},
+        )
+        ds = ds.assign_coords(
+            equation=("equation", np.array(sections, dtype=str), {"long_name": "section whose dA/dt the row gives"}),
+            wind=("wind", wind, {"units": "m/s", "long_name": "mean wind speed perpendicular to the span"}),
+        )
     given = [k for k in _CHANGE_VARS if truth.get(k) is not None]
     if given and len(given) != len(_CHANGE_VARS):
         raise ValueError(f"truth has {given} but the slow changes need all of {list(_CHANGE_VARS)}")
@@ -546,8 +571,14 @@ def _check_truth(ds: xr.Dataset, sections: tuple) -> None:
         names = ds.coords["feature"].values.tolist()
         if not all(isinstance(f, str) and f for f in names) or len(set(names)) != len(names):
             raise _Breach("/truth/feature must hold distinct non-empty strings")
-    elif "feature" in ds.coords or "equation" in ds.coords:
-        raise _Breach("/truth has feature/equation coordinates but no coef variable")
+    elif "feature" in ds.coords:
+        raise _Breach("/truth has a feature coordinate but no coef variable")
+    if "curves" in ds.data_vars:
+        _check_truth_curves(ds, sections)
+    elif "wind" in ds.coords:
+        raise _Breach("/truth has a wind coordinate but no curves variable")
+    if "equation" in ds.coords and "coef" not in ds.data_vars and "curves" not in ds.data_vars:
+        raise _Breach("/truth has an equation coordinate but neither coef nor curves")
     present = [k for k in _CHANGE_VARS if k in ds.data_vars]
     if present and len(present) != len(_CHANGE_VARS):
         raise _Breach(f"/truth has {present} but the slow changes need all of {list(_CHANGE_VARS)}")
@@ -555,6 +586,23 @@ def _check_truth(ds: xr.Dataset, sections: tuple) -> None:
         values = _check_variable(ds, "truth", name, _CHANGE_VARS[name][0], "1").values
         if not np.all(np.isfinite(values)) or np.any(values < 0):
             raise _Breach(f"/truth/{name} must be finite and >= 0")
+
+
+def _check_truth_curves(ds: xr.Dataset, sections: tuple) -> None:
+    """The optional exact coefficient curves of /truth (DESIGN 3.5)."""
+    curves = _check_variable(ds, "truth", "curves", ("equation", "order", "wind"), None)
+    if curves.attrs.get("units") != CURVE_UNITS:
+        raise _Breach(f"/truth/curves has units {curves.attrs.get('units')!r}, expected {CURVE_UNITS!r}")
+    _check_sections(ds, "truth", "equation", sections)
+    if "wind" not in ds.coords:
+        raise _Breach("missing coordinate /truth/wind (m/s) of /truth/curves")
+    wind = ds.coords["wind"]
+    if wind.dims != ("wind",) or wind.dtype.kind != "f":
+        raise _Breach(f"/truth/wind must be a 1-D floating-point coordinate; got dims {wind.dims}, dtype {wind.dtype}")
+    _check_units(wind, "/truth/wind", "m/s")
+    w = wind.values
+    if w.size < 2 or not np.all(np.isfinite(w)) or np.any(w <= 0) or np.any(np.diff(w) <= 0):
+        raise _Breach("/truth/wind must hold at least 2 finite positive increasing speeds")
 
 
 # -------------------------------------------------------------------- write / read
@@ -770,9 +818,11 @@ def event_arrays(tree: xr.DataTree) -> dict:
         (n_acc, n_sec) m/s^2; and, if the event has a truth,
         ``truth_time`` (n_t,) s; ``U`` (n_t, n_sec) m/s; ``A`` (n_t, n_sec) m;
         ``r`` (n_t, n_sec, 4) m/s; ``regime`` (n_t, n_sec) int; plus ``coef``
-        (n_sec, n_features) and ``feature`` (tuple of str) when stored, and the
+        (n_sec, n_features) and ``feature`` (tuple of str) when stored, the
         slow changes ``damping_ratio``, ``mass_factor`` (n_t,) and ``aero_factor``
-        (n_t, 4), dimensionless, when stored.
+        (n_t, 4), dimensionless, when stored, and the coefficient curves
+        ``curves`` (n_sec, 4, n_wind) m^(1-i)/s with ``curve_wind`` (n_wind,)
+        m/s when stored.
     """
     wind = tree["wind"]
     accel = tree["accel"]
@@ -800,6 +850,9 @@ def event_arrays(tree: xr.DataTree) -> dict:
         for name in _CHANGE_VARS:
             if name in truth.data_vars:
                 out[name] = truth[name].values
+        if "curves" in truth.data_vars:
+            out["curves"] = truth["curves"].values
+            out["curve_wind"] = truth["wind"].values
     return out
 
 

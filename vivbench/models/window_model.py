@@ -21,7 +21,7 @@ import xarray as xr
 
 import vivbench
 from vivbench.core.record import Record
-from vivbench.core.terms import evaluate_library
+from vivbench.core.terms import evaluate_library, feature_names
 from vivbench.io.window_model import read_window_model, write_window_model
 from vivbench.models.protocol import (
     ModelBase,
@@ -260,6 +260,70 @@ class WindowSINDy(ModelBase):
     def save(self, path):
         """Write the window coefficients as a NetCDF window-model file; returns the path."""
         return write_window_model(self.to_dataset(), path)
+
+    @classmethod
+    def from_result(cls, ds: xr.Dataset, windows=None) -> "WindowSINDy":
+        """The window models of one identification result as a fitted model of the protocol.
+
+        Parameters
+        ----------
+        ds : xarray.Dataset
+            An identification result (``<event_id>.identify.nc``, read by
+            :func:`vivbench.io.result.read_result`) with ``coef`` (window,
+            equation, feature) in physical units (dA/dt in m/s),
+            ``window_start``, ``window_end`` (window) in s and the attribute
+            ``event_id``; ``threshold``, ``n_terms``, ``rss`` and ``aicc``
+            (window, equation) are copied when present (NaN or 0 otherwise).
+        windows : array_like of int, optional
+            Only these windows (indices along ``window``, in the given order).
+            ``from_result(ds, windows=[w]).predict(record)`` is window w's own
+            model at every sample of the record, whatever the neighbouring windows.
+
+        Returns
+        -------
+        WindowSINDy
+            Fitted with the default parameters (the result's identification
+            settings are in its ``identify_config_json``, not restored here) and
+            an empty ``estimators_``: it predicts, gives order contributions,
+            simulates, prints equations and saves.
+
+        Raises
+        ------
+        InputError
+            One line naming the result's file when a variable or the event id is missing.
+        """
+        from vivbench.core.errors import InputError
+
+        source = ds.encoding.get("source", "result")
+        missing = [n for n in ("coef", "window_start", "window_end") if n not in ds.data_vars]
+        if missing or "event_id" not in ds.attrs:
+            what = ", ".join(missing + ([] if "event_id" in ds.attrs else ["the event_id attribute"]))
+            raise InputError(f"{source}: not an identification result with window models: missing {what}")
+        n_w = int(ds.sizes["window"])
+        w = np.arange(n_w) if windows is None else np.atleast_1d(np.asarray(windows, dtype=int))
+        if w.size == 0 or np.any((w < 0) | (w >= n_w)):
+            raise InputError(f"{source}: windows must be indices in 0..{n_w - 1}; got {w.tolist()}")
+        coef = np.asarray(ds["coef"].values, dtype=float)[w]
+        shape = coef.shape[:2]
+
+        def per_window(name, fill):
+            return np.asarray(ds[name].values)[w] if name in ds.data_vars else np.full(shape, fill)
+
+        model = cls()
+        model.estimators_ = {}
+        model.event_ids_ = [str(ds.attrs["event_id"])]
+        model.coef_ = coef
+        model.window_start_ = np.asarray(ds["window_start"].values, dtype=float)[w]
+        model.window_end_ = np.asarray(ds["window_end"].values, dtype=float)[w]
+        model.window_event_ = np.zeros(w.size, dtype=int)
+        model.threshold_ = per_window("threshold", np.nan).astype(float)
+        model.n_terms_ = per_window("n_terms", 0).astype(int)
+        model.rss_ = per_window("rss", np.nan).astype(float)
+        model.aicc_ = per_window("aicc", np.nan).astype(float)
+        model.n_sections_ = int(coef.shape[1])
+        model.feature_names_ = ([str(f) for f in ds["feature"].values] if "feature" in ds.coords
+                                else feature_names(model.n_sections_))
+        return model
 
     @classmethod
     def load(cls, path) -> "WindowSINDy":

@@ -18,6 +18,8 @@ regime_timeline_figure     Fig. 6 and Table 1 (regimes of three events), with tr
 decision_graph_figure      Figs. 8-10 (decision graph, clusters)
 forecast_figure            Figs. 11-12 (simulation and forecasts)
 model_forecast_figure      Figs. 11-12 for any model of the protocol (``simulate``)
+curves_figure              coefficient curves a_i(U) against the truth (DESIGN 3.5),
+                           drawn like aerodynamic derivatives
 =========================  =====================================================
 """
 
@@ -59,6 +61,7 @@ __all__ = [
     "decision_graph_figure",
     "forecast_figure",
     "model_forecast_figure",
+    "curves_figure",
     "term_scale",
 ]
 
@@ -829,3 +832,73 @@ def _mark_stop(ax, sim, column, *, colour="k", minutes=True):
     cols = range(sim.A_sim.shape[1]) if column is None else [column]
     for c in cols:
         ax.plot(sim.t[i] / (60.0 if minutes else 1.0), sim.A_sim[i, c], "x", ms=9, mew=2, color=colour)
+
+
+_CURVE_UNITS = ("m/s", "1/s", "1/(m s)", "1/(m$^2$ s)")
+
+
+def curves_figure(curves: xr.Dataset, path: str | Path, *, truth: tuple[np.ndarray, np.ndarray] | None = None,
+                  equation: str | None = None, frequency: float | None = None, depth: float | None = None,
+                  name: str = "campaign model") -> Path:
+    """Coefficient curves a_ki(U) of a campaign-level model against the truth's (DESIGN 3.5).
+
+    One panel per order i = 0..3 for one equation k, drawn the way
+    aerodynamic derivatives are drawn against reduced velocity: the truth as
+    a black line, the model as a coloured line with its band shaded.
+
+    Parameters
+    ----------
+    curves : xarray.Dataset
+        ``curves`` and optionally ``curves_lower``, ``curves_upper``
+        (equation, order, wind) in m^(1-i)/s with coordinate ``wind`` (m/s),
+        e.g. a ``campaign.pooled.nc`` or :meth:`vivbench.models.PooledSINDy.curves`.
+    path : output PNG
+    truth : (curves, wind), optional
+        The truth's curves (S, 4, n_true) in m^(1-i)/s on wind (n_true,) m/s
+        (``/truth/curves``), drawn over the model's wind range and 1 m/s beyond.
+    equation : section whose equation is drawn (default the reference section, S2 of three)
+    frequency, depth : float, optional
+        Modal frequency f (Hz) and deck depth D (m); with both, a secondary
+        axis gives the reduced velocity U / (f D).
+    name : how the model is named in the legend
+
+    Returns
+    -------
+    Path
+    """
+    sections = [str(s) for s in curves["equation"].values]
+    k = _section_index(sections, equation)
+    wind = np.asarray(curves["wind"].values, dtype=float)
+    point = np.asarray(curves["curves"].values, dtype=float)[k]
+    band = None
+    if "curves_lower" in curves and "curves_upper" in curves:
+        band = (np.asarray(curves["curves_lower"].values, dtype=float)[k],
+                np.asarray(curves["curves_upper"].values, dtype=float)[k])
+    colour = plt.get_cmap("viridis")(0.35)
+    with _figure(path, 2, 2, figsize=(10, 7), constrained_layout=True, sharex=True) as (fig, axes):
+        for i, ax in enumerate(axes.ravel()):
+            if truth is not None:
+                tc, tw = np.asarray(truth[0], dtype=float)[k, i], np.asarray(truth[1], dtype=float)
+                shown = (tw >= wind.min() - 1.0) & (tw <= wind.max() + 1.0)
+                ax.plot(tw[shown], tc[shown], color="k", lw=1.8, label="truth")
+            if band is not None and np.isfinite(band[0][i]).any():
+                ax.fill_between(wind, band[0][i], band[1][i], color=colour, alpha=0.25, lw=0, label=f"{name}: band")
+            ax.plot(wind, point[i], color=colour, lw=1.4, ls="--", label=name)
+            ax.axhline(0.0, color="0.6", lw=0.6, zorder=0)
+            # The y range follows the lines (a wide band at the data's edges would flatten them).
+            seen = [point[i]] + ([tc[shown]] if truth is not None else [])
+            vals = np.concatenate([v[np.isfinite(v)] for v in seen] + [np.zeros(1)])
+            lo, hi = float(vals.min()), float(vals.max())
+            pad = 0.15 * (hi - lo) if hi > lo else max(abs(hi), 1e-12)
+            ax.set_ylim(lo - pad, hi + pad)
+            ax.set_ylabel(f"a$_{{{i}}}$(U) at {sections[k]} ({_CURVE_UNITS[i]})")
+            ax.set_title(f"({'abcd'[i]}) order {i}: coefficient of A$^{{{i}}}$ in dA/dt", fontsize=10, loc="left")
+            if i >= 2:
+                ax.set_xlabel("mean wind speed U (m/s)")
+            if frequency and depth and i < 2:
+                fd = float(frequency) * float(depth)
+                sec = ax.secondary_xaxis("top", functions=(lambda u, fd=fd: u / fd, lambda ur, fd=fd: ur * fd))
+                sec.set_xlabel("reduced velocity U/(f D) (-)")
+            if i == 0:
+                ax.legend(loc="best", fontsize=8)
+    return Path(path)

@@ -12,7 +12,13 @@ from scipy.integrate import cumulative_trapezoid
 
 from vivbench.io.event import build_event
 from vivbench.core.regime import classify_regime
-from vivbench.synth.aero import amplitude_coefficients, exact_coefficients, modal_coefficients, order_contributions
+from vivbench.synth.aero import (
+    amplitude_coefficients,
+    exact_coefficients,
+    modal_coefficients,
+    order_contributions,
+    truth_curves,
+)
 from vivbench.synth.config import ChangesConfig, GeneratorConfig, StructureConfig, config_to_dict
 from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
@@ -20,7 +26,11 @@ from vivbench.synth.wind import MeanWind, WindScript, felt_mean_wind, mean_wind,
 from vivbench.core.terms import feature_exponents, feature_names
 from vivbench.core.errors import InputError
 
-__all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event"]
+__all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event", "event_truth_curves",
+           "TRUTH_CURVE_WIND"]
+
+#: Wind grid of the truth's coefficient curves (DESIGN 3.5), m/s: 2 to 16 m/s in steps of 0.1 m/s.
+TRUTH_CURVE_WIND = np.arange(20, 161) / 10.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -187,6 +197,39 @@ def _changed_exact_coefficients(structure: StructureConfig, changes: ChangesConf
     return Xi
 
 
+def event_truth_curves(config: GeneratorConfig, number: int = 1, wind=TRUTH_CURVE_WIND) -> xr.DataArray | None:
+    """The exact coefficient curves a_ki(U) of one event (DESIGN 3.5), where they are well defined.
+
+    Parameters
+    ----------
+    config : GeneratorConfig
+        The campaign's configuration (before the event's slow changes).
+    number : int
+        The event's number in its campaign (from 1): selects the steps of the
+        slow changes, if any.
+    wind : array_like, shape (n_wind,), m/s
+        Default :data:`TRUTH_CURVE_WIND`.
+
+    Returns
+    -------
+    xarray.DataArray ``curves`` (equation, order, wind), m^(1-i)/s, or None
+        :func:`vivbench.synth.truth_curves` of the event's structure. With slow
+        changes, the event's own structure (damping, mass and frequency after
+        the steps) and its aero factors on the aerodynamic part of each order;
+        None with a damping drift (the curves would change within the event).
+    """
+    changes = config.changes
+    if not changes.any:
+        return truth_curves(config.structure, config.aero, wind)
+    if changes.drift_amplitude:
+        return None
+    s = _changed_structure(config.structure, changes, number)
+    curves = truth_curves(replace(s, damping_ratio=0.0), config.aero, wind)
+    values = curves.values * changes.aero_factors(number)[None, :, None]
+    values[:, 1, :] -= s.damping_ratio * s.omega
+    return curves.copy(data=values)
+
+
 def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.SeedSequence | int) -> SimulatedEvent:
     """Simulate one event (no file written).
 
@@ -339,7 +382,9 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     The generator configuration, the event's script and its seed are stored as
     JSON in the ``/truth`` attribute ``config_json`` so that the file says how
     it was made. With slow changes, ``/truth`` also records the damping ratio,
-    the mass factor and the aero factors on the truth grid.
+    the mass factor and the aero factors on the truth grid. ``/truth/curves``
+    holds the exact coefficient curves on :data:`TRUTH_CURVE_WIND`
+    (:func:`event_truth_curves`; left out with a damping drift).
     """
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     ev = simulate_event(spec, config, ss)
@@ -358,6 +403,10 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     if ev.coef is not None:
         truth["coef"] = ev.coef
         truth["feature"] = feature_names(config.structure.n_sections)
+    curves = event_truth_curves(config, spec.number)
+    if curves is not None:
+        truth["curves"] = curves.values
+        truth["wind"] = curves["wind"].values
     return build_event(
         event_id=spec.event_id, start_time=spec.start_time, source="synthetic",
         span_azimuth_deg=config.wind.span_azimuth_deg,

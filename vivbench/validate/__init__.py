@@ -19,6 +19,7 @@ from vivbench.validate.metrics import (
     cluster_agreement,
     cluster_purity,
     confusion_matrix,
+    curve_errors,
     forecast_summary,
     merge_support_scores,
     order_support,
@@ -34,10 +35,13 @@ from vivbench.validate.pooled import pooled_recovery
 from vivbench.validate.recovery import (
     campaign_recovery,
     model_window_rhs_errors,
+    model_window_rhs_errors_true_AU,
     recovery_by_event,
     regime_scores,
     rhs_relative_error,
+    truth_record,
     window_rhs_errors,
+    window_rhs_errors_true_AU,
 )
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.sweep import (
@@ -69,6 +73,7 @@ __all__ = [
     "cluster_agreement",
     "cluster_purity",
     "confusion_matrix",
+    "curve_errors",
     "forecast_summary",
     "merge_support_scores",
     "order_support",
@@ -88,5 +93,8 @@ __all__ = [
     "validate_campaign",
     "window_rhs_errors",
     "model_window_rhs_errors",
+    "model_window_rhs_errors_true_AU",
+    "window_rhs_errors_true_AU",
+    "truth_record",
     "write_validation",
 ]

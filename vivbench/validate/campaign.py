@@ -23,6 +23,7 @@ from vivbench.validate.metrics import (
     REGIMES,
     SUPPORT_NOTES,
     cluster_agreement,
+    curve_errors,
     forecast_summary,
     merge_support_scores,
     regime_report,
@@ -31,16 +32,34 @@ from vivbench.validate.metrics import (
 )
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
-from vivbench.validate.recovery import model_window_rhs_errors, window_rhs_errors
+from vivbench.validate.recovery import (
+    model_window_rhs_errors,
+    model_window_rhs_errors_true_AU,
+    window_rhs_errors,
+    window_rhs_errors_true_AU,
+)
 from vivbench.core.errors import InputError
 
-__all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables"]
+__all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables", "event_truth_curves",
+           "NO_TRUE_SUPPORT"]
+
+#: What the support scores say for a truth without an exact coefficient matrix.
+NO_TRUE_SUPPORT = "n/a (no exact coefficient matrix: truth outside the library)"
 
 _NOTES = (
     "Regime accuracy is reported for identifiable window-equations apart from the others, with coverage "
     "(share flagged identifiable) beside it; labels of unflagged windows are not findings (README, known limitations).",
-    "RHS error: relative RMS of identified minus true dA/dt, both evaluated on the result's own A and U over the "
-    "window; 'active' window-equations are those whose true dA/dt RMS is at least active_share of the event's.",
+    "RHS error (rhs, median_rhs_rel_error): relative RMS of identified minus true dA/dt, both evaluated on the "
+    "result's own (measured) A and U over the window with the exact coefficient matrix (in-library truths only); "
+    "'active' window-equations are those whose true dA/dt RMS is at least active_share of the event's.",
+    "RHS error on the true (A, U) (rhs_true_AU, median_rhs_error_true_AU): relative RMS of the model's predict on "
+    "the truth's own time, A and U minus the truth's dA/dt (sum of /truth/r over the orders) over the window's "
+    "truth samples, for any truth (no coefficient matrix needed); window models use each window's own model, "
+    "'active' as above with the truth's dA/dt.",
+    "Curve errors (pooled.curves): the campaign model's coefficient curves a_ki(U) (campaign.pooled.nc) against "
+    "the truth's (/truth/curves), over the lock-in range (winds of the truth samples whose regime is "
+    "self-excited, 2..4): relative RMS of the net linear coefficient a_k1 on the model's wind grid, and of "
+    "sum_i a_ki(U) A^i on those samples.",
     *SUPPORT_NOTES,
 )
 
@@ -133,6 +152,38 @@ def _cluster_tables(rows: list[dict], truth_regimes: dict) -> list[dict]:
     return out
 
 
+def event_truth_curves(truth) -> tuple[np.ndarray, np.ndarray] | None:
+    """The exact coefficient curves of an event's truth (DESIGN 3.5), stored or rebuilt.
+
+    Parameters
+    ----------
+    truth : xarray.Dataset, an event's ``/truth``
+
+    Returns
+    -------
+    (curves, wind) or None
+        ``curves`` (S, 4, n_wind) in m^(1-i)/s and ``wind`` (n_wind,) in m/s:
+        ``/truth/curves`` when stored; for files written before it, rebuilt
+        from the generator configuration in ``config_json`` with
+        :func:`vivbench.synth.event_truth_curves` (the same function the
+        generator uses); None when neither gives curves (a drifting damping,
+        or a configuration that is not the generator's).
+    """
+    if "curves" in truth.data_vars:
+        return truth["curves"].values, truth["wind"].values
+    from vivbench.synth import config_from_dict
+    from vivbench.synth.event import event_truth_curves as rebuild
+
+    try:
+        meta = json.loads(truth.attrs["config_json"])
+        config = config_from_dict(meta["generator"])
+        number = int(meta.get("event", {}).get("number", 1))
+    except (KeyError, TypeError, ValueError):
+        return None
+    curves = rebuild(config, number)
+    return None if curves is None else (curves.values, curves["wind"].values)
+
+
 def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts_dir=None, tau: float = DEFAULT_TAU,
                       active_share: float = 0.1) -> dict:
     """Score every identification result of a campaign against the truth.
@@ -152,11 +203,20 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     dict
         ``regime`` (:func:`regime_report` over all events), ``regime_confusion``
         (rows group, true regime, counts per identified regime), ``rhs``
-        (:func:`rhs_error_summary`), ``support`` (:func:`support_scores` for all
-        models and for identifiable ones), ``support_table`` (rows), ``per_event``
-        (rows), ``clusters`` (rows, or None), ``forecast`` (rows of
+        (:func:`rhs_error_summary` of the window models' dA/dt error on the
+        result's measured A and U with the exact coefficient matrix; None when
+        no truth has ``coef``), ``rhs_true_AU`` (:func:`rhs_error_summary` of
+        their dA/dt error on the truth's own A and U against the truth's dA/dt,
+        :func:`vivbench.validate.window_rhs_errors_true_AU`, any truth),
+        ``support`` (:func:`support_scores` for all models and for identifiable
+        ones; None without ``coef``), ``support_note`` (None, or
+        :data:`NO_TRUE_SUPPORT`), ``support_table`` (rows), ``per_event``
+        (rows; events without ``coef`` have ``support`` = :data:`NO_TRUE_SUPPORT`
+        instead of support scores), ``clusters`` (rows, or None), ``forecast`` (rows of
         :func:`forecast_summary` per d, or None), ``truth_regime_shares``,
-        ``pooled`` (regime report and RHS errors of the campaign model when
+        ``pooled`` (regime report, ``rhs`` and ``rhs_true_AU`` errors and
+        ``curves`` (:func:`curve_errors` of its coefficient curves against the
+        truth's, or ``scored`` False with the reason) of the campaign model when
         ``results_dir/campaign.pooled.nc`` is present, else None: regimes and
         dA/dt of the model object of ``campaign.model.nc`` through the model
         protocol, or of the model rebuilt from the pooled result's ``coef``
@@ -193,6 +253,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         pairs.append((event_id, ep, rp))
 
     regimes, truths, flags, errs, actives, per_event = [], [], [], [], [], []
+    errs_true, actives_true, truth_U, truth_A, truth_excited, truth_curves = [], [], [], [], [], []
     sup_all, sup_ok = [], []
     skipped, truth_by_key = {}, {}
     # The campaign model of ``vivbench pool``, scored beside the window models when present: the
@@ -208,7 +269,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)
         model_tau = float(getattr(model, "tau", DEFAULT_TAU))
-    p_reg, p_ok, p_errs, p_act = [], [], [], []
+    p_reg, p_ok, p_errs, p_act, p_errs_true, p_act_true = [], [], [], [], [], []
     for event_id, ep, rp in pairs:
         tree = read_event(ep)
         if "truth" not in tree.children:
@@ -242,6 +303,20 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
                                                    active_share=active_share)
                 p_errs.append(pe.ravel())
                 p_act.append(pact.ravel())
+            pet, pact_t = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
+                                                          active_share=active_share)
+            p_errs_true.append(pet.ravel())
+            p_act_true.append(pact_t.ravel())
+        et, act_t = window_rhs_errors_true_AU(res, truth, active_share=active_share)
+        errs_true.append(et.ravel())
+        actives_true.append(act_t.ravel())
+        row.update(rhs_error_true_AU_median=float(np.nanmedian(et)) if np.isfinite(et).any() else math.nan,
+                   rhs_error_true_AU_median_active=(float(np.nanmedian(et[act_t])) if np.isfinite(et[act_t]).any()
+                                                    else math.nan))
+        truth_U.append(truth["U"].values)
+        truth_A.append(truth["A"].values)
+        truth_excited.append(truth["regime"].values >= 2)
+        truth_curves.append(event_truth_curves(truth))
         if "coef" in truth.data_vars:
             coef_true = truth["coef"].values
             e, act = window_rhs_errors(res, coef_true, truth["r"].values, active_share=active_share)
@@ -256,14 +331,17 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
                 row[f"support_precision_{level}"] = sup[level]["precision"]
                 row[f"support_recall_{level}"] = sup[level]["recall"]
         else:
-            skipped[str(ep)] = "truth has no exact coefficient matrix (coef): support and RHS error not scored"
+            # Support recall means nothing without a true support; the dA/dt error on the true (A, U) stands.
+            row["support"] = NO_TRUE_SUPPORT
         per_event.append(row)
     pooled_out = None
     if pooled is not None and p_reg:
         pr = regime_report(np.concatenate(p_reg), np.concatenate(truths), np.concatenate(p_ok))
         pooled_out = {"regime": pr, "rhs": rhs_error_summary(np.concatenate(p_errs), np.concatenate(p_act)) if p_errs else None,
+                      "rhs_true_AU": rhs_error_summary(np.concatenate(p_errs_true), np.concatenate(p_act_true)),
                       "file": str(pooled_path), "model_file": str(model_path),
-                      "n_terms": [int(k) for k in model.n_terms_]}
+                      "n_terms": [int(k) for k in model.n_terms_],
+                      "curves": _pooled_curve_errors(pooled, model, truth_curves, truth_U, truth_A, truth_excited)}
     if not regimes:
         raise InputError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
                          "validation needs synthetic events")
@@ -305,6 +383,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         "regime": regime,
         "regime_confusion": confusion_rows,
         "rhs": rhs,
+        "rhs_true_AU": rhs_error_summary(np.concatenate(errs_true), np.concatenate(actives_true)),
+        "support_note": None if support is not None else NO_TRUE_SUPPORT,
         "support": support,
         "support_table": support_rows,
         "per_event": per_event,
@@ -322,6 +402,34 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     return out
 
 
+def _pooled_curve_errors(pooled, model, truth_curves, U, A, excited) -> dict:
+    """:func:`curve_errors` of the campaign model's curves against the truth's, or why they are not scored."""
+    from vivbench.core.terms import reference_section
+
+    if "curves" in pooled.data_vars:
+        curves, wind = pooled["curves"].values, pooled["wind"].values
+    elif hasattr(model, "curves") and getattr(model, "amplitude_ratios_", None) is not None:
+        from vivbench.analysis.pool import curve_wind_grid
+
+        c = model.curves(curve_wind_grid(np.concatenate([u.ravel() for u in U])))
+        curves, wind = c["curves"].values, c["wind"].values
+    else:
+        return {"scored": False, "reason": "the campaign model has no curves (re-run vivbench pool)"}
+    if not truth_curves or any(tc is None for tc in truth_curves):
+        return {"scored": False, "reason": "an event's truth has no coefficient curves (damping drift)"}
+    tc0, tw0 = truth_curves[0]
+    if any(tw.shape != tw0.shape or not np.array_equal(tw, tw0) or not np.array_equal(tc, tc0)
+           for tc, tw in truth_curves[1:]):
+        return {"scored": False, "reason": "the truth's curves differ between events (slow changes): no single "
+                                            "campaign curve to compare with"}
+    if tc0.shape[0] != curves.shape[0]:
+        return {"scored": False, "reason": f"the truth has {tc0.shape[0]} equations, the model {curves.shape[0]}"}
+    err = curve_errors(curves, wind, tc0, tw0, np.concatenate(U), np.concatenate(A), np.concatenate(excited))
+    k = reference_section(curves.shape[0])
+    return {"scored": True, **err, "reference_equation": f"S{k + 1}",
+            "reference": {"linear": err["linear"][k], "total": err["total"][k], "lock_in_wind": err["lock_in_wind"][k]}}
+
+
 def _summary(v: dict) -> dict:
     """Flat headline numbers (units in the names where they have any)."""
     g = v["regime"]["groups"]
@@ -335,6 +443,9 @@ def _summary(v: dict) -> dict:
         "regime_accuracy_all": g["all"]["accuracy"],
         "truth_most_common_regime_share": max(v["truth_regime_shares"].values()),
     }
+    rt = v["rhs_true_AU"]
+    out.update(median_rhs_error_true_AU=rt["all"]["median"], median_rhs_error_true_AU_active=rt["active"]["median"],
+               q90_rhs_error_true_AU_active=rt["active"]["q90"], rhs_true_AU_active_share=rt["active_share"])
     if v["rhs"] is not None:
         out.update(median_rhs_rel_error=v["rhs"]["all"]["median"],
                    median_rhs_rel_error_active=v["rhs"]["active"]["median"],
@@ -357,6 +468,12 @@ def _summary(v: dict) -> dict:
                    pooled_regime_accuracy_all=pg["all"]["accuracy"])
         if v["pooled"]["rhs"] is not None:
             out["pooled_median_rhs_rel_error_active"] = v["pooled"]["rhs"]["active"]["median"]
+        prt = v["pooled"]["rhs_true_AU"]
+        out.update(pooled_median_rhs_error_true_AU=prt["all"]["median"],
+                   pooled_median_rhs_error_true_AU_active=prt["active"]["median"])
+        c = v["pooled"]["curves"]
+        if c.get("scored"):
+            out.update(pooled_curve_error_linear=c["reference"]["linear"], pooled_curve_error_total=c["reference"]["total"])
     for row in v["clusters"] or []:
         tag = f"{row['feature_set']}{'_no_halo' if row['halo_ignored'] else ''}"
         out[f"ari_{tag}"] = row["ari"]

@@ -41,6 +41,7 @@ __all__ = [
     "support_scores",
     "merge_support_scores",
     "rhs_error_summary",
+    "curve_errors",
     "cluster_purity",
     "cluster_agreement",
     "forecast_summary",
@@ -350,6 +351,86 @@ def rhs_error_summary(errors: np.ndarray, active: np.ndarray | None = None, quan
         out["active_share"] = float(active.mean()) if active.size else float("nan")
     else:
         out["active_share"] = float("nan")
+    return out
+
+
+# ----------------------------------------------------------------------- coefficient curves
+
+
+def _interp_curves(curves: np.ndarray, wind: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """Curves (4, n_wind) linearly interpolated to speeds U (n,), shape (n, 4); NaN outside the grid."""
+    out = np.stack([np.interp(U, wind, c, left=np.nan, right=np.nan) for c in curves], axis=1)
+    return out
+
+
+def _rel_rms(x: np.ndarray, ref: np.ndarray) -> float:
+    ok = np.isfinite(x) & np.isfinite(ref)
+    if not ok.any():
+        return float("nan")
+    den = np.sqrt(np.mean(ref[ok] ** 2))
+    return float(np.sqrt(np.mean((x[ok] - ref[ok]) ** 2)) / den) if den > 0 else float("nan")
+
+
+def curve_errors(curves: np.ndarray, wind: np.ndarray, true_curves: np.ndarray, true_wind: np.ndarray,
+                 U: np.ndarray, A: np.ndarray, self_excited: np.ndarray) -> dict:
+    """Errors of a campaign-level model's coefficient curves (DESIGN 3.5) over the lock-in range.
+
+    Parameters
+    ----------
+    curves : ndarray, shape (S, 4, n_wind)
+        The model's a_ki(U) in m^(1-i)/s on ``wind``.
+    wind : ndarray, shape (n_wind,), m/s, increasing
+    true_curves : ndarray, shape (S, 4, n_true)
+        The truth's curves on ``true_wind`` (m/s, increasing).
+    true_wind : ndarray, shape (n_true,), m/s
+    U, A : ndarray, shape (n, S), m/s and m
+        The truth's samples (all events of the campaign).
+    self_excited : ndarray of bool, shape (n, S)
+        Samples whose true regime is self-excited (2..4, DESIGN 2.5).
+
+    Returns
+    -------
+    dict of lists, one entry per equation k
+        ``lock_in_wind`` ([U_min, U_max] m/s of the self-excited samples, the
+        lock-in range; None without any), ``linear`` (relative RMS error of the
+        net linear coefficient a_k1 over the model's wind points inside the
+        lock-in range, against the truth's interpolated there), ``total``
+        (relative RMS error of sum_i a_ki(U_k) A_k^i over the self-excited
+        samples: the dA/dt the curves give where the truth is self-excited),
+        ``n_wind`` and ``n_samples`` (points scored). NaN where nothing is scored.
+    """
+    curves, true_curves = np.asarray(curves, dtype=float), np.asarray(true_curves, dtype=float)
+    wind, true_wind = np.asarray(wind, dtype=float), np.asarray(true_wind, dtype=float)
+    U, A = np.asarray(U, dtype=float), np.asarray(A, dtype=float)
+    mask = np.asarray(self_excited, dtype=bool)
+    S = curves.shape[0]
+    if curves.shape[:2] != (S, 4) or true_curves.shape[:2] != (S, 4):
+        raise ValueError(f"curves and true_curves must have shape (S, 4, n_wind); got {curves.shape}, {true_curves.shape}")
+    if U.shape != A.shape or U.shape != mask.shape or U.ndim != 2 or U.shape[1] != S:
+        raise ValueError(f"U, A and self_excited must have shape (n, {S}); got {U.shape}, {A.shape}, {mask.shape}")
+    out = {"lock_in_wind": [], "linear": [], "total": [], "n_wind": [], "n_samples": []}
+    powers = np.arange(4)
+    for k in range(S):
+        sel = mask[:, k] & np.isfinite(U[:, k]) & np.isfinite(A[:, k])
+        if not sel.any():
+            out["lock_in_wind"].append(None)
+            out["linear"].append(float("nan"))
+            out["total"].append(float("nan"))
+            out["n_wind"].append(0)
+            out["n_samples"].append(0)
+            continue
+        lo, hi = float(U[sel, k].min()), float(U[sel, k].max())
+        g = (wind >= lo) & (wind <= hi)
+        a_true = np.interp(wind[g], true_wind, true_curves[k, 1], left=np.nan, right=np.nan)
+        Uk, Ak = U[sel, k], A[sel, k]
+        Apow = Ak[:, None] ** powers
+        f_model = np.sum(_interp_curves(curves[k], wind, Uk) * Apow, axis=1)
+        f_true = np.sum(_interp_curves(true_curves[k], true_wind, Uk) * Apow, axis=1)
+        out["lock_in_wind"].append([lo, hi])
+        out["linear"].append(_rel_rms(curves[k, 1, g], a_true))
+        out["total"].append(_rel_rms(f_model, f_true))
+        out["n_wind"].append(int(g.sum()))
+        out["n_samples"].append(int(np.sum(np.isfinite(f_model) & np.isfinite(f_true))))
     return out
 
 

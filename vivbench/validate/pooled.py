@@ -2,7 +2,9 @@
 
 The model is used through the model protocol (DESIGN 7): regimes by
 :func:`vivbench.regimes.model_window_regimes` on its order contributions,
-right-hand sides by its ``predict``. The identifiability verdict of each
+right-hand sides by its ``predict`` (on the results' measured A and U against
+the exact matrix where the truth has one, and on the truth's own A and U
+against its dA/dt for any truth). The identifiability verdict of each
 window (bootstrap agreement, confidence-region margins) is the one written in
 the pooled result ``campaign.pooled.nc``.
 """
@@ -14,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.validate.recovery import model_window_rhs_errors, regime_scores
+from vivbench.validate.recovery import model_window_rhs_errors, model_window_rhs_errors_true_AU, regime_scores
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.core.errors import InputError
@@ -45,7 +47,11 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     dict
         :func:`vivbench.validate.regime_scores` of the model's regimes plus
         ``rhs_median_rel_error`` and ``rhs_median_rel_error_active`` (the one
-        model evaluated over every window).
+        model and the exact matrix on the results' measured A and U; NaN
+        without ``/truth/coef``) and ``rhs_error_true_AU_median``,
+        ``rhs_error_true_AU_median_active`` (the model's ``predict`` on the
+        truth's own A and U against the truth's dA/dt, any truth:
+        :func:`vivbench.validate.model_window_rhs_errors_true_AU`).
     """
     from vivbench.analysis.pool import campaign_model_file, load_campaign_model
     from vivbench.io.campaign_model import read_pooled
@@ -65,7 +71,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         ds = read_result(path)
         results[str(ds.attrs["event_id"])] = ds
     event_of = pooled["event_id"].values.astype(str)
-    regimes, truths_w, flags, errs, errs_active = [], [], [], [], []
+    regimes, truths_w, flags, errs, errs_active, errs_true, errs_true_active = [], [], [], [], [], [], []
     for event_id in dict.fromkeys(event_of):
         if event_id not in truths:
             raise InputError(f"{pooled_file}: event {event_id} has no event file among the {len(truths)} given")
@@ -81,11 +87,23 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         regimes.append(model_window_regimes(model, record, start, end, tau=model_tau)["regime"])
         flags.append(pooled["identifiable"].values[sel].astype(bool))
         truths_w.append(truth_window_regimes(truth, start, end, tau=tau))
-        e, act = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
-                                         active_share=active_share)
-        errs.append(e.ravel())
-        errs_active.append(np.where(act, e, np.nan).ravel())
+        if "coef" in truth.data_vars:
+            e, act = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
+                                             active_share=active_share)
+            errs.append(e.ravel())
+            errs_active.append(np.where(act, e, np.nan).ravel())
+        et, act_t = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
+                                                    active_share=active_share)
+        errs_true.append(et.ravel())
+        errs_true_active.append(np.where(act_t, et, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))
-    scores["rhs_median_rel_error"] = float(np.nanmedian(np.concatenate(errs)))
-    scores["rhs_median_rel_error_active"] = float(np.nanmedian(np.concatenate(errs_active)))
+
+    def median(parts):
+        x = np.concatenate(parts) if parts else np.array([np.nan])
+        return float(np.nanmedian(x)) if np.isfinite(x).any() else float("nan")
+
+    scores["rhs_median_rel_error"] = median(errs)
+    scores["rhs_median_rel_error_active"] = median(errs_active)
+    scores["rhs_error_true_AU_median"] = median(errs_true)
+    scores["rhs_error_true_AU_median_active"] = median(errs_true_active)
     return scores

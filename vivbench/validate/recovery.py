@@ -2,8 +2,19 @@
 
 The truth of a synthetic event (``/truth``) is compared with the windows of an
 identification result (``<event_id>.identify.nc``): the true regime of each
-window and equation by the same rule as the models (DESIGN 2.5), and the true
-right-hand side dA/dt evaluated at the measured amplitudes and winds.
+window and equation by the same rule as the models (DESIGN 2.5), and the
+right-hand side dA/dt, in two ways:
+
+- on the true (A, U) (``rhs_error_true_AU``, any truth): the model's
+  ``predict`` on a record of the truth's own time, A and U
+  (:func:`truth_record`) against the truth's dA_k/dt, the sum over orders of
+  ``/truth/r``. No coefficient matrix is needed, so realistic truths (aero
+  functions outside the library, DESIGN 2.8) are scored too; the error is that
+  of the dynamics where the truth is, free of the measurement's errors in A and
+  U (errors-in-variables).
+- on the measured (A, U) with the exact matrix (``rhs_median_rel_error``,
+  in-library truths only): the model and ``/truth/coef`` both evaluated on the
+  result's own A and U.
 """
 
 from __future__ import annotations
@@ -11,11 +22,12 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
+from vivbench.core.record import Record
 from vivbench.core.terms import evaluate_library
 from vivbench.regimes.truth import truth_window_regimes
 
 __all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
-           "campaign_recovery"]
+           "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -158,12 +170,137 @@ def model_window_rhs_errors(model, record, coef_true: np.ndarray, truth_r: np.nd
     return errors, active
 
 
+def truth_record(truth: xr.Dataset, event_id: str = "truth") -> Record:
+    """The truth of an event as a record of the model protocol.
+
+    Parameters
+    ----------
+    truth : xarray.Dataset
+        An event's ``/truth`` group: ``time`` (n_t,) s, ``A``, ``U`` (n_t, S)
+        in m and m/s, ``r`` (n_t, S, 4) in m/s.
+    event_id : str
+        The record's event id (window models look their coefficients up by it).
+
+    Returns
+    -------
+    Record
+        ``t``, ``A``, ``U`` of the truth and ``dA`` its dA_k/dt, the sum of
+        ``r`` over the orders (m/s).
+    """
+    r = np.asarray(truth["r"].values, dtype=float)
+    return Record(event_id=str(event_id), t=truth["time"].values, A=truth["A"].values, U=truth["U"].values,
+                  dA=r.sum(axis=-1))
+
+
+def _window_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start, end, scale: np.ndarray,
+                   active_share: float) -> tuple[np.ndarray, np.ndarray]:
+    """Relative RMS error (W, S) of f_model against f_true (n, S) over each window, and the active mask."""
+    start = np.atleast_1d(np.asarray(start, dtype=float))
+    end = np.atleast_1d(np.asarray(end, dtype=float))
+    inside = (t[None, :] >= start[:, None]) & (t[None, :] < end[:, None])  # (W, n)
+    count = inside.sum(axis=1)[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # NaN in a window's samples propagates to its error through the products.
+        mse = np.where(inside[:, :, None], (f_model - f_true)[None] ** 2, 0.0).sum(axis=1) / count
+        ms_true = np.where(inside[:, :, None], f_true[None] ** 2, 0.0).sum(axis=1) / count
+        errors = np.sqrt(mse) / np.sqrt(ms_true)
+    active = np.sqrt(ms_true) >= active_share * scale
+    return errors, active & (count > 0)
+
+
+def model_window_rhs_errors_true_AU(model, truth: xr.Dataset, window_start, window_end, *, event_id: str = "truth",
+                                    active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Relative dA/dt error of any model of the protocol on the true (A, U), window by window.
+
+    The model's ``predict`` on :func:`truth_record` (the truth's own time, A and
+    U) against the truth's dA_k/dt = sum_i r_ki: the error of the model's
+    dynamics where the truth is, with no coefficient matrix (any truth, in or
+    outside the library).
+
+    Parameters
+    ----------
+    model : fitted model with ``predict(record)`` -> dA/dt, shape (n_samples, S), m/s
+    truth : xarray.Dataset, an event's ``/truth`` (``time``, ``A``, ``U``, ``r``)
+    window_start, window_end : array_like, shape (W,), s
+        A window holds the truth samples with start <= t < end.
+    event_id : str
+        Event id of the record (a window model must know it).
+    active_share : float
+        A window-equation has dynamics (is active) when the RMS of its true dA/dt
+        is at least this share of the event's RMS true dA/dt of that section.
+
+    Returns
+    -------
+    errors : ndarray, shape (W, S)
+        rms(f_model - f_true) / rms(f_true) over the window's truth samples (NaN
+        where the prediction is missing on a sample of the window, or without
+        true dynamics).
+    active : ndarray of bool, shape (W, S)
+    """
+    record = truth_record(truth, event_id)
+    f_model = np.asarray(model.predict(record), dtype=float)
+    if f_model.shape != record.A.shape:
+        raise ValueError(f"predict must return shape {record.A.shape} (n_samples, n_sections); got {f_model.shape}")
+    scale = np.sqrt(np.mean(record.dA**2, axis=0))
+    return _window_errors(f_model, record.dA, record.t, window_start, window_end, scale, active_share)
+
+
+def window_rhs_errors_true_AU(result: xr.Dataset, truth: xr.Dataset, *,
+                              active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """Relative dA/dt error of every window model of one result on the true (A, U).
+
+    Window w's own model (:meth:`vivbench.models.WindowSINDy.from_result` with
+    ``windows=[w]``, through the protocol's ``predict``) on the truth's samples
+    inside window w, against the truth's dA_k/dt = sum_i r_ki. On an in-library
+    event this is :func:`window_rhs_errors` with the truth's (A, U) in place of
+    the result's measured ones.
+
+    Parameters
+    ----------
+    result : an identification result (``coef``, ``window_start``, ``window_end``, attribute ``event_id``)
+    truth : xarray.Dataset, the event's ``/truth``
+    active_share : float
+        As in :func:`model_window_rhs_errors_true_AU`.
+
+    Returns
+    -------
+    errors : ndarray, shape (n_windows, n_eq)
+        A window without a model counts as predicting zero (error 1); NaN without
+        true dynamics.
+    active : ndarray of bool, shape (n_windows, n_eq)
+    """
+    from vivbench.models.window_model import WindowSINDy
+
+    event_id = str(result.attrs.get("event_id", "truth"))
+    record = truth_record(truth, event_id)
+    start, end = result["window_start"].values, result["window_end"].values
+    fitted = np.all(np.isfinite(result["coef"].values), axis=(1, 2))
+    scale = np.sqrt(np.mean(record.dA**2, axis=0))
+    errors = np.full((start.size, record.n_sections), np.nan)
+    active = np.zeros(errors.shape, dtype=bool)
+    for w in range(start.size):
+        sel = (record.t >= start[w]) & (record.t < end[w])
+        if not sel.any():
+            continue
+        f_true = record.dA[sel]
+        if fitted[w]:
+            part = Record(event_id=event_id, t=record.t[sel], A=record.A[sel], U=record.U[sel])
+            f_id = WindowSINDy.from_result(result, windows=[w]).predict(part)
+        else:
+            f_id = np.zeros_like(f_true)
+        rms_true = np.sqrt(np.mean(f_true**2, axis=0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            errors[w] = np.sqrt(np.mean((f_id - f_true) ** 2, axis=0)) / rms_true
+        active[w] = rms_true >= active_share * scale
+    return errors, active
+
+
 def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -> dict:
     """Regime scores and right-hand-side errors of a campaign's results against its truth.
 
     Parameters
     ----------
-    event_files : synthetic event files (with ``/truth`` and its ``coef``)
+    event_files : synthetic event files (with ``/truth``; ``coef`` optional)
     result_files : the matching ``<event_id>.identify.nc``, same order
     active_share : a window counts as active when the RMS of its true dA/dt is at
         least this share of the event's RMS true dA/dt (relative errors on windows
@@ -174,7 +311,11 @@ def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -
     dict
         :func:`regime_scores` plus ``rhs_median_rel_error`` (all windows),
         ``rhs_median_rel_error_active``, ``active_share`` (share of active
-        window-equations) and ``truth_regime_shares``. The fuller tables are
+        window-equations) on the measured (A, U) with the exact matrix (NaN
+        for truths without ``coef``); ``rhs_error_true_AU_median``,
+        ``rhs_error_true_AU_median_active`` and ``active_share_true_AU`` on the
+        true (A, U) (:func:`window_rhs_errors_true_AU`, any truth); and
+        ``truth_regime_shares``. The fuller tables are
         :func:`vivbench.validate.validate_campaign`.
     """
     return recovery_by_event(event_files, result_files, active_share=active_share)[0]
@@ -196,18 +337,31 @@ def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -
         truth = read_event(ev_path)["truth"].ds
         res = read_result(res_path)
         start, end = res["window_start"].values, res["window_end"].values
-        e, active = window_rhs_errors(res, truth["coef"].values, truth["r"].values, active_share=active_share)
+        if "coef" in truth.data_vars:
+            e, active = window_rhs_errors(res, truth["coef"].values, truth["r"].values, active_share=active_share)
+        else:  # no exact matrix (truth outside the library): no error on the measured (A, U)
+            e = np.full(res["regime"].shape, np.nan)
+            active = np.zeros(e.shape, dtype=bool)
+        et, act_t = window_rhs_errors_true_AU(res, truth, active_share=active_share)
         parts.append({"regime": res["regime"].values, "truth": truth_window_regimes(truth, start, end),
                       "flag": res["identifiable"].values.astype(bool), "err": e.ravel(),
-                      "err_active": np.where(active, e, np.nan).ravel()})
+                      "err_active": np.where(active, e, np.nan).ravel(), "err_true": et.ravel(),
+                      "err_true_active": np.where(act_t, et, np.nan).ravel()})
     return _recovery_scores(parts), [_recovery_scores([p]) for p in parts]
+
+
+def _nanmedian(x: np.ndarray) -> float:
+    return float(np.nanmedian(x)) if np.isfinite(x).any() else float("nan")
 
 
 def _recovery_scores(parts: list[dict]) -> dict:
     cat = {k: np.concatenate([np.ravel(p[k]) for p in parts]) for k in parts[0]}
     scores = regime_scores(cat["regime"], cat["truth"], cat["flag"])
-    scores["rhs_median_rel_error"] = float(np.nanmedian(cat["err"]))
-    scores["rhs_median_rel_error_active"] = float(np.nanmedian(cat["err_active"]))
+    scores["rhs_median_rel_error"] = _nanmedian(cat["err"])
+    scores["rhs_median_rel_error_active"] = _nanmedian(cat["err_active"])
     scores["active_share"] = float(np.mean(np.isfinite(cat["err_active"])))
+    scores["rhs_error_true_AU_median"] = _nanmedian(cat["err_true"])
+    scores["rhs_error_true_AU_median_active"] = _nanmedian(cat["err_true_active"])
+    scores["active_share_true_AU"] = float(np.mean(np.isfinite(cat["err_true_active"])))
     scores["truth_regime_shares"] = {k: float(np.mean(cat["truth"] == k)) for k in (1, 2, 3, 4)}
     return scores
