@@ -1,0 +1,186 @@
+"""Benchmark: campaign models on realistic (misspecified) campaigns, against the truth's own (A, U).
+
+Run::
+
+    vivbench synth --events 31 --seed 1 --config realistic.toml --out CAMP --workers 2
+    vivbench identify CAMP --out ID --workers 2
+    .venv/bin/python benchmarks/bench_misspecification.py --campaign CAMP --results ID [--campaign ... --results ...]
+
+(``realistic.toml``: ``[aero] mode = "realistic"`` and ``[wind] felt_wind = "tributary"``.)
+
+For each campaign, every model is fitted twice: on the identification's
+records (measured A and U, dA/dt recomputed with ``CAMPAIGN_DERIVATIVE``, as
+``vivbench pool`` does) and, to separate errors-in-variables from the basis,
+on the truth's own (A, U, dA) (truth grid, dA = sum over orders of /truth/r).
+Both are scored on the truth's (A, U):
+
+- ``dA err``: per window and section, relative RMS error of the model's dA/dt
+  against the truth's, over the (window, section) pairs with dynamics (true
+  dA/dt RMS over the window >= 10 % of its RMS over the event); median and
+  90th percentile;
+- ``regime acc``: share of all (window, section) pairs whose regime from the
+  model's order contributions on the truth's (A, U) equals the true regime;
+- for the models fitted on measured data, the verdicts on the measured record
+  (what a user would have): ``coverage`` (share of windows flagged
+  identifiable) and ``flag acc`` (share of the flagged with the true regime);
+  the noise-floor gate of ``vivbench pool`` (amplitude_snr < min_snr) applies.
+  PooledSINDy's verdicts (``campaign_window_verdicts``) only with ``--pooled-verdicts`` (slow).
+
+Models: PooledSINDy (STLSQ + AICc on A^i U^j, j <= 5) and VaryingCoefficientSINDy
+(penalised cubic splines in U; M and lambda by 5-fold cross-validation over events).
+Nothing is asserted; the table is printed and written to ``benchmarks/out/misspecification.json``.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+
+from vivbench.analysis import CAMPAIGN_DERIVATIVE, records_from_results  # noqa: E402
+from vivbench.core.record import Record  # noqa: E402
+from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
+from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
+                              varying_window_verdicts)
+
+OUT = Path(__file__).resolve().parent / "out"
+
+
+def _window_sums(x, t, start, end):
+    lo, hi = np.searchsorted(t, start, side="left"), np.searchsorted(t, end, side="left")
+    c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)])
+    return c[hi] - c[lo]
+
+
+def load_campaign(camp: Path, results: Path):
+    """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event."""
+    files = sorted(results.glob("*.identify.nc"))
+    measured = records_from_results(files, derivative=CAMPAIGN_DERIVATIVE)
+    events = []
+    for f, rec in zip(files, measured):
+        with xr.open_dataset(f) as ds:
+            ws, we = ds["window_start"].values, ds["window_end"].values
+            attrs = dict(ds.attrs)
+            snr = ds["amplitude_snr"].values if "amplitude_snr" in ds else None
+        min_snr = json.loads(attrs.get("identify_config_json", "{}")).get("min_snr")
+        low = (snr < min_snr) if (snr is not None and min_snr is not None) else np.zeros((ws.size, rec.n_sections), bool)
+        with xr.open_dataset(camp / attrs["source_file"], group="truth") as tr:
+            truth = tr.load()
+        trec = Record(event_id=rec.event_id, t=truth["time"].values, A=truth["A"].values, U=truth["U"].values,
+                      dA=truth["r"].values.sum(axis=-1))
+        events.append({"id": rec.event_id, "measured": rec, "truth_rec": trec, "truth": truth, "ws": ws, "we": we,
+                       "low_snr": low, "true_regime": truth_window_regimes(truth, ws, we)})
+    return measured, events
+
+
+def score(model, events, verdicts: str | None = None) -> dict:
+    """dA/dt error and regime accuracy on the truth's (A, U); verdicts on the measured record when asked."""
+    errs, hits, n_reg, flagged, flag_ok, n_win = [], 0, 0, 0, 0, 0
+    for ev in events:
+        trec, ws, we = ev["truth_rec"], ev["ws"], ev["we"]
+        t, true = trec.t, trec.dA
+        pred = model.predict(trec)
+        okp = np.isfinite(pred) & np.isfinite(true)
+        num = _window_sums(np.where(okp, (pred - true) ** 2, 0.0), t, ws, we)
+        den = _window_sums(np.where(okp, true**2, 0.0), t, ws, we)
+        cnt = _window_sums(okp.astype(float), t, ws, we)
+        event_ms = np.nanmean(np.where(okp, true, np.nan) ** 2, axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            dyn = (cnt > 0) & (den / np.maximum(cnt, 1) >= 0.01 * event_ms)  # RMS >= 10 % of the event's
+            errs.append(np.sqrt(num / den)[dyn])
+        reg = model_window_regimes(model, trec, ws, we)["regime"]
+        tr = ev["true_regime"]
+        valid = tr > 0
+        hits += int(((reg == tr) & valid).sum())
+        n_reg += int(valid.sum())
+        if verdicts is not None:
+            rec = ev["measured"]
+            if verdicts == "varying":
+                v = varying_window_verdicts(model, rec, ws, we)
+            else:
+                v = campaign_window_verdicts(model, rec.t, rec.A, rec.U, ws, we)
+            flag = v["identifiable"] & ~ev["low_snr"] & valid
+            flagged += int(flag.sum())
+            flag_ok += int((flag & (v["regime"] == tr)).sum())
+            n_win += int((valid & (v["regime"] > 0)).sum())
+    e = np.concatenate(errs)
+    out = {"dA_err_median": float(np.median(e)), "dA_err_p90": float(np.percentile(e, 90)), "n_dyn": int(e.size),
+           "regime_acc": hits / max(n_reg, 1)}
+    if verdicts is not None:
+        out["coverage"] = flagged / max(n_win, 1)
+        out["flag_acc"] = flag_ok / flagged if flagged else float("nan")
+    return out
+
+
+def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False) -> dict:
+    t0 = time.perf_counter()
+    measured, events = load_campaign(camp, results)
+    truth_records = [ev["truth_rec"] for ev in events]
+    print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
+    rows = {}
+    specs = [
+        ("PooledSINDy", lambda: PooledSINDy(n_bootstrap=100 if pooled_verdicts else 0), "pooled"),
+        ("VaryingCoefficientSINDy", lambda: VaryingCoefficientSINDy(select_orders=select_orders), "varying"),
+        ("VaryingCoefficientSINDy(mean U)",
+         lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="mean"), "varying"),
+    ]
+    for name, make, kind in specs:
+        for data, recs in (("measured", measured), ("truth", truth_records)):
+            t1 = time.perf_counter()
+            model = make().fit(recs)
+            fit_s = time.perf_counter() - t1
+            want = None if data == "truth" or (kind == "pooled" and not pooled_verdicts) else kind
+            row = score(model, events, verdicts=want)
+            row["fit_s"] = fit_s
+            if kind == "varying":
+                row["n_basis"] = model.n_basis_.tolist()
+                row["penalty"] = model.penalty_.tolist()
+                row["edf"] = np.round(model.edf_, 1).tolist()
+                row["orders"] = model.orders_.astype(int).tolist()
+            rows[f"{name} fitted on {data}"] = row
+            print(f"  {name:<32} on {data:<8} {json.dumps(row)}", flush=True)
+    return rows
+
+
+def print_table(title: str, rows: dict) -> None:
+    print(f"\n{title}")
+    head = f"{'model':<48} {'dA err med':>10} {'p90':>6} {'regime acc':>10} {'coverage':>8} {'flag acc':>8} {'fit s':>6}"
+    print(head)
+    print("-" * len(head))
+    for name, r in rows.items():
+        cov = f"{r['coverage']:8.3f}" if "coverage" in r else f"{'-':>8}"
+        acc = f"{r['flag_acc']:8.3f}" if "flag_acc" in r else f"{'-':>8}"
+        print(f"{name:<48} {r['dA_err_median']:10.3f} {r['dA_err_p90']:6.2f} {r['regime_acc']:10.3f} {cov} {acc} "
+              f"{r['fit_s']:6.1f}")
+
+
+def main(argv=None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--campaign", action="append", required=True, type=Path)
+    parser.add_argument("--results", action="append", required=True, type=Path)
+    parser.add_argument("--pooled-verdicts", action="store_true")
+    parser.add_argument("--select-orders", action="store_true")
+    args = parser.parse_args(argv)
+    if len(args.campaign) != len(args.results):
+        parser.error("give one --results per --campaign")
+    out = {}
+    for camp, res in zip(args.campaign, args.results):
+        out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders)
+    for camp, rows in out.items():
+        print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
+    OUT.mkdir(exist_ok=True)
+    (OUT / "misspecification.json").write_text(json.dumps(out, indent=2) + "\n")
+    return out
+
+
+if __name__ == "__main__":
+    main()

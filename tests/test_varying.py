@@ -1,0 +1,136 @@
+"""The varying-coefficient campaign model: exact recovery of smooth curves, the protocol, the penalty's effect."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from vivbench.core import Record
+from vivbench.core.errors import InputError
+from vivbench.models import (CampaignLevel, FittedModel, HasEquations, Method, NotFittedError, Persistent, Predictor,
+                             Simulator, VaryingCoefficientSINDy)
+from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots
+from vivbench.regimes import model_window_regimes, varying_window_verdicts
+
+
+def bell(U):
+    """a_1(U): net damping with a Gaussian lock-in bell, 1/s."""
+    return -0.01 + 0.05 * np.exp(-0.5 * ((U - 10.0) / 1.5) ** 2)
+
+
+A3 = -2.0  # a_3, 1/(m^2 s)
+
+
+def _records(n_events: int = 10, seed: int = 0, S: int = 2):
+    """Noise-free records: dA/dt = bell(U) A + A3 A^3 on (A, U) histories spanning 6-15 m/s."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for e in range(n_events):
+        t = np.arange(0.0, 1200.0, 0.5)
+        U = 7.0 + 6.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (600 + 100 * e) + e)
+        A = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 300 + e))
+        U = np.repeat(U[:, None], S, axis=1)
+        A = A[:, None] * np.linspace(1.0, 0.6, S)[None, :]
+        out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=bell(U) * A + A3 * A**3))
+    return out
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    return VaryingCoefficientSINDy(n_bootstrap=10).fit(_records())
+
+
+def test_recovers_bell_and_constant(fitted):
+    wind = np.linspace(8.0, 14.0, 25)
+    c = fitted.curves(wind)
+    assert c["curves"].shape == (2, 4, wind.size)
+    for k in range(2):
+        np.testing.assert_allclose(c["curves"].values[k, 1], bell(wind), atol=2e-4)
+        np.testing.assert_allclose(c["curves"].values[k, 3], A3, rtol=5e-3)  # the bell is not exactly a spline
+        np.testing.assert_allclose(c["curves"].values[k, 0], 0.0, atol=1e-5)
+    assert np.all(c["curves_lower"].values <= c["curves"].values)
+    assert np.all(c["curves_upper"].values >= c["curves"].values)
+    rec = _records(2, seed=5)[1]
+    err = np.sqrt(np.mean((fitted.predict(rec) - rec.dA) ** 2) / np.mean(rec.dA**2))
+    assert err < 1e-3
+
+
+def test_protocol(fitted):
+    model = VaryingCoefficientSINDy()
+    assert isinstance(model, Method)
+    for proto in (FittedModel, Predictor, Simulator, CampaignLevel, Persistent, HasEquations):
+        assert isinstance(fitted, proto)
+    with pytest.raises(NotFittedError):
+        model.predict(_records(1)[0])
+    rec = _records(1, seed=3)[0]
+    r = fitted.order_contributions(rec)
+    assert r.shape == (rec.n_samples, 2, 4)
+    np.testing.assert_allclose(fitted.predict(rec), r.sum(axis=-1))
+    assert len(fitted.equations()) == 2 and fitted.equations()[0].startswith("dA1/dt = a10(U1)")
+    reg = model_window_regimes(fitted, rec, np.array([0.0, 600.0]), np.array([50.0, 650.0]))
+    assert reg["regime"].shape == (2, 2)
+    v = varying_window_verdicts(fitted, rec, np.array([0.0, 600.0]), np.array([50.0, 650.0]))
+    assert v["identifiable"].shape == (2, 2) and np.all(v["regime"] == reg["regime"])
+    assert "wind_input" not in repr(model) and repr(VaryingCoefficientSINDy(seed=3)) == "VaryingCoefficientSINDy(seed=3)"
+
+
+def test_nan_samples_and_simulate(fitted):
+    rec = _records(1, seed=4)[0]
+    U = rec.U.copy()
+    U[10:20, 0] = np.nan
+    r = fitted.order_contributions(Record(event_id="x", t=rec.t, A=rec.A, U=U))
+    assert np.isnan(r[10:20, 0]).all() and np.isfinite(r[10:20, 1]).all()
+    sim = fitted.simulate(rec, t0=0.0, t1=100.0)
+    assert sim.A_sim.shape == (201, 2) and np.isfinite(sim.A_sim).all()
+
+
+def test_save_load(fitted, tmp_path):
+    path = fitted.save(tmp_path / "vcm.nc")
+    loaded = VaryingCoefficientSINDy.load(path)
+    rec = _records(1, seed=6)[0]
+    np.testing.assert_array_equal(loaded.predict(rec), fitted.predict(rec))
+    assert loaded.get_params() == fitted.get_params()
+
+
+def test_mean_wind_input():
+    recs = _records(6)
+    m = VaryingCoefficientSINDy(n_bootstrap=0, wind_input="mean", n_basis=(11,)).fit(recs)
+    err = np.sqrt(np.mean((m.predict(recs[0]) - recs[0].dA) ** 2) / np.mean(recs[0].dA ** 2))
+    assert err < 1e-2  # equal winds: the mean is each section's wind
+
+
+def test_bad_parameters():
+    with pytest.raises(InputError):
+        VaryingCoefficientSINDy(n_basis=(3,)).fit(_records(2))
+    with pytest.raises(InputError):
+        VaryingCoefficientSINDy(wind_input="gust").fit(_records(2))
+
+
+def test_basis_partition_of_unity():
+    knots = uniform_knots(5.0, 15.0, 9)
+    B = bspline_basis(np.array([4.0, 5.0, 9.3, 15.0, 20.0, np.nan]), knots)
+    np.testing.assert_allclose(B[:5].sum(axis=1), 1.0)
+    assert np.isnan(B[5]).all()
+    P = difference_penalty(9)
+    np.testing.assert_allclose(P @ np.linspace(0, 1, 9), 0.0, atol=1e-12)  # straight lines are not penalised
+
+
+def _roughness(model):
+    """Sum over sections and orders of ||D2 c||^2 of the standardised coefficients."""
+    D = np.diff(np.eye(model.coef_.shape[1]), n=2, axis=0)
+    c = model.coef_ / (model.y_scale_[:, None, None] / model.a_ref_[:, None, None] ** np.arange(4))
+    return float(np.sum((D @ c) ** 2))
+
+
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 1000), low=st.floats(-6.0, -2.0), factor=st.floats(10.0, 1e4))
+def test_larger_penalty_is_not_rougher(seed, low, factor):
+    rng = np.random.default_rng(seed)
+    recs = _records(6, seed=seed)
+    noisy = [Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U, dA=r.dA + 1e-3 * rng.standard_normal(r.dA.shape))
+             for r in recs]
+    small = VaryingCoefficientSINDy(n_basis=(15,), penalties=(10.0**low,), n_bootstrap=0).fit(noisy)
+    large = VaryingCoefficientSINDy(n_basis=(15,), penalties=(10.0**low * factor,), n_bootstrap=0).fit(noisy)
+    assert _roughness(large) <= _roughness(small) * (1 + 1e-9) + 1e-12

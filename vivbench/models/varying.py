@@ -1,0 +1,641 @@
+"""A varying-coefficient campaign model: dA_k/dt = sum_i a_ki(U_k) A_k^i with spline curves a_ki(U).
+
+Why: on realistic bridges (DESIGN 2.8) the aerodynamic functions of the reduced
+velocity are not polynomials (a lock-in bell), so the campaign SINDy model,
+whose coefficients of A^i are polynomials of degree <= 5 in U, is outside the
+truth's class. This model keeps the physical structure of DESIGN 2.3 (the
+dynamics are a cubic polynomial in A whose coefficients are functions of the
+wind) and gives the coefficient functions a flexible, smooth basis instead:
+
+    a_ki(U) = sum_m c_kim B_m(U),   i = 0..3, m = 0..M-1,
+
+with B_m a cubic B-spline basis on M - 3 uniform intervals spanning the
+campaign's range of U_k (outside it the curves are held constant). The
+coefficients are fitted by penalised least squares (P-splines, Eilers & Marx
+1996): the residual sum of squares of the standardised target plus
+lambda sum_i ||D2 c_ki||^2, D2 the second-difference matrix, so lambda -> inf
+leaves straight lines in U and lambda -> 0 the unpenalised spline fit.
+
+Criterion: M (from ``n_basis``) and lambda (from ``penalties``, relative to
+trace(X^T X) / trace(P)) are chosen per section by K-fold cross-validation over
+events (whole events are left out, so the strong correlation of derivative
+errors within an event cannot make a rough fit look good, as it does with
+GCV). Optionally (``select_orders``) the same cross-validation then drops every
+order whose removal does not increase the cross-validated error.
+
+Everything is computed from per-block sufficient statistics (X_b^T X_b, X_b^T y_b,
+y_b^T y_b): the folds, the penalty grid and the block bootstrap of the bands
+are small p x p solves (p = 4 M), with no loop over samples.
+
+Only own-section terms are used: in the averaged truth the mode shape makes
+the other sections' amplitudes proportional to A_k, so their terms are
+collinear with A_k's. What this model does not fix: errors in the measured U
+(a point anemometer against the tributary-averaged wind the deck feels) smear
+the bell along U; and it is time-invariant, so changes the wind does not carry
+(damping drift, a step between events) are averaged over.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+import xarray as xr
+from scipy.interpolate import BSpline
+
+from vivbench.core.errors import InputError
+from vivbench.core.record import Record
+from vivbench.core.regime import DEFAULT_TAU
+from vivbench.models.protocol import ModelBase, as_record, section_names
+from vivbench.models.simulate import Simulation, nmse
+
+__all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty"]
+
+#: Spline degree (cubic).
+DEGREE = 3
+
+
+def uniform_knots(lo: float, hi: float, n_basis: int, degree: int = DEGREE) -> np.ndarray:
+    """Knot vector of ``n_basis`` B-splines of ``degree`` on uniform intervals over [lo, hi].
+
+    Returns
+    -------
+    ndarray, shape (n_basis + degree + 1,), m/s
+        The boundary knots are repeated ``degree`` times beyond [lo, hi] at the
+        same spacing (P-spline convention), so every interval is alike.
+    """
+    n_int = n_basis - degree
+    if n_int < 1:
+        raise InputError(f"n_basis must exceed the degree {degree}; got {n_basis}")
+    if not hi > lo:
+        hi = lo + 1.0  # a campaign at one wind speed: any unit interval
+    h = (hi - lo) / n_int
+    return lo + h * np.arange(-degree, n_int + degree + 1)
+
+
+def bspline_basis(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> np.ndarray:
+    """Dense B-spline design matrix, U clipped to the knots' base interval.
+
+    Parameters
+    ----------
+    U : ndarray, shape (n,), m/s (NaN allowed: that row is NaN)
+    knots : ndarray, shape (M + degree + 1,)
+
+    Returns
+    -------
+    ndarray, shape (n, M)
+    """
+    U = np.asarray(U, dtype=float)
+    lo, hi = knots[degree], knots[-degree - 1]
+    ok = np.isfinite(U)
+    x = np.clip(np.where(ok, U, lo), lo, hi)
+    B = BSpline.design_matrix(x, knots, degree).toarray()
+    B[~ok] = np.nan
+    return B
+
+
+def difference_penalty(n_basis: int, order: int = 2) -> np.ndarray:
+    """D^T D for the ``order``-th difference matrix D of ``n_basis`` coefficients, shape (M, M)."""
+    D = np.diff(np.eye(n_basis), n=order, axis=0)
+    return D.T @ D
+
+
+def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float) -> np.ndarray:
+    """Columns B_m(U) (A / a_ref)^i, ordered (i, m); shape (n, 4 M)."""
+    B = bspline_basis(U, knots)
+    Apow = (A / a_ref)[:, None] ** np.arange(4)
+    return (Apow[:, :, None] * B[:, None, :]).reshape(U.size, -1)
+
+
+def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
+                 knots: np.ndarray, a_ref: float):
+    """Per-block sufficient statistics of the design :func:`_design`.
+
+    Returns X_b^T X_b (n_blocks, p, p), X_b^T y_b (n_blocks, p), y_b^T y_b and
+    the sample counts (n_blocks,). The design is built one block at a time
+    (a few hundred per campaign), so memory stays at one block's rows.
+    """
+    order = np.argsort(block, kind="stable")
+    bounds = np.searchsorted(block[order], np.arange(n_blocks + 1))
+    Us, As, ys = U[order], A[order], y[order]
+    p = 4 * (knots.size - DEGREE - 1)
+    G = np.empty((n_blocks, p, p))
+    b = np.empty((n_blocks, p))
+    for j in range(n_blocks):
+        sl = slice(bounds[j], bounds[j + 1])
+        xb = _design(Us[sl], As[sl], knots, a_ref)
+        G[j] = xb.T @ xb
+        b[j] = xb.T @ ys[sl]
+    cy = np.concatenate([[0.0], np.cumsum(ys**2)])
+    return G, b, cy[bounds[1:]] - cy[bounds[:-1]], np.diff(bounds)
+
+
+def _solve(G: np.ndarray, b: np.ndarray, P: np.ndarray, lam: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Penalised solutions for every penalty: (G + lam P) c = b on the kept columns.
+
+    G (..., p, p), b (..., p), lam (L,) -> c (..., L, p) (zero outside ``keep``).
+    """
+    idx = np.flatnonzero(keep)
+    Gk = G[..., idx[:, None], idx]
+    Pk = P[idx[:, None], idx]
+    bk = b[..., idx]
+    scale = np.trace(Gk, axis1=-2, axis2=-1)[..., None, None, None] / max(len(idx), 1)
+    ridge = 1e-10 * scale * np.eye(len(idx))
+    M = Gk[..., None, :, :] + lam[:, None, None] * Pk + ridge
+    ck = np.linalg.solve(M, np.broadcast_to(bk[..., None, :], M.shape[:-1])[..., None])[..., 0]
+    out = np.zeros(ck.shape[:-1] + (G.shape[-1],))
+    out[..., idx] = ck
+    return out
+
+
+def _quad_error(c: np.ndarray, G: np.ndarray, b: np.ndarray, yy: np.ndarray) -> np.ndarray:
+    """||y - X c||^2 from the statistics: c^T G c - 2 c^T b + y^T y; c (..., L, p), G (..., p, p)."""
+    return (np.einsum("...lp,...pq,...lq->...l", c, G, c) - 2.0 * np.einsum("...lp,...p->...l", c, b)
+            + yy[..., None])
+
+
+class VaryingCoefficientSINDy(ModelBase):
+    """Penalised cubic-spline coefficient curves of the powers of A, fitted to a whole campaign.
+
+    dA_k/dt = sum_{i=0..3} a_ki(U_k) A_k^i, a_ki(U) = sum_m c_kim B_m(U)
+    (module docstring). A model of the protocol (:mod:`vivbench.models.protocol`):
+    ``fit(records)``, ``predict``, ``order_contributions``, ``simulate`` (RK4),
+    ``curves`` (DESIGN 3.5, with block-bootstrap bands), ``equations``,
+    ``save``/``load`` (NetCDF).
+
+    Parameters
+    ----------
+    n_basis : sequence of int
+        Candidate numbers M of cubic B-splines per curve (M - 3 uniform intervals).
+    penalties : sequence of float
+        Candidate relative penalties; lambda = penalty * trace(X^T X) / trace(P).
+    n_folds : int
+        Folds of the cross-validation over events (events are dealt to folds in
+        a seeded random order); with fewer events, leave-one-event-out.
+    select_orders : bool
+        Drop every order whose removal does not raise the cross-validated error
+        (backward elimination at the selected M and lambda; order 1 is always kept).
+    n_bootstrap : int
+        Block-bootstrap replicates of the coefficients (fixed M and lambda) for
+        the curves' bands and the window verdicts (0: none).
+    block_s : float
+        Block length of the bootstrap, s.
+    agreement : float
+        Share of replicates that must give a window the model's regime for the
+        window to count as identifiable (:func:`vivbench.regimes.varying_window_verdicts`).
+    tau : float
+        Regime threshold of DESIGN 2.5.
+    seed : int
+        Seed of the fold assignment and of the bootstrap.
+    wind_input : {"section", "mean"}
+        The wind of equation k's curves: the section's own U_k, or the mean of
+        U over the sections (the truth sums every section's aerodynamic force,
+        so with a wind that differs along the span the mean can be the better variable).
+
+    Attributes
+    ----------
+    coef_ : ndarray, shape (S, M_max, 4)
+        Physical spline coefficients: a_ki(U) = sum_m coef_[k, m, i] B_km(U), in
+        m^(1-i)/s (zero beyond section k's ``n_basis_[k]``).
+    coef_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4)
+    knots_ : ndarray, shape (S, M_max + 4), m/s (NaN-padded)
+    n_basis_ : ndarray of int, shape (S,); penalty_ : ndarray, shape (S,) (relative)
+    orders_ : ndarray of bool, shape (S, 4)
+        Orders kept in each equation.
+    cv_error_ : ndarray, shape (S, len(n_basis), len(penalties))
+        Cross-validated mean squared error of the standardised target.
+    edf_ : ndarray, shape (S,)
+        Effective degrees of freedom, trace((X^T X + lambda P)^-1 X^T X).
+    wind_range_ : ndarray, shape (S, 2), m/s
+        Range of U_k fitted; the curves are constant outside it.
+    y_scale_, a_ref_ : ndarray, shape (S,), m/s and m
+        RMS of dA_k/dt and of A_k over the fitted samples (the regression's scales).
+    rss_ : ndarray, shape (S,), m^2/s^2; n_samples_, n_blocks_, n_sections_ : int
+    event_ids_ : list of str
+    """
+
+    _fitted_attribute = "coef_"
+
+    def __init__(self, *, n_basis: Sequence[int] = (6, 8, 11, 15, 20),
+                 penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
+                 n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
+                 block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
+                 wind_input: str = "section"):
+        self.n_basis = n_basis
+        self.penalties = penalties
+        self.n_folds = n_folds
+        self.select_orders = select_orders
+        self.n_bootstrap = n_bootstrap
+        self.block_s = block_s
+        self.agreement = agreement
+        self.tau = tau
+        self.seed = seed
+        self.wind_input = wind_input
+
+    def _wind(self, U: np.ndarray) -> np.ndarray:
+        """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
+        U = np.asarray(U, dtype=float)
+        if self.wind_input == "mean":
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows stay NaN
+                m = np.nanmean(U, axis=1, keepdims=True)
+            return np.repeat(m, U.shape[1], axis=1)
+        return U
+
+    def to_json(self) -> str:
+        """The parameters as a JSON object (sorted keys; sequences as lists)."""
+        params = self.get_params()
+        params["n_basis"] = [int(x) for x in params["n_basis"]]
+        params["penalties"] = [float(x) for x in params["penalties"]]
+        params["select_orders"] = bool(params["select_orders"])
+        return json.dumps(params, sort_keys=True)
+
+    def _validate(self) -> None:
+        nb = np.asarray(self.n_basis)
+        if nb.ndim != 1 or nb.size == 0 or np.any(nb < DEGREE + 1) or np.any(nb != np.round(nb)):
+            raise InputError(f"n_basis must be a non-empty sequence of integers >= {DEGREE + 1}; got {self.n_basis!r}")
+        pen = np.asarray(self.penalties, dtype=float)
+        if pen.ndim != 1 or pen.size == 0 or np.any(~np.isfinite(pen)) or np.any(pen < 0):
+            raise InputError(f"penalties must be a non-empty sequence of finite numbers >= 0; got {self.penalties!r}")
+        if int(self.n_folds) < 2:
+            raise InputError(f"n_folds must be an integer >= 2; got {self.n_folds!r}")
+        if int(self.n_bootstrap) < 0:
+            raise InputError(f"n_bootstrap must be an integer >= 0; got {self.n_bootstrap!r}")
+        if not (np.isfinite(self.block_s) and self.block_s > 0):
+            raise InputError(f"block_s must be a positive number of seconds; got {self.block_s!r}")
+        if not 0.0 < self.agreement <= 1.0:
+            raise InputError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
+        if not 0.0 < self.tau < 1.0:
+            raise InputError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
+        if self.wind_input not in ("section", "mean"):
+            raise InputError(f"wind_input must be 'section' or 'mean'; got {self.wind_input!r}")
+
+    # -- fitting -------------------------------------------------------------------------------------
+
+    def fit(self, records: Sequence[Record | tuple]) -> "VaryingCoefficientSINDy":
+        """Fit the curves of every section.
+
+        Parameters
+        ----------
+        records : sequence of Record (or of legacy (t, A, U, dA) tuples)
+            One per event: t shape (n,), s; A, U, dA shape (n, S) in m, m/s, m/s.
+            Samples with a non-finite value in a section are ignored for that section.
+
+        Returns
+        -------
+        self
+        """
+        self._validate()
+        records = [as_record(r, k) for k, r in enumerate(records)]
+        if not records:
+            raise InputError("no records to fit")
+        S = records[0].n_sections
+        for rec in records:
+            if rec.dA is None:
+                raise ValueError(f"record {rec.event_id!r} has no dA: the model is fitted to dA/dt")
+            if rec.n_sections != S:
+                raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {S}")
+        t = np.concatenate([r.t for r in records])
+        A = np.concatenate([r.A for r in records])
+        U = self._wind(np.concatenate([r.U for r in records]))
+        dA = np.concatenate([r.dA for r in records])
+        event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
+        # Blocks: block_s-long pieces of each event, numbered across the campaign.
+        t0 = np.concatenate([np.full(r.n_samples, r.t[0]) for r in records])
+        piece = np.floor((t - t0) / self.block_s).astype(np.int64)
+        _, block_all = np.unique(event * (piece.max() + 1) + piece, return_inverse=True)
+
+        n_ev = len(records)
+        rng = np.random.default_rng(self.seed)
+        K = min(int(self.n_folds), n_ev)
+        fold_of_event = np.empty(n_ev, dtype=np.int64)
+        fold_of_event[rng.permutation(n_ev)] = np.arange(n_ev) % K
+        n_basis = np.array(self.n_basis, dtype=int)
+        pen = np.asarray(self.penalties, dtype=float)
+        Mmax = int(n_basis.max())
+
+        self.coef_ = np.zeros((S, Mmax, 4))
+        self.knots_ = np.full((S, Mmax + DEGREE + 1), np.nan)
+        self.n_basis_ = np.zeros(S, dtype=int)
+        self.penalty_ = np.zeros(S)
+        self.orders_ = np.ones((S, 4), dtype=bool)
+        self.cv_error_ = np.full((S, n_basis.size, pen.size), np.nan)
+        self.edf_ = np.zeros(S)
+        self.wind_range_ = np.zeros((S, 2))
+        self.y_scale_ = np.ones(S)
+        self.a_ref_ = np.ones(S)
+        self.rss_ = np.zeros(S)
+        n_boot = int(self.n_bootstrap)
+        self.coef_bootstrap_ = np.zeros((n_boot, S, Mmax, 4))
+        n_samples = 0
+        n_blocks_used = 0
+        for k in range(S):
+            ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
+            n = int(ok.sum())
+            if n < 4 * Mmax + 2:
+                raise InputError(f"section {k + 1}: {n} valid samples are too few for {4 * Mmax} spline coefficients")
+            n_samples += n
+            Ak, Uk, yk = A[ok, k], U[ok, k], dA[ok, k]
+            ys = float(np.sqrt(np.mean(yk**2))) or 1.0
+            aref = float(np.sqrt(np.mean(Ak**2))) or 1.0
+            lo, hi = float(Uk.min()), float(Uk.max())
+            y = yk / ys
+            _, blk = np.unique(block_all[ok], return_inverse=True)
+            nb = int(blk.max()) + 1
+            n_blocks_used = max(n_blocks_used, nb)
+            ev_of_block = np.zeros(nb, dtype=np.int64)
+            ev_of_block[blk] = event[ok]
+            fold_of_block = fold_of_event[ev_of_block]
+            best = None
+            for a, M in enumerate(n_basis):
+                knots = uniform_knots(lo, hi, int(M))
+                G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref)
+                P = np.kron(np.eye(4), difference_penalty(int(M)))
+                err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(4 * M, dtype=bool)) / n
+                self.cv_error_[k, a] = err
+                j = int(np.argmin(err))
+                if best is None or err[j] < best[0]:
+                    best = (err[j], int(M), float(pen[j]), knots, G, b, yy, P)
+            _err, M, lam_rel, knots, G, b, yy, P = best
+            keep_orders = np.ones(4, dtype=bool)
+            if self.select_orders:
+                keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, M, _err * n)
+            keep = np.repeat(keep_orders, M)
+            Gs, bs = G.sum(axis=0), b.sum(axis=0)
+            lam = np.array([lam_rel * _penalty_scale(Gs, P)])
+            c = _solve(Gs, bs, P, lam, keep)[0]
+            rss = float(_quad_error(c[None], Gs, bs, yy.sum())[0]) * ys**2
+            idx = np.flatnonzero(keep)
+            H = np.linalg.solve(Gs[idx[:, None], idx] + lam[0] * P[idx[:, None], idx] + 1e-10 * np.eye(idx.size)
+                                * np.trace(Gs[idx[:, None], idx]) / idx.size, Gs[idx[:, None], idx])
+            self.edf_[k] = float(np.trace(H))
+            to_phys = ys / aref ** np.arange(4)  # (4,)
+            self.coef_[k, :M] = c.reshape(4, M).T * to_phys
+            self.knots_[k, :M + DEGREE + 1] = knots
+            self.n_basis_[k], self.penalty_[k], self.orders_[k] = M, lam_rel, keep_orders
+            self.wind_range_[k] = lo, hi
+            self.y_scale_[k], self.a_ref_[k], self.rss_[k] = ys, aref, rss
+            if n_boot:
+                # Block multiplicities; the resampled statistics are weighted sums of the blocks'.
+                mult = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=n_boot).astype(float)
+                Gr = np.einsum("rb,bpq->rpq", mult, G)
+                br = mult @ b
+                cr = _solve(Gr, br, P, lam, keep)[:, 0]
+                self.coef_bootstrap_[:, k, :M] = cr.reshape(n_boot, 4, M).transpose(0, 2, 1) * to_phys
+        self.n_samples_ = n_samples
+        self.n_blocks_ = n_blocks_used
+        self.n_sections_ = S
+        self.event_ids_ = [r.event_id for r in records]
+        return self
+
+    @staticmethod
+    def _cv_error(G, b, yy, fold_of_block, K, P, pen, keep) -> np.ndarray:
+        """Summed held-out squared error over the K folds, for every relative penalty, shape (L,)."""
+        Gs, bs = G.sum(axis=0), b.sum(axis=0)
+        Gf = np.stack([G[fold_of_block == f].sum(axis=0) for f in range(K)])
+        bf = np.stack([b[fold_of_block == f].sum(axis=0) for f in range(K)])
+        yf = np.array([yy[fold_of_block == f].sum() for f in range(K)])
+        lam = pen * _penalty_scale(Gs, P)
+        c = _solve(Gs[None] - Gf, bs[None] - bf, P, lam, keep)  # (K, L, p)
+        return _quad_error(c, Gf, bf, yf).sum(axis=0)
+
+    def _select_orders(self, G, b, yy, fold_of_block, K, P, lam_rel, M, err_all) -> np.ndarray:
+        """Backward elimination of orders by the cross-validated error (order 1 always kept)."""
+        keep = np.ones(4, dtype=bool)
+        current = err_all
+        while True:
+            trials = {}
+            for i in (0, 2, 3):
+                if keep[i]:
+                    trial = keep.copy()
+                    trial[i] = False
+                    trials[i] = float(self._cv_error(G, b, yy, fold_of_block, K, P, np.array([lam_rel]),
+                                                     np.repeat(trial, M))[0])
+            if not trials:
+                return keep
+            i = min(trials, key=trials.get)
+            if trials[i] > current:
+                return keep
+            keep[i] = False
+            current = trials[i]
+
+    # -- the model protocol --------------------------------------------------------------------------
+
+    def _check_record(self, record) -> Record:
+        self._check_fitted()
+        record = as_record(record)
+        if record.n_sections != self.n_sections_:
+            raise ValueError(f"record {record.event_id!r} has {record.n_sections} sections; "
+                             f"the model was fitted on {self.n_sections_}")
+        return record
+
+    def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None) -> np.ndarray:
+        """The curves a_ki at each section's own wind.
+
+        Parameters
+        ----------
+        U : ndarray, shape (n, S), m/s
+        coef : ndarray, shape (S, M_max, 4) or (R, S, M_max, 4), optional
+            Spline coefficients (default ``coef_``).
+
+        Returns
+        -------
+        ndarray, shape (n, S, 4) or (R, n, S, 4), m^(1-i)/s; NaN where U is not finite.
+        """
+        self._check_fitted()
+        coef = self.coef_ if coef is None else np.asarray(coef, dtype=float)
+        U = self._wind(U)
+        out = np.empty(coef.shape[:-3] + (U.shape[0], self.n_sections_, 4))
+        for k in range(self.n_sections_):  # a few sections
+            M = int(self.n_basis_[k])
+            B = bspline_basis(U[:, k], self.knots_[k, :M + DEGREE + 1])
+            out[..., k, :] = np.einsum("nm,...mi->...ni", B, coef[..., k, :M, :])
+        return out
+
+    def order_contributions(self, record: Record) -> np.ndarray:
+        """r[:, k, i] = a_ki(U_k) A_k^i, shape (n_samples, n_sections, 4), m/s (NaN where A or U is missing)."""
+        record = self._check_record(record)
+        return self.coefficient_values(record.U) * record.A[..., None] ** np.arange(4)
+
+    def order_contributions_bootstrap(self, record: Record) -> np.ndarray:
+        """Order contributions of every bootstrap replicate, shape (n_bootstrap, n_samples, S, 4), m/s."""
+        record = self._check_record(record)
+        return self.coefficient_values(record.U, self.coef_bootstrap_) * record.A[..., None] ** np.arange(4)
+
+    def predict(self, record: Record) -> np.ndarray:
+        """dA/dt of the model, shape (n_samples, n_sections), m/s."""
+        return self.order_contributions(record).sum(axis=-1)
+
+    def simulate(self, record: Record, t0: float | None = None, t1: float | None = None, A0=None,
+                 bound_factor: float = 10.0) -> Simulation:
+        """Integrate the model from A0 at t0 to t1 on the record's time grid (classical RK4).
+
+        The wind is linear between samples (the curves are evaluated at every
+        sample and midpoint at once; only the RK4 steps loop over time).
+
+        Parameters
+        ----------
+        record : Record
+        t0, t1 : float, s, optional
+            Span, snapped to the record's samples (default: the whole record).
+        A0 : array_like, shape (S,), m, optional
+            Initial amplitudes (default: the record's A at t0).
+        bound_factor : float
+            The run stops when an amplitude leaves [-0.05, bound_factor] x the record's largest amplitude.
+
+        Returns
+        -------
+        Simulation
+        """
+        record = self._check_record(record)
+        t = record.t
+        i0 = int(np.argmin(np.abs(t - (t[0] if t0 is None else float(t0)))))
+        i1 = int(np.argmin(np.abs(t - (t[-1] if t1 is None else float(t1))))) + 1
+        tt = t[i0:i1]
+        S = self.n_sections_
+        U = record.U[i0:i1]
+        Umid = 0.5 * (U[:-1] + U[1:])
+        a = self.coefficient_values(U)  # (n, S, 4)
+        am = self.coefficient_values(Umid) if tt.size > 1 else np.zeros((0, S, 4))
+        A_meas = record.A[i0:i1]
+        x = np.asarray(record.A[i0] if A0 is None else A0, dtype=float).copy()
+        if x.shape != (S,):
+            raise ValueError(f"A0 must have shape ({S},) (one amplitude per section, m); got {x.shape}")
+        top = bound_factor * np.nanmax(np.abs(record.A)) if np.isfinite(record.A).any() else np.inf
+        out = np.full((tt.size, S), np.nan)
+        out[0] = x
+        stopped, reason = None, None
+
+        def f(c, y):
+            return c[:, 0] + y * (c[:, 1] + y * (c[:, 2] + y * c[:, 3]))
+
+        for n in range(tt.size - 1):  # time integration: one step after another
+            h = tt[n + 1] - tt[n]
+            k1 = f(a[n], x)
+            k2 = f(am[n], x + 0.5 * h * k1)
+            k3 = f(am[n], x + 0.5 * h * k2)
+            k4 = f(a[n + 1], x + h * k3)
+            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            if not np.all(np.isfinite(x)) or np.any(x > top) or np.any(x < -0.05 * top / bound_factor):
+                stopped, reason = float(tt[n + 1]), "non-finite or out-of-bounds amplitude"
+                break
+            out[n + 1] = x
+        covered = 1.0 if stopped is None else float((stopped - tt[0]) / max(tt[-1] - tt[0], 1e-12))
+        return Simulation(t=tt, A_sim=out, A_meas=A_meas, stopped_at=stopped, reason=reason,
+                          nmse=nmse(out, A_meas), covered=covered, windows=np.zeros(max(tt.size - 1, 0), dtype=int))
+
+    def curves(self, wind, level: float = 0.95) -> xr.Dataset:
+        """The fitted curves a_ki(U) of DESIGN 3.5 with block-bootstrap bands.
+
+        Parameters
+        ----------
+        wind : array_like, shape (n_wind,), m/s
+        level : float
+            Level of the percentile band of the bootstrap replicates (widened to
+            contain the point curve).
+
+        Returns
+        -------
+        xarray.Dataset
+            ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind) in
+            m^(1-i)/s; NaN bands without replicates.
+        """
+        self._check_fitted()
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"level must lie strictly between 0 and 1; got {level!r}")
+        wind = np.atleast_1d(np.asarray(wind, dtype=float))
+        if wind.ndim != 1 or not np.all(np.isfinite(wind)):
+            raise ValueError("wind must be a 1-D array of finite speeds in m/s")
+        Uw = np.repeat(wind[:, None], self.n_sections_, axis=1)
+        point = np.moveaxis(self.coefficient_values(Uw), 0, -1)  # (S, 4, n_wind)
+        if self.coef_bootstrap_.shape[0]:
+            boot = np.moveaxis(self.coefficient_values(Uw, self.coef_bootstrap_), 1, -1)
+            q = 50.0 * np.array([1.0 - level, 1.0 + level])
+            lo, hi = np.percentile(boot, q, axis=0)
+            lower, upper = np.fmin(lo, point), np.fmax(hi, point)
+        else:
+            lower = upper = np.full_like(point, np.nan)
+        dims = ("equation", "order", "wind")
+        units = "m^(1-order) s-1"
+        return xr.Dataset(
+            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (DESIGN 3.5)"}),
+             "curves_lower": (dims, lower, {"units": units, "long_name": f"lower {level:g} bootstrap band"}),
+             "curves_upper": (dims, upper, {"units": units, "long_name": f"upper {level:g} bootstrap band"})},
+            coords={"equation": section_names(self.n_sections_), "order": np.arange(4),
+                    "wind": ("wind", wind, {"units": "m/s"})},
+            attrs={"model": type(self).__name__},
+        )
+
+    def equations(self, precision: int = 3) -> list[str]:
+        """Readable equations, e.g. ``"dA1/dt = a10(U1) + a11(U1) A1 + a12(U1) A1^2 + a13(U1) A1^3"``.
+
+        Each curve is summarised by its range over the fitted winds and the
+        spline it is (M cubic B-splines, relative penalty, effective degrees of freedom).
+        """
+        self._check_fitted()
+        out = []
+        grid = np.linspace(self.wind_range_[:, 0].min(), self.wind_range_[:, 1].max(), 201)
+        vals = self.coefficient_values(np.repeat(grid[:, None], self.n_sections_, axis=1))
+        for k in range(self.n_sections_):
+            terms = []
+            for i in range(4):
+                if not self.orders_[k, i]:
+                    continue
+                name = f"a{k + 1}{i}(U{k + 1})" + ("" if i == 0 else f" A{k + 1}" + ("" if i == 1 else f"^{i}"))
+                terms.append(name)
+            line = f"dA{k + 1}/dt = " + (" + ".join(terms) if terms else "0")
+            ranges = "; ".join(f"a{k + 1}{i} in [{vals[:, k, i].min():.{precision}g}, {vals[:, k, i].max():.{precision}g}]"
+                               for i in range(4) if self.orders_[k, i])
+            out.append(f"{line}   ({ranges}; {self.n_basis_[k]} cubic B-splines on "
+                       f"[{self.wind_range_[k, 0]:.3g}, {self.wind_range_[k, 1]:.3g}] m/s, "
+                       f"penalty {self.penalty_[k]:.1e}, edf {self.edf_[k]:.1f})")
+        return out
+
+    # -- persistence ---------------------------------------------------------------------------------
+
+    _ARRAYS = {"coef_": ("equation", "basis", "order"), "knots_": ("equation", "knot"),
+               "n_basis_": ("equation",), "penalty_": ("equation",), "orders_": ("equation", "order"),
+               "cv_error_": ("equation", "n_basis_candidate", "penalty_candidate"), "edf_": ("equation",),
+               "wind_range_": ("equation", "bound"), "y_scale_": ("equation",), "a_ref_": ("equation",),
+               "rss_": ("equation",), "coef_bootstrap_": ("bootstrap", "equation", "basis", "order")}
+
+    def to_dataset(self) -> xr.Dataset:
+        """The fitted model as an xarray Dataset (one variable per fitted array)."""
+        self._check_fitted()
+        data = {name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(float if name != "orders_" else np.int8))
+                for name, dims in self._ARRAYS.items()}
+        attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
+                 "n_blocks": self.n_blocks_, "events": json.dumps(self.event_ids_)}
+        return xr.Dataset(data, coords={"equation": section_names(self.n_sections_), "order": np.arange(4)},
+                          attrs=attrs)
+
+    def save(self, path):
+        """Write the fitted model as NetCDF; returns the path."""
+        self.to_dataset().to_netcdf(path)
+        return path
+
+    @classmethod
+    def load(cls, path) -> "VaryingCoefficientSINDy":
+        """A fitted model from a file written by :meth:`save`."""
+        with xr.open_dataset(path) as ds:
+            ds = ds.load()
+        if ds.attrs.get("model") != cls.__name__:
+            raise InputError(f"{path}: not a {cls.__name__} file")
+        params = json.loads(ds.attrs["params_json"])
+        params["n_basis"], params["penalties"] = tuple(params["n_basis"]), tuple(params["penalties"])
+        model = cls(**params)
+        for name in cls._ARRAYS:
+            setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+        model.n_basis_ = model.n_basis_.astype(int)
+        model.orders_ = model.orders_.astype(bool)
+        model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
+        model.n_sections_ = int(ds.sizes["equation"])
+        model.event_ids_ = json.loads(ds.attrs["events"])
+        return model
+
+
+def _penalty_scale(G: np.ndarray, P: np.ndarray) -> float:
+    """trace(G) / trace(P): makes the relative penalties independent of the data's size and scale."""
+    return float(np.trace(G) / max(np.trace(P), 1e-300))
