@@ -81,6 +81,10 @@ def test_nan_samples_and_simulate(fitted):
     U = rec.U.copy()
     U[10:20, 0] = np.nan
     r = fitted.order_contributions(Record(event_id="x", t=rec.t, A=rec.A, U=U))
+    # The default wind is the mean over the sections that have one: a missing section drops out of it.
+    assert np.isfinite(r).all()
+    own = VaryingCoefficientSINDy(n_bootstrap=0, wind_input="section", n_basis=(11,)).fit(_records(4))
+    r = own.order_contributions(Record(event_id="x", t=rec.t, A=rec.A, U=U))
     assert np.isnan(r[10:20, 0]).all() and np.isfinite(r[10:20, 1]).all()
     sim = fitted.simulate(rec, t0=0.0, t1=100.0)
     assert sim.A_sim.shape == (201, 2) and np.isfinite(sim.A_sim).all()
