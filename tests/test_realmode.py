@@ -202,3 +202,17 @@ def test_sweep_realism_values_are_checked(change, message):
     with pytest.raises(ValueError) as info:
         sweep_config_from_dict({"duration": [600.0, 600.0], **change})
     assert message in str(info.value)
+
+
+def test_two_point_sweep_over_a_realism_switch_runs(tmp_path):
+    from vivbench.validate import run_sweep
+
+    cfg = sweep_config_from_dict({"seed": 2, "n_events": 1, "duration": [300.0, 300.0],
+                                  "grid": {"aero_realistic": [0, 1]}})
+    result = run_sweep(cfg, tmp_path / "s", workers=1)
+    assert not result.failures, result.failures
+    rows = (tmp_path / "s" / "sweep.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    assert {"aero_realistic", "felt_wind_tributary", "drift_amplitude"} <= set(header)
+    assert [r.split(",")[header.index("aero_realistic")] for r in rows[1:]] == ["0", "1"] or \
+        [float(r.split(",")[header.index("aero_realistic")]) for r in rows[1:]] == [0.0, 1.0]

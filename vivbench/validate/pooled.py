@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.validate.recovery import model_window_rhs_errors, regime_scores
+from vivbench.validate.recovery import _nanmedian, model_window_rhs_errors, regime_scores, truth_window_activity
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.core.errors import InputError
@@ -81,11 +81,15 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         regimes.append(model_window_regimes(model, record, start, end, tau=model_tau)["regime"])
         flags.append(pooled["identifiable"].values[sel].astype(bool))
         truths_w.append(truth_window_regimes(truth, start, end, tau=tau))
-        e, act = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
-                                         active_share=active_share)
+        if "coef" in truth.data_vars:
+            e, act = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
+                                             active_share=active_share)
+        else:  # a truth outside the library (DESIGN 2.8): regimes scored, RHS errors not
+            act = truth_window_activity(truth, start, end, active_share=active_share)
+            e = np.full(act.shape, np.nan)
         errs.append(e.ravel())
         errs_active.append(np.where(act, e, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))
-    scores["rhs_median_rel_error"] = float(np.nanmedian(np.concatenate(errs)))
-    scores["rhs_median_rel_error_active"] = float(np.nanmedian(np.concatenate(errs_active)))
+    scores["rhs_median_rel_error"] = _nanmedian(np.concatenate(errs))
+    scores["rhs_median_rel_error_active"] = _nanmedian(np.concatenate(errs_active))
     return scores
