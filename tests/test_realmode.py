@@ -216,3 +216,10 @@ def test_two_point_sweep_over_a_realism_switch_runs(tmp_path):
     assert {"aero_realistic", "felt_wind_tributary", "drift_amplitude"} <= set(header)
     assert [r.split(",")[header.index("aero_realistic")] for r in rows[1:]] == ["0", "1"] or \
         [float(r.split(",")[header.index("aero_realistic")]) for r in rows[1:]] == [0.0, 1.0]
+
+
+def test_realism_grid_example_loads():
+    from vivbench.validate import load_compare_config
+
+    cfg = load_compare_config(ROOT / "examples" / "compare_realism.toml")
+    assert set(cfg.grid) == {"aero", "felt_wind", "drift"} and plan(cfg) == (4, 4)

@@ -268,6 +268,9 @@ def load_compare_config(path: str | Path) -> CompareConfig:
         [grid]
         optimizer = ["stlsq", "sr3", "ensemble"]
         window = [30.0, 50.0, 100.0]
+        aero = ["in_library", "realistic"]        # realism factors: aero, felt_wind, drift
+        felt_wind = ["anemometer", "tributary"]
+        drift = [0.0, 0.3]
     """
     return load_toml(path, compare_config_from_dict, "grid file")
 
