@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.validate.recovery import _nanmedian, model_window_rhs_errors, regime_scores, truth_window_activity
+from vivbench.validate.recovery import finite_median, model_window_rhs_errors, regime_scores, truth_window_activity
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.core.errors import InputError
@@ -90,6 +90,6 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         errs.append(e.ravel())
         errs_active.append(np.where(act, e, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))
-    scores["rhs_median_rel_error"] = _nanmedian(np.concatenate(errs))
-    scores["rhs_median_rel_error_active"] = _nanmedian(np.concatenate(errs_active))
+    scores["rhs_median_rel_error"] = finite_median(np.concatenate(errs))
+    scores["rhs_median_rel_error_active"] = finite_median(np.concatenate(errs_active))
     return scores

@@ -15,7 +15,7 @@ from vivbench.core.terms import evaluate_library
 from vivbench.regimes.truth import truth_window_regimes
 
 __all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
-           "campaign_recovery"]
+           "campaign_recovery", "truth_window_activity", "truth_rhs_errors", "finite_median"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -192,7 +192,7 @@ def truth_rhs_errors(result: xr.Dataset, truth: xr.Dataset, *, active_share: flo
     return np.full(active.shape, np.nan), active
 
 
-def _nanmedian(x: np.ndarray) -> float:
+def finite_median(x: np.ndarray) -> float:
     """Median of the finite values; NaN (without a warning) when there is none."""
     x = np.asarray(x, dtype=float)
     x = x[np.isfinite(x)]
@@ -250,8 +250,8 @@ def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -
 def _recovery_scores(parts: list[dict]) -> dict:
     cat = {k: np.concatenate([np.ravel(p[k]) for p in parts]) for k in parts[0]}
     scores = regime_scores(cat["regime"], cat["truth"], cat["flag"])
-    scores["rhs_median_rel_error"] = _nanmedian(cat["err"])
-    scores["rhs_median_rel_error_active"] = _nanmedian(cat["err_active"])
+    scores["rhs_median_rel_error"] = finite_median(cat["err"])
+    scores["rhs_median_rel_error_active"] = finite_median(cat["err_active"])
     scores["active_share"] = float(np.mean(cat["active"]))
     scores["truth_regime_shares"] = {k: float(np.mean(cat["truth"] == k)) for k in (1, 2, 3, 4)}
     return scores
