@@ -10,7 +10,10 @@ from vivbench.cli.common import DEFAULT_WORKERS, duration, progress
 def run(args) -> int:
     from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign, load_config
 
-    generator = load_config(args.config) if args.config else GeneratorConfig()
+    if args.config:
+        generator = load_config(args.config, mode=args.mode)
+    else:
+        generator = GeneratorConfig.from_mode(args.mode or "in_library")
     campaign = CampaignConfig(n_events=args.events, seed=args.seed, duration=args.duration, generator=generator)
     bar = progress(campaign.n_events, "synth")
     try:
@@ -31,5 +34,12 @@ def register(sub) -> None:
     s.add_argument("--duration", type=duration, default=(1200.0, 3600.0),
                    help="event duration in minutes: N or MIN-MAX (default 20-60)")
     s.add_argument("--config", help="generator configuration (TOML); defaults otherwise")
+    s.add_argument("--mode", choices=("in_library", "realistic"), default=None,
+                   help="generator mode (DESIGN 2.8): in_library (polynomial aerodynamics in U, the deck feels the "
+                        "anemometer's wind; the truth has an exact coefficient matrix; the default) or realistic "
+                        "(non-polynomial functions of reduced velocity with a yaw factor, the deck feels the "
+                        "tributary-averaged wind of a spatially resolved field). Replaces the --config file's "
+                        "top-level `mode`; the file's explicit keys override the mode's values. Slow changes "
+                        "stay off in both (the [changes] table)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help="worker processes (files do not depend on it)")
     s.set_defaults(func=run)

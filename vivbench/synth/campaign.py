@@ -18,18 +18,21 @@ import numpy as np
 
 from vivbench.io.netcdf import atomic_path
 from vivbench.io.event import write_event
-from vivbench.synth.config import GeneratorConfig
+from vivbench.synth.config import DEFAULT_LOCK_IN, GeneratorConfig
 from vivbench.synth.event import EventSpec, generate_event
 from vivbench.synth.wind import WindScript
 from vivbench.core.errors import InputError, error_line
 
-__all__ = ["SCENARIOS", "CampaignConfig", "draw_script", "campaign_specs", "generate_campaign", "CampaignResult"]
+__all__ = ["SCENARIOS", "LOCK_IN_TOLERANCE", "CampaignConfig", "draw_script", "script_lock_in", "campaign_specs", "generate_campaign", "CampaignResult"]
 
 # Scenario cycle: the first event is like the paper's event 1 (growth in lock-in,
 # a strongly self-excited plateau, decay as the wind leaves), and any four
 # consecutive events visit all four regimes.
 SCENARIOS = ("pass_high", "pass_low", "brief", "outside")
 _CYCLE = ("pass_high", "pass_low", "brief", "outside", "pass_high", "pass_low", "brief", "pass_high")
+# Campaign scripts follow a bridge's lock-in only when it differs from the default's by more than
+# this at either end (m/s): the default bridge's (and the realistic mode's) specs stay as they were.
+LOCK_IN_TOLERANCE = 0.5
 # Fractions of the duration range each scenario uses (lock-in passes need time to grow).
 _DURATION_SHARE = {"pass_high": (0.4, 1.0), "pass_low": (0.4, 1.0), "brief": (0.0, 0.5), "outside": (0.0, 0.6)}
 
@@ -68,14 +71,26 @@ class CampaignConfig:
             raise InputError(f"start must be an ISO 8601 date, e.g. 2026-01-01T00:00:00Z; got {self.start!r}") from None
 
 
-def draw_script(kind: str, duration: float, rng: np.random.Generator) -> WindScript:
+def draw_script(kind: str, duration: float, rng: np.random.Generator, *,
+                lock_in: tuple[float, float] | None = None) -> WindScript:
     """Draw a mean-wind script of a scenario.
+
+    Speeds are designed for the default bridge's lock-in range, 5.5-10.5 m/s:
 
     - ``pass_high``: from outside lock-in to its upper centre (8.4-9.4 m/s: a
       strongly self-excited plateau, regime 4) and out again;
     - ``pass_low``: the same to the lower part of lock-in (6.7-7.1 m/s, regime 3);
     - ``brief``: a short passage through lock-in: growth, no plateau, decay;
     - ``outside``: wind that stays below or above lock-in (regime 1).
+
+    Parameters
+    ----------
+    kind : one of :data:`SCENARIOS`
+    duration : s
+    rng : the script's random stream
+    lock_in : (low, high) lock-in range of another bridge, m/s; every speed is then
+        mapped affinely from 5.5-10.5 m/s onto it (the same draws, so the scenarios keep
+        their places relative to lock-in). None: the default bridge's speeds.
     """
     T = float(duration)
     low = lambda: rng.uniform(3.8, 5.0)  # noqa: E731
@@ -113,7 +128,23 @@ def draw_script(kind: str, duration: float, rng: np.random.Generator) -> WindScr
             speeds = tuple(max(s, 10.8) for s in speeds)
     else:
         raise InputError(f"unknown scenario {kind!r}; allowed: {', '.join(SCENARIOS)}")
+    if lock_in is not None:
+        (a, b), (lo, hi) = DEFAULT_LOCK_IN, lock_in
+        if not 0 < lo < hi:
+            raise InputError(f"lock_in must be (low, high) m/s with 0 < low < high; got {lock_in}")
+        scale = (hi - lo) / (b - a)
+        speeds = tuple(float(max(lo + (s - a) * scale, 0.5)) for s in speeds)
     return WindScript(times=times, speeds=speeds, side=side, yaw_deg=yaw)
+
+
+def script_lock_in(generator: GeneratorConfig) -> tuple[float, float] | None:
+    """The lock-in range a campaign's scripts follow: None (the default speeds) unless the
+    bridge's own (:attr:`GeneratorConfig.lock_in`) differs from 5.5-10.5 m/s by more than
+    :data:`LOCK_IN_TOLERANCE` at either end. A bridge without self-excitation keeps the default speeds."""
+    lock = generator.lock_in
+    if lock is None or max(abs(lock[0] - DEFAULT_LOCK_IN[0]), abs(lock[1] - DEFAULT_LOCK_IN[1])) <= LOCK_IN_TOLERANCE:
+        return None
+    return lock
 
 
 def campaign_specs(campaign: CampaignConfig) -> list[tuple[EventSpec, np.random.SeedSequence]]:
@@ -124,6 +155,7 @@ def campaign_specs(campaign: CampaignConfig) -> list[tuple[EventSpec, np.random.
     width = max(3, len(str(campaign.n_events)))
     specs = []
     lo, hi = campaign.duration
+    lock_in = script_lock_in(campaign.generator)
     for i, child in enumerate(children):
         # The script draws from its own stream, spawned from the event's seed.
         rng = np.random.default_rng(np.random.SeedSequence(child.entropy, spawn_key=child.spawn_key + (1000,)))
@@ -135,7 +167,7 @@ def campaign_specs(campaign: CampaignConfig) -> list[tuple[EventSpec, np.random.
             event_id=f"E{i + 1:0{width}d}",
             start_time=begin.strftime("%Y-%m-%dT%H:%M:%SZ"),
             kind=kind,
-            script=draw_script(kind, duration, rng),
+            script=draw_script(kind, duration, rng, lock_in=lock_in),
             number=i + 1,
             campaign_time=(begin - start).total_seconds(),
         )

@@ -43,6 +43,8 @@ __all__ = [
     "DefectConfig",
     "ChangesConfig",
     "GeneratorConfig",
+    "GENERATOR_MODES",
+    "DEFAULT_LOCK_IN",
     "config_to_dict",
     "config_from_dict",
     "load_config",
@@ -576,6 +578,86 @@ class GeneratorConfig:
         zeta_max = self.structure.damping_ratio * max(1.0, self.changes.step_damping_factor) * (1 + abs(self.changes.drift_amplitude))
         _check(zeta_max < 0.2, f"the changed damping ratio must stay below 0.2; it reaches {zeta_max:.4g}")
 
+    @classmethod
+    def in_library(cls, **overrides) -> GeneratorConfig:
+        """The ``in_library`` mode (DESIGN 2.8): polynomial aerodynamics in U, the deck feels the anemometer's wind.
+
+        The truth lies in the identification's model class (an exact coefficient matrix
+        exists); for exact-recovery tests. Keywords override any field, as for the
+        constructor (``GeneratorConfig.in_library()`` equals ``GeneratorConfig()`` today).
+        """
+        return cls.from_mode("in_library", **overrides)
+
+    @classmethod
+    def realistic(cls, **overrides) -> GeneratorConfig:
+        """The ``realistic`` mode (DESIGN 2.8): the truth lies outside the identification's model class.
+
+        ``aero`` is :meth:`AeroConfig.realistic` (non-polynomial functions of the reduced
+        velocity with a yaw factor) and ``wind`` is ``WindConfig(felt_wind="tributary")``
+        (the deck feels the tributary-averaged wind of a spatially resolved field; each
+        anemometer is one point). Slow changes stay off (``changes`` is a separate option).
+
+        Keywords override fields. ``aero`` and ``wind`` given as dicts (as read from
+        TOML) override the mode's values key by key; given as instances they replace them.
+        """
+        return cls.from_mode("realistic", **overrides)
+
+    @classmethod
+    def from_mode(cls, mode: str, **overrides) -> GeneratorConfig:
+        """The named mode ``"in_library"`` or ``"realistic"`` with keyword overrides (see :meth:`realistic`)."""
+        _check(mode in GENERATOR_MODES, f"mode must be one of {list(GENERATOR_MODES)}; got {mode!r}")
+        aero, wind = overrides.pop("aero", {}), overrides.pop("wind", {})
+        if isinstance(aero, dict):
+            aero = _aero_from_dict(aero, default_mode=mode)
+        if isinstance(wind, dict):
+            wind = WindConfig(**_tuples({"felt_wind": _FELT_WIND_OF_MODE[mode], **wind}))
+        return cls(aero=aero, wind=wind, **overrides)
+
+    @property
+    def mode(self) -> str:
+        """The named mode this configuration belongs to, implied by its saved values.
+
+        ``"in_library"`` when the aerodynamic functions are polynomials in U without a
+        yaw factor and the deck feels the anemometer's wind; ``"realistic"`` when the
+        functions are not polynomials (or depend on yaw) and the deck feels the
+        tributary-averaged wind; ``"mixed"`` otherwise. Slow changes do not enter. The
+        event file's ``config_json`` holds both, so the mode of any event can be recovered.
+        """
+        aero = "in_library" if self.aero.polynomials() is not None else "realistic"
+        wind = "in_library" if self.wind.felt_wind == "anemometer" else "realistic"
+        return aero if aero == wind else "mixed"
+
+    @property
+    def lock_in(self) -> tuple[float, float] | None:
+        """The lock-in range in m/s: where Y1 > 0 around its maximum, wind perpendicular to the span.
+
+        Evaluated for this structure's frequency and depth (curves of reduced velocity)
+        on 0.05-60 m/s, the ends refined by linear interpolation. None when Y1 <= 0
+        everywhere (no self-excitation). ``(5.5, 10.5)`` for the ``in_library`` defaults.
+        """
+        U = np.arange(0.05, 60.0, 0.005)
+        y = self.aero.Y1.at_wind(U, self.structure.frequency, self.structure.depth)
+        k = int(np.argmax(y))
+        if not y[k] > 0:
+            return None
+        neg = np.flatnonzero(y <= 0)
+        below, above = neg[neg < k], neg[neg > k]
+        lo = U[0] if below.size == 0 else _zero_between(U, y, below[-1])
+        hi = U[-1] if above.size == 0 else _zero_between(U, y, above[0] - 1)
+        return float(lo), float(hi)
+
+
+GENERATOR_MODES = AERO_MODES
+"""Named generator modes (DESIGN 2.8); ``GeneratorConfig()`` is the ``in_library`` mode."""
+_FELT_WIND_OF_MODE = {"in_library": "anemometer", "realistic": "tributary"}
+DEFAULT_LOCK_IN = (5.5, 10.5)
+"""Lock-in range (m/s) of the default ``in_library`` bridge, for which the campaign scripts were designed."""
+
+
+def _zero_between(U: np.ndarray, y: np.ndarray, i: int) -> float:
+    """Linear-interpolated zero of y between samples i and i + 1 (a sign change)."""
+    return U[i] + (U[i + 1] - U[i]) * y[i] / (y[i] - y[i + 1])
+
 
 def _tuples(d: dict) -> dict:
     """TOML and JSON give lists; the dataclasses hold tuples."""
@@ -638,26 +720,34 @@ _SECTIONS = {"structure": StructureConfig, "aero": AeroConfig, "wind": WindConfi
 
 
 def config_from_dict(data: dict[str, Any]) -> GeneratorConfig:
-    """Inverse of :func:`config_to_dict`; unknown keys are an error."""
-    allowed = {f.name for f in dataclasses.fields(GeneratorConfig)}
+    """Inverse of :func:`config_to_dict`; unknown keys are an error.
+
+    An optional top-level ``mode`` (``"in_library"``, the default, or ``"realistic"``)
+    selects :meth:`GeneratorConfig.from_mode`; the other keys override its values
+    (``[aero]`` and ``[wind]`` key by key; ``[aero] mode`` still picks the aerodynamics).
+    """
+    allowed = {f.name for f in dataclasses.fields(GeneratorConfig)} | {"mode"}
     unknown = set(data) - allowed
     _check(not unknown, f"unknown configuration keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+    mode = data.get("mode", "in_library")
+    _check(mode in GENERATOR_MODES, f"mode must be one of {list(GENERATOR_MODES)}; got {mode!r}")
     kwargs = {}
     for key, value in data.items():
+        if key == "mode":
+            continue
         if key in _SECTIONS:
+            _check(isinstance(value, dict), f"[{key}] must be a table; got {value!r}")
             sub_allowed = {f.name for f in dataclasses.fields(_SECTIONS[key])} | ({"mode"} if key == "aero" else set())
             sub_unknown = set(value) - sub_allowed
             _check(not sub_unknown, f"unknown keys {sorted(sub_unknown)} in [{key}]; allowed: {sorted(sub_allowed)}")
-            if key == "aero":
-                value = _aero_from_dict(value)
         kwargs[key] = value
-    return GeneratorConfig(**kwargs)
+    return GeneratorConfig.from_mode(mode, **kwargs)
 
 
-def _aero_from_dict(data: dict[str, Any]) -> AeroConfig:
-    """The ``[aero]`` table: an optional ``mode`` (``in_library`` by default) whose values the other keys override."""
+def _aero_from_dict(data: dict[str, Any], default_mode: str = "in_library") -> AeroConfig:
+    """The ``[aero]`` table: an optional ``mode`` (``default_mode`` otherwise) whose values the other keys override."""
     data = dict(data)
-    mode = data.pop("mode", "in_library")
+    mode = data.pop("mode", default_mode)
     overrides = {k: (curve_from_data(v, k) if k in _AERO_CURVES else v) for k, v in data.items()}
     if overrides.get("yaw") is False:  # TOML has no null: `yaw = false` removes the mode's yaw factor
         overrides["yaw"] = None
@@ -666,12 +756,18 @@ def _aero_from_dict(data: dict[str, Any]) -> AeroConfig:
     return AeroConfig.from_mode(mode, **overrides)
 
 
-def load_config(path: str | Path) -> GeneratorConfig:
+def load_config(path: str | Path, *, mode: str | None = None) -> GeneratorConfig:
     """Read a generator configuration from TOML (sections as in :func:`config_to_dict`).
 
-    ``[aero]`` may also name a mode, ``mode = "realistic"`` (or ``"in_library"``,
-    the default); its other keys then override that mode's values.
+    A top-level ``mode = "realistic"`` (or ``"in_library"``, the default) starts from
+    :meth:`GeneratorConfig.realistic` (or :meth:`GeneratorConfig.in_library`); the
+    file's explicit keys override the mode's values. ``[aero]`` may also name a mode
+    of its own for the aerodynamic functions alone. ``mode``, when given (the command
+    line's ``--mode``), replaces the file's top-level ``mode``.
 
     Missing keys take their defaults. Errors name the file.
     """
-    return load_toml(path, config_from_dict, "configuration file")
+    def build(data: dict[str, Any]) -> GeneratorConfig:
+        return config_from_dict({**data, "mode": mode} if mode is not None else data)
+
+    return load_toml(path, build, "configuration file")

@@ -1,6 +1,6 @@
 """Method comparison: the identification chain scored on synthetic campaigns over a grid of variants.
 
-A grid (TOML, :func:`load_compare_config`) names levels of seven factors:
+A grid (TOML, :func:`load_compare_config`) names levels of ten factors:
 
 ====================== ============================================= ==========================
 factor                 meaning                                        default (base) level
@@ -15,7 +15,21 @@ accel_noise            accelerometer noise floor as a multiple of     1
                        the default 30 micro-g/sqrt(Hz)
 anemometer_noise       anemometer relative rms error                  0.01
 turbulence_intensity   sigma_u / U of the turbulence field            0.08
+aero                   realism: aerodynamic functions (DESIGN 2.8):   in_library
+                       in_library (polynomials in U) or realistic
+                       (functions of reduced velocity, yaw factor)
+felt_wind              realism: the wind the deck feels: anemometer   anemometer
+                       (its own low-passed wind) or tributary (the
+                       average over each section's tributary length)
+drift                  realism: relative amplitude of the daily       0
+                       damping drift (ChangesConfig.drift_amplitude),
+                       in [0, 1)
 ====================== ============================================= ==========================
+
+The three realism factors change the generator (the other settings of the
+realistic mode, e.g. ``GeneratorConfig.realistic()``, are the two first of
+them at ``realistic`` and ``tributary``); like the noise factors they make
+campaigns of their own.
 
 Designs. ``"one_at_a_time"`` (the default: its size grows with the sum of the
 numbers of levels, not their product) runs the base cell and, for every factor
@@ -33,7 +47,7 @@ regime: the accuracy of always answering it), median relative error of the ident
 the wall and CPU time of the identification (reading the events, identifying,
 writing the results; not the scoring). Cells that differ only in identification
 settings share one campaign: campaigns are generated once per (accel_noise,
-anemometer_noise, turbulence_intensity) and the seed, and reused from an
+anemometer_noise, turbulence_intensity, aero, felt_wind, drift) and the seed, and reused from an
 earlier run into the same directory when their configuration matches.
 Campaigns, then cells, run through :func:`vivbench.core.parallel.run_tasks`
 (local processes or dask); the table does not depend on the worker count or
@@ -64,12 +78,14 @@ from vivbench.preprocess.derivative import DERIVATIVE_METHODS
 from vivbench.library.basis import SCALINGS
 from vivbench.core.toml import load_toml
 from vivbench.regression.optimizers import OPTIMIZERS
+from vivbench.synth.config import AERO_MODES, FELT_WIND_MODES
 from vivbench.core.errors import InputError, error_line
 
 __all__ = ["FACTORS", "DESIGNS", "BASE_LEVELS", "CompareConfig", "CompareResult", "compare_config_from_dict",
            "load_compare_config", "compare_cells", "plan", "run_comparison"]
 
-FACTORS = ("derivative", "scaling", "optimizer", "window", "accel_noise", "anemometer_noise", "turbulence_intensity")
+FACTORS = ("derivative", "scaling", "optimizer", "window", "accel_noise", "anemometer_noise", "turbulence_intensity",
+           "aero", "felt_wind", "drift")
 DESIGNS = ("one_at_a_time", "product")
 BASE_LEVELS = {
     "derivative": "tv",
@@ -79,8 +95,12 @@ BASE_LEVELS = {
     "accel_noise": 1.0,
     "anemometer_noise": 0.01,
     "turbulence_intensity": 0.08,
+    "aero": "in_library",
+    "felt_wind": "anemometer",
+    "drift": 0.0,
 }
-_CATEGORICAL = {"derivative": DERIVATIVE_METHODS, "scaling": SCALINGS, "optimizer": OPTIMIZERS}
+_CATEGORICAL = {"derivative": DERIVATIVE_METHODS, "scaling": SCALINGS, "optimizer": OPTIMIZERS,
+                "aero": AERO_MODES, "felt_wind": FELT_WIND_MODES}
 # Axis labels with units for the plots.
 _LABELS = {
     "derivative": "dA/dt method",
@@ -90,8 +110,11 @@ _LABELS = {
     "accel_noise": "accelerometer noise floor (x 30 micro-g/sqrt(Hz))",
     "anemometer_noise": "anemometer error (relative rms, -)",
     "turbulence_intensity": "turbulence intensity sigma_u/U (-)",
+    "aero": "aerodynamic functions (generator mode)",
+    "felt_wind": "wind felt by the deck",
+    "drift": "daily damping drift amplitude (-)",
 }
-_CAMPAIGN_FACTORS = ("accel_noise", "anemometer_noise", "turbulence_intensity")
+_CAMPAIGN_FACTORS = ("accel_noise", "anemometer_noise", "turbulence_intensity", "aero", "felt_wind", "drift")
 _METRICS = ("n_scored", "truth_majority_share", "coverage", "accuracy_all", "accuracy_identifiable", "accuracy_not_identifiable",
             "rhs_median_rel_error", "rhs_median_rel_error_active", "no_model_share", "wall_time_s",
             "wall_time_per_event_s", "cpu_time_s")
@@ -114,6 +137,8 @@ def _check_level(factor: str, value, where: str):
         raise InputError(f"{where}: {factor} must be >= 0; got {value}")
     if factor == "turbulence_intensity" and not 0 <= value < 0.5:
         raise InputError(f"{where}: turbulence_intensity must be in [0, 0.5); got {value}")
+    if factor == "drift" and not 0 <= value < 1:
+        raise InputError(f"{where}: drift must be in [0, 1) (relative damping drift amplitude); got {value}")
     return value
 
 
@@ -243,6 +268,9 @@ def load_compare_config(path: str | Path) -> CompareConfig:
         [grid]
         optimizer = ["stlsq", "sr3", "ensemble"]
         window = [30.0, 50.0, 100.0]
+        aero = ["in_library", "realistic"]        # realism factors: aero, felt_wind, drift
+        felt_wind = ["anemometer", "tributary"]
+        drift = [0.0, 0.3]
     """
     return load_toml(path, compare_config_from_dict, "grid file")
 
@@ -270,15 +298,17 @@ def _campaign_key(cell: dict) -> tuple:
 
 
 def _campaign_config(config: CompareConfig, key: tuple):
-    from vivbench.synth import CampaignConfig, GeneratorConfig, SensorConfig, WindConfig
+    from vivbench.synth import AeroConfig, CampaignConfig, ChangesConfig, GeneratorConfig, SensorConfig, WindConfig
 
-    accel, anem, ti = key
-    default = GeneratorConfig()
+    accel, anem, ti, aero, felt, drift = key
+    default = GeneratorConfig.in_library()
     generator = dataclasses.replace(
         default,
         sensors=dataclasses.replace(default.sensors, noise_density=SensorConfig().noise_density * accel),
-        wind=dataclasses.replace(default.wind, noise=anem,
+        wind=dataclasses.replace(default.wind, noise=anem, felt_wind=felt,
                                  turbulence=dataclasses.replace(WindConfig().turbulence, intensity=ti)),
+        aero=AeroConfig.from_mode(aero),
+        changes=ChangesConfig(drift_amplitude=drift),
     )
     return CampaignConfig(n_events=config.n_events, seed=config.seed, duration=config.duration, generator=generator)
 

@@ -16,7 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.validate.recovery import model_window_rhs_errors, model_window_rhs_errors_true_AU, regime_scores
+from vivbench.validate.recovery import (
+    finite_median,
+    model_window_rhs_errors,
+    model_window_rhs_errors_true_AU,
+    regime_scores,
+    truth_window_activity,
+)
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.core.errors import InputError
@@ -90,20 +96,18 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         if "coef" in truth.data_vars:
             e, act = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
                                              active_share=active_share)
-            errs.append(e.ravel())
-            errs_active.append(np.where(act, e, np.nan).ravel())
+        else:  # a truth outside the library (DESIGN 2.8): no error on the measured (A, U)
+            act = truth_window_activity(truth, start, end, active_share=active_share)
+            e = np.full(act.shape, np.nan)
+        errs.append(e.ravel())
+        errs_active.append(np.where(act, e, np.nan).ravel())
         et, act_t = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
                                                     active_share=active_share)
         errs_true.append(et.ravel())
         errs_true_active.append(np.where(act_t, et, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))
-
-    def median(parts):
-        x = np.concatenate(parts) if parts else np.array([np.nan])
-        return float(np.nanmedian(x)) if np.isfinite(x).any() else float("nan")
-
-    scores["rhs_median_rel_error"] = median(errs)
-    scores["rhs_median_rel_error_active"] = median(errs_active)
-    scores["rhs_error_true_AU_median"] = median(errs_true)
-    scores["rhs_error_true_AU_median_active"] = median(errs_true_active)
+    scores["rhs_median_rel_error"] = finite_median(np.concatenate(errs))
+    scores["rhs_median_rel_error_active"] = finite_median(np.concatenate(errs_active))
+    scores["rhs_error_true_AU_median"] = finite_median(np.concatenate(errs_true))
+    scores["rhs_error_true_AU_median_active"] = finite_median(np.concatenate(errs_true_active))
     return scores

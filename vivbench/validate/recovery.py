@@ -27,7 +27,8 @@ from vivbench.core.terms import evaluate_library
 from vivbench.regimes.truth import truth_window_regimes
 
 __all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
-           "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU"]
+           "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU",
+           "truth_window_activity", "truth_rhs_errors", "finite_median"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -293,6 +294,45 @@ def window_rhs_errors_true_AU(result: xr.Dataset, truth: xr.Dataset, *,
             errors[w] = np.sqrt(np.mean((f_id - f_true) ** 2, axis=0)) / rms_true
         active[w] = rms_true >= active_share * scale
     return errors, active
+def truth_window_activity(truth: xr.Dataset, window_start, window_end, *, active_share: float = 0.1) -> np.ndarray:
+    """Which window-equations have dynamics, from the truth alone (no coefficient matrix needed).
+
+    A window is active for a section when the RMS of the true dA/dt (the sum of the truth's
+    order contributions r0..r3 on its own time grid, start <= t < end) is at least
+    ``active_share`` of the event's RMS true dA/dt of that section.
+
+    Returns
+    -------
+    active : ndarray of bool, shape (W, n_sections)
+    """
+    t = truth["time"].values
+    f = np.asarray(truth["r"].values, dtype=float).sum(-1)
+    scale = np.sqrt(np.mean(f**2, axis=0))
+    start = np.atleast_1d(np.asarray(window_start, dtype=float))
+    end = np.atleast_1d(np.asarray(window_end, dtype=float))
+    inside = (t[None, :] >= start[:, None]) & (t[None, :] < end[:, None])  # (W, n_t)
+    n = inside.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt((inside.astype(float) @ f**2) / n[:, None])
+    return (n[:, None] > 0) & (rms >= active_share * scale)
+
+
+def truth_rhs_errors(result: xr.Dataset, truth: xr.Dataset, *, active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`window_rhs_errors` when the truth has an exact coefficient matrix (``coef``); otherwise
+    (a truth outside the library, DESIGN 2.8) the errors are NaN (not scored) and the activity comes
+    from :func:`truth_window_activity`."""
+    if "coef" in truth.data_vars:
+        return window_rhs_errors(result, truth["coef"].values, truth["r"].values, active_share=active_share)
+    active = truth_window_activity(truth, result["window_start"].values, result["window_end"].values,
+                                   active_share=active_share)
+    return np.full(active.shape, np.nan), active
+
+
+def finite_median(x: np.ndarray) -> float:
+    """Median of the finite values; NaN (without a warning) when there is none."""
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(np.median(x)) if x.size else float("nan")
 
 
 def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -> dict:
@@ -300,7 +340,8 @@ def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -
 
     Parameters
     ----------
-    event_files : synthetic event files (with ``/truth``; ``coef`` optional)
+    event_files : synthetic event files (with ``/truth``; without its ``coef``, a truth outside the
+        library, the RHS errors are NaN and ``active_share`` counts the active windows)
     result_files : the matching ``<event_id>.identify.nc``, same order
     active_share : a window counts as active when the RMS of its true dA/dt is at
         least this share of the event's RMS true dA/dt (relative errors on windows
@@ -337,31 +378,25 @@ def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -
         truth = read_event(ev_path)["truth"].ds
         res = read_result(res_path)
         start, end = res["window_start"].values, res["window_end"].values
-        if "coef" in truth.data_vars:
-            e, active = window_rhs_errors(res, truth["coef"].values, truth["r"].values, active_share=active_share)
-        else:  # no exact matrix (truth outside the library): no error on the measured (A, U)
-            e = np.full(res["regime"].shape, np.nan)
-            active = np.zeros(e.shape, dtype=bool)
+        e, active = truth_rhs_errors(res, truth, active_share=active_share)
         et, act_t = window_rhs_errors_true_AU(res, truth, active_share=active_share)
         parts.append({"regime": res["regime"].values, "truth": truth_window_regimes(truth, start, end),
                       "flag": res["identifiable"].values.astype(bool), "err": e.ravel(),
-                      "err_active": np.where(active, e, np.nan).ravel(), "err_true": et.ravel(),
-                      "err_true_active": np.where(act_t, et, np.nan).ravel()})
+                      "err_active": np.where(active, e, np.nan).ravel(),
+                      # scored and active; without a coefficient matrix nothing is scored: active alone
+                      "active": (active & np.isfinite(e) if "coef" in truth.data_vars else active).ravel(),
+                      "err_true": et.ravel(), "err_true_active": np.where(act_t, et, np.nan).ravel()})
     return _recovery_scores(parts), [_recovery_scores([p]) for p in parts]
-
-
-def _nanmedian(x: np.ndarray) -> float:
-    return float(np.nanmedian(x)) if np.isfinite(x).any() else float("nan")
 
 
 def _recovery_scores(parts: list[dict]) -> dict:
     cat = {k: np.concatenate([np.ravel(p[k]) for p in parts]) for k in parts[0]}
     scores = regime_scores(cat["regime"], cat["truth"], cat["flag"])
-    scores["rhs_median_rel_error"] = _nanmedian(cat["err"])
-    scores["rhs_median_rel_error_active"] = _nanmedian(cat["err_active"])
-    scores["active_share"] = float(np.mean(np.isfinite(cat["err_active"])))
-    scores["rhs_error_true_AU_median"] = _nanmedian(cat["err_true"])
-    scores["rhs_error_true_AU_median_active"] = _nanmedian(cat["err_true_active"])
+    scores["rhs_median_rel_error"] = finite_median(cat["err"])
+    scores["rhs_median_rel_error_active"] = finite_median(cat["err_active"])
+    scores["active_share"] = float(np.mean(cat["active"]))
+    scores["rhs_error_true_AU_median"] = finite_median(cat["err_true"])
+    scores["rhs_error_true_AU_median_active"] = finite_median(cat["err_true_active"])
     scores["active_share_true_AU"] = float(np.mean(np.isfinite(cat["err_true_active"])))
     scores["truth_regime_shares"] = {k: float(np.mean(cat["truth"] == k)) for k in (1, 2, 3, 4)}
     return scores

@@ -1,7 +1,8 @@
 """Monte-Carlo recovery sweeps: many synthetic campaigns, each generated, identified and scored.
 
-A sweep varies the measurement noise, the turbulence and structural or
-aerodynamic parameters of the synthetic bridge over a grid (every combination)
+A sweep varies the measurement noise, the turbulence, structural or
+aerodynamic parameters and the realism switches of DESIGN 2.8 (aerodynamic
+functions, felt wind, damping drift) of the synthetic bridge over a grid (every combination)
 and/or ranges (drawn per campaign), and records for every campaign how well
 the identification chain recovers the truth (:func:`campaign_recovery`).
 
@@ -196,6 +197,8 @@ class SweepConfig:
                     raise InputError(f"[grid] {name} needs at least one value")
                 if len(set(vals)) != len(vals):
                     raise InputError(f"[grid] {name} values must be distinct; got {list(vals)}")
+            elif PARAMETERS[name].switch:
+                raise InputError(f"[ranges] {name} is a 0/1 switch: give it under [grid], e.g. {name} = [0, 1]")
             elif len(vals) != 2 or not vals[0] <= vals[1]:
                 raise InputError(f"[ranges] {name} must be [low, high] with low <= high; got {list(vals)}")
             out.append((name, vals))
@@ -324,6 +327,8 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
         duration = [240.0, 240.0]     # event duration (min, max), s
         [grid]                        # every combination is a grid point
         noise_density = [30.0, 300.0]
+        aero_realistic = [0, 1]       # realism switches (0/1, grid only): aero_realistic, felt_wind_tributary
+        drift_amplitude = [0.0, 0.3]
         [ranges]                      # drawn per campaign, uniformly
         turbulence_intensity = [0.04, 0.12]
         [identify]                    # IdentifyConfig: window, step, alpha, optimizer, derivative = "tv",
