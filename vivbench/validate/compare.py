@@ -116,7 +116,8 @@ _LABELS = {
 }
 _CAMPAIGN_FACTORS = ("accel_noise", "anemometer_noise", "turbulence_intensity", "aero", "felt_wind", "drift")
 _METRICS = ("n_scored", "truth_majority_share", "coverage", "accuracy_all", "accuracy_identifiable", "accuracy_not_identifiable",
-            "rhs_median_rel_error", "rhs_median_rel_error_active", "no_model_share", "wall_time_s",
+            "rhs_median_rel_error", "rhs_median_rel_error_active", "rhs_error_true_AU_median_active",
+            "no_model_share", "wall_time_s",
             "wall_time_per_event_s", "cpu_time_s")
 _COLUMNS = ("cell_id", "varied") + FACTORS + ("n_events",) + _METRICS + ("error",)
 
@@ -386,6 +387,8 @@ def _run_cell(task: dict) -> dict:
         "accuracy_not_identifiable": scores["accuracy_not_identifiable"],
         "rhs_median_rel_error": scores["rhs_median_rel_error"],
         "rhs_median_rel_error_active": scores["rhs_median_rel_error_active"],
+        # on the truth's own (A, U): scored for truths outside the library too
+        "rhs_error_true_AU_median_active": scores["rhs_error_true_AU_median_active"],
         "no_model_share": no_model / total if total else float("nan"),
         "wall_time_s": wall,
         "wall_time_per_event_s": wall / len(task["files"]),

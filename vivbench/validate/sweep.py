@@ -79,10 +79,12 @@ METRIC_COLUMNS = (
     "rhs_median_rel_error",
     "rhs_median_rel_error_active",
     "active_share",
+    "rhs_error_true_AU_median_active",
     "pooled_coverage",
     "pooled_accuracy_all",
     "pooled_accuracy_identifiable",
     "pooled_rhs_median_rel_error_active",
+    "pooled_rhs_error_true_AU_median_active",
     "truth_share_regime1",
     "truth_share_regime2",
     "truth_share_regime3",
@@ -420,6 +422,8 @@ def _flatten_scores(scores: dict) -> dict[str, float]:
         "rhs_median_rel_error": scores["rhs_median_rel_error"],
         "rhs_median_rel_error_active": scores["rhs_median_rel_error_active"],
         "active_share": scores["active_share"],
+        # on the truth's own (A, U) through the models' predict: scored for truths outside the library too
+        "rhs_error_true_AU_median_active": scores["rhs_error_true_AU_median_active"],
     }
     for k in (1, 2, 3, 4):
         out[f"truth_share_regime{k}"] = shares.get(k, float("nan"))
@@ -467,7 +471,8 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         pooled = write_pooled(pool_results(results, PooledSINDy(seed=task.campaign_seed)), root / "identify")
         ps = pooled_recovery(events, pooled, results)
         metrics.update({f"pooled_{k}": float(ps[k]) for k in ("coverage", "accuracy_all", "accuracy_identifiable",
-                                                               "rhs_median_rel_error_active")})
+                                                               "rhs_median_rel_error_active",
+                                                               "rhs_error_true_AU_median_active")})
     except Exception as exc:
         # Temporary paths differ from run to run; the table must not.
         message = error_line(exc).replace(str(root), "<campaign>")
