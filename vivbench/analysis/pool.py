@@ -17,7 +17,7 @@ from vivbench.models.campaign import PooledSINDy
 from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.result import read_result
-from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, read_pooled
+from vivbench.io.campaign_model import MODEL_NAME, POOLED_FORMAT, POOLED_NAME, read_pooled
 from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
 
@@ -111,14 +111,15 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
     return out
 
 
-def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
+def pool_results(result_files: Sequence, model=None, *,
                  derivative: Derivative | None = CAMPAIGN_DERIVATIVE) -> "xr.Dataset":
     """Fit the campaign model on identification results and label every window with it.
 
     Parameters
     ----------
     result_files : paths of ``<event_id>.identify.nc`` (their A, U, segments and windows are used)
-    model : PooledSINDy, optional (default settings otherwise)
+    model : PooledSINDy or VaryingCoefficientSINDy, optional
+        The campaign model, fitted here in place (default: ``PooledSINDy()``).
     derivative : Derivative or None
         dA/dt of the campaign model, recomputed from each result's A
         (default :data:`CAMPAIGN_DERIVATIVE`); None uses the results' own dA.
@@ -131,19 +132,37 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     Returns
     -------
     xarray.Dataset
-        Coordinates ``equation``, ``feature``, ``bootstrap``, ``order`` and
-        ``window_all`` (every window of every event); variables ``coef``
-        (equation, feature) in physical units (dA/dt in m/s), ``coef_bootstrap``,
-        ``n_terms``, ``threshold``, ``rss``, ``aicc``; per window ``event_id``,
+        Coordinates ``equation``, ``order``, ``window_all`` (every window of
+        every event), ``wind`` and ``event``; per window ``event_id``,
         ``window``, ``window_start``, ``window_end``, ``regime``,
         ``identifiable``, ``agreement``, ``order_rms``; the coefficient curves
-        (DESIGN 3.5, :meth:`PooledSINDy.curves` at its default 95 % level)
+        (DESIGN 3.5, the model's ``curves`` at its default 95 % level)
         ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind)
-        in m^(1-i)/s on the coordinate ``wind`` (m/s, :func:`curve_wind_grid`
-        of the results' U). Written by
-        :func:`write_pooled` as ``campaign.pooled.nc``.
+        in m^(1-i)/s on ``wind`` (m/s, :func:`curve_wind_grid` of the results'
+        U); per event the residual checks of :mod:`vivbench.analysis.changes`
+        (``event_residual_ratio``, ``event_residual_rel_rms``,
+        ``event_linear_offset``, ``event_linear_offset_se``,
+        ``event_change_stat``) and the attributes ``change_event``,
+        ``change_p_value``, ``change_detected``, ``change_heterogeneity_p``.
+        With a ``PooledSINDy`` also the coordinates ``feature`` and
+        ``bootstrap`` and ``coef`` (equation, feature) in physical units (dA/dt
+        in m/s), ``coef_bootstrap``, ``n_terms``, ``threshold``, ``rss``,
+        ``aicc``, ``robust`` (the file has no ``model`` attribute, as before
+        the varying model existed). With a ``VaryingCoefficientSINDy`` the
+        attribute ``model = "VaryingCoefficientSINDy"`` and per equation
+        ``n_basis``, ``penalty``, ``edf``, ``rss`` instead (no library
+        coefficients: the splines are in the model's own file,
+        ``campaign.model.nc``). Written by :func:`write_pooled` as
+        ``campaign.pooled.nc``.
     """
-    model = model or PooledSINDy()
+    from vivbench.analysis.changes import change_point_scan, event_residual_checks
+    from vivbench.models.varying import VaryingCoefficientSINDy
+    from vivbench.regimes.varying import varying_window_verdicts
+
+    model = PooledSINDy() if model is None else model
+    varying = isinstance(model, VaryingCoefficientSINDy)
+    if not varying and not isinstance(model, PooledSINDy):
+        raise InputError(f"pool_results takes a PooledSINDy or a VaryingCoefficientSINDy; got {type(model).__name__}")
     results = []
     for path in result_files:
         ds = read_result(path, ["A", "U", "dA", "segment", "window_start", "window_end"], optional=["amplitude_snr"])
@@ -154,11 +173,16 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
     for path, _ds, _attrs, eq in results:
         if eq != sections:
             raise InputError(f"{path}: equations {eq} differ from {sections} of the other results")
-    model.fit([_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results])
-    rows = {k: [] for k in ("event_id", "window", "window_start", "window_end", "regime", "identifiable", "agreement", "robust", "order_rms")}
-    for _path, ds, attrs, _eq in results:
+    records = [_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results]
+    model.fit(records)
+    keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
+    rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}
+    for (_path, ds, attrs, _eq), record in zip(results, records):
         s, e = ds["window_start"].values, ds["window_end"].values
-        out = campaign_window_verdicts(model, ds["time"].values, ds["A"].values, ds["U"].values, s, e)
+        if varying:
+            out = varying_window_verdicts(model, record, s, e)
+        else:
+            out = campaign_window_verdicts(model, ds["time"].values, ds["A"].values, ds["U"].values, s, e)
         min_snr = json.loads(attrs.get("identify_config_json", "{}")).get("min_snr")
         if min_snr is not None and "amplitude_snr" in ds:
             # The identification's noise-floor test holds for any model: below the floor A is noise.
@@ -167,51 +191,100 @@ def pool_results(result_files: Sequence, model: PooledSINDy | None = None, *,
         rows["window"].append(np.arange(s.size))
         rows["window_start"].append(s)
         rows["window_end"].append(e)
-        for key in ("regime", "identifiable", "agreement", "robust", "order_rms"):
+        for key in keys:
             rows[key].append(out[key])
     cat = {k: np.concatenate(v) for k, v in rows.items()}
-    data = {
-        "coef": (("equation", "feature"), model.coef_, {"units": "m/s per unit of the feature", "long_name": "pooled campaign model"}),
-        "coef_bootstrap": (("bootstrap", "equation", "feature"), model.coef_bootstrap_, {"long_name": "block-bootstrap replicate models"}),
-        "n_terms": (("equation",), model.n_terms_.astype(np.int32), {"units": "1"}),
-        "threshold": (("equation",), model.threshold_, {"units": "1", "long_name": "selected STLSQ threshold (standardised)"}),
-        "rss": (("equation",), model.rss_, {"units": "m2 s-2"}),
-        "aicc": (("equation",), model.aicc_, {"units": "1"}),
+    windows = {
         "event_id": (("window_all",), cat["event_id"].astype(str)),
         "window": (("window_all",), cat["window"].astype(np.int32), {"long_name": "window index in the event's result"}),
         "window_start": (("window_all",), cat["window_start"], {"units": "s"}),
         "window_end": (("window_all",), cat["window_end"], {"units": "s"}),
         "regime": (("window_all", "equation"), cat["regime"].astype(np.int8), {"long_name": "regime of the pooled model (DESIGN 2.5)"}),
-        "identifiable": (("window_all", "equation"), cat["identifiable"].astype(np.int8),
-                         {"long_name": "bootstrap agreement on the regime reaches the agreement level, the "
-                          "near-null-space test passes and the amplitude is above the noise floor"}),
-        "agreement": (("window_all", "equation"), cat["agreement"], {"units": "1", "long_name": "share of bootstrap models with the same regime"}),
-        "robust": (("window_all", "equation"), cat["robust"].astype(np.int8),
-                   {"long_name": "no model within the fit tolerance gives the window another regime (near-null-space test)"}),
-        "order_rms": (("window_all", "equation", "order"), cat["order_rms"], {"units": "m/s"}),
     }
+    agreement = (("window_all", "equation"), cat["agreement"], {"units": "1", "long_name": "share of bootstrap models with the same regime"})
+    order_rms = (("window_all", "equation", "order"), cat["order_rms"], {"units": "m/s"})
+    if varying:
+        data = {
+            "n_basis": (("equation",), model.n_basis_.astype(np.int32), {"units": "1", "long_name": "cubic B-splines per curve"}),
+            "penalty": (("equation",), model.penalty_, {"units": "1", "long_name": "relative second-difference penalty"}),
+            "edf": (("equation",), model.edf_, {"units": "1", "long_name": "effective degrees of freedom"}),
+            "rss": (("equation",), model.rss_, {"units": "m2 s-2"}),
+            **windows,
+            "identifiable": (("window_all", "equation"), cat["identifiable"].astype(np.int8),
+                             {"long_name": "bootstrap agreement on the regime reaches the agreement level and the "
+                              "amplitude is above the noise floor"}),
+            "agreement": agreement,
+            "order_rms": order_rms,
+        }
+    else:
+        data = {
+            "coef": (("equation", "feature"), model.coef_, {"units": "m/s per unit of the feature", "long_name": "pooled campaign model"}),
+            "coef_bootstrap": (("bootstrap", "equation", "feature"), model.coef_bootstrap_, {"long_name": "block-bootstrap replicate models"}),
+            "n_terms": (("equation",), model.n_terms_.astype(np.int32), {"units": "1"}),
+            "threshold": (("equation",), model.threshold_, {"units": "1", "long_name": "selected STLSQ threshold (standardised)"}),
+            "rss": (("equation",), model.rss_, {"units": "m2 s-2"}),
+            "aicc": (("equation",), model.aicc_, {"units": "1"}),
+            **windows,
+            "identifiable": (("window_all", "equation"), cat["identifiable"].astype(np.int8),
+                             {"long_name": "bootstrap agreement on the regime reaches the agreement level, the "
+                              "near-null-space test passes and the amplitude is above the noise floor"}),
+            "agreement": agreement,
+            "robust": (("window_all", "equation"), cat["robust"].astype(np.int8),
+                       {"long_name": "no model within the fit tolerance gives the window another regime (near-null-space test)"}),
+            "order_rms": order_rms,
+        }
     curves = model.curves(curve_wind_grid(np.concatenate([ds["U"].values.ravel() for _p, ds, _a, _e in results])))
     for name in ("curves", "curves_lower", "curves_upper"):
         data[name] = (("equation", "order", "wind"), curves[name].values, curves[name].attrs)
-    coords = {"equation": sections, "feature": model.feature_names_, "bootstrap": np.arange(model.coef_bootstrap_.shape[0]),
-              "order": np.arange(4), "window_all": np.arange(cat["window"].size),
-              "wind": ("wind", curves["wind"].values, {"units": "m/s", "long_name": "mean wind speed of the curves"})}
+    # Does the model's assumption (one function of (A, U) for the whole campaign) hold? (vivbench.analysis.changes)
+    checks = event_residual_checks(model, records)
+    scan = change_point_scan(checks["linear_offset"], checks["linear_offset_se"], checks["weight"], seed=model.seed)
+    data.update({
+        "event_residual_ratio": (("event",), checks["residual_ratio"],
+                                 {"units": "1", "long_name": "RMS of the event's dA/dt residual over the median of the events'"}),
+        "event_residual_rel_rms": (("event",), checks["residual_rel_rms"],
+                                   {"units": "1", "long_name": "RMS of the event's dA/dt residual over the RMS of its dA/dt"}),
+        "event_linear_offset": (("event",), checks["linear_offset"],
+                                {"units": "s-1", "long_name": "least-squares coefficient of the event's residual on A "
+                                 "(an unmodelled change of the net linear coefficient; negative: more damped)"}),
+        "event_linear_offset_se": (("event",), checks["linear_offset_se"],
+                                   {"units": "s-1", "long_name": "block-robust standard error of event_linear_offset"}),
+        "event_change_stat": (("event",), scan["split_stat"],
+                              {"units": "m2 s-2", "long_name": "between-group sum of squares of event_linear_offset "
+                               "for a change just before this event"}),
+    })
+    event_ids = [str(a["event_id"]) for _p, _d, a, _e in results]
+    coords = {"equation": sections}
+    if not varying:
+        coords.update(feature=model.feature_names_, bootstrap=np.arange(model.coef_bootstrap_.shape[0]))
+    coords.update({"order": np.arange(4), "window_all": np.arange(cat["window"].size),
+                   "wind": ("wind", curves["wind"].values, {"units": "m/s", "long_name": "mean wind speed of the curves"}),
+                   "event": ("event", event_ids, {"long_name": "events in the order of the result files"})})
+    enough = bool(model.enough_data_) if not varying else True
     attrs = {
         "format": "vivbench-pooled",
         "format_version": 1,
-        "events": json.dumps([str(a["event_id"]) for _p, _d, a, _e in results]),
+        "events": json.dumps(event_ids),
         "n_samples": model.n_samples_,
         "n_blocks": model.n_blocks_,
-        "cond": model.cond_,
-        "enough_data": int(model.enough_data_),
-        "note": ("" if model.enough_data_ else
+    }
+    if varying:
+        attrs["model"] = type(model).__name__
+    else:
+        attrs.update(cond=model.cond_, enough_data=int(model.enough_data_))
+    attrs.update({
+        "note": ("" if enough else
                  f"only {model.n_blocks_} bootstrap blocks of {model.block_s:g} s (fewer than {model.min_blocks}): "
                  "too little data for an identifiability verdict, no window is flagged identifiable"),
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
         "pooled_config_json": model.to_json(),
         "derivative_json": json.dumps(None if derivative is None else dataclasses.asdict(derivative), sort_keys=True),
         "vivbench_version": vivbench.__version__,
-    }
+        "change_event": "" if scan["change_index"] < 0 else event_ids[scan["change_index"]],
+        "change_p_value": scan["p_value"],
+        "change_detected": int(scan["detected"]),
+        "change_heterogeneity_p": scan["heterogeneity_p"],
+    })
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
@@ -236,36 +309,68 @@ def campaign_model_file(directory) -> Path | None:
     return None
 
 
-def load_campaign_model(path) -> PooledSINDy:
+def _file_model_name(path: Path) -> tuple[str | None, str | None]:
+    """The ``model`` and ``format`` attributes of a NetCDF file (None when absent or unreadable)."""
+    try:
+        with xr.open_dataset(path) as ds:
+            name, fmt = ds.attrs.get("model"), ds.attrs.get("format")
+    except Exception:  # noqa: BLE001 - the readers below give the one-line error
+        return None, None
+    return (None if name is None else str(name)), (None if fmt is None else str(fmt))
+
+
+def load_campaign_model(path):
     """The campaign model of ``vivbench pool`` as a model of the protocol (DESIGN 7).
 
     Parameters
     ----------
     path : path
-        A campaign model file (``campaign.model.nc``, :meth:`PooledSINDy.save`),
-        a pooled result (``campaign.pooled.nc``) or a directory holding one of
-        them (the model file first, see :func:`campaign_model_file`).
+        A campaign model file (``campaign.model.nc``: :meth:`PooledSINDy.save`
+        or :meth:`VaryingCoefficientSINDy.save`, told apart by the file's
+        ``model`` attribute), a pooled result (``campaign.pooled.nc``) or a
+        directory holding one of them (the model file first, see
+        :func:`campaign_model_file`).
 
     Returns
     -------
-    PooledSINDy
-        Loaded with :meth:`PooledSINDy.load`; from a pooled result (older outputs)
-        rebuilt with :meth:`PooledSINDy.from_pooled`, which predicts, gives order
-        contributions, simulates and prints equations but has no ``curves``.
+    PooledSINDy or VaryingCoefficientSINDy
+        A ``PooledSINDy`` file is loaded with :meth:`PooledSINDy.load`; from a
+        pooled result (older outputs) rebuilt with :meth:`PooledSINDy.from_pooled`,
+        which predicts, gives order contributions, simulates and prints
+        equations but has no ``curves``. A file whose ``model`` attribute is
+        ``"VaryingCoefficientSINDy"`` is loaded with
+        :meth:`VaryingCoefficientSINDy.load`.
 
     Raises
     ------
     InputError
         One line naming the file or directory: nothing of ``vivbench pool``
-        there, or a file that is neither a campaign model nor a pooled result.
+        there, a file that is neither a campaign model nor a pooled result, a
+        pooled result of the varying model without its model file, or (for a
+        directory) a model file of another model than the pooled result's.
     """
+    from vivbench.io.campaign_model import pooled_model_name
+    from vivbench.models.varying import VaryingCoefficientSINDy
+
     path = Path(path)
+    pooled_name = None
     if path.is_dir():
         found = campaign_model_file(path)
         if found is None:
             raise InputError(f"{path}: no campaign model ({MODEL_NAME} or {POOLED_NAME}) in this directory; "
                              "run vivbench pool first")
+        if found.name == MODEL_NAME and (path / POOLED_NAME).is_file():
+            pooled_name = _file_model_name(path / POOLED_NAME)[0] or "PooledSINDy"
         path = found
+    name, fmt = _file_model_name(path) if path.is_file() else (None, None)
+    if pooled_name is not None and (name or "PooledSINDy") != pooled_name:
+        raise InputError(f"{path}: a {name or 'PooledSINDy'} model beside a pooled result of {pooled_name}; "
+                         "re-run vivbench pool")
+    if name == VaryingCoefficientSINDy.__name__:
+        if fmt != POOLED_FORMAT:
+            return VaryingCoefficientSINDy.load(path)
+        raise InputError(f"{path}: a pooled result of VaryingCoefficientSINDy holds no model; its {MODEL_NAME} "
+                         "is needed (re-run vivbench pool --model varying)")
     try:
         return PooledSINDy.load(path)
     except ModelFileError as exc:
@@ -273,6 +378,9 @@ def load_campaign_model(path) -> PooledSINDy:
             pooled = read_pooled(path)
         except ModelFileError:
             raise exc from None
+    if pooled_model_name(pooled) != "PooledSINDy":
+        raise InputError(f"{path}: a pooled result of {pooled_model_name(pooled)} holds no model; its {MODEL_NAME} "
+                         "is needed (re-run vivbench pool)")
     return PooledSINDy.from_pooled(pooled)
 
 

@@ -1,4 +1,4 @@
-"""``vivbench pool``: one SINDy model for a whole campaign and the regimes it gives every window."""
+"""``vivbench pool``: one model for a whole campaign and the regimes it gives every window."""
 
 from __future__ import annotations
 
@@ -8,25 +8,42 @@ from pathlib import Path
 
 def run(args) -> int:
     from vivbench.models.campaign import PooledSINDy
+    from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.io.result import list_results
+    from vivbench.io.netcdf import write_netcdf_atomic
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_pooled
 
     results_dir = Path(args.results)
     files = list_results(results_dir)
-    model = PooledSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement, tau=args.tau,
-                        seed=args.seed)
+    if args.model == "varying":
+        model = VaryingCoefficientSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement,
+                                        tau=args.tau, seed=args.seed)
+    else:
+        model = PooledSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement, tau=args.tau,
+                            seed=args.seed)
     ds = pool_results(files, model)  # fits ``model`` in place
     out_dir = Path(args.out) if args.out else results_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     out = write_pooled(ds, out_dir)
     # The fitted model itself, for forecast, validate and the report (the model protocol's load).
-    model_out = model.save(out_dir / MODEL_NAME)
+    if args.model == "varying":
+        model_out = write_netcdf_atomic(model.to_dataset(), out_dir / MODEL_NAME)
+    else:
+        model_out = model.save(out_dir / MODEL_NAME)
     if ds.attrs.get("note"):
         print(f"vivbench pool: {ds.attrs['note']}", file=sys.stderr)
-    print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, terms per equation "
-          f"{', '.join(str(int(k)) for k in ds['n_terms'].values)}, regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
-    print(f"wrote {model_out}: the fitted campaign model (vivbench.models.CampaignSINDy.load)")
+    if args.model == "varying":
+        shape = f"cubic B-splines per curve {', '.join(str(int(k)) for k in ds['n_basis'].values)}"
+    else:
+        shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
+    print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, {shape}, "
+          f"regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
+    if ds.attrs["change_detected"]:
+        print(f"vivbench pool: the events' residuals change with time (permutation p = {ds.attrs['change_p_value']:.3f}, "
+              f"most likely from {ds.attrs['change_event']} on): the campaign model averages over a change the "
+              "wind does not carry", file=sys.stderr)
+    print(f"wrote {model_out}: the fitted campaign model (vivbench.analysis.load_campaign_model)")
     return 0
 
 
@@ -34,6 +51,9 @@ def register(sub) -> None:
     s = sub.add_parser("pool", help="fit one model to a whole campaign's results and label every window with it")
     s.add_argument("results", help="directory of <event_id>.identify.nc")
     s.add_argument("--out", default=None, help="output directory (default: the results directory)")
+    s.add_argument("--model", choices=("sindy", "varying"), default="sindy",
+                   help="campaign model: sindy (PooledSINDy, the 69-term library; default) or varying "
+                        "(VaryingCoefficientSINDy, spline curves in U for realistic bridges)")
     s.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates (default 100)")
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")
     s.add_argument("--agreement", type=float, default=0.9,

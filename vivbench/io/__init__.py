@@ -43,6 +43,8 @@ from vivbench.io.campaign_model import (
     CAMPAIGN_MODEL_VERSION,
     write_pooled,
     read_pooled,
+    POOLED_MODELS,
+    pooled_model_name,
     write_campaign_model,
     read_campaign_model,
 )
@@ -74,7 +76,8 @@ __all__ = [
     "ResultFormatError", "build_result", "write_result", "read_result", "list_results", "result_path",
     "result_record", "markdown_table", "markdown_attributes", "ModelFileError", "read_model_dataset",
     "POOLED_NAME", "MODEL_NAME", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION",
-    "write_pooled", "read_pooled", "write_campaign_model", "read_campaign_model", "WINDOW_MODEL_FORMAT",
+    "write_pooled", "read_pooled", "POOLED_MODELS", "pooled_model_name", "write_campaign_model", "read_campaign_model",
+    "WINDOW_MODEL_FORMAT",
     "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
     "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude",
     "check_wind_varies", "import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",

@@ -10,7 +10,13 @@ Two schemas, one owner:
   :data:`MODEL_NAME` (``campaign.model.nc``) beside the pooled result.
 - the *pooled result* ``campaign.pooled.nc`` of ``vivbench pool`` (format
   ``"vivbench-pooled"``): the model's coefficients with every window's regime.
-  Written by :func:`write_pooled`, read by :func:`read_pooled`.
+  Written by :func:`write_pooled`, read by :func:`read_pooled`. Its ``model``
+  attribute names the campaign model (:data:`POOLED_MODELS`; absent in files of
+  the SINDy model written before it existed): only ``"PooledSINDy"`` files hold
+  the 69 library coefficients (``coef``, ``coef_bootstrap``); a
+  ``"VaryingCoefficientSINDy"`` file holds the windows' verdicts, the curves and
+  per-equation spline settings, and its model lives in ``campaign.model.nc``
+  (that model's own file, :meth:`vivbench.models.VaryingCoefficientSINDy.save`).
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ from vivbench.io.netcdf import write_netcdf_atomic
 
 __all__ = [
     "POOLED_NAME", "MODEL_NAME", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "write_pooled",
-    "read_pooled", "write_campaign_model", "read_campaign_model",
+    "read_pooled", "write_campaign_model", "read_campaign_model", "POOLED_MODELS", "pooled_model_name",
 ]
 
 POOLED_NAME = "campaign.pooled.nc"
@@ -51,9 +57,16 @@ _MODEL_VARIABLES = {
     "to_physical": ("basis", "basis_"),
 }
 
-_POOLED_VARIABLES = {
+#: Campaign models a pooled result can come from (its ``model`` attribute; absent means the first).
+POOLED_MODELS = ("PooledSINDy", "VaryingCoefficientSINDy")
+
+#: Variables of a pooled result of the SINDy model beyond :data:`_POOLED_VARIABLES`.
+_POOLED_SINDY_VARIABLES = {
     "coef": ("equation", "feature"),
     "coef_bootstrap": ("bootstrap", "equation", "feature"),
+}
+
+_POOLED_VARIABLES = {
     "regime": ("window_all", "equation"),
     "identifiable": ("window_all", "equation"),
     "order_rms": ("window_all", "equation", "order"),
@@ -77,8 +90,20 @@ def read_pooled(path) -> xr.Dataset:
         One line naming the file (missing, unreadable, other format, lacking a variable).
     """
     ds = read_model_dataset(path, fmt=POOLED_FORMAT, max_version=1, variables=_POOLED_VARIABLES, what="pooled result")
-    _check_library(ds, path)
+    name = ds.attrs.get("model", POOLED_MODELS[0])
+    if name not in POOLED_MODELS:
+        raise ModelFileError(f"{path}: pooled result of an unknown campaign model {name!r} (known: {', '.join(POOLED_MODELS)})")
+    if name == "PooledSINDy":
+        missing = [v for v in _POOLED_SINDY_VARIABLES if v not in ds.variables]
+        if missing:
+            raise ModelFileError(f"{path}: pooled result of PooledSINDy lacks {', '.join(missing)}")
+        _check_library(ds, path)
     return ds
+
+
+def pooled_model_name(ds: xr.Dataset) -> str:
+    """The campaign model a pooled result comes from: its ``model`` attribute, ``"PooledSINDy"`` when absent."""
+    return str(ds.attrs.get("model", POOLED_MODELS[0]))
 
 
 def _check_library(ds: xr.Dataset, path) -> None:

@@ -371,7 +371,18 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         pooled = read_pooled(pooled_path)
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)
-        md += ["## The campaign model (`vivbench pool`)", "",
+        varying = pooled.attrs.get("model") == "VaryingCoefficientSINDy"
+        if varying:
+            intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
+                     "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
+                     "window's regime is the rule of DESIGN 2.5 applied to this model's order contributions over the "
+                     "window's data; it counts as identifiable when at least "
+                     f"{json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap replicates "
+                     "of the spline coefficients agree and the amplitude is above the noise floor. "
+                     f"B-splines per curve: {', '.join(str(int(k)) for k in pooled['n_basis'].values)}; "
+                     f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
+                     f"coverage {float(pooled.attrs['coverage']):.3f}.")
+        md += ["## The campaign model (`vivbench pool`)", ""] + ([intro] if varying else [
                "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
                "AICc on all samples of all events (`vivbench.models.campaign`). A window's regime is the rule of "
                "DESIGN 2.5 applied to this model's order contributions over the window's data; it counts as "
@@ -382,7 +393,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                f"Terms per equation: {', '.join(str(int(k)) for k in pooled['n_terms'].values)}; "
                f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
                f"coverage {float(pooled.attrs['coverage']):.3f}."
-               + (f" **{pooled.attrs['note']}**" if pooled.attrs.get("note") else ""), "",
+               + (f" **{pooled.attrs['note']}**" if pooled.attrs.get("note") else "")]) + ["",
                f"Model file: `{model_path.name}`"
                + ("" if model_path.name != POOLED_NAME else
                   " (no campaign.model.nc: the model is rebuilt from the pooled result's coefficients)") + ".", "",

@@ -340,7 +340,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         pooled_out = {"regime": pr, "rhs": rhs_error_summary(np.concatenate(p_errs), np.concatenate(p_act)) if p_errs else None,
                       "rhs_true_AU": rhs_error_summary(np.concatenate(p_errs_true), np.concatenate(p_act_true)),
                       "file": str(pooled_path), "model_file": str(model_path),
-                      "n_terms": [int(k) for k in model.n_terms_],
+                      "model": type(model).__name__,
+                      "n_terms": [int(k) for k in getattr(model, "n_terms_", getattr(model, "n_basis_", []))],
                       "curves": _pooled_curve_errors(pooled, model, truth_curves, truth_U, truth_A, truth_excited)}
     if not regimes:
         raise InputError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "

@@ -1,0 +1,98 @@
+"""`vivbench pool --model varying` and the campaign model's per-event residual checks."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from tests.helpers import assert_close
+from vivbench.analysis.changes import change_point_scan, event_residual_checks
+from vivbench.core.record import Record
+
+
+def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results, tmp_path):
+    """The varying model's pooled file and model file; validate and forecast use it through the protocol."""
+    from vivbench.analysis import campaign_model_file, load_campaign_model
+    from vivbench.cli import main
+    from vivbench.core.errors import InputError
+    from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, pooled_model_name, read_pooled
+    from vivbench.io.result import read_result, result_record
+    from vivbench.models.varying import VaryingCoefficientSINDy
+    from vivbench.regimes import model_window_regimes
+    from vivbench.validate import validate_campaign
+
+    camp, res_dir, _ = small_results
+    res = tmp_path / "res"
+    shutil.copytree(res_dir, res)
+    assert main(["pool", str(res), "--model", "varying", "--bootstrap", "8", "--block", "20"]) == 0
+    assert not list(res.glob("*.tmp*"))
+    pooled = read_pooled(res / POOLED_NAME)
+    assert pooled_model_name(pooled) == "VaryingCoefficientSINDy" and "coef" not in pooled
+    assert {"n_basis", "penalty", "edf", "curves", "event_linear_offset", "event_residual_ratio"} <= set(pooled.data_vars)
+    assert pooled.sizes["event"] == 2 and pooled["curves"].dims == ("equation", "order", "wind")
+    model = load_campaign_model(res)
+    assert isinstance(model, VaryingCoefficientSINDy) and campaign_model_file(res) == res / MODEL_NAME
+    result = read_result(sorted(res.glob("*.identify.nc"))[0])
+    start, end = result["window_start"].values, result["window_end"].values
+    sel = pooled["event_id"].values.astype(str) == result.attrs["event_id"]
+    regimes = model_window_regimes(model, result_record(result), start, end, tau=model.tau)["regime"]
+    assert np.array_equal(regimes, pooled["regime"].values[sel])
+    v = validate_campaign(camp.files[0].parent, res)
+    assert v["pooled"]["model_file"] == str(res / MODEL_NAME)
+    t0 = float(start[start.size // 2])
+    assert main(["forecast", str(sorted(res.glob("*.identify.nc"))[0]), "--out", str(tmp_path / "fc"),
+                 "--t0", str(t0), "--horizon", "100", "--d", "0"]) == 0
+    summary = json.loads((tmp_path / "fc" / "summary.json").read_text())
+    assert any(k.startswith("campaign_model_simulation_nmse") for k in summary)
+    # The pooled file alone holds no varying model; a model file of another kind is refused.
+    with pytest.raises(InputError, match="holds no model"):
+        load_campaign_model(res / POOLED_NAME)
+    other = tmp_path / "other"
+    shutil.copytree(res_dir, other)
+    assert main(["pool", str(other), "--bootstrap", "4", "--block", "20"]) == 0
+    shutil.copy(other / MODEL_NAME, res / MODEL_NAME)
+    with pytest.raises(InputError, match="re-run vivbench pool"):
+        load_campaign_model(res)
+    sindy = read_pooled(other / POOLED_NAME)
+    assert "model" not in sindy.attrs and pooled_model_name(sindy) == "PooledSINDy" and "coef" in sindy
+
+
+class _Offset:
+    """A model predicting dA/dt - delta_e A for the event with index e in its id."""
+
+    def __init__(self, deltas):
+        self.deltas = deltas
+
+    def predict(self, rec):
+        return rec.dA - self.deltas[int(rec.event_id)] * rec.A
+
+
+def test_event_residual_checks_recover_the_offsets():
+    rng = np.random.default_rng(0)
+    deltas = np.array([0.0, 1e-3, -2e-3])
+    recs = []
+    for e in range(3):
+        t = np.arange(2400) * 0.25
+        A = 0.05 + 0.02 * rng.random((t.size, 3))
+        recs.append(Record(event_id=str(e), t=t, A=A, U=np.full_like(A, 8.0), dA=1e-3 * rng.standard_normal(A.shape)))
+    out = event_residual_checks(_Offset(deltas), recs, block_s=60.0)
+    assert_close(out["linear_offset"], deltas, atol=1e-15, reason="sums of squares in floating point")
+    assert np.all(out["linear_offset_se"] < 1e-12) and np.nanmedian(out["residual_ratio"]) == 1.0
+
+
+def test_change_point_scan_finds_a_step_and_not_noise():
+    rng = np.random.default_rng(1)
+    E = 20
+    se = np.full(E, 1e-4)
+    w = 1.0 + rng.random(E)
+    noise = 1e-4 * rng.standard_normal(E)
+    step = noise + np.where(np.arange(E) >= 10, -1e-3, 0.0)
+    found = change_point_scan(step, se, w)
+    assert found["detected"] and found["change_index"] == 10 and found["heterogeneity_p"] < 1e-6
+    none = change_point_scan(noise, se, w)
+    assert not none["detected"] and none["p_value"] > 0.05
+    nan = change_point_scan(np.array([np.nan, 1.0]), np.ones(2), np.ones(2))
+    assert nan["change_index"] == -1 and np.isnan(nan["p_value"])
