@@ -21,9 +21,19 @@ def default_campaign_specs():
 
 @pytest.fixture(scope="session")
 def event1(default_campaign_specs):
-    """The default campaign's first event (paper-like event 1), simulated in memory."""
+    """The default (realistic) campaign's first event (paper-like event 1), simulated in memory."""
     spec, seed = default_campaign_specs[0]
     return spec, simulate_event(spec, CampaignConfig().generator, seed)
+
+
+@pytest.fixture(scope="session")
+def event1_in_library(default_campaign_specs):
+    """The same event with the ``in_library`` generator (DESIGN 2.8): for exact-recovery tests,
+    which need the truth inside the library (an exact coefficient matrix)."""
+    from vivbench.synth import GeneratorConfig
+
+    spec, seed = default_campaign_specs[0]
+    return spec, simulate_event(spec, GeneratorConfig.in_library(), seed)
 
 
 @pytest.fixture(scope="session")
@@ -44,6 +54,33 @@ def small_results(small_campaign, tmp_path_factory):
     results, failures = identify_files(small_campaign.files[:2], out, workers=1)
     assert not failures, failures
     return small_campaign, out, results
+
+
+@pytest.fixture(scope="session")
+def small_campaign_in_library(tmp_path_factory):
+    """``small_campaign`` with the ``in_library`` generator (DESIGN 2.8).
+
+    For the tests that score coefficients or supports against the truth's exact
+    coefficient matrix (``/truth/coef``), which exists only when the truth lies in the library.
+    """
+    from vivbench.synth import GeneratorConfig
+
+    out = tmp_path_factory.mktemp("campaign_in_library")
+    result = generate_campaign(CampaignConfig(n_events=4, seed=11, duration=(360.0, 540.0),
+                                              generator=GeneratorConfig.in_library()), out, workers=1)
+    assert not result.failures, result.failures
+    return result
+
+
+@pytest.fixture(scope="session")
+def small_results_in_library(small_campaign_in_library, tmp_path_factory):
+    """``small_results`` of ``small_campaign_in_library``: (campaign, dir, files); see there."""
+    from vivbench.analysis.identify import identify_files
+
+    out = tmp_path_factory.mktemp("small_identify_in_library")
+    results, failures = identify_files(small_campaign_in_library.files[:2], out, workers=1)
+    assert not failures, failures
+    return small_campaign_in_library, out, results
 
 
 @pytest.fixture(scope="session")

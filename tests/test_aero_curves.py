@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -37,6 +38,7 @@ from vivbench.synth import (
     truth_curves,
 )
 
+from vivbench.synth.config import bell_polynomial
 S = StructureConfig()
 FD = S.frequency * S.depth  # m/s per unit of reduced velocity
 
@@ -87,16 +89,19 @@ def test_validation_messages(make, match):
 
 
 def test_modes_and_exactness():
-    assert AeroConfig.in_library() == AeroConfig() == GeneratorConfig().aero
-    assert AeroConfig().exact_in_library and AeroConfig().yaw is None
+    # the default is the realistic mode (DESIGN 2.8); in_library is the named polynomial set
+    assert AeroConfig.realistic() == AeroConfig() == GeneratorConfig().aero
+    lib = AeroConfig.in_library()
+    assert lib.exact_in_library and lib.yaw is None and AeroConfig.from_mode("in_library") == lib
+    assert lib.Y1 == bell_polynomial(20.0, 8.0, 2.5) and lib.C_L == bell_polynomial(0.04, 8.0, 8.0)
     real = AeroConfig.realistic()
     assert not real.exact_in_library and exact_coefficients(S, real) is None
     with pytest.raises(ValueError, match="amplitude_polynomials needs"):
         amplitude_polynomials(S, real)
     # a constant is a polynomial of degree 0: still exact
-    assert AeroConfig(C_L=Constant(value=0.02)).exact_in_library
+    assert AeroConfig.in_library(C_L=Constant(value=0.02)).exact_in_library
     # a yaw factor leaves the library even with polynomials
-    assert not AeroConfig(yaw=YawFactor()).exact_in_library
+    assert not AeroConfig.in_library(yaw=YawFactor()).exact_in_library
     assert AeroConfig.realistic(yaw=None, Y1=LorentzianBell(peak=20.0, center=7.0, width=0.8)).yaw is None
 
 
@@ -104,9 +109,10 @@ def test_general_averaging_equals_polynomial_path():
     """The truth from curve values (any shapes) equals the in_library polynomial path for polynomials."""
     rng = np.random.default_rng(0)
     U = rng.uniform(3.0, 14.0, size=(50, 3))
-    poly = amplitude_coefficients(U, S, AeroConfig())
+    # the polynomial path needs the in_library mode's polynomials
+    poly = amplitude_coefficients(U, S, AeroConfig.in_library())
     # a yaw factor at yaw 0 multiplies by 1 but forces the general path
-    general = amplitude_coefficients(U, S, AeroConfig(yaw=YawFactor()), np.zeros_like(U))
+    general = amplitude_coefficients(U, S, AeroConfig.in_library(yaw=YawFactor()), np.zeros_like(U))
     scale = np.abs(poly).max(axis=0)
     assert_close(general / scale, poly / scale, rtol=1e-12, atol=1e-13,
                  reason="sums of products in a different order; the cubic term cancels near the bell's edges")
@@ -118,9 +124,12 @@ def test_config_round_trip_and_toml(tmp_path):
     assert d["aero"]["Y1"] == {"peak": 18.0, "center": 6.5, "width": 0.9, "baseline": -3.0, "kind": "lorentzian"}
     assert d["aero"]["yaw"]["shape"] == "gaussian"
     assert config_from_dict(d) == cfg
-    # the default's saved form is unchanged: no kind on polynomials, no yaw key
-    d0 = config_to_dict(GeneratorConfig())
-    assert "yaw" not in d0["aero"] and d0["aero"]["Y1"] == {"coefficients": list(AeroConfig().Y1.coefficients)}
+    # the in_library saved form: no kind on polynomials, an explicit null yaw (the default has a yaw factor)
+    lib = GeneratorConfig.in_library()
+    d0 = config_to_dict(lib)
+    assert d0["aero"]["yaw"] is None and d0["aero"]["Y1"] == {"coefficients": list(lib.aero.Y1.coefficients)}
+    assert config_from_dict(json.loads(json.dumps(d0))) == lib
+    assert config_to_dict(GeneratorConfig())["aero"]["yaw"] == config_to_dict(YawFactor(shape="gaussian", width_deg=20.0))
     toml = tmp_path / "aero.toml"
     toml.write_text(
         '[aero]\nmode = "realistic"\n'
@@ -193,7 +202,7 @@ def test_averaged_model_reproduces_envelope_drawn(seed, plateau, yaw_deg):
     assert err < 0.02, f"{aero}: envelope error {err:.2%} RMS (limit 2 %)"
 
 
-@pytest.mark.parametrize("aero", [AeroConfig(), AeroConfig.realistic()], ids=["in_library", "realistic"])
+@pytest.mark.parametrize("aero", [AeroConfig.in_library(), AeroConfig.realistic()], ids=["in_library", "realistic"])
 def test_truth_curves_agree_with_order_contributions(aero):
     wind = np.linspace(3.0, 13.0, 41)
     curves = truth_curves(S, aero, wind)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -83,13 +84,13 @@ def test_points_spread_evenly_over_each_tributary_length():
     assert_close(pts[:, 0] - 55.0, STRUCTURE.positions - 275.0, rtol=1e-14, reason="rounding", what="first strip edge")
     assert_close(anemometer_positions(STRUCTURE, TRIBUTARY), STRUCTURE.positions + 8.0, rtol=1e-14, reason="rounding",
                  what="anemometer offset")
-    assert np.array_equal(anemometer_positions(STRUCTURE, WindConfig()), STRUCTURE.positions), \
+    assert np.array_equal(anemometer_positions(STRUCTURE, WindConfig(felt_wind="anemometer")), STRUCTURE.positions), \
         "in_library anemometers sit at the sections"
 
 
 def test_anemometer_mode_deck_is_the_anemometer():
     mw = _constant_wind(120.0)
-    f = wind_field(mw, STRUCTURE, WindConfig(), np.random.default_rng(0))
+    f = wind_field(mw, STRUCTURE, WindConfig(felt_wind="anemometer"), np.random.default_rng(0))
     assert f.deck is f.anemometer and f.positions.size == 3, "in_library: the deck feels the anemometer's own turbulence"
     ref = simulate_turbulence(STRUCTURE.positions, U, 120.0, FS, TURB, np.random.default_rng(0))
     assert np.array_equal(f.anemometer, ref), "in_library field is today's 3-point simulation, unchanged"
@@ -234,14 +235,14 @@ def test_config_round_trip_and_legacy_form(tmp_path):
     data = config_to_dict(example)
     assert data["wind"]["felt_wind"] == "tributary", "a non-default felt wind is stored"
     assert config_from_dict(data) == example, "round trip of the tributary configuration"
-    # The in_library values are left out, so default files are stored as before the keys existed.
-    default = config_to_dict(GeneratorConfig())
-    assert not {"felt_wind", "points_per_section", "anemometer_offset"} & set(default["wind"]), default["wind"].keys()
-    assert config_from_dict(default) == GeneratorConfig()
-    fields = {f.name: f.default for f in dataclasses.fields(WindConfig)}
-    assert (fields["felt_wind"], fields["points_per_section"], fields["anemometer_offset"]) == ("anemometer", 5, 0.0), \
-        "the legacy form assumes these defaults"
-    odd = GeneratorConfig(wind=WindConfig(points_per_section=3))  # unused in anemometer mode, but kept
+    # The default is the realistic mode: WindConfig() is the tributary-averaged felt wind.
+    assert WindConfig() == WindConfig(felt_wind="tributary") == GeneratorConfig().wind
+    # Every key is stored, so both modes read back as themselves whatever the defaults.
+    for cfg in (GeneratorConfig(), GeneratorConfig.in_library()):
+        data = json.loads(json.dumps(config_to_dict(cfg)))
+        assert {"felt_wind", "points_per_section", "anemometer_offset"} <= set(data["wind"])
+        assert config_from_dict(data) == cfg and config_from_dict(data).mode == cfg.mode
+    odd = GeneratorConfig.in_library(wind={"points_per_section": 3})  # unused in anemometer mode, but kept
     assert config_from_dict(config_to_dict(odd)) == odd
     toml = tmp_path / "w.toml"
     toml.write_text('[wind]\nfelt_wind = "tributary"\npoints_per_section = 7\n')
@@ -251,3 +252,23 @@ def test_config_round_trip_and_legacy_form(tmp_path):
     bad.write_text('[wind]\nfelt_wind = "tributory"\n')
     with pytest.raises(ValueError, match=r"bad\.toml: felt_wind must be one of"):
         load_config(bad)
+
+
+def test_old_saved_form_without_the_felt_wind_keys_reads_back_as_in_library():
+    # Event files written before the realistic default left out the felt-wind keys
+    # (and a None yaw factor) of an in_library configuration: config_from_dict
+    # restores those values for a saved form (every top-level key present).
+    old = config_to_dict(GeneratorConfig.in_library())
+    for key in ("felt_wind", "points_per_section", "anemometer_offset"):
+        del old["wind"][key]
+    del old["aero"]["yaw"]
+    back = config_from_dict(json.loads(json.dumps(old)))
+    assert back == GeneratorConfig.in_library() and back.mode == "in_library"
+    # the same for a saved form with only the wind keys missing (a realistic aero with its yaw kept)
+    mixed = config_to_dict(GeneratorConfig.realistic(wind=WindConfig(felt_wind="anemometer")))
+    for key in ("felt_wind", "points_per_section", "anemometer_offset"):
+        del mixed["wind"][key]
+    assert config_from_dict(mixed) == GeneratorConfig.realistic(wind=WindConfig(felt_wind="anemometer"))
+    # a partial (hand-written) dict takes the realistic defaults for what it leaves out
+    partial = config_from_dict({"structure": {"frequency": 0.3}, "wind": {"noise": 0.02}})
+    assert partial.mode == "realistic" and partial.wind.felt_wind == "tributary" and partial.aero.yaw is not None

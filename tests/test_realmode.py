@@ -37,15 +37,21 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_named_modes_and_their_overrides():
-    assert GeneratorConfig.in_library() == GeneratorConfig()
+    # the default is the realistic mode (DESIGN 2.8), its fields their classes' defaults
+    assert GeneratorConfig.realistic() == GeneratorConfig() == CampaignConfig().generator
+    assert GeneratorConfig() == GeneratorConfig(aero=AeroConfig(), wind=WindConfig())
+    lib = GeneratorConfig.in_library()
+    assert lib.aero == AeroConfig.in_library() and lib.wind == WindConfig(felt_wind="anemometer")
     real = GeneratorConfig.realistic()
     assert real.aero == AeroConfig.realistic() and real.wind == WindConfig(felt_wind="tributary")
     assert not real.changes.any, "slow changes are a separate option, off in both modes"
-    assert (GeneratorConfig().mode, real.mode) == ("in_library", "realistic")
+    assert (lib.mode, real.mode, GeneratorConfig().mode) == ("in_library", "realistic", "realistic")
     # dicts override the mode's values key by key, instances replace them
     assert GeneratorConfig.realistic(wind={"points_per_section": 3}).wind == WindConfig(felt_wind="tributary",
                                                                                          points_per_section=3)
-    assert GeneratorConfig.realistic(wind=WindConfig()).mode == "mixed"
+    assert GeneratorConfig.realistic(wind=WindConfig(felt_wind="anemometer")).mode == "mixed"
+    assert GeneratorConfig.in_library(wind=WindConfig()).mode == "mixed"
+    assert GeneratorConfig.in_library(wind={"points_per_section": 3}).wind.felt_wind == "anemometer"
     assert GeneratorConfig.realistic(aero={"mode": "in_library"}).mode == "mixed"
     assert GeneratorConfig.realistic(changes=ChangesConfig(drift_amplitude=0.2)).mode == "realistic"
     with pytest.raises(ValueError, match="mode must be one of"):
@@ -64,18 +70,24 @@ def test_toml_mode_key_explicit_keys_win_and_mode_is_recovered(tmp_path):
     back = config_from_dict(json.loads(json.dumps(config_to_dict(cfg))))
     assert back == cfg and back.mode == "realistic"
     assert "mode" not in config_to_dict(GeneratorConfig.realistic())
+    # a file without `mode` starts from the realistic default
+    path.write_text('[wind]\npoints_per_section = 3\n')
+    assert load_config(path) == GeneratorConfig.realistic(wind={"points_per_section": 3})
     path.write_text('mode = "fancy"\n')
     with pytest.raises(ValueError, match=r"g\.toml: mode must be one of \['in_library', 'realistic'\]"):
         load_config(path)
 
 
-def test_cli_synth_mode_realistic_records_the_mode(tmp_path):
+@pytest.mark.parametrize("mode", [None, "realistic", "in_library"])
+def test_cli_synth_mode_records_the_mode(tmp_path, mode):
     out = tmp_path / "c"
-    assert main(["synth", "--events", "1", "--duration", "3", "--mode", "realistic", "--workers", "1",
-                 "--out", str(out)]) == 0
+    argv = ["synth", "--events", "1", "--duration", "3", "--workers", "1", "--out", str(out)]
+    assert main(argv + ([] if mode is None else ["--mode", mode])) == 0
     tree = read_event(out / "E001.nc")
     saved = config_from_dict(json.loads(tree["truth"].attrs["config_json"])["generator"])
-    assert saved == GeneratorConfig.realistic() and saved.mode == "realistic"
+    # without --mode: the realistic default; --mode in_library: the campaign generated before the default changed
+    want = GeneratorConfig.from_mode(mode or "realistic")
+    assert saved == want and saved.mode == (mode or "realistic")
 
 
 def test_realistic_campaign_visits_all_four_regimes():
@@ -90,8 +102,8 @@ def test_realistic_campaign_visits_all_four_regimes():
 
 
 def test_default_and_realistic_scripts_are_unchanged():
-    assert np.allclose(GeneratorConfig().lock_in, DEFAULT_LOCK_IN)
-    assert script_lock_in(GeneratorConfig()) is None and script_lock_in(GeneratorConfig.realistic()) is None
+    assert np.allclose(GeneratorConfig.in_library().lock_in, DEFAULT_LOCK_IN)
+    assert script_lock_in(GeneratorConfig.in_library()) is None and script_lock_in(GeneratorConfig()) is None
     specs = campaign_specs(CampaignConfig(n_events=8, duration=(1200.0, 1200.0)))
     plateaus = [spec.script.speeds[2] for spec, _ in specs if spec.kind == "pass_high"]
     assert all(8.4 <= p <= 9.4 for p in plateaus)
@@ -150,7 +162,7 @@ def test_compare_realism_factors_make_their_own_campaigns():
     gens = {c["varied"]: _campaign_config(cfg, tuple(c[k] for k in ("accel_noise", "anemometer_noise",
                                                                       "turbulence_intensity", "aero", "felt_wind",
                                                                       "drift"))).generator for c in cells}
-    assert gens["base"] == GeneratorConfig(), "the base cell's campaign is the default generator's"
+    assert gens["base"] == GeneratorConfig.in_library(), "compare's base cell is the in_library generator's"
     assert gens["aero"].aero == AeroConfig.realistic() and gens["aero"].wind.felt_wind == "anemometer"
     assert gens["felt_wind"].wind.felt_wind == "tributary" and gens["felt_wind"].mode == "mixed"
     assert gens["drift"].changes.drift_amplitude == 0.3

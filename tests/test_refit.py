@@ -12,7 +12,7 @@ from scipy.signal import savgol_filter
 from tests.helpers import assert_close
 from vivbench.cli import main
 from vivbench.analysis.identify import IdentifyConfig, identify_event
-from vivbench.io.result import result_path
+from vivbench.io.result import read_result, result_path
 from vivbench.models.refit import RefitConfig, _equation_error_fit, order_rms, refit_coefficients, refit_event, simulate_coefficients
 from vivbench.io.event import read_event
 from vivbench.io.netcdf import write_netcdf_atomic
@@ -135,9 +135,13 @@ def test_config_and_input_validation(clean):
 
 
 @pytest.fixture(scope="module")
-def identified(small_campaign, tmp_path_factory):
-    """One event of the small campaign, identified and written; and its event file."""
-    event_file = small_campaign.files[0]
+def identified(small_campaign_in_library, tmp_path_factory):
+    """One event of the small campaign, identified and written; and its event file.
+
+    The in_library campaign: these tests refit on and compare with the truth's exact
+    coefficient matrix, which exists only when the truth lies in the library.
+    """
+    event_file = small_campaign_in_library.files[0]
     tree = read_event(event_file)
     ds = identify_event(tree, IdentifyConfig(), source=str(event_file))
     out = tmp_path_factory.mktemp("refit_result")
@@ -187,6 +191,25 @@ def test_cli_writes_files_and_rejects_bad_input(identified, tmp_path, capsys):
     assert main(["refit", str(bad), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("vivbench refit: ") and str(bad) in err and "\n" not in err, err
+
+
+def test_cli_refits_an_event_outside_the_library(small_results, tmp_path, capsys):
+    """The realistic default has no /truth/coef: the refit runs without the true model; --support truth is refused."""
+    camp, _dir, results = small_results
+    event = camp.files[0]
+    ds = read_result(results[0])
+    t0 = float(ds["window_start"].values[0])
+    out = tmp_path / "refit"
+    capsys.readouterr()
+    assert main(["refit", str(results[0]), "--out", str(out), "--event", str(event), "--terms", "U^2, A",
+                 "--t0", str(t0), "--t1", str(t0 + 20.0), "--max-iter", "5"]) == 0
+    err = capsys.readouterr().err
+    assert "no /truth/coef" in err and "no true-model comparison" in err, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary.get("nmse_truth_mean") is None and summary["nmse_refit_mean"] is not None
+    assert main(["refit", str(results[0]), "--out", str(out), "--event", str(event), "--support", "truth"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("vivbench refit: ") and "no /truth/coef for --support truth" in err and "\n" not in err, err
 
 
 def test_own_section_terms_build_the_mask():

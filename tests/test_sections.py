@@ -21,7 +21,7 @@ import xarray as xr
 
 from vivbench.cli import main
 from vivbench.core.terms import reference_section
-from vivbench.synth import GeneratorConfig, StructureConfig, config_from_dict
+from vivbench.synth import AeroConfig, GeneratorConfig, StructureConfig, config_from_dict, exact_coefficients
 
 # Mode shapes of a half-sine (odd number of half-waves) at k / (n + 1) of the span, tributary lengths span / n.
 _SPAN = 1650.0
@@ -96,9 +96,13 @@ def test_synth_writes_n_sections(chain):
     assert tree["wind"]["u"].shape[1] == n and tree["accel"]["acc"].shape[1] == n
     truth = tree["truth"].ds
     assert truth["A"].shape[1] == n and truth["r"].shape[1:] == (n, 4)
-    assert truth["coef"].shape == (n, 23 * n)
+    # the realistic default: no exact coefficient matrix, the truth's curves per section instead
+    assert "coef" not in truth and truth["curves"].shape[:2] == (n, 4)
     cfg = json.loads(truth.attrs["config_json"])["generator"]["structure"]
     assert len(cfg["mode_shape"]) == n and len(cfg["tributary_lengths"]) == n
+    # an in_library bridge with these sections has an exact (n, 23 n) coefficient matrix
+    Xi = exact_coefficients(StructureConfig(**cfg), AeroConfig.in_library())
+    assert Xi is not None and Xi.shape == (n, 23 * n)
 
 
 def test_identify_and_pool_use_23n_columns(chain):

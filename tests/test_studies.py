@@ -14,14 +14,15 @@ from vivbench.models.campaign import PooledSINDy
 from vivbench.analysis.identify import identify_files
 from vivbench.analysis.pool import pool_results
 from vivbench.io.campaign_model import write_pooled
-from vivbench.synth import AeroConfig, CampaignConfig, GeneratorConfig, SensorConfig, TurbulenceConfig, WindConfig, generate_campaign
+from vivbench.synth import CampaignConfig, GeneratorConfig, SensorConfig, TurbulenceConfig, generate_campaign
 from vivbench.validate import campaign_recovery, pooled_recovery
 
 pytestmark = pytest.mark.slow
 
-CLEAN = GeneratorConfig(
-    aero=AeroConfig(cl_unlocked=0.0, buffeting_w=0.0),
-    wind=WindConfig(turbulence=TurbulenceConfig(intensity=0.0), noise=0.0, resolution=0.0),
+# exact-recovery studies need the truth in the library (a true coefficient matrix): the in_library mode
+CLEAN = GeneratorConfig.in_library(
+    aero=dict(cl_unlocked=0.0, buffeting_w=0.0),
+    wind=dict(turbulence=TurbulenceConfig(intensity=0.0), noise=0.0, resolution=0.0),
     sensors=SensorConfig(noise_density=0.0, bits=0),
 )
 

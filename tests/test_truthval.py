@@ -42,13 +42,14 @@ def _truth(path):
     return read_event(path)["truth"].ds
 
 
-def test_true_AU_error_is_the_coef_error_on_the_same_A_U(small_results):
+def test_true_AU_error_is_the_coef_error_on_the_same_A_U(small_results_in_library):
     """With a 'truth' on the result's own (A, U) whose dA/dt is the exact matrix's, the new metric is the old one."""
     from vivbench.core.terms import evaluate_library
     from vivbench.io.result import read_result
     from vivbench.validate import window_rhs_errors, window_rhs_errors_true_AU
 
-    camp, _dir, results = small_results
+    # compares with the error against the exact coefficient matrix: the in_library mode
+    camp, _dir, results = small_results_in_library
     res = read_result(results[0])
     truth = _truth(camp.files[0])
     coef = truth["coef"].values

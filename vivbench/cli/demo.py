@@ -1,4 +1,4 @@
-"""``vivbench demo``: the whole chain on the default synthetic campaign.
+"""``vivbench demo``: the whole chain on the default synthetic campaign (the realistic generator mode).
 
 Generate, identify, pool, cluster, forecast, refit, validate and report, each
 step as the subcommand a user would run (its exact command is written to
@@ -113,8 +113,13 @@ def run(args) -> int:
               f"identifiable / {_f(s.get('regime_accuracy_all'))} all (chance {_f(s.get('truth_most_common_regime_share'))})")
         print(f"          campaign model (vivbench pool): coverage {_f(s.get('pooled_regime_coverage'))}, accuracy "
               f"{_f(s.get('pooled_regime_accuracy_identifiable'))} identifiable / {_f(s.get('pooled_regime_accuracy_all'))} all")
-        print(f"dynamics: median relative error of dA/dt on windows with dynamics: window models "
-              f"{_f(s.get('median_rhs_rel_error_active'))}, campaign model {_f(s.get('pooled_median_rhs_rel_error_active'))}")
+        if s.get("median_rhs_rel_error_active") is not None:  # an exact coefficient matrix (in_library truth)
+            window, pooled, where = "median_rhs_rel_error_active", "pooled_median_rhs_rel_error_active", ""
+        else:  # a truth outside the library (the realistic default): measured on the true (A, U)
+            window, pooled = "median_rhs_error_true_AU_active", "pooled_median_rhs_error_true_AU_active"
+            where = " (on the true A, U)"
+        print(f"dynamics: median relative error of dA/dt on windows with dynamics{where}: window models "
+              f"{_f(s.get(window))}, campaign model {_f(s.get(pooled))}")
     if c:
         tags = sorted(k[len("n_clusters_"):] for k in c if k.startswith("n_clusters_"))
         print("clusters: " + "; ".join(f"{t}: {c.get('n_clusters_' + t)} clusters, ARI {_f(c.get('ari_' + t))}" for t in tags))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 from vivbench.core.errors import InputError
@@ -23,15 +24,14 @@ def _load_result(path: str):
 
 
 def _truth_coef(path: str, event_id: str):
+    """The event file's exact coefficient matrix, or None when it has none (a field event or a
+    truth outside the library, e.g. the realistic generator mode)."""
     from vivbench.io.event import event_arrays, read_event
 
     tree = read_event(path)
     if str(tree.attrs["event_id"]) != event_id:
         raise InputError(f"{path}: event {tree.attrs['event_id']!r} does not match the result's {event_id!r}")
-    arr = event_arrays(tree)
-    if "coef" not in arr:
-        raise InputError(f"{path}: no /truth/coef (a field event or a truth outside the library)")
-    return arr["coef"]
+    return event_arrays(tree).get("coef")
 
 
 def _json_value(v):
@@ -71,7 +71,12 @@ def run(args) -> int:
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))
     truth = _truth_coef(args.event, event_id) if args.event else None
     if args.support == "truth" and truth is None:
+        if args.event:
+            raise InputError(f"{args.event}: no /truth/coef for --support truth (a field event or a truth outside the library)")
         raise InputError("--support truth needs --event EVENT.nc (the event file with /truth/coef)")
+    if args.event and truth is None:
+        print(f"vivbench refit: {args.event} has no /truth/coef (a field event or a truth outside the library): "
+              "no true-model comparison", file=sys.stderr)
     config = RefitConfig(shooting_interval=args.shooting_interval, substeps=args.substeps, max_iter=args.max_iter,
                          tol=args.tol, ridge=args.ridge, hessian=args.hessian,
                          free_initial_state=args.free_initial_state)
@@ -101,7 +106,9 @@ def register(sub) -> None:
     s = sub.add_parser("refit", help="output-error refit of coefficients on a support (CasADi, IPOPT)")
     s.add_argument("result", help="identification result <event_id>.identify.nc")
     s.add_argument("--out", required=True, help="output directory")
-    s.add_argument("--event", default=None, help="the event file, for the truth coefficients and support")
+    s.add_argument("--event", default=None,
+                   help="the event file, for the truth coefficients and support (an event without /truth/coef, "
+                        "e.g. of the realistic generator mode, is refitted without the true-model comparison)")
     s.add_argument("--t0", type=float, default=None, help="segment start, s (default: start of the grid)")
     s.add_argument("--t1", type=float, default=None, help="segment end, s (default: end of the grid)")
     s.add_argument("--support", default="identified", choices=("identified", "window", "truth"),

@@ -13,7 +13,7 @@ def run(args) -> int:
     if args.config:
         generator = load_config(args.config, mode=args.mode)
     else:
-        generator = GeneratorConfig.from_mode(args.mode or "in_library")
+        generator = GeneratorConfig.from_mode(args.mode or "realistic")
     campaign = CampaignConfig(n_events=args.events, seed=args.seed, duration=args.duration, generator=generator)
     bar = progress(campaign.n_events, "synth")
     try:
@@ -33,13 +33,14 @@ def register(sub) -> None:
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--duration", type=duration, default=(1200.0, 3600.0),
                    help="event duration in minutes: N or MIN-MAX (default 20-60)")
-    s.add_argument("--config", help="generator configuration (TOML); defaults otherwise")
-    s.add_argument("--mode", choices=("in_library", "realistic"), default=None,
-                   help="generator mode (DESIGN 2.8): in_library (polynomial aerodynamics in U, the deck feels the "
-                        "anemometer's wind; the truth has an exact coefficient matrix; the default) or realistic "
-                        "(non-polynomial functions of reduced velocity with a yaw factor, the deck feels the "
-                        "tributary-averaged wind of a spatially resolved field). Replaces the --config file's "
-                        "top-level `mode`; the file's explicit keys override the mode's values. Slow changes "
-                        "stay off in both (the [changes] table)")
+    s.add_argument("--config", help="generator configuration (TOML); the --mode defaults otherwise")
+    s.add_argument("--mode", choices=("realistic", "in_library"), default=None,
+                   help="generator mode (DESIGN 2.8): realistic (the default: non-polynomial functions of reduced "
+                        "velocity with a yaw factor, the deck feels the tributary-averaged wind of a spatially "
+                        "resolved field; the truth lies outside the identification's model class) or in_library "
+                        "(polynomial aerodynamics in U, the deck feels the anemometer's wind; the truth has an exact "
+                        "coefficient matrix, for exact-recovery checks). Replaces the --config file's top-level "
+                        "`mode` (realistic when the file has none); the file's explicit keys override the mode's "
+                        "values. Slow changes stay off in both (the [changes] table)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help="worker processes (files do not depend on it)")
     s.set_defaults(func=run)

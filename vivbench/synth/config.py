@@ -44,6 +44,7 @@ __all__ = [
     "ChangesConfig",
     "GeneratorConfig",
     "GENERATOR_MODES",
+    "DEFAULT_MODE",
     "DEFAULT_LOCK_IN",
     "config_to_dict",
     "config_from_dict",
@@ -165,7 +166,12 @@ class AeroConfig:
 
     Two named modes (DESIGN 2.8), each a constructor:
 
-    - :meth:`in_library` (the defaults, ``AeroConfig()``): polynomials in U that
+    - :meth:`realistic` (the defaults, ``AeroConfig()``): a box girder's functions
+      of reduced velocity that are not polynomials (a Gaussian lock-in bell for Y1
+      centred near Ur = 1/St, logistic e1 and e2, a Gaussian bell of C_L >= 0) and
+      a Gaussian yaw factor, so that the truth lies outside the identification's
+      model class (no inverse crime).
+    - :meth:`in_library`: polynomials in U that
       keep the averaged truth inside the A^i U^j library, so that an exact
       coefficient matrix exists when deg(U Y1 e) <= 5 and deg(U^2 C_L) <= 5.
       The nonlinear e1 and e2 are positive and linear in U (a Simiu-Scanlan
@@ -173,9 +179,7 @@ class AeroConfig:
       plateaus below the centre of lock-in and the cubic term (regime 4) those
       above it. Outside lock-in, where Y1 < 0, the same terms slightly weaken
       the aerodynamic damping at large amplitude, as in the classical model.
-    - :meth:`realistic`: a box girder's functions of reduced velocity that are
-      not polynomials (a Gaussian lock-in bell for Y1 centred near Ur = 1/St,
-      logistic e1 and e2, a Gaussian bell of C_L >= 0) and a Gaussian yaw factor.
+      For exact-recovery tests.
 
     Attributes
     ----------
@@ -193,12 +197,12 @@ class AeroConfig:
     buffeting_u, buffeting_w : buffeting force F = rho U D (b_u u' + b_w w') per unit length
     """
 
-    Y1: Curve = _Y1
-    e1: Curve = _linear(E1, -0.12, 8.0)
-    e2: Curve = _linear(E2, 0.12, 8.0)
-    Y2: Curve = Polynomial(coefficients=(0.5,))
-    C_L: Curve = bell_polynomial(0.04, 8.0, 8.0)
-    yaw: YawFactor | None = field(default=None, metadata={"omit_if_none": True})
+    Y1: Curve = GaussianBell(peak=20.0, center=7.0, width=1.1, baseline=-4.0)
+    e1: Curve = LogisticStep(start=36.0, end=20.0, center=7.0, width=1.5)
+    e2: Curve = LogisticStep(start=300.0, end=520.0, center=7.0, width=1.5)
+    Y2: Curve = Constant(value=0.5)
+    C_L: Curve = GaussianBell(peak=0.04, center=7.0, width=2.0, baseline=0.003)
+    yaw: YawFactor | None = YawFactor(shape="gaussian", width_deg=20.0)
     strouhal: float = 0.143
     cl_unlocked: float = 0.05
     lock_bandwidth: float = 0.03
@@ -222,12 +226,21 @@ class AeroConfig:
 
     @classmethod
     def in_library(cls, **overrides) -> AeroConfig:
-        """The ``in_library`` mode: polynomials in U (today's defaults), no yaw factor; keywords override."""
-        return cls(**overrides)
+        """The ``in_library`` mode: polynomials in U, no yaw factor; keywords override.
+
+        Y1 is the quadratic bell 20 (1 - ((U - 8) / 2.5)^2) (lock-in 5.5-10.5 m/s), e1 and
+        e2 are linear in U (28 and 400 at 8 m/s, slopes -0.12 and +0.12 per m/s relative),
+        Y2 = 0.5 and C_L the quadratic bell 0.04 (1 - ((U - 8) / 8)^2). The averaged truth
+        then has an exact coefficient matrix over the library.
+        """
+        base = dict(Y1=_Y1, e1=_linear(E1, -0.12, 8.0), e2=_linear(E2, 0.12, 8.0),
+                    Y2=Polynomial(coefficients=(0.5,)), C_L=bell_polynomial(0.04, 8.0, 8.0), yaw=None)
+        base.update(overrides)
+        return cls(**base)
 
     @classmethod
     def realistic(cls, **overrides) -> AeroConfig:
-        """The ``realistic`` mode: non-polynomial functions of reduced velocity typical of a box girder.
+        """The ``realistic`` mode (the defaults, ``AeroConfig()``): non-polynomial functions of reduced velocity typical of a box girder.
 
         Reduced velocities Ur = U / (f1 D); with the default structure (f1 = 0.327 Hz,
         D = 3.5 m) Ur = U / (1.14 m/s). Y1 is a Gaussian bell of peak 20 centred on
@@ -240,16 +253,7 @@ class AeroConfig:
         over a floor of 0.003, >= 0 everywhere. Y1 and C_L fall off with the yaw
         angle as exp(-psi^2 / (2 (20 deg)^2)). Keywords override any of these.
         """
-        base = dict(
-            Y1=GaussianBell(peak=20.0, center=7.0, width=1.1, baseline=-4.0),
-            e1=LogisticStep(start=36.0, end=20.0, center=7.0, width=1.5),
-            e2=LogisticStep(start=300.0, end=520.0, center=7.0, width=1.5),
-            Y2=Constant(value=0.5),
-            C_L=GaussianBell(peak=0.04, center=7.0, width=2.0, baseline=0.003),
-            yaw=YawFactor(shape="gaussian", width_deg=20.0),
-        )
-        base.update(overrides)
-        return cls(**base)
+        return cls(**overrides)
 
     @classmethod
     def from_mode(cls, mode: str, **overrides) -> AeroConfig:
@@ -276,7 +280,8 @@ class AeroConfig:
 
 
 FELT_WIND_MODES = ("anemometer", "tributary")
-"""Values of ``WindConfig.felt_wind``; ``"anemometer"`` is the ``in_library`` mode."""
+"""Values of ``WindConfig.felt_wind``; ``"tributary"`` (the default) is the ``realistic`` mode,
+``"anemometer"`` the ``in_library`` mode."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -301,17 +306,17 @@ class WindConfig:
     anemometer_rate : Hz; resolution, m/s; noise : relative rms error
     felt_wind : which wind the deck feels (DESIGN 2.8):
 
+        - ``"tributary"`` (the default, the ``realistic`` mode): the turbulence is simulated at
+          ``points_per_section`` points spread evenly over each section's tributary length
+          and at the anemometers, with Davenport coherence between all of them. Section k's
+          deck (buffeting and, low-passed at ``felt_cutoff_hz``, the U_k of the aeroelastic
+          force and of the truth) feels the average over its points; each anemometer records
+          its single point's full turbulence plus the sensor errors. The identification's U
+          then carries realistic errors-in-variables.
         - ``"anemometer"`` (the ``in_library`` mode): each section's deck feels its
           anemometer's own turbulence; U_k is the anemometer's wind low-passed at
           ``felt_cutoff_hz`` (before the sensor errors), so the identification's U
           differs from the truth only by sensor noise and filter edges.
-        - ``"tributary"``: the turbulence is simulated at ``points_per_section`` points
-          spread evenly over each section's tributary length and at the anemometers,
-          with Davenport coherence between all of them. Section k's deck (buffeting and,
-          low-passed at ``felt_cutoff_hz``, the U_k of the aeroelastic force and of the
-          truth) feels the average over its points; each anemometer records its single
-          point's full turbulence plus the sensor errors. The identification's U then
-          carries realistic errors-in-variables.
     points_per_section : int, 1..64; points over each tributary length (``"tributary"`` only)
     anemometer_offset : float, m; spanwise distance of each anemometer from its section's
         position (``"tributary"`` only). The field lives on one horizontal line, so an
@@ -332,7 +337,7 @@ class WindConfig:
     anemometer_rate: float = 32.0
     resolution: float = 0.01
     noise: float = 0.01
-    felt_wind: str = "anemometer"
+    felt_wind: str = "tributary"
     points_per_section: int = 5
     anemometer_offset: float = 0.0
 
@@ -543,6 +548,11 @@ class ChangesConfig:
 class GeneratorConfig:
     """Everything the generator needs besides the event script and the seed.
 
+    The defaults are the ``realistic`` mode (DESIGN 2.8): ``GeneratorConfig()`` equals
+    :meth:`realistic` and its fields are their classes' defaults (``AeroConfig()`` and
+    ``WindConfig()`` are the realistic aerodynamics and the tributary-averaged felt wind).
+    :meth:`in_library` gives the polynomial truth inside the identification's model class.
+
     Attributes
     ----------
     integration_step : s; RK4 step of the full modal simulation
@@ -583,19 +593,22 @@ class GeneratorConfig:
         """The ``in_library`` mode (DESIGN 2.8): polynomial aerodynamics in U, the deck feels the anemometer's wind.
 
         The truth lies in the identification's model class (an exact coefficient matrix
-        exists); for exact-recovery tests. Keywords override any field, as for the
-        constructor (``GeneratorConfig.in_library()`` equals ``GeneratorConfig()`` today).
+        exists); for exact-recovery tests. Keywords override fields: ``aero`` and ``wind``
+        given as dicts override the mode's values key by key; given as instances they
+        replace them (so ``wind=WindConfig(...)`` must say ``felt_wind="anemometer"`` to
+        stay in this mode).
         """
         return cls.from_mode("in_library", **overrides)
 
     @classmethod
     def realistic(cls, **overrides) -> GeneratorConfig:
-        """The ``realistic`` mode (DESIGN 2.8): the truth lies outside the identification's model class.
+        """The ``realistic`` mode (DESIGN 2.8, the default): the truth lies outside the identification's model class.
 
         ``aero`` is :meth:`AeroConfig.realistic` (non-polynomial functions of the reduced
         velocity with a yaw factor) and ``wind`` is ``WindConfig(felt_wind="tributary")``
         (the deck feels the tributary-averaged wind of a spatially resolved field; each
         anemometer is one point). Slow changes stay off (``changes`` is a separate option).
+        ``GeneratorConfig.realistic()`` equals ``GeneratorConfig()``.
 
         Keywords override fields. ``aero`` and ``wind`` given as dicts (as read from
         TOML) override the mode's values key by key; given as instances they replace them.
@@ -633,7 +646,8 @@ class GeneratorConfig:
 
         Evaluated for this structure's frequency and depth (curves of reduced velocity)
         on 0.05-60 m/s, the ends refined by linear interpolation. None when Y1 <= 0
-        everywhere (no self-excitation). ``(5.5, 10.5)`` for the ``in_library`` defaults.
+        everywhere (no self-excitation). ``(5.5, 10.5)`` for the ``in_library`` mode, about
+        ``(5.6, 10.4)`` for the ``realistic`` default.
         """
         U = np.arange(0.05, 60.0, 0.005)
         y = self.aero.Y1.at_wind(U, self.structure.frequency, self.structure.depth)
@@ -648,10 +662,13 @@ class GeneratorConfig:
 
 
 GENERATOR_MODES = AERO_MODES
-"""Named generator modes (DESIGN 2.8); ``GeneratorConfig()`` is the ``in_library`` mode."""
+"""Named generator modes (DESIGN 2.8); ``GeneratorConfig()`` is the ``realistic`` mode."""
+DEFAULT_MODE = "realistic"
+"""The mode of ``GeneratorConfig()``, of a configuration file without ``mode`` and of ``vivbench synth``."""
 _FELT_WIND_OF_MODE = {"in_library": "anemometer", "realistic": "tributary"}
 DEFAULT_LOCK_IN = (5.5, 10.5)
-"""Lock-in range (m/s) of the default ``in_library`` bridge, for which the campaign scripts were designed."""
+"""Lock-in range (m/s) of the ``in_library`` bridge, for which the campaign scripts were designed
+(the ``realistic`` default's, about 5.6-10.4 m/s, is close enough to keep them)."""
 
 
 def _zero_between(U: np.ndarray, y: np.ndarray, i: int) -> float:
@@ -665,12 +682,9 @@ def _tuples(d: dict) -> dict:
 
 
 def _plain(obj: Any) -> Any:
-    """Dataclasses as dicts in field order, tuples as lists; a field whose metadata says
-    ``omit_if_none`` is left out while it is None (so that adding an optional field
-    leaves the saved form of existing configurations unchanged)."""
+    """Dataclasses as dicts in field order (every field, None included), tuples as lists."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
-                if not (f.metadata.get("omit_if_none") and getattr(obj, f.name) is None)}
+        return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, (list, tuple)):
         return [_plain(x) for x in obj]
     if isinstance(obj, dict):
@@ -678,40 +692,44 @@ def _plain(obj: Any) -> Any:
     return obj
 
 
-# WindConfig keys left out of the plain-data form while they hold the values that
-# reproduce the generator as it was before they existed (felt_wind = "anemometer",
-# the in_library mode, with the other two at their defaults, unused then): the files
-# of such configurations stay byte-identical, and reading the form back fills the
-# defaults in. Revisit when the default felt_wind changes.
+# Keys that configurations saved before the generator's default became the realistic
+# mode left out while they held their in_library values (the default then): the
+# felt-wind keys of WindConfig, together, and an absent (None) aero yaw factor.
+# config_from_dict restores these values for such saved forms (see _restore_legacy).
 _WIND_LEGACY = {"felt_wind": "anemometer", "points_per_section": 5, "anemometer_offset": 0.0}
+_SAVED_KEYS = frozenset({"structure", "aero", "wind", "sensors", "integration_step", "truth_step",
+                         "initial_amplitude", "tau"})
 
 
-def _drop_wind_legacy(wind: dict[str, Any]) -> None:
-    if all(wind.get(k) == v for k, v in _WIND_LEGACY.items()):
-        for k in _WIND_LEGACY:
-            del wind[k]
+def _restore_legacy(data: dict[str, Any]) -> dict[str, Any]:
+    """The in_library values of the keys an old saved form left out (see :func:`config_from_dict`)."""
+    if "mode" in data or not _SAVED_KEYS <= set(data):
+        return data
+    aero, wind = data["aero"], data["wind"]
+    if not (isinstance(aero, dict) and isinstance(wind, dict)):
+        return data
+    data = dict(data)
+    if "yaw" not in aero and "mode" not in aero and set(_AERO_CURVES) <= set(aero):
+        data["aero"] = {**aero, "yaw": None}
+    if "felt_wind" not in wind:
+        data["wind"] = {**_WIND_LEGACY, **wind}
+    return data
 
 
 def config_to_dict(config) -> dict[str, Any]:
-    """Plain-data form (JSON- and TOML-ready) of any configuration dataclass.
+    """Plain-data form (JSON-ready) of any configuration dataclass.
 
-    Curves of reduced velocity carry their ``kind``; polynomials are written as
-    ``{"coefficients": [...]}`` as before; an absent ``aero.yaw`` is left out.
-    A generator configuration without slow changes leaves out its ``changes``
-    section (it takes its default when read back), so files generated without
-    changes are the same as before the option existed. The felt-wind keys of
-    ``WindConfig`` are left out while they hold their ``in_library`` values
-    (``felt_wind = "anemometer"``, the others at their defaults), so such
-    configurations are stored exactly as before the keys existed;
-    :func:`config_from_dict` restores them.
+    Every field is written, so that the form reads back as the same configuration
+    whatever the defaults: curves of reduced velocity carry their ``kind``,
+    polynomials are written as ``{"coefficients": [...]}``, an absent yaw factor
+    as ``"yaw": null`` (``yaw = false`` in a TOML file) and the felt-wind keys of
+    ``WindConfig`` always. The one omission: a generator configuration without
+    slow changes leaves out its ``changes`` section (whose default is no change),
+    so files generated without changes are the same as before the option existed.
     """
     data = json.loads(json.dumps(_plain(config)))
-    if isinstance(config, WindConfig):
-        _drop_wind_legacy(data)
-    elif isinstance(config, GeneratorConfig):
-        _drop_wind_legacy(data["wind"])
-        if not config.changes.any:
-            del data["changes"]
+    if isinstance(config, GeneratorConfig) and not config.changes.any:
+        del data["changes"]
     return data
 
 
@@ -722,14 +740,27 @@ _SECTIONS = {"structure": StructureConfig, "aero": AeroConfig, "wind": WindConfi
 def config_from_dict(data: dict[str, Any]) -> GeneratorConfig:
     """Inverse of :func:`config_to_dict`; unknown keys are an error.
 
-    An optional top-level ``mode`` (``"in_library"``, the default, or ``"realistic"``)
+    An optional top-level ``mode`` (``"realistic"``, the default, or ``"in_library"``)
     selects :meth:`GeneratorConfig.from_mode`; the other keys override its values
     (``[aero]`` and ``[wind]`` key by key; ``[aero] mode`` still picks the aerodynamics).
+
+    Saved forms from before the realistic default (event files' ``config_json``):
+    :func:`config_to_dict` then left out ``aero.yaw`` when it was None and the three
+    felt-wind keys of ``[wind]`` when they held their in_library values. A dict without
+    ``mode`` that holds every key a saved form always has (``structure``, ``aero``,
+    ``wind``, ``sensors``, ``integration_step``, ``truth_step``, ``initial_amplitude``,
+    ``tau``) is read as such a form: an ``[aero]`` table with all five curves and no
+    ``yaw`` (nor ``mode``) gets ``yaw = None``, and a ``[wind]`` table without
+    ``felt_wind`` gets ``felt_wind = "anemometer"``, ``points_per_section = 5`` and
+    ``anemometer_offset = 0`` where absent. Old in_library files thus read back as
+    in_library; forms written now list these keys and are not affected. A partial
+    dict (a hand-written TOML file) takes the realistic defaults for what it leaves out.
     """
     allowed = {f.name for f in dataclasses.fields(GeneratorConfig)} | {"mode"}
     unknown = set(data) - allowed
     _check(not unknown, f"unknown configuration keys {sorted(unknown)}; allowed: {sorted(allowed)}")
-    mode = data.get("mode", "in_library")
+    data = _restore_legacy(data)
+    mode = data.get("mode", DEFAULT_MODE)
     _check(mode in GENERATOR_MODES, f"mode must be one of {list(GENERATOR_MODES)}; got {mode!r}")
     kwargs = {}
     for key, value in data.items():
@@ -744,7 +775,7 @@ def config_from_dict(data: dict[str, Any]) -> GeneratorConfig:
     return GeneratorConfig.from_mode(mode, **kwargs)
 
 
-def _aero_from_dict(data: dict[str, Any], default_mode: str = "in_library") -> AeroConfig:
+def _aero_from_dict(data: dict[str, Any], default_mode: str = DEFAULT_MODE) -> AeroConfig:
     """The ``[aero]`` table: an optional ``mode`` (``default_mode`` otherwise) whose values the other keys override."""
     data = dict(data)
     mode = data.pop("mode", default_mode)
@@ -759,7 +790,7 @@ def _aero_from_dict(data: dict[str, Any], default_mode: str = "in_library") -> A
 def load_config(path: str | Path, *, mode: str | None = None) -> GeneratorConfig:
     """Read a generator configuration from TOML (sections as in :func:`config_to_dict`).
 
-    A top-level ``mode = "realistic"`` (or ``"in_library"``, the default) starts from
+    A top-level ``mode = "realistic"`` (the default) or ``"in_library"`` starts from
     :meth:`GeneratorConfig.realistic` (or :meth:`GeneratorConfig.in_library`); the
     file's explicit keys override the mode's values. ``[aero]`` may also name a mode
     of its own for the aerodynamic functions alone. ``mode``, when given (the command
