@@ -408,14 +408,6 @@ class PooledSINDy(ModelBase):
 
     # -- the model protocol -------------------------------------------------------------------------
 
-    def _check_record(self, record) -> Record:
-        self._check_fitted()
-        record = as_record(record)
-        if record.n_sections != self.n_sections_:
-            raise ValueError(f"record {record.event_id!r} has {record.n_sections} sections; "
-                             f"the model was fitted on {self.n_sections_}")
-        return record
-
     def order_contributions(self, record: Record) -> np.ndarray:
         """Contributions of the orders of A to dA/dt.
 

@@ -158,6 +158,15 @@ class ModelBase:
         if not self.is_fitted:
             raise NotFittedError(f"this {type(self).__name__} is not fitted yet: call fit(records) or load(path) first")
 
+    def _check_record(self, record) -> Record:
+        """The record (legacy tuples accepted), checked against the fitted model's number of sections."""
+        self._check_fitted()
+        record = as_record(record)
+        if record.n_sections != self.n_sections_:
+            raise ValueError(f"record {record.event_id!r} has {record.n_sections} sections; "
+                             f"the model was fitted on {self.n_sections_}")
+        return record
+
     def equations(self, precision: int = 3) -> list[str]:  # pragma: no cover - subclasses implement
         """One string per equation (subclasses implement)."""
         raise NotImplementedError

@@ -427,14 +427,6 @@ class VaryingCoefficientSINDy(ModelBase):
 
     # -- the model protocol --------------------------------------------------------------------------
 
-    def _check_record(self, record) -> Record:
-        self._check_fitted()
-        record = as_record(record)
-        if record.n_sections != self.n_sections_:
-            raise ValueError(f"record {record.event_id!r} has {record.n_sections} sections; "
-                             f"the model was fitted on {self.n_sections_}")
-        return record
-
     def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None) -> np.ndarray:
         """The curves a_ki at each section's own wind.
 
