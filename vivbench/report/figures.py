@@ -709,33 +709,15 @@ def forecast_figure(result: xr.Dataset, path: str | Path, *, t0: float | None = 
     runs = [(d, forecast(result, t0, horizon, d=float(d))) for d in ds if t0 + d <= t_last]
     cmap = plt.get_cmap("viridis")
     with _figure(path, 2, 1, figsize=(9, 7.5), constrained_layout=True) as (fig, (ax, ax2)):
-        for i, name in enumerate(sections):
-            c = _SECTION_COLOURS.get(name)
-            ax.plot(result["time"].values / 60.0, result["A"].values[:, i], lw=1.2, color=c, label=f"measured {name}")
-            ax.plot(sim.t / 60.0, sim.A_sim[:, i], lw=1.0, ls="--", color=c,
-                    label=f"simulated {name} (NMSE {sim.nmse[i]:.3g})")
-        _mark_stop(ax, sim, None)
-        ax.axvspan(t0 / 60.0, (t0 + horizon) / 60.0, color="0.9", lw=0, zorder=0, label="forecast span of (b)")
-        ax.set_ylabel("amplitude A (m)")
-        ax.set_xlabel("time since event start (min)")
-        ax.set_title(f"(a) event {result.attrs['event_id']}: time-varying model from the measured A(t = {sim.t[0]:.0f} s) "
-                     "and U", fontsize=10, loc="left")
-        if sim.stopped:
-            ax.text(0.99, 0.03, f"simulation stopped (x): {sim.reason}", transform=ax.transAxes, ha="right",
-                    va="bottom", fontsize=7, wrap=True)
-        ax.legend(loc="upper left", fontsize=7, ncol=2)
+        _simulation_panel(ax, result["time"].values, result["A"].values, sections, sim, t0, horizon,
+                          f"(a) event {result.attrs['event_id']}: time-varying model from the measured "
+                          f"A(t = {sim.t[0]:.0f} s) and U")
         sel = (result["time"].values >= t0 - 1e-9) & (result["time"].values <= t0 + horizon + 1e-9)
         ax2.plot(result["time"].values[sel], result["A"].values[sel, e], lw=2.0, color="k", label=f"measured {equation}")
         for n_run, (d, fc) in enumerate(runs):
             c = cmap(n_run / max(len(runs) - 1, 1) * 0.9)
             what = "fixed at t0 (window in force)" if d == 0 else f"mean over [t0, t0+{d:g} s] ({fc.windows.size} windows)"
-            if not fc.stopped:
-                status = f"NMSE {fc.nmse[e]:.3g}"
-            elif np.isfinite(fc.nmse[e]):
-                status = f"NMSE {fc.nmse[e]:.3g} before the stop at {fc.stopped_at:.0f} s"
-            else:
-                status = f"stopped at {fc.stopped_at:.0f} s, no valid interval"
-            ax2.plot(fc.t, fc.A_sim[:, e], lw=1.2, color=c, label=f"{what}: {status}")
+            ax2.plot(fc.t, fc.A_sim[:, e], lw=1.2, color=c, label=f"{what}: {_forecast_status(fc, e)}")
             _mark_stop(ax2, fc, e, colour=c, minutes=False)
         ax2.set_xlabel("time since event start (s)")
         ax2.set_ylabel(f"amplitude A at {equation} (m)")
@@ -788,37 +770,45 @@ def model_forecast_figure(model, record, path: str | Path, *, t0: float, horizon
     sim = model.simulate(record, *span)
     fc = model.simulate(record, float(t0), float(t0) + horizon)
     with _figure(path, 2, 1, figsize=(9, 7.5), constrained_layout=True) as (fig, (ax, ax2)):
-        for i, sec in enumerate(sections):
-            c = _SECTION_COLOURS.get(sec)
-            ax.plot(t / 60.0, A[:, i], lw=1.2, color=c, label=f"measured {sec}")
-            ax.plot(sim.t / 60.0, sim.A_sim[:, i], lw=1.0, ls="--", color=c,
-                    label=f"simulated {sec} (NMSE {sim.nmse[i]:.3g})")
-        _mark_stop(ax, sim, None)
-        ax.axvspan(t0 / 60.0, (t0 + horizon) / 60.0, color="0.9", lw=0, zorder=0, label="forecast span of (b)")
-        ax.set_ylabel("amplitude A (m)")
-        ax.set_xlabel("time since event start (min)")
-        ax.set_title(f"(a) event {record.event_id}: {name} from the measured A(t = {sim.t[0]:.0f} s) and U",
-                     fontsize=10, loc="left")
-        if sim.stopped:
-            ax.text(0.99, 0.03, f"simulation stopped (x): {sim.reason}", transform=ax.transAxes, ha="right",
-                    va="bottom", fontsize=7, wrap=True)
-        ax.legend(loc="upper left", fontsize=7, ncol=2)
+        _simulation_panel(ax, t, A, sections, sim, t0, horizon,
+                          f"(a) event {record.event_id}: {name} from the measured A(t = {sim.t[0]:.0f} s) and U")
         sel = (t >= t0 - 1e-9) & (t <= t0 + horizon + 1e-9)
         ax2.plot(t[sel], A[sel, e], lw=2.0, color="k", label=f"measured {equation}")
-        if not fc.stopped:
-            status = f"NMSE {fc.nmse[e]:.3g}"
-        elif np.isfinite(fc.nmse[e]):
-            status = f"NMSE {fc.nmse[e]:.3g} before the stop at {fc.stopped_at:.0f} s"
-        else:
-            status = f"stopped at {fc.stopped_at:.0f} s, no valid interval"
         c = plt.get_cmap("viridis")(0.0)
-        ax2.plot(fc.t, fc.A_sim[:, e], lw=1.2, color=c, label=f"{name}: {status}")
+        ax2.plot(fc.t, fc.A_sim[:, e], lw=1.2, color=c, label=f"{name}: {_forecast_status(fc, e)}")
         _mark_stop(ax2, fc, e, colour=c, minutes=False)
         ax2.set_xlabel("time since event start (s)")
         ax2.set_ylabel(f"amplitude A at {equation} (m)")
         ax2.set_title(f"(b) forecast from t0 = {t0:.0f} s (x: blow-up, run stopped)", fontsize=10, loc="left")
         ax2.legend(loc="best", fontsize=7)
     return Path(path)
+
+
+def _simulation_panel(ax, t, A, sections, sim, t0, horizon, title):
+    """Panel (a) of the forecast figures: measured amplitudes against a simulation over the whole span."""
+    for i, sec in enumerate(sections):
+        c = _SECTION_COLOURS.get(sec)
+        ax.plot(t / 60.0, A[:, i], lw=1.2, color=c, label=f"measured {sec}")
+        ax.plot(sim.t / 60.0, sim.A_sim[:, i], lw=1.0, ls="--", color=c,
+                label=f"simulated {sec} (NMSE {sim.nmse[i]:.3g})")
+    _mark_stop(ax, sim, None)
+    ax.axvspan(t0 / 60.0, (t0 + horizon) / 60.0, color="0.9", lw=0, zorder=0, label="forecast span of (b)")
+    ax.set_ylabel("amplitude A (m)")
+    ax.set_xlabel("time since event start (min)")
+    ax.set_title(title, fontsize=10, loc="left")
+    if sim.stopped:
+        ax.text(0.99, 0.03, f"simulation stopped (x): {sim.reason}", transform=ax.transAxes, ha="right",
+                va="bottom", fontsize=7, wrap=True)
+    ax.legend(loc="upper left", fontsize=7, ncol=2)
+
+
+def _forecast_status(fc, e: int) -> str:
+    """Legend text of a forecast of section e: its NMSE, and where a blown-up run was stopped."""
+    if not fc.stopped:
+        return f"NMSE {fc.nmse[e]:.3g}"
+    if np.isfinite(fc.nmse[e]):
+        return f"NMSE {fc.nmse[e]:.3g} before the stop at {fc.stopped_at:.0f} s"
+    return f"stopped at {fc.stopped_at:.0f} s, no valid interval"
 
 
 def _mark_stop(ax, sim, column, *, colour="k", minutes=True):
