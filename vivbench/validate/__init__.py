@@ -12,6 +12,25 @@ from vivbench.validate.compare import (
     plan,
     run_comparison,
 )
+from vivbench.validate.leaderboard import LeaderboardResult, method_slug, parse_methods, run_leaderboard
+from vivbench.validate.leaderboard_table import (
+    LEADERBOARD_COLUMNS,
+    SCORE_LABELS,
+    SCORES,
+    format_score,
+    leaderboard_markdown,
+    plot_leaderboard,
+    read_leaderboard,
+)
+from vivbench.validate.scenarios import (
+    SCENARIO_FINGERPRINTS,
+    SCENARIOS,
+    Scenario,
+    load_scenario_file,
+    scenario,
+    scenarios_from_dict,
+    select_scenarios,
+)
 from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
 from vivbench.validate.metrics import (
     REGIMES,
@@ -59,6 +78,10 @@ from vivbench.validate.sweep import (
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 
 __all__ = [
+    "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "LeaderboardResult", "format_score", "leaderboard_markdown",
+    "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
+    "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
+    "select_scenarios",
     "BASE_LEVELS", "DESIGNS", "FACTORS", "CompareConfig", "CompareResult", "compare_cells", "compare_config_from_dict",
     "load_compare_config", "plan", "run_comparison",
     "METRIC_COLUMNS", "SWEEP_PARAMETERS", "SweepConfig", "SweepResult", "SweepTask", "load_sweep_config",
