@@ -34,11 +34,12 @@ from vivbench.core.terms import reference_section, section_exponents
 from vivbench.io.event import read_event_summary
 from vivbench.io.result import read_result, result_record
 from vivbench.core.errors import InputError
+from vivbench.report.leaderboard import leaderboard_section
 
 __all__ = ["EXTRA_STEPS", "write_report"]
 
 #: The steps whose output directories the report embeds, in report order.
-EXTRA_STEPS = ("cluster", "forecast", "refit", "validate", "compare", "sweep")
+EXTRA_STEPS = ("cluster", "forecast", "refit", "validate", "compare", "sweep", "leaderboard")
 
 # Canonical command of each step, used when its directory does not record the
 # exact command (a ``command`` key in summary.json or a command.txt file).
@@ -449,7 +450,10 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
     say("recovery")
 
     for step in step_names:
-        md += _step_section(step, extra_dirs.get(step), campaign_dir, results_dir, out_dir, written, max_rows)
+        if step == "leaderboard":  # its own section module (vivbench.report.leaderboard)
+            md += leaderboard_section(extra_dirs.get(step), out_dir, written)
+        else:
+            md += _step_section(step, extra_dirs.get(step), campaign_dir, results_dir, out_dir, written, max_rows)
         say(step)
 
     _remove_stale_pngs(out_dir, written)
