@@ -88,3 +88,13 @@ def test_scenario_file(tmp_path):
     path.write_text('[scenario.t]\nversion = 1\ndescription = "x"\nevnts = 2\n')
     with pytest.raises(InputError, match="unknown keys \\['evnts'\\]"):
         load_scenario_file(path)
+
+
+def test_synth_scenario_refuses_options_it_fixes(tmp_path, capsys):
+    from vivbench.cli import main
+
+    assert main(["synth", "--scenario", "drift", "--seed", "3", "--out", str(tmp_path / "c")]) == 2
+    assert "--scenario drift fixes the campaign" in capsys.readouterr().err
+    assert main(["synth", "--scenario", "nope", "--out", str(tmp_path / "c")]) == 2
+    assert "unknown scenario 'nope'" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
