@@ -17,6 +17,7 @@ from vivbench.validate.leaderboard_table import (
     LEADERBOARD_COLUMNS,
     SCORE_LABELS,
     SCORES,
+    VALUES,
     format_score,
     leaderboard_markdown,
     plot_leaderboard,
@@ -78,7 +79,7 @@ from vivbench.validate.sweep import (
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 
 __all__ = [
-    "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "LeaderboardResult", "format_score", "leaderboard_markdown",
+    "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",
     "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
     "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
     "select_scenarios",

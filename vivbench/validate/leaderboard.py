@@ -43,11 +43,23 @@ from pathlib import Path
 from vivbench.core.errors import InputError, error_line
 from vivbench.core.parallel import run_tasks
 from vivbench.io.netcdf import atomic_path
-from vivbench.validate.leaderboard_table import SCORES, plot_leaderboard, write_csv, write_markdown
+from vivbench.validate.leaderboard_table import VALUES, plot_leaderboard, write_csv, write_markdown
 from vivbench.validate.scenarios import Scenario
 
 __all__ = ["LeaderboardResult", "run_leaderboard", "method_slug", "parse_methods"]
 
+
+#: Where each leaderboard column comes from in :func:`vivbench.validate.methods.score_fitted`'s dict.
+SCORE_SOURCES = {
+    "coverage": "coverage",
+    "accuracy_flagged": "accuracy_identifiable",
+    "accuracy_all": "accuracy_all",
+    "rhs_error_true_AU": "rhs_error_true_AU_median_active",
+    "curve_error": "curve_error_total",
+    "forecast_nmse": "simulation_nmse",
+    "forecast_covered": "simulation_covered",
+    "fit_time_s": "fit_time_s",
+}
 
 _CELL_FORMAT = "vivbench-leaderboard-cell"
 _CELL_FORMAT_VERSION = 1
@@ -137,10 +149,30 @@ def _prepare_scenario_reported(task: dict) -> dict:
 
 
 def _score_cell(task: dict) -> dict:
-    """Fit and score one method on one scenario (a worker task): the cell's scores."""
-    from vivbench.validate.methods import score_method  # the scoring API of the method plug-ins
+    """Fit and score one method on one scenario (a worker task): the cell's scores.
 
-    return score_method(task["method"], task["events"], task["results"])
+    Every method gets the same records (the identification results' A, U and the chain's dA,
+    :func:`vivbench.analysis.records_from_results`) and is scored on the same windows (the
+    identification's) against the events' ``/truth``, by :mod:`vivbench.validate.methods`.
+    """
+    from vivbench.analysis.pool import records_from_results
+    from vivbench.io.event import read_event
+    from vivbench.io.result import read_result
+    from vivbench.validate.methods import fit_method, resolve_method, score_fitted
+
+    records = records_from_results(task["results"])
+    truths = [read_event(path)["truth"].ds for path in task["events"]]
+    windows = []
+    for path in task["results"]:
+        ds = read_result(path, ["window_start", "window_end"])
+        windows.append((ds["window_start"].values, ds["window_end"].values))
+    method = resolve_method(task["method"])
+    fitted, seconds = fit_method(method, records)
+    scores = score_fitted(fitted, records, truths, windows=windows, fit_time_s=seconds)
+    # Adapter (the scoring API has no such key): whether the fitted model gives a verdict, which
+    # tells "coverage 0: no verdict" from "coverage 0: flagged nothing".
+    has_verdict = callable(getattr(fitted, "identifiable", None))
+    return {"has_verdict": has_verdict, **{ours: scores[theirs] for ours, theirs in SCORE_SOURCES.items()}}
 
 
 def _score_cell_reported(task: dict) -> dict:
@@ -157,7 +189,7 @@ def _cell_path(out: Path, scenario: str, method: str) -> Path:
 
 
 def _cell_text(scn: Scenario, record_key: str, method: str, scores: dict) -> str:
-    row = {k: _number(scores.get(k)) for k in SCORES}
+    row = {k: _number(scores.get(k)) for k in VALUES}
     body = {"format": _CELL_FORMAT, "format_version": _CELL_FORMAT_VERSION, "scenario": scn.name,
             "scenario_version": scn.version, "scenario_record": record_key, "method": method,
             "has_verdict": bool(scores.get("has_verdict", False)), "scores": row}
@@ -184,9 +216,9 @@ def _read_cell(path: Path, scn: Scenario, record_key: str, method: str) -> dict 
     if body.get("scenario") != scn.name or body.get("scenario_record") != record_key or body.get("method") != method:
         return None
     scores = body.get("scores")
-    if not isinstance(scores, dict) or set(SCORES) - set(scores):
+    if not isinstance(scores, dict) or set(VALUES) - set(scores):
         return None
-    return {"has_verdict": bool(body.get("has_verdict")), **{k: _number(scores[k]) for k in SCORES}}
+    return {"has_verdict": bool(body.get("has_verdict")), **{k: _number(scores[k]) for k in VALUES}}
 
 
 # ------------------------------------------------------------------------ run
@@ -339,7 +371,7 @@ def _run(methods, scenarios, out, workers, scheduler, identify, progress) -> Lea
     for s in scenarios:
         for m in methods:
             row = {"scenario": s.name, "scenario_version": s.version, "in_class": s.in_class, "method": m,
-                   "has_verdict": False, **{k: float("nan") for k in SCORES}, "error": ""}
+                   "has_verdict": False, **{k: float("nan") for k in VALUES}, "error": ""}
             row.update(rows_by_cell.get((s.name, m), {}))
             row["error"] = errors.get((s.name, m), "")
             rows.append(row)
