@@ -175,15 +175,6 @@ def _score_cell(task: dict) -> dict:
     return {"has_verdict": has_verdict, **{ours: scores[theirs] for ours, theirs in SCORE_SOURCES.items()}}
 
 
-def _score_cell_reported(task: dict) -> dict:
-    try:
-        return _score_cell(task)
-    except (InputError, OSError):
-        raise
-    except Exception as exc:
-        raise RuntimeError(error_line(exc)) from exc
-
-
 def _cell_path(out: Path, scenario: str, method: str) -> Path:
     return out / "cells" / scenario / f"{method_slug(method)}.json"
 
@@ -351,7 +342,7 @@ def _run(methods, scenarios, out, workers, scheduler, identify, progress) -> Lea
                 pending.append((s.name, m))
     cell_tasks = [{"method": m, "events": files[sn]["events"], "results": files[sn]["results"]} for sn, m in pending]
     computed = []
-    with closing(run_tasks(_score_cell_reported, cell_tasks, workers=workers, scheduler=scheduler)) as outcomes:
+    with closing(run_tasks(_score_cell, cell_tasks, workers=workers, scheduler=scheduler)) as outcomes:
         for o in outcomes:
             sn, m = pending[o.index]
             if o.ok:
