@@ -12,6 +12,21 @@ from vivbench.validate.compare import (
     plan,
     run_comparison,
 )
+from vivbench.validate.methods import (
+    BUILTIN_METHODS,
+    SCORE_KEYS,
+    CampaignMethod,
+    FittedWindows,
+    VerdictModel,
+    WindowMethod,
+    check_method_spec,
+    default_windows,
+    fit_method,
+    resolve_method,
+    score_fitted,
+    score_method,
+    simulation_nmse,
+)
 from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
 from vivbench.validate.metrics import (
     REGIMES,
@@ -59,6 +74,9 @@ from vivbench.validate.sweep import (
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 
 __all__ = [
+    "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "FittedWindows", "VerdictModel", "WindowMethod",
+    "check_method_spec", "default_windows", "fit_method", "resolve_method", "score_fitted", "score_method",
+    "simulation_nmse",
     "BASE_LEVELS", "DESIGNS", "FACTORS", "CompareConfig", "CompareResult", "compare_cells", "compare_config_from_dict",
     "load_compare_config", "plan", "run_comparison",
     "METRIC_COLUMNS", "SWEEP_PARAMETERS", "SweepConfig", "SweepResult", "SweepTask", "load_sweep_config",
