@@ -32,6 +32,21 @@ from vivbench.validate.scenarios import (
     scenarios_from_dict,
     select_scenarios,
 )
+from vivbench.validate.methods import (
+    BUILTIN_METHODS,
+    SCORE_KEYS,
+    CampaignMethod,
+    FittedWindows,
+    VerdictModel,
+    WindowMethod,
+    check_method_spec,
+    default_windows,
+    fit_method,
+    resolve_method,
+    score_fitted,
+    score_method,
+    simulation_nmse,
+)
 from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
 from vivbench.validate.metrics import (
     REGIMES,
@@ -83,6 +98,9 @@ __all__ = [
     "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
     "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
     "select_scenarios",
+    "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "FittedWindows", "VerdictModel", "WindowMethod",
+    "check_method_spec", "default_windows", "fit_method", "resolve_method", "score_fitted", "score_method",
+    "simulation_nmse",
     "BASE_LEVELS", "DESIGNS", "FACTORS", "CompareConfig", "CompareResult", "compare_cells", "compare_config_from_dict",
     "load_compare_config", "plan", "run_comparison",
     "METRIC_COLUMNS", "SWEEP_PARAMETERS", "SweepConfig", "SweepResult", "SweepTask", "load_sweep_config",

@@ -1,0 +1,186 @@
+"""Methods as plug-ins (DESIGN 7): resolution, pysindy adapters, the standard scores, and a known answer
+for a method defined outside the package, run through `vivbench compare`."""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pysindy as ps
+import pytest
+import xarray as xr
+
+from tests.helpers import assert_close
+from vivbench.core import InputError, Record
+from vivbench.models import PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
+from vivbench.validate import resolve_method, score_fitted, score_method
+
+REPO = Path(__file__).resolve().parents[1]
+
+# A known model, one section: dA/dt = 1e-4 U + (-0.02 + 0.002 U) A - 2 A^3 (m/s), monomials in A and U.
+# U and A vary within every 50 s window (periods 20 s and 30 s), so each window's regression is well posed.
+
+
+def _known(event_id: str, phase: float, *, n: int = 800, dt: float = 0.25) -> tuple[Record, np.ndarray]:
+    t = np.arange(n) * dt
+    U = (8.0 + 1.5 * np.sin(2 * np.pi * t / 20 + phase))[:, None]
+    A = (0.05 + 0.04 * np.sin(2 * np.pi * t / 30 + 2 * phase))[:, None]
+    r = np.zeros((n, 1, 4))
+    r[..., 0] = 1e-4 * U
+    r[..., 1] = (-0.02 + 0.002 * U) * A
+    r[..., 3] = -2.0 * A**3
+    return Record(event_id=event_id, t=t, A=A, U=U, dA=r.sum(-1)), r
+
+
+@pytest.fixture(scope="module")
+def known():
+    return [_known("E1", 0.0), _known("E2", 1.0)]
+
+
+def _sindy(degree: int = 3, threshold: float = 1e-10):
+    return ps.SINDy(feature_library=ps.PolynomialLibrary(degree=degree), optimizer=ps.STLSQ(threshold=threshold))
+
+
+def test_term_orders_read_the_power_of_A_from_pysindy_names():
+    names = ["1", "A1", "U1", "A1^2", "A1 U1", "A1^2 U1^3", "U1 A2^3", "A1^4", "sin(A1)", "A1 A2", "1 U1^2"]
+    got = term_orders(names, ["A1", "A2"], ["U1", "U2"])
+    assert got.tolist() == [0, 1, 0, 2, 1, 2, 3, -1, -1, 2, 0]
+
+
+def test_pysindy_campaign_and_windows_reproduce_a_known_model(known):
+    records = [r for r, _ in known]
+    camp = PySINDyCampaign(sindy=_sindy()).fit(records)
+    win = PySINDyWindows(sindy=_sindy(), window=50.0, step=25.0).fit(records)
+    cp = PySINDyCP(u_degree=2, threshold=1e-10).fit(records)
+    assert win.coef_.shape[0] == 2 * 7, "seven 50 s windows (25 s step) per 200 s record"
+    for rec, r in known:
+        for name, model in (("campaign", camp), ("windows", win), ("pysindy-cp", cp)):
+            got = model.order_contributions(rec)
+            assert got.shape == r.shape
+            # noise-free, exact dA/dt: least squares on the true library, rounding only
+            assert_close(got, r, atol=1e-9 * np.abs(r).max(), reason="least-squares rounding on O(1e-2) data",
+                         what=f"{name} order contributions")
+            assert_close(model.predict(rec), rec.dA, atol=1e-9 * np.abs(rec.dA).max(),
+                         reason="least-squares rounding", what=f"{name} predict")
+
+
+def test_terms_without_an_order_are_refused_or_set_aside(known):
+    records = [r for r, _ in known]
+    with pytest.raises(ValueError, match="'A1\\^4' is not a monomial in A of order <= 3"):
+        PySINDyCampaign(sindy=_sindy(degree=4, threshold=0.0)).fit(records)
+    m = PySINDyCampaign(sindy=_sindy(degree=4, threshold=0.0), other_terms="aside").fit(records)
+    assert (m.term_orders_ == -1).sum() > 0 and 0.0 <= m.other_share_ < 1e-3
+
+
+def test_resolve_method_names_the_spec_and_the_problem(tmp_path, monkeypatch):
+    for spec in ("windows", "campaign", "varying", "pysindy-cp"):
+        assert callable(resolve_method(spec).fit)
+    (tmp_path / "plug_bad.py").write_text("def nofit():\n    return 3\n\ndef boom():\n    raise RuntimeError('no')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    cases = [("not a spec", "is not one of windows"), ("no_such_module_xyz:make", "cannot import module"),
+             ("plug_bad:missing", "has no callable 'missing'"), ("plug_bad:nofit", "returned a int, which has no fit"),
+             ("plug_bad:boom", "boom\\(\\) failed: RuntimeError: no")]
+    for spec, message in cases:
+        with pytest.raises(InputError, match=message) as info:
+            resolve_method(spec)
+        assert repr(spec) in str(info.value)
+
+
+class _Damped:
+    """Always linearly damped: r1 = -c A, other orders 0 (regime 1 everywhere)."""
+
+    def fit(self, records):
+        return self
+
+    def order_contributions(self, record):
+        r = np.zeros(record.A.shape + (4,))
+        r[..., 1] = -0.01 * record.A
+        return r
+
+
+def _truth(rec: Record, r: np.ndarray) -> xr.Dataset:
+    from vivbench.core.regime import classify_regime
+
+    regime = classify_regime(r[None], rec.A[None], axis=0)
+    return xr.Dataset({"A": (("time", "section"), rec.A), "U": (("time", "section"), rec.U),
+                       "r": (("time", "section", "order"), r), "regime": (("time", "section"), regime)},
+                      coords={"time": rec.t})
+
+
+def test_scores_of_exact_and_of_damped_models(known):
+    records = [r for r, _ in known]
+    truths = [_truth(rec, r) for rec, r in known]
+    exact = score_method(PySINDyCampaign(sindy=_sindy()), records, truths)
+    assert exact["coverage"] == 0.0, "no identifiability verdict: coverage 0"
+    assert exact["accuracy_all"] == 1.0 and np.isnan(exact["accuracy_identifiable"])
+    assert exact["rhs_error_true_AU_median"] < 1e-8
+    assert np.isnan(exact["curve_error_linear"]) and np.isnan(exact["simulation_nmse"]) and exact["fit_time_s"] > 0
+    damped = score_fitted(_Damped(), records, truths)
+    assert damped["coverage"] == 0.0 and damped["n_scored"] == exact["n_scored"] > 0
+    assert damped["accuracy_all"] == damped["truth_share_regime1"]
+
+
+PLUGIN = textwrap.dedent('''
+    """A user's method outside vivbench: always linearly damped dynamics, dA/dt = -c A."""
+    import numpy as np
+
+    class Damped:
+        def fit(self, records):
+            return self
+
+        def order_contributions(self, record):
+            r = np.zeros(record.A.shape + (4,))
+            r[..., 1] = -0.02 * record.A
+            return r
+
+    def make():
+        return Damped()
+''')
+
+
+def test_known_answer_of_a_plugin_through_the_cli(tmp_path):
+    """A method defined outside the package, on PYTHONPATH, run by `vivbench compare` in a subprocess:
+    it answers regime 1 everywhere, so its accuracy on all windows is the share of true regime-1 windows,
+    and its coverage is 0; pysindy-cp runs beside it."""
+    from vivbench.io.event import read_event
+    from vivbench.io.result import read_result
+    from vivbench.regimes.truth import truth_window_regimes
+
+    (tmp_path / "my_methods.py").write_text(PLUGIN)
+    grid = tmp_path / "grid.toml"
+    grid.write_text('[campaign]\nevents = 1\nduration = [400.0, 400.0]\nseed = 2\n'
+                    '[grid]\nmethod = ["my_methods:make", "pysindy-cp"]\n')
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(REPO)]))
+    proc = subprocess.run([sys.executable, "-m", "vivbench", "compare", "--grid", str(grid), "--out", str(out),
+                           "--workers", "1"], env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    with open(out / "compare.csv", newline="") as fh:
+        rows = {r["method"]: r for r in csv.DictReader(fh)}
+    assert set(rows) == {"windows", "my_methods:make", "pysindy-cp"}
+    plug = rows["my_methods:make"]
+    assert plug["error"] == "" and rows["pysindy-cp"]["error"] == "", (plug["error"], rows["pysindy-cp"]["error"])
+    # The expected figure, computed here from the truth and the cell's windows alone.
+    truth_reg = []
+    for res_path in sorted((out / "cells" / plug["cell_id"]).glob("*.identify.nc")):
+        res = read_result(res_path)
+        truth = read_event(out / "campaigns" / "k00" / f"{res.attrs['event_id']}.nc")["truth"].ds
+        truth_reg.append(truth_window_regimes(truth, res["window_start"].values, res["window_end"].values).ravel())
+    truth_reg = np.concatenate(truth_reg)
+    n_scored, n_regime1 = int((truth_reg > 0).sum()), int((truth_reg == 1).sum())
+    assert int(plug["n_scored"]) == n_scored > 0
+    assert 0 < n_regime1 < n_scored, "the campaign must hold regime-1 and other windows for the answer to mean something"
+    assert float(plug["coverage"]) == 0.0
+    # exact as counts: the CSV holds 6 significant digits
+    assert round(float(plug["accuracy_all"]) * n_scored) == n_regime1
+    assert_close(float(plug["accuracy_all"]), n_regime1 / n_scored, rtol=1e-5, reason="CSV holds 6 significant digits")
+    for k in ("curve_error_linear", "simulation_nmse"):
+        assert plug[k] == "nan", k
+    assert float(rows["pysindy-cp"]["coverage"]) == 0.0 and 0.0 <= float(rows["pysindy-cp"]["accuracy_all"]) <= 1.0
+    assert float(rows["pysindy-cp"]["fit_time_s"]) > 0
+    assert float(rows["windows"]["coverage"]) >= 0.0 and rows["windows"]["error"] == ""
