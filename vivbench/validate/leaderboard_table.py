@@ -156,7 +156,7 @@ def leaderboard_markdown(rows: Sequence[dict], *, scenarios: Sequence | None = N
     by = {(r["scenario"], r["method"]): r for r in rows}
     first = {r["scenario"]: r for r in rows}
     lines = ["Every method is fitted on the same records of each scenario (the identification's A, U and dA, "
-             "dA by the chain's default derivative) and scored on the same windows (the identification's, "
+             "dA by the chain's default derivative) and scored on the same windows (the identification's, by default "
              "50 s every 25 s) against the truth, by `vivbench.validate.methods.score_fitted`.", ""]
     in_class = [s for s in scen if first[s]["in_class"]]
     if in_class:
