@@ -219,3 +219,15 @@ def test_report_section(reference, tmp_path):
     assert "| tiny v1 | " in text and "one 4-min event" in text  # table and scenario legend
     assert written == ["leaderboard_heatmaps.png"] and (tmp_path / written[0]).is_file()
     assert "Not run" in leaderboard_section(None, tmp_path, [])[2]
+
+
+@pytest.mark.slow
+def test_report_cli_embeds_the_leaderboard(reference, tmp_path):
+    out, _ = reference
+    scen = out / "scenarios" / "tiny"
+    assert main(["report", "--campaign", str(scen / "campaign"), "--results", str(scen / "identify"), "--name", "lb",
+                 "--out-root", str(tmp_path), "--leaderboard", str(out)]) == 0
+    text = (tmp_path / "lb" / "report.md").read_text()
+    assert "## Leaderboard: methods on the scenario suite" in text and "--leaderboard " in text
+    assert "![Leaderboard heat maps](leaderboard_heatmaps.png)" in text
+    assert (tmp_path / "lb" / "leaderboard_heatmaps.png").is_file()

@@ -62,10 +62,8 @@ def leaderboard_section(directory, out_dir: Path, written: list[str]) -> list[st
         written.append(_FIGURE)
         figure = quote(_FIGURE)
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    out += [f"Every method fitted on the records of every scenario (the same identification windows for all) and "
-            f"scored against the scenario's truth: {len(methods)} method(s), {len(scenarios) or 'the'} scenario(s), "
-            f"from `{directory}`.", "",
-            f"Produced by: `{_command(directory)}`", ""]
+    out += [f"{len(methods)} method(s) on {len(scenarios) or 'the'} scenario(s), from `{directory}`.", "",
+            f"*Produced by:* `{_command(directory)}`", ""]
     out += leaderboard_markdown(rows, scenarios=scenarios, figure=figure, heading="###").splitlines()
     out.append("")
     return out
