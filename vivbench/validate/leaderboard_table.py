@@ -168,9 +168,13 @@ def leaderboard_markdown(rows: Sequence[dict], *, scenarios: Sequence | None = N
     lines += ["Not applicable: a method without an identifiability verdict flags no window, so its coverage is 0 "
               "and it has no accuracy on flagged windows (\"no verdict\"); \"- (none flagged)\" means a method "
               "with a verdict flagged nothing; the curve error needs a method with coefficient curves and a truth "
-              "that stores them (none with a damping drift), the forecast NMSE a method that simulates (\"n/a\"); "
+              "that stores them (none with a damping drift) and self-excited truth samples (none on a forced-only "
+              "bridge), the forecast NMSE a method that simulates (\"n/a\"); "
               "\"(62 % run)\" after a forecast NMSE: the median simulation left the data's range after that share of "
-              "its run and the NMSE covers only the part before. "
+              "its run and the NMSE covers only the part before. The built-in windows method simulates with the "
+              "model of the window in force at each time, re-identified every window step from the very data it "
+              "simulates: its forecast NMSE is not that of a model fixed in advance and is not comparable with the "
+              "campaign-level models'. "
               "Fit time is wall-clock time on the machine that ran the cell and varies between runs.", ""]
     if figure:
         lines += [f"![Leaderboard heat maps]({figure})", ""]
@@ -252,7 +256,8 @@ def plot_leaderboard(rows: Sequence[dict], path: Path) -> Path:
             for j, m in enumerate(methods):
                 r = by.get((s, m))
                 text = format_score(r, score) if r is not None else ""
-                text = text.replace(" (no verdict)", "\nno verdict").replace(" (none flagged)", "\nnone")
+                text = text.replace(" (no verdict)", "\nno verdict").replace(" (none flagged)", "\nnone").replace(
+                    " (", "\n(")
                 ax.text(j, i, text, ha="center", va="center", fontsize=7,
                         bbox={"facecolor": "white", "alpha": 0.6, "linewidth": 0, "pad": 1})
         ax.set_xticks(range(len(methods)))
