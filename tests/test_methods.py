@@ -119,8 +119,11 @@ def test_scores_of_exact_and_of_damped_models(known):
     assert exact["coverage"] == 0.0, "no identifiability verdict: coverage 0"
     assert exact["accuracy_all"] == 1.0 and np.isnan(exact["accuracy_identifiable"])
     assert exact["rhs_error_true_AU_median"] < 1e-8
-    assert np.isnan(exact["curve_error_linear"]) and np.isnan(exact["simulation_nmse"]) and exact["fit_time_s"] > 0
+    # these truths have no curves; the adapter simulates (covered share in [0, 1])
+    assert np.isnan(exact["curve_error_linear"]) and 0.0 <= exact["simulation_covered"] <= 1.0
+    assert exact["fit_time_s"] > 0
     damped = score_fitted(_Damped(), records, truths)
+    assert np.isnan(damped["simulation_nmse"]) and np.isnan(damped["curve_error_total"]), "no simulate, no curves"
     assert damped["coverage"] == 0.0 and damped["n_scored"] == exact["n_scored"] > 0
     assert damped["accuracy_all"] == damped["truth_share_regime1"]
 
@@ -184,3 +187,32 @@ def test_known_answer_of_a_plugin_through_the_cli(tmp_path):
     assert float(rows["pysindy-cp"]["coverage"]) == 0.0 and 0.0 <= float(rows["pysindy-cp"]["accuracy_all"]) <= 1.0
     assert float(rows["pysindy-cp"]["fit_time_s"]) > 0
     assert float(rows["windows"]["coverage"]) >= 0.0 and rows["windows"]["error"] == ""
+
+
+def test_campaign_adapter_curves_are_the_known_coefficients(known):
+    m = PySINDyCampaign(sindy=_sindy()).fit([r for r, _ in known])
+    wind = np.array([6.0, 8.0, 10.0])
+    c = m.curves(wind)["curves"].values  # (1, 4, 3)
+    expected = np.stack([1e-4 * wind, -0.02 + 0.002 * wind, 0 * wind, -2.0 + 0 * wind])[None]
+    assert_close(c, expected, atol=1e-9, reason="least-squares rounding", what="a_ki(U)")
+
+
+def test_campaign_adapter_simulates_the_known_model(known):
+    """The fitted model integrated over a record whose A solves the known model (solve_ivp, tight tolerances)."""
+    from scipy.integrate import solve_ivp
+
+    m = PySINDyCampaign(sindy=_sindy()).fit([r for r, _ in known])
+    t = np.arange(0.0, 300.0, 0.25)
+
+    def wind(tt):
+        return 8.0 + 1.0 * np.sin(2 * np.pi * tt / 600)
+
+    def rhs(tt, a):
+        u = wind(tt)
+        return 1e-4 * u + (-0.02 + 0.002 * u) * a - 2.0 * a**3
+
+    A = solve_ivp(rhs, (t[0], t[-1]), [0.02], t_eval=t, rtol=1e-12, atol=1e-14).y.T
+    sim = m.simulate(Record(event_id="S", t=t, A=A, U=wind(t)[:, None]))
+    assert sim.covered == 1.0 and sim.stopped_at is None
+    # RK4 with 0.25 s steps and U linear between samples against a tight reference
+    assert_close(sim.A_sim, A, rtol=1e-6, reason="RK4 step 0.25 s, U interpolated linearly", what="simulated A")
