@@ -156,7 +156,8 @@ def test_known_answer_of_a_plugin_through_the_cli(tmp_path):
 
     (tmp_path / "my_methods.py").write_text(PLUGIN)
     grid = tmp_path / "grid.toml"
-    grid.write_text('[campaign]\nevents = 1\nduration = [400.0, 400.0]\nseed = 2\n'
+    # the product design runs exactly the listed methods (one_at_a_time would add the "windows" base cell)
+    grid.write_text('design = "product"\n[campaign]\nevents = 1\nduration = [400.0, 400.0]\nseed = 2\n'
                     '[grid]\nmethod = ["my_methods:make", "pysindy-cp"]\n')
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(tmp_path), str(REPO)]))
@@ -165,7 +166,7 @@ def test_known_answer_of_a_plugin_through_the_cli(tmp_path):
     assert proc.returncode == 0, proc.stderr
     with open(out / "compare.csv", newline="") as fh:
         rows = {r["method"]: r for r in csv.DictReader(fh)}
-    assert set(rows) == {"windows", "my_methods:make", "pysindy-cp"}
+    assert set(rows) == {"my_methods:make", "pysindy-cp"}
     plug = rows["my_methods:make"]
     assert plug["error"] == "" and rows["pysindy-cp"]["error"] == "", (plug["error"], rows["pysindy-cp"]["error"])
     # The expected figure, computed here from the truth and the cell's windows alone.
@@ -186,7 +187,6 @@ def test_known_answer_of_a_plugin_through_the_cli(tmp_path):
         assert plug[k] == "nan", k
     assert float(rows["pysindy-cp"]["coverage"]) == 0.0 and 0.0 <= float(rows["pysindy-cp"]["accuracy_all"]) <= 1.0
     assert float(rows["pysindy-cp"]["fit_time_s"]) > 0
-    assert float(rows["windows"]["coverage"]) >= 0.0 and rows["windows"]["error"] == ""
 
 
 def test_campaign_adapter_curves_are_the_known_coefficients(known):
@@ -216,3 +216,14 @@ def test_campaign_adapter_simulates_the_known_model(known):
     assert sim.covered == 1.0 and sim.stopped_at is None
     # RK4 with 0.25 s steps and U linear between samples against a tight reference
     assert_close(sim.A_sim, A, rtol=1e-6, reason="RK4 step 0.25 s, U interpolated linearly", what="simulated A")
+
+
+def test_method_levels_are_checked_before_any_campaign_is_made(tmp_path):
+    from vivbench.validate import compare_config_from_dict, compare_cells
+
+    cfg = compare_config_from_dict({"grid": {"method": ["campaign", "pysindy-cp"]}, "campaign": {"duration": 600}})
+    assert [c["method"] for c in compare_cells(cfg)] == ["windows", "campaign", "pysindy-cp"]
+    for levels, message in ((["nope"], "method 'nope' is not one of"),
+                            (["no_such_module_xyz:make"], "cannot import module 'no_such_module_xyz'")):
+        with pytest.raises(InputError, match=message):
+            compare_config_from_dict({"grid": {"method": levels}})

@@ -613,6 +613,8 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
     else:
         sel = rows
     sel = [dict(r, cpu_time_per_event_s=r["cpu_time_s"] / r["n_events"]) for r in sel]
+    if _has_method(config):
+        sel = [dict(r, fit_time_per_event_s=r["fit_time_s"] / r["n_events"]) for r in sel]
     pos = {lv: i for i, lv in enumerate(levels)}
     x = np.array([pos[r[factor]] for r in sel], dtype=float)
     panels = [
@@ -623,6 +625,14 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
         ("identification time\nper event (s)", [("wall_time_per_event_s", "wall time"),
                                                 ("cpu_time_per_event_s", "CPU time")], False),
     ]
+    if _has_method(config):
+        # Realistic truths have no exact matrix: the dA/dt error on the true (A, U) is the one always scored.
+        panels[1] = ("median rel. error of dA/dt,\nactive windows (-)",
+                     [("rhs_error_true_AU_median_active", "on the true (A, U)"),
+                      ("rhs_median_rel_error_active", "measured (A, U), exact matrix")], True)
+        panels[2] = ("time per event (s)", [("wall_time_per_event_s", "wall time (identification + fit)"),
+                                            ("cpu_time_per_event_s", "CPU time"),
+                                            ("fit_time_per_event_s", "method fit (windows: identification)")], False)
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
     for ax, (ylabel, metrics, logy) in zip(axes, panels):
         for k, (metric, label) in enumerate(metrics):
