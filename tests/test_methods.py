@@ -227,3 +227,21 @@ def test_method_levels_are_checked_before_any_campaign_is_made(tmp_path):
                             (["no_such_module_xyz:make"], "cannot import module 'no_such_module_xyz'")):
         with pytest.raises(InputError, match=message):
             compare_config_from_dict({"grid": {"method": levels}})
+
+
+def test_builtin_windows_method_gives_the_identification_regimes_and_verdicts(small_results):
+    """"windows" through the method API refits the chain's estimator on the results' records: the same
+    windows, regimes and verdicts as the identification (whose verdicts add the noise-floor test)."""
+    from vivbench.analysis import records_from_results
+    from vivbench.analysis.identify import IdentifyConfig
+    from vivbench.io.result import read_result
+
+    _campaign, _dir, files = small_results
+    fitted = resolve_method("windows").fit(records_from_results(files))
+    for rec, path in zip(records_from_results(files), files):
+        res = read_result(path)
+        s, e = res["window_start"].values, res["window_end"].values
+        np.testing.assert_array_equal(fitted.window_regimes(rec, s, e), res["regime"].values)
+        ok = fitted.identifiable(rec, s, e)
+        snr_ok = ~(res["amplitude_snr"].values < IdentifyConfig().min_snr)
+        np.testing.assert_array_equal(ok & snr_ok, res["identifiable"].values.astype(bool))
