@@ -510,6 +510,8 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
             continue
         if has_own:
             r = np.asarray(fitted.window_regimes(rec, start, end), dtype=int)
+            if r.shape != (start.size, rec.n_sections):
+                raise ValueError(f"window_regimes must return shape {(start.size, rec.n_sections)}; got {r.shape}")
         else:
             r = model_window_regimes(fitted, rec, start, end, tau=tau)["regime"].astype(int)
         reg.append(r)
