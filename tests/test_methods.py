@@ -58,6 +58,12 @@ def test_pysindy_campaign_and_windows_reproduce_a_known_model(known):
     win = PySINDyWindows(sindy=_sindy(), window=50.0, step=25.0).fit(records)
     cp = PySINDyCP(u_degree=2, threshold=1e-10).fit(records)
     assert win.coef_.shape[0] == 2 * 7, "seven 50 s windows (25 s step) per 200 s record"
+    from vivbench.models import CampaignLevel, FittedModel, Method, Predictor, Simulator
+
+    for model in (camp, win, cp):
+        assert isinstance(model, Method) and isinstance(model, FittedModel) and isinstance(model, Predictor)
+        assert "SINDy(" in repr(model)
+    assert isinstance(camp, Simulator) and isinstance(camp, CampaignLevel) and not isinstance(win, CampaignLevel)
     for rec, r in known:
         for name, model in (("campaign", camp), ("windows", win), ("pysindy-cp", cp)):
             got = model.order_contributions(rec)
