@@ -451,20 +451,15 @@ def _run_cell(task: dict) -> dict:
 
 def _score_method_cell(cell: dict, config: CompareConfig, event_files, results, wall: float, cpu: float) -> dict:
     """Fit the cell's method on the identification's records and score it (:func:`score_fitted`)."""
-    from vivbench.analysis.pool import records_from_results
-    from vivbench.io.event import read_event
     from vivbench.io.result import read_result
-    from vivbench.validate.methods import FittedWindows, fit_method, resolve_method, score_fitted
+    from vivbench.validate.methods import FittedWindows, fit_method, resolve_method, score_fitted, scoring_inputs
 
     spec = cell[METHOD_FACTOR]
-    datasets = [read_result(r) for r in results]
-    records = records_from_results(results)
-    truths = [read_event(f)["truth"].ds for f in event_files]
-    windows = [(ds["window_start"].values, ds["window_end"].values) for ds in datasets]
+    records, truths, windows = scoring_inputs(event_files, results)
     w0, c0 = time.perf_counter(), time.process_time()
     if spec == "windows":
         # The identification's own window models, regimes and verdicts: its wall time is the fit.
-        fitted, fit_time = FittedWindows.from_results(datasets), wall
+        fitted, fit_time = FittedWindows.from_results([read_result(r) for r in results]), wall
     else:
         fitted, fit_time = fit_method(resolve_method(spec), records)
     wall += time.perf_counter() - w0
