@@ -46,6 +46,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from vivbench.core.record import Record
+from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.window_model import nearest_window
 from vivbench.preprocess.windows import window_bounds
@@ -89,6 +90,25 @@ def term_orders(feature_names: Sequence[str], state_names: Sequence[str], input_
             if m.group(1) in state:
                 order += int(m.group(2) or 1)
         out[j] = order if 0 <= order <= 3 else -1
+    return out
+
+
+def term_a_exponents(feature_names: Sequence[str], state_names: Sequence[str],
+                     input_names: Sequence[str]) -> np.ndarray:
+    """Exponent of each state (A) variable in each term, shape (p, S); NaN rows for terms that are not monomials."""
+    index = {n: k for k, n in enumerate(state_names)}
+    inputs = set(input_names)
+    out = np.zeros((len(feature_names), len(state_names)))
+    for j, name in enumerate(feature_names):
+        for factor in str(name).split():
+            if factor == "1":
+                continue
+            m = _FACTOR.match(factor)
+            if m is None or (m.group(1) not in index and m.group(1) not in inputs):
+                out[j] = np.nan
+                break
+            if m.group(1) in index:
+                out[j, index[m.group(1)]] += int(m.group(2) or 1)
     return out
 
 
@@ -234,6 +254,8 @@ class PySINDyCampaign(_PySINDyBase):
     a_scale_, u_center_, u_scale_ : float (m, m/s, m/s)
     n_sections_ : int; n_trajectories_ : int; other_share_ : float
         RMS of the terms without an order relative to the RMS of the whole fitted right-hand side.
+    amplitude_ratios_ : ndarray, shape (S, S)
+        Median A_l / A_k of the fitted data (:func:`vivbench.models.amplitude_ratios`), for ``curves``.
     """
 
     def __init__(self, *, sindy=None, standardize: bool = True, use_record_derivative: bool = True,
@@ -265,9 +287,11 @@ class PySINDyCampaign(_PySINDyBase):
         self.sindy_ = model
         self.feature_names_ = names
         self.term_orders_ = orders
+        self.a_exponents_ = term_a_exponents(names, self.state_names_, self.input_names_)
         self.n_trajectories_ = len(pieces)
         self.coef_ = coef
         self.other_share_ = self._other_share(records)
+        self.amplitude_ratios_ = amplitude_ratios(np.concatenate([r.A for r in records]))
         return self
 
     def _other_share(self, records) -> float:
@@ -297,6 +321,125 @@ class PySINDyCampaign(_PySINDyBase):
         record = self._check_record(record)
         theta, _ok = self._theta(self.sindy_, record)
         return theta @ self.coef_.T * self.a_scale_
+
+    def simulate(self, record: Record, t0: float | None = None, t1: float | None = None, A0=None,
+                 bound_factor: float = 3.0):
+        """Integrate the fitted model with the record's wind (classical RK4 on the record's time grid).
+
+        The right-hand side of a library of monomials in A is sum_j xi_kj g_j(U) prod_l A_l^p_lj:
+        the wind parts g_j are evaluated once on the samples and midpoints (U linear between
+        samples), so each step costs a few small array operations.
+
+        Parameters
+        ----------
+        record : Record
+        t0, t1 : float, s, optional
+            Span, snapped to the record's samples (default: the whole record; U must be finite on it).
+        A0 : array_like, shape (S,), m, optional
+            Initial amplitudes (default: the record's A at t0).
+        bound_factor : float
+            The run stops where an amplitude leaves [0, bound_factor x the largest measured
+            amplitude of the span] (as :func:`vivbench.models.simulate_identified`).
+
+        Returns
+        -------
+        vivbench.models.Simulation
+
+        Raises
+        ------
+        ValueError
+            When fitted terms without an order were set aside (``other_terms="aside"``): their
+            dependence on A is not a monomial, which this integrator needs.
+        """
+        from vivbench.models.simulate import Simulation, nmse
+
+        record = self._check_record(record)
+        if np.any((self.term_orders_ < 0) & np.any(self.coef_ != 0, axis=0)):
+            raise ValueError("simulate needs a right-hand side of monomials in A; this model has terms set aside")
+        t = record.t
+        i0 = 0 if t0 is None else int(np.argmin(np.abs(t - float(t0))))
+        i1 = t.size - 1 if t1 is None else int(np.argmin(np.abs(t - float(t1))))
+        tt, A_meas, U = t[i0:i1 + 1], record.A[i0:i1 + 1], record.U[i0:i1 + 1]
+        if tt.size < 2 or not np.all(np.isfinite(U)):
+            raise ValueError(f"record {record.event_id!r}: the span needs >= 2 samples and finite U")
+        S = self.n_sections_
+        keep = np.any(self.coef_ != 0, axis=0)
+        P = self.a_exponents_[keep]  # (p', S)
+        coef = self.coef_[:, keep] * self.a_scale_  # dA/dt in m/s per unit scaled feature
+
+        def wind_part(Ux):
+            # theta at x = 1 (A = a_s) is the wind part of every monomial term
+            rec = Record(event_id=record.event_id, t=np.arange(Ux.shape[0], dtype=float),
+                         A=np.full(Ux.shape, self.a_scale_), U=Ux)
+            return self._theta(self.sindy_, rec)[0][:, keep]
+
+        g = wind_part(U)
+        g_mid = wind_part(0.5 * (U[1:] + U[:-1]))
+        x = (np.asarray(A_meas[0] if A0 is None else A0, dtype=float) / self.a_scale_).reshape(S)
+        top = bound_factor * np.nanmax(A_meas)
+        out = np.full(A_meas.shape, np.nan)
+        out[0] = x * self.a_scale_
+        stop = None
+
+        def f(xv, gv):
+            return coef @ (gv * np.prod(xv[None, :] ** P, axis=1)) / self.a_scale_
+
+        dt = np.diff(tt)
+        for n in range(tt.size - 1):  # an ODE step needs the previous one: the loop is over steps
+            h = dt[n]
+            k1 = f(x, g[n])
+            k2 = f(x + 0.5 * h * k1, g_mid[n])
+            k3 = f(x + 0.5 * h * k2, g_mid[n])
+            k4 = f(x + h * k3, g[n + 1])
+            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            a = x * self.a_scale_
+            if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > top):
+                stop = n + 1
+                break
+            out[n + 1] = a
+        covered = 1.0 if stop is None else stop / (tt.size - 1)
+        return Simulation(t=tt, A_sim=out, A_meas=A_meas, stopped_at=None if stop is None else float(tt[stop]),
+                          reason=None if stop is None else "amplitude left the data's range", nmse=nmse(out, A_meas),
+                          covered=float(covered), windows=np.zeros(0, dtype=int))
+
+    def curves(self, wind) -> "xr.Dataset":
+        """Coefficient curves a_ki(U) of DESIGN 3.5 (no bands: a single fit has no replicates).
+
+        With every section at the wind U and A_l = rho_kl A_k (``amplitude_ratios_``, the median
+        ratios of the fitted data; a pair without data counts as rho = 0), a term of power i in A
+        is a_ki(U) A_k^i, so a_ki(U) is the order-i contribution to dA_k/dt at A_k = 1 m.
+
+        Parameters
+        ----------
+        wind : array_like, shape (n_wind,), m/s
+
+        Returns
+        -------
+        xarray.Dataset
+            ``curves`` (equation, order, wind) in m^(1-i)/s, ``curves_lower`` and ``curves_upper``
+            NaN; coordinates ``equation``, ``order``, ``wind`` (m/s).
+        """
+        import xarray as xr
+
+        self._check_fitted()
+        wind = np.atleast_1d(np.asarray(wind, dtype=float))
+        if wind.ndim != 1 or wind.size < 1 or not np.all(np.isfinite(wind)):
+            raise ValueError("wind must be a 1-D array of finite speeds in m/s")
+        S = self.n_sections_
+        rho = np.nan_to_num(self.amplitude_ratios_, nan=0.0)
+        out = np.empty((S, 4, wind.size))
+        for k in range(S):
+            A = np.repeat(rho[k][None], wind.size, axis=0)
+            rec = Record(event_id="curves", t=np.arange(wind.size, dtype=float), A=A,
+                         U=np.repeat(wind[:, None], S, axis=1))
+            out[k] = self.order_contributions(rec)[:, k, :].T
+        dims = ("equation", "order", "wind")
+        units = {"units": "m^(1-order) s-1"}
+        return xr.Dataset({"curves": (dims, out, units), "curves_lower": (dims, np.full_like(out, np.nan), units),
+                           "curves_upper": (dims, np.full_like(out, np.nan), units)},
+                          coords={"equation": section_names(S), "order": np.arange(4),
+                                  "wind": ("wind", wind, {"units": "m/s"})},
+                          attrs={"model": type(self).__name__})
 
 
 class PySINDyWindows(_PySINDyBase):

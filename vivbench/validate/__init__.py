@@ -45,6 +45,7 @@ from vivbench.validate.methods import (
     resolve_method,
     score_fitted,
     score_method,
+    scoring_inputs,
     simulation_nmse,
 )
 from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
@@ -100,6 +101,7 @@ __all__ = [
     "select_scenarios",
     "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "FittedWindows", "VerdictModel", "WindowMethod",
     "check_method_spec", "default_windows", "fit_method", "resolve_method", "score_fitted", "score_method",
+    "scoring_inputs",
     "simulation_nmse",
     "BASE_LEVELS", "DESIGNS", "FACTORS", "CompareConfig", "CompareResult", "compare_cells", "compare_config_from_dict",
     "load_compare_config", "plan", "run_comparison",

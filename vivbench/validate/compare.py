@@ -451,20 +451,15 @@ def _run_cell(task: dict) -> dict:
 
 def _score_method_cell(cell: dict, config: CompareConfig, event_files, results, wall: float, cpu: float) -> dict:
     """Fit the cell's method on the identification's records and score it (:func:`score_fitted`)."""
-    from vivbench.analysis.pool import records_from_results
-    from vivbench.io.event import read_event
     from vivbench.io.result import read_result
-    from vivbench.validate.methods import FittedWindows, fit_method, resolve_method, score_fitted
+    from vivbench.validate.methods import FittedWindows, fit_method, resolve_method, score_fitted, scoring_inputs
 
     spec = cell[METHOD_FACTOR]
-    datasets = [read_result(r) for r in results]
-    records = records_from_results(results)
-    truths = [read_event(f)["truth"].ds for f in event_files]
-    windows = [(ds["window_start"].values, ds["window_end"].values) for ds in datasets]
+    records, truths, windows = scoring_inputs(event_files, results)
     w0, c0 = time.perf_counter(), time.process_time()
     if spec == "windows":
         # The identification's own window models, regimes and verdicts: its wall time is the fit.
-        fitted, fit_time = FittedWindows.from_results(datasets), wall
+        fitted, fit_time = FittedWindows.from_results([read_result(r) for r in results]), wall
     else:
         fitted, fit_time = fit_method(resolve_method(spec), records)
     wall += time.perf_counter() - w0
@@ -613,6 +608,8 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
     else:
         sel = rows
     sel = [dict(r, cpu_time_per_event_s=r["cpu_time_s"] / r["n_events"]) for r in sel]
+    if _has_method(config):
+        sel = [dict(r, fit_time_per_event_s=r["fit_time_s"] / r["n_events"]) for r in sel]
     pos = {lv: i for i, lv in enumerate(levels)}
     x = np.array([pos[r[factor]] for r in sel], dtype=float)
     panels = [
@@ -623,6 +620,14 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
         ("identification time\nper event (s)", [("wall_time_per_event_s", "wall time"),
                                                 ("cpu_time_per_event_s", "CPU time")], False),
     ]
+    if _has_method(config):
+        # Realistic truths have no exact matrix: the dA/dt error on the true (A, U) is the one always scored.
+        panels[1] = ("median rel. error of dA/dt,\nactive windows (-)",
+                     [("rhs_error_true_AU_median_active", "on the true (A, U)"),
+                      ("rhs_median_rel_error_active", "measured (A, U), exact matrix")], True)
+        panels[2] = ("time per event (s)", [("wall_time_per_event_s", "wall time (identification + fit)"),
+                                            ("cpu_time_per_event_s", "CPU time"),
+                                            ("fit_time_per_event_s", "method fit (windows: identification)")], False)
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
     for ax, (ylabel, metrics, logy) in zip(axes, panels):
         for k, (metric, label) in enumerate(metrics):

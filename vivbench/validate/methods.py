@@ -18,6 +18,7 @@ API (stable; the leaderboard builds on it)::
                  tau=0.2, active_share=0.1, fit_time_s=nan, simulate=True) -> dict
     score_method(method, records, truths, **same keywords) -> dict   # fit_method, then score_fitted
     default_windows(record, window=50.0, step=25.0) -> (start, end)
+    scoring_inputs(event_files, result_files, *, derivative=None) -> (records, truths, windows)
     simulation_nmse(fitted, records) -> (nmse, covered)
 
 ``truths`` are the events' ``/truth`` groups (xarray.Dataset with ``time``,
@@ -84,8 +85,8 @@ from vivbench.validate.metrics import curve_errors
 from vivbench.validate.recovery import finite_median, model_window_rhs_errors, model_window_rhs_errors_true_AU, regime_scores
 
 __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
-           "score_method", "default_windows", "simulation_nmse", "WindowMethod", "CampaignMethod", "FittedWindows",
-           "VerdictModel"]
+           "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "WindowMethod", "CampaignMethod",
+           "FittedWindows", "VerdictModel"]
 
 #: Names of the built-in methods.
 BUILTIN_METHODS = ("windows", "campaign", "varying", "pysindy-cp")
@@ -457,6 +458,41 @@ def _curve_scores(fitted, records, truths) -> tuple[float, float]:
     return float(err["linear"][k]), float(err["total"][k])
 
 
+def scoring_inputs(event_files: Sequence, result_files: Sequence, *, derivative=None) -> tuple[list, list, list]:
+    """Records, truths and windows of a synthetic campaign's identification, ready for :func:`score_method`.
+
+    Parameters
+    ----------
+    event_files : the events' files (with ``/truth``), in the results' order
+    result_files : their ``<event_id>.identify.nc``
+    derivative : see :func:`vivbench.analysis.records_from_results` (None: the results' own dA)
+
+    Returns
+    -------
+    records : list of Record
+    truths : list of xarray.Dataset (each event's ``/truth``)
+    windows : list of (window_start, window_end), the identification's windows (s)
+    """
+    from vivbench.analysis.pool import records_from_results
+    from vivbench.io.event import read_event
+    from vivbench.io.result import read_result
+
+    if len(event_files) != len(result_files):
+        raise InputError(f"{len(event_files)} event files but {len(result_files)} results; give one result per event")
+    records = records_from_results(result_files, derivative=derivative)
+    truths, windows = [], []
+    for ev, res_path, rec in zip(event_files, result_files, records):
+        tree = read_event(ev)
+        if "truth" not in tree.children:
+            raise InputError(f"{ev}: no /truth group: a method can be scored only against a synthetic truth")
+        if str(tree.attrs.get("event_id", rec.event_id)) != rec.event_id:
+            raise InputError(f"{res_path}: its event {rec.event_id} is not the event of {ev}")
+        truths.append(tree["truth"].ds)
+        res = read_result(res_path, ["window_start", "window_end"])
+        windows.append((res["window_start"].values, res["window_end"].values))
+    return records, truths, windows
+
+
 def fit_method(method, records: Sequence[Record]):
     """``method.fit(records)`` and its wall time (s). Returns (fitted, fit_time_s).
 
@@ -510,6 +546,8 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
             continue
         if has_own:
             r = np.asarray(fitted.window_regimes(rec, start, end), dtype=int)
+            if r.shape != (start.size, rec.n_sections):
+                raise ValueError(f"window_regimes must return shape {(start.size, rec.n_sections)}; got {r.shape}")
         else:
             r = model_window_regimes(fitted, rec, start, end, tau=tau)["regime"].astype(int)
         reg.append(r)
