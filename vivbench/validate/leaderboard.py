@@ -155,17 +155,9 @@ def _score_cell(task: dict) -> dict:
     :func:`vivbench.analysis.records_from_results`) and is scored on the same windows (the
     identification's) against the events' ``/truth``, by :mod:`vivbench.validate.methods`.
     """
-    from vivbench.analysis.pool import records_from_results
-    from vivbench.io.event import read_event
-    from vivbench.io.result import read_result
-    from vivbench.validate.methods import fit_method, resolve_method, score_fitted
+    from vivbench.validate.methods import fit_method, resolve_method, score_fitted, scoring_inputs
 
-    records = records_from_results(task["results"])
-    truths = [read_event(path)["truth"].ds for path in task["events"]]
-    windows = []
-    for path in task["results"]:
-        ds = read_result(path, ["window_start", "window_end"])
-        windows.append((ds["window_start"].values, ds["window_end"].values))
+    records, truths, windows = scoring_inputs(task["events"], task["results"])
     method = resolve_method(task["method"])
     fitted, seconds = fit_method(method, records)
     scores = score_fitted(fitted, records, truths, windows=windows, fit_time_s=seconds)
