@@ -13,6 +13,7 @@ import textwrap
 import pytest
 
 from vivbench.cli import main
+from vivbench.core.errors import InputError
 from vivbench.validate import LEADERBOARD_COLUMNS, load_scenario_file, method_slug, run_leaderboard
 
 # A method defined outside the package, as a user writes it: linearly damped dynamics (regime 1
@@ -177,6 +178,10 @@ def test_a_new_scenario_version_regenerates_its_campaign_and_cells(reference, pl
     scenarios = list(load_scenario_file(_scenario_file(tmp_path / "v1.toml", 1)).values())
     same = run_leaderboard(METHODS.split(","), scenarios, out)
     assert same.prepared == () and same.computed == () and len(same.resumed) == 2
+    again = run_leaderboard(METHODS.split(","), scenarios, out, rerun=["lbplug:linear_damping"])
+    assert again.computed == (("tiny", "lbplug:linear_damping"),) and again.resumed == (("tiny", "windows"),)
+    with pytest.raises(InputError, match="rerun names methods that are not run: campaign"):
+        run_leaderboard(METHODS.split(","), scenarios, out, rerun=["campaign"])
     bumped = list(load_scenario_file(_scenario_file(tmp_path / "v2.toml", 2)).values())
     new = run_leaderboard(METHODS.split(","), bumped, out)
     assert new.prepared == ("tiny",) and new.resumed == () and len(new.computed) == 2

@@ -17,6 +17,7 @@ def run(args) -> int:
     bar = progress(len(scenarios) * (1 + len(methods)), "leaderboard", unit="task")
     try:
         result = run_leaderboard(methods, scenarios, args.out, workers=args.workers, scheduler=args.scheduler,
+                                 rerun=parse_methods(args.rerun) if args.rerun else (),
                                  progress=lambda *_: bar.update())
     except KeyboardInterrupt:
         bar.close()
@@ -55,6 +56,9 @@ def register(sub) -> None:
                         "seed, in_class, [scenario.NAME.generator]); without --scenarios they replace the suite")
     s.add_argument("--out", required=True,
                    help="output directory; rerunning into it resumes and reuses the scenarios' campaigns")
+    s.add_argument("--rerun", default=None, metavar="METHODS",
+                   help="comma-separated methods (among --methods) whose finished cells are computed again: cells "
+                        "are keyed by scenario and method spec, not by the method's code, so rerun a method you changed")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                    help="local worker processes (the scores do not depend on it; fit times do)")
     s.add_argument("--scheduler", default=None,

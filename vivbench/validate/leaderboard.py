@@ -251,7 +251,7 @@ def _exclusive(out: Path):
 
 
 def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_dir: str | Path, *,
-                    workers: int = 1, scheduler: str | None = None, identify=None,
+                    workers: int = 1, scheduler: str | None = None, identify=None, rerun: Sequence[str] = (),
                     progress: Callable[[str, str, str | None], None] | None = None) -> LeaderboardResult:
     """Score every method on every scenario and write the leaderboard (see the module docstring).
 
@@ -263,6 +263,9 @@ def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_d
     out_dir : output directory (created); rerunning into it resumes
     workers, scheduler : see :func:`vivbench.core.parallel.run_tasks`
     identify : IdentifyConfig of the chain that makes every scenario's records and windows (default settings)
+    rerun : methods (among ``methods``) whose finished cells are computed again. A cell is keyed by the
+        scenario's record and the method's spec, not by the method's code: after changing a method,
+        rerun it (or delete its files under ``OUT/cells/``)
     progress : optional ``progress(kind, scenario, method)``, called with ``"scenario"`` (method None)
         after each scenario is ready and ``"cell"`` after each cell, resumed ones included
 
@@ -277,14 +280,18 @@ def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_d
     names = [s.name for s in scenarios]
     if len(set(names)) != len(names):
         raise InputError(f"scenarios named twice: {', '.join(names)}")
+    rerun = parse_methods(rerun) if rerun else []
+    unknown = [m for m in rerun if m not in methods]
+    if unknown:
+        raise InputError(f"rerun names methods that are not run: {', '.join(unknown)}; methods: {', '.join(methods)}")
     identify = _identify_config(identify)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     with _exclusive(out):
-        return _run(methods, scenarios, out, workers, scheduler, identify, progress)
+        return _run(methods, scenarios, out, workers, scheduler, identify, set(rerun), progress)
 
 
-def _run(methods, scenarios, out, workers, scheduler, identify, progress) -> LeaderboardResult:
+def _run(methods, scenarios, out, workers, scheduler, identify, rerun, progress) -> LeaderboardResult:
     records = {s.name: _scenario_record(s, identify) for s in scenarios}
     keys = {name: _record_key(text) for name, text in records.items()}
     files: dict[str, dict] = {}
@@ -324,7 +331,7 @@ def _run(methods, scenarios, out, workers, scheduler, identify, progress) -> Lea
             if s.name not in files:
                 errors[(s.name, m)] = "scenario failed"
                 continue
-            row = _read_cell(_cell_path(out, s.name, m), s, keys[s.name], m)
+            row = None if m in rerun else _read_cell(_cell_path(out, s.name, m), s, keys[s.name], m)
             if row is not None:
                 rows_by_cell[(s.name, m)] = row
                 resumed.append((s.name, m))
