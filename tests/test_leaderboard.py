@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import os
@@ -178,6 +179,9 @@ def test_a_new_scenario_version_regenerates_its_campaign_and_cells(reference, pl
     scenarios = list(load_scenario_file(_scenario_file(tmp_path / "v1.toml", 1)).values())
     same = run_leaderboard(METHODS.split(","), scenarios, out)
     assert same.prepared == () and same.computed == () and len(same.resumed) == 2
+    reworded = [dataclasses.replace(scenarios[0], description="other words, same campaign")]
+    assert run_leaderboard(METHODS.split(","), reworded, out).prepared == ()
+    assert "other words" in (out / "scenarios" / "tiny" / "scenario.json").read_text()
     again = run_leaderboard(METHODS.split(","), scenarios, out, rerun=["lbplug:linear_damping"])
     assert again.computed == (("tiny", "lbplug:linear_damping"),) and again.resumed == (("tiny", "windows"),)
     with pytest.raises(InputError, match="rerun names methods that are not run: campaign"):

@@ -10,8 +10,8 @@ processes or dask.distributed):
    ``identify/``), and ``scenario.json`` records the scenario (name, version,
    fingerprint) and the identification settings. A later run reuses the
    directory when that record is the same and regenerates it otherwise (a new
-   scenario version, other identification settings), dropping the cells scored
-   on the old campaign.
+   scenario version, other identification settings); cells scored on an old
+   campaign are then not reused. The description does not enter.
 2. **Cells.** Every (scenario, method) cell fits the method on the scenario's
    records and scores it (:mod:`vivbench.validate.methods`: the same scores for
    built-in and plug-in methods). Each finished cell is written at once,
@@ -99,8 +99,14 @@ def _scenario_record(scn: Scenario, identify) -> str:
                        "identify": json.loads(identify.to_json())}, indent=1, sort_keys=True) + "\n"
 
 
-def _record_key(record_text: str) -> str:
-    return hashlib.sha256(record_text.encode()).hexdigest()
+def _record_key(record_text: str) -> str | None:
+    """SHA-256 of a scenario record without its description (words do not change a campaign); None if broken."""
+    try:
+        data = json.loads(record_text)
+        data["scenario"].pop("description", None)
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return None
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
 
 
 def _scenario_files(directory: Path) -> tuple[list[str], list[str]]:
@@ -300,9 +306,12 @@ def _run(methods, scenarios, out, workers, scheduler, identify, rerun, progress)
     for s in scenarios:
         d = out / "scenarios" / s.name
         marker = d / "scenario.json"
-        if marker.is_file() and marker.read_text() == records[s.name]:
+        if marker.is_file() and _record_key(marker.read_text()) == keys[s.name]:
             events, results = _scenario_files(d)
             if events and len(events) == s.n_events:
+                if marker.read_text() != records[s.name]:  # a new description: the legend reads it from here
+                    with atomic_path(marker) as tmp:
+                        tmp.write_text(records[s.name])
                 files[s.name] = {"events": events, "results": results}
                 if progress is not None:
                     progress("scenario", s.name, None)
@@ -354,6 +363,8 @@ def _run(methods, scenarios, out, workers, scheduler, identify, rerun, progress)
             else:
                 errors[(sn, m)] = o.error
                 failures[f"cell {sn} / {m}"] = o.error
+                # a rerun that failed must not leave the old result to be resumed next time
+                _cell_path(out, sn, m).unlink(missing_ok=True)
             if progress is not None:
                 progress("cell", sn, m)
 
@@ -368,5 +379,7 @@ def _run(methods, scenarios, out, workers, scheduler, identify, rerun, progress)
     table = write_csv(rows, out / "leaderboard.csv")
     figure = plot_leaderboard(rows, out / "leaderboard.png")
     markdown = write_markdown(rows, scenarios, out / "leaderboard.md", figure=figure.name)
+    order = {s.name: i for i, s in enumerate(scenarios)}
     return LeaderboardResult(rows=rows, table=table, markdown=markdown, figure=figure, computed=tuple(computed),
-                             resumed=tuple(resumed), prepared=tuple(prepared), failures=failures)
+                             resumed=tuple(resumed), prepared=tuple(sorted(prepared, key=order.get)),
+                             failures=dict(sorted(failures.items())))
