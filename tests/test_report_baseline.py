@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 from pathlib import Path
@@ -101,14 +102,6 @@ def test_paired_figures_and_links(side_by_side):
             assert "*Produced by:* `vivbench " in "\n\n".join(blocks[i + 1: i + 3]), block[:80]
 
 
-def test_without_baseline_the_report_has_no_such_section(identified_real, tmp_path):
-    campaign, results = identified_real
-    path = write_report("plain", campaign, results, out_root=tmp_path)
-    text = path.read_text()
-    assert _SECTION not in text and "--baseline" not in text and "sbs_" not in text
-    assert not list(path.parent.glob("sbs_*.png"))
-
-
 @pytest.fixture(scope="module")
 def identified_real(small_results):
     return Path(small_results[0].files[0]).parent, small_results[1]
@@ -132,3 +125,31 @@ def test_paragraph_without_two_modes_has_no_numbers():
                                            [{"median_rhs_error_true_AU_active": 0.5, "regime_coverage": 0.0},
                                             {"median_rhs_error_true_AU_active": 1.25, "regime_coverage": 0.0}])
     assert "0.500 in-library against 1.250 realistic" in with_numbers
+
+
+@pytest.mark.slow
+def test_cli_demo_with_baseline(tmp_path):
+    """`vivbench demo --baseline in_library` runs both chains and writes the side-by-side report."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-m", "vivbench.cli", "demo", "--out", str(tmp_path), "--events", "2",
+                          "--duration", "8", "--workers", "1", "--baseline", "in_library"],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "baseline: in-library" in run.stdout
+    base = tmp_path / "baseline_in_library"
+    for step in ("cluster", "forecast", "validate"):
+        assert (base / step / "command.txt").read_text().startswith(f"vivbench {step} ")
+    assert not (base / "refit").exists()
+    from vivbench.io.event import read_event_summary
+    from vivbench.synth import config_from_dict
+
+    meta = json.loads(read_event_summary(base / "campaign" / "E001.nc").truth.attrs["config_json"])
+    assert config_from_dict(meta["generator"]).mode == "in_library"
+    text = (tmp_path / "reports" / "demo" / "report.md").read_text()
+    section = _section(text)
+    assert "| quantity | in-library, 2 events | realistic, 2 events |" in section
+    assert f"--baseline {base}" in text
+    for target in _LINK.findall(text):
+        assert (tmp_path / "reports" / "demo" / unquote(target)).is_file(), target
