@@ -18,7 +18,7 @@ import xarray as xr
 from tests.helpers import assert_close
 from vivbench.core import InputError, Record
 from vivbench.models import PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
-from vivbench.validate import resolve_method, score_fitted, score_method
+from vivbench.validate import above_noise_floor, default_windows, resolve_method, score_fitted, score_method
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -237,9 +237,9 @@ def test_method_levels_are_checked_before_any_campaign_is_made(tmp_path):
 
 def test_builtin_windows_method_gives_the_identification_regimes_and_verdicts(small_results):
     """"windows" through the method API refits the chain's estimator on the results' records: the same
-    windows, regimes and verdicts as the identification (whose verdicts add the noise-floor test)."""
+    windows, regimes and verdicts as the identification, noise-floor test included (the records carry
+    the identification's noise floor)."""
     from vivbench.analysis import records_from_results
-    from vivbench.analysis.identify import IdentifyConfig
     from vivbench.io.result import read_result
 
     _campaign, _dir, files = small_results
@@ -248,6 +248,27 @@ def test_builtin_windows_method_gives_the_identification_regimes_and_verdicts(sm
         res = read_result(path)
         s, e = res["window_start"].values, res["window_end"].values
         np.testing.assert_array_equal(fitted.window_regimes(rec, s, e), res["regime"].values)
-        ok = fitted.identifiable(rec, s, e)
-        snr_ok = ~(res["amplitude_snr"].values < IdentifyConfig().min_snr)
-        np.testing.assert_array_equal(ok & snr_ok, res["identifiable"].values.astype(bool))
+        assert rec.noise_std is not None and np.all(rec.noise_std > 0)
+        np.testing.assert_array_equal(fitted.identifiable(rec, s, e), res["identifiable"].values.astype(bool))
+
+
+def test_builtin_verdicts_refuse_windows_below_the_noise_floor(small_results):
+    """A window whose mean amplitude is below min_snr times the record's noise floor is never flagged,
+    whatever the method's own verdict (there A is the envelope of noise); an unknown floor tests nothing."""
+    import dataclasses
+
+    from vivbench.analysis import records_from_results
+
+    _campaign, _dir, files = small_results
+    records = records_from_results(files)
+    rec = records[0]
+    start, end = default_windows(rec)
+    assert above_noise_floor(rec, start, end).shape == (start.size, rec.n_sections)
+    loud = dataclasses.replace(rec, noise_std=np.full(rec.n_sections, 1.0))  # 1 m: every window below 3x
+    assert not above_noise_floor(loud, start, end).any()
+    assert above_noise_floor(dataclasses.replace(rec, noise_std=None), start, end).all()
+    assert above_noise_floor(dataclasses.replace(rec, noise_std=np.full(rec.n_sections, np.nan)), start, end).all()
+    fitted = resolve_method("campaign").fit(records)
+    assert not fitted.identifiable(loud, start, end).any()
+    with pytest.raises(ValueError, match="noise_std"):
+        dataclasses.replace(rec, noise_std=np.ones(rec.n_sections + 1))

@@ -60,10 +60,10 @@ give ``window_regimes(record, window_start, window_end)`` -> int (W, S), its
 own regime of each window (window SINDy: the regime of the window's own
 model; otherwise the rule on the order contributions, in which overlapping
 windows' models mix, see README), and ``identifiable``. The identification's
-noise-floor test (``min_snr``) needs the preprocessing's noise level, which a
-record does not carry: the built-in "windows" and "campaign" verdicts here do
-without it (in ``vivbench compare`` the "windows" rows are scored from the
-identification results, with it).
+noise-floor test (``min_snr``) needs the preprocessing's noise level: records
+read from identification results carry it (``Record.noise_std``), and the
+built-in verdicts apply it (:func:`above_noise_floor`); records without it are
+not tested.
 """
 
 from __future__ import annotations
@@ -85,7 +85,8 @@ from vivbench.validate.metrics import curve_errors
 from vivbench.validate.recovery import finite_median, model_window_rhs_errors, model_window_rhs_errors_true_AU, regime_scores
 
 __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
-           "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "WindowMethod", "CampaignMethod",
+           "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
+           "CampaignMethod",
            "FittedWindows", "VerdictModel"]
 
 #: Names of the built-in methods.
@@ -121,8 +122,34 @@ class VerdictModel:
         return getattr(self.__dict__["model"], name)
 
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
-        """Bool (W, S): the model's regime of the window is identifiable (its verdict of DESIGN 2.5)."""
-        return np.asarray(self._verdict(self.model, record, window_start, window_end)["identifiable"], dtype=bool)
+        """Bool (W, S): the model's regime of the window is identifiable (its verdict of DESIGN 2.5).
+
+        Also needs the window's mean amplitude above the record's noise floor
+        (:func:`above_noise_floor`), as ``vivbench pool`` does.
+        """
+        ok = np.asarray(self._verdict(self.model, record, window_start, window_end)["identifiable"], dtype=bool)
+        return ok & above_noise_floor(record, window_start, window_end)
+
+
+def above_noise_floor(record: Record, window_start, window_end, min_snr: float | None = None) -> np.ndarray:
+    """Bool (W, S): the window's mean amplitude is at least ``min_snr`` times the record's noise floor.
+
+    The identification's noise-floor test (:mod:`vivbench.preprocess.noise_floor`): below it A is the
+    envelope of noise and no model can give the window's regime. True where the floor is unknown
+    (``record.noise_std`` None or NaN) or the window has no valid sample. ``min_snr`` None: the
+    identification's default (``IdentifyConfig().min_snr``).
+    """
+    from vivbench.analysis.identify import IdentifyConfig
+    from vivbench.preprocess.noise_floor import window_amplitude_snr
+
+    start = np.atleast_1d(np.asarray(window_start, dtype=float))
+    end = np.atleast_1d(np.asarray(window_end, dtype=float))
+    if min_snr is None:
+        min_snr = IdentifyConfig().min_snr
+    if record.noise_std is None or min_snr is None:
+        return np.ones((start.size, record.n_sections), dtype=bool)
+    snr = window_amplitude_snr(record.t, record.A, start, end, record.noise_std)
+    return ~(snr < min_snr)  # NaN (unknown) passes
 
 
 def _campaign_verdict(model, record, start, end):
@@ -275,7 +302,8 @@ class WindowMethod:
                 e_e.append(est.window_end_)
                 events.append(np.full(est.window_start_.size, k))
                 reg_e.append(v["regime"])
-                ok_e.append(v["identifiable"])
+                floor = above_noise_floor(rec, est.window_start_, est.window_end_, cfg.min_snr)
+                ok_e.append(np.asarray(v["identifiable"], dtype=bool) & floor)
             if s_e:
                 starts += s_e
                 ends += e_e
