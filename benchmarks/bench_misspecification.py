@@ -46,9 +46,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from vivbench.analysis import CAMPAIGN_DERIVATIVE, records_from_results  # noqa: E402
+from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
-from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
+from vivbench.models import PooledSINDy, VaryingCoefficientSINDy, YawRecord  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
                               varying_window_verdicts)
 
@@ -61,8 +61,12 @@ def _window_sums(x, t, start, end):
     return c[hi] - c[lo]
 
 
-def load_campaign(camp: Path, results: Path):
-    """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event."""
+def load_campaign(camp: Path, results: Path, yaw: bool = True):
+    """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event.
+
+    With ``yaw`` both records carry the mean wind's yaw measured from the event's
+    anemometers (the truth's own yaw is not stored: its record gets the measured one).
+    """
     files = sorted(results.glob("*.identify.nc"))
     measured = records_from_results(files, derivative=CAMPAIGN_DERIVATIVE)
     events = []
@@ -77,9 +81,16 @@ def load_campaign(camp: Path, results: Path):
             truth = tr.load()
         trec = Record(event_id=rec.event_id, t=truth["time"].values, A=truth["A"].values, U=truth["U"].values,
                       dA=truth["r"].values.sum(axis=-1))
+        if yaw:
+            with xr.open_dataset(camp / attrs["source_file"], group="wind") as w:
+                tw, u, v = w["time"].values, w["u"].values, w["v"].values
+            with xr.open_dataset(camp / attrs["source_file"]) as root:
+                az = float(root.attrs["span_azimuth_deg"])
+            trec = YawRecord.from_record(trec, event_yaw(tw, u, v, az, trec.t))
+            rec = YawRecord.from_record(rec, event_yaw(tw, u, v, az, rec.t))
         events.append({"id": rec.event_id, "measured": rec, "truth_rec": trec, "truth": truth, "ws": ws, "we": we,
                        "low_snr": low, "true_regime": truth_window_regimes(truth, ws, we)})
-    return measured, events
+    return [ev["measured"] for ev in events], events
 
 
 def score(model, events, verdicts: str | None = None) -> dict:
@@ -131,6 +142,9 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         ("PooledSINDy", lambda: PooledSINDy(n_bootstrap=100 if pooled_verdicts else 0), "pooled"),
         # The default evaluates the curves at the mean wind over the sections (chosen on the seed-0 campaign).
         ("VaryingCoefficientSINDy(mean U)", lambda: VaryingCoefficientSINDy(select_orders=select_orders), "varying"),
+        # The wind's yaw as a second covariate (chosen on the seed-0 campaign, benchmarks/bench_floor.py).
+        ("VaryingCoefficientSINDy(mean U, yaw)",
+         lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1), "varying"),
         ("VaryingCoefficientSINDy(own U)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="section"), "varying"),
     ]

@@ -81,7 +81,7 @@ def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
                   dA=_campaign_derivative(ds, derivative))
 
 
-def records_from_results(paths: Sequence, *, derivative: Derivative | None = None) -> list[Record]:
+def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None) -> list[Record]:
     """The records of identification results, ready for any model of the protocol (DESIGN 7).
 
     Parameters
@@ -92,6 +92,11 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
         None (default) keeps the results' own dA (the identification's
         smoothed derivative); otherwise dA/dt is recomputed from A on each
         segment as :func:`pool_results` does (e.g. :data:`CAMPAIGN_DERIVATIVE`).
+    campaign : path or None
+        Directory of the events the results were made from (their
+        ``source_file``): the records then carry the mean wind's yaw measured
+        from the event's anemometers (:class:`vivbench.models.YawRecord`,
+        :func:`vivbench.analysis.with_yaw`).
 
     Returns
     -------
@@ -107,12 +112,22 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
     out = []
     for path in paths:
         ds = read_result(path, ["A", "U", "dA", "segment"])
-        out.append(_result_record(ds, ds.attrs, derivative))
+        rec = _result_record(ds, ds.attrs, derivative)
+        out.append(rec if campaign is None else _with_event_yaw(rec, ds.attrs, campaign))
     return out
 
 
+def _with_event_yaw(record: Record, attrs, campaign) -> Record:
+    from vivbench.analysis.yaw import with_yaw
+
+    source = attrs.get("source_file")
+    if not source:
+        raise InputError(f"the result of {record.event_id} names no source_file: its wind's yaw cannot be measured")
+    return with_yaw(record, Path(campaign) / Path(str(source)).name)
+
+
 def pool_results(result_files: Sequence, model=None, *,
-                 derivative: Derivative | None = CAMPAIGN_DERIVATIVE) -> "xr.Dataset":
+                 derivative: Derivative | None = CAMPAIGN_DERIVATIVE, campaign=None) -> "xr.Dataset":
     """Fit the campaign model on identification results and label every window with it.
 
     Parameters
@@ -128,6 +143,10 @@ def pool_results(result_files: Sequence, model=None, *,
         thousands of samples average the noise, but not a smoother's bias):
         with the chain's smoothed dA its median dA/dt error was 0.0121
         against 0.0105 on the default campaign.
+    campaign : path or None
+        Directory of the results' event files: every record then carries the
+        mean wind's yaw measured from its anemometers (needed by a
+        ``VaryingCoefficientSINDy`` with ``yaw_degree`` > 0).
 
     Returns
     -------
@@ -174,6 +193,11 @@ def pool_results(result_files: Sequence, model=None, *,
         if eq != sections:
             raise InputError(f"{path}: equations {eq} differ from {sections} of the other results")
     records = [_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results]
+    if campaign is not None:
+        records = [_with_event_yaw(r, attrs, campaign) for r, (_p, _d, attrs, _e) in zip(records, results)]
+    if varying and int(model.yaw_degree) and campaign is None:
+        raise InputError("the varying model with a yaw covariate (yaw_degree > 0) needs the campaign's event "
+                         "files for the wind's yaw (give campaign / --campaign)")
     model.fit(records)
     keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}

@@ -50,6 +50,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.yaw_record import record_yaw
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty"]
 
@@ -102,15 +103,20 @@ def difference_penalty(n_basis: int, order: int = 2) -> np.ndarray:
     return D.T @ D
 
 
-def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float) -> np.ndarray:
-    """Columns B_m(U) (A / a_ref)^i, ordered (i, m); shape (n, 4 M)."""
+def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,
+            n_yaw: int = 0) -> np.ndarray:
+    """Columns B_m(U) (A / a_ref)^i z^j, ordered (i, j, m); shape (n, 4 (n_yaw + 1) M).
+
+    ``z`` is the scaled yaw covariate (sin^2 psi over its reference), used for j = 1..n_yaw.
+    """
     B = bspline_basis(U, knots)
     Apow = (A / a_ref)[:, None] ** np.arange(4)
-    return (Apow[:, :, None] * B[:, None, :]).reshape(U.size, -1)
+    Zpow = (np.ones_like(U) if z is None else z)[:, None] ** np.arange(n_yaw + 1)
+    return (Apow[:, :, None, None] * Zpow[:, None, :, None] * B[:, None, None, :]).reshape(U.size, -1)
 
 
 def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
-                 knots: np.ndarray, a_ref: float):
+                 knots: np.ndarray, a_ref: float, z: np.ndarray | None = None, n_yaw: int = 0):
     """Per-block sufficient statistics of the design :func:`_design`.
 
     Returns X_b^T X_b (n_blocks, p, p), X_b^T y_b (n_blocks, p), y_b^T y_b and
@@ -120,12 +126,13 @@ def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray,
     order = np.argsort(block, kind="stable")
     bounds = np.searchsorted(block[order], np.arange(n_blocks + 1))
     Us, As, ys = U[order], A[order], y[order]
-    p = 4 * (knots.size - DEGREE - 1)
+    zs = None if z is None else z[order]
+    p = 4 * (n_yaw + 1) * (knots.size - DEGREE - 1)
     G = np.empty((n_blocks, p, p))
     b = np.empty((n_blocks, p))
     for j in range(n_blocks):
         sl = slice(bounds[j], bounds[j + 1])
-        xb = _design(Us[sl], As[sl], knots, a_ref)
+        xb = _design(Us[sl], As[sl], knots, a_ref, None if zs is None else zs[sl], n_yaw)
         G[j] = xb.T @ xb
         b[j] = xb.T @ ys[sl]
     cy = np.concatenate([[0.0], np.cumsum(ys**2)])
@@ -226,7 +233,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
                  n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
-                 wind_input: str = "mean"):
+                 wind_input: str = "mean", yaw_degree: int = 0):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -237,6 +244,7 @@ class VaryingCoefficientSINDy(ModelBase):
         self.tau = tau
         self.seed = seed
         self.wind_input = wind_input
+        self.yaw_degree = yaw_degree
 
     def _wind(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
@@ -248,12 +256,35 @@ class VaryingCoefficientSINDy(ModelBase):
             return np.repeat(m, U.shape[1], axis=1)
         return U
 
+    def _zeta(self, record_or_yaw, n: int) -> np.ndarray | None:
+        """The yaw covariate sin^2(psi) of each equation, shape (n, S) (None without ``yaw_degree``).
+
+        With ``wind_input="mean"`` it is the mean over the sections, like the wind.
+        A record without yaw gets the median of the fitted samples' (``yaw_fallback_``).
+        """
+        if int(self.yaw_degree) == 0:
+            return None
+        yaw = record_yaw(record_or_yaw) if isinstance(record_or_yaw, Record) else record_or_yaw
+        if yaw is None:
+            fallback = getattr(self, "yaw_fallback_", None)
+            if fallback is None:
+                raise InputError("yaw_degree > 0 needs records with the mean wind's yaw (YawRecord, "
+                                 "vivbench.analysis.records_from_results(..., yaw=...))")
+            return np.broadcast_to(np.asarray(fallback, dtype=float), (n, np.size(fallback))).copy()
+        z = np.sin(np.radians(np.asarray(yaw, dtype=float))) ** 2
+        if self.wind_input == "mean":
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                z = np.repeat(np.nanmean(z, axis=1, keepdims=True), z.shape[1], axis=1)
+        return z
+
     def to_json(self) -> str:
         """The parameters as a JSON object (sorted keys; sequences as lists)."""
         params = self.get_params()
         params["n_basis"] = [int(x) for x in params["n_basis"]]
         params["penalties"] = [float(x) for x in params["penalties"]]
         params["select_orders"] = bool(params["select_orders"])
+        params["yaw_degree"] = int(params["yaw_degree"])
         return json.dumps(params, sort_keys=True)
 
     def _validate(self) -> None:
@@ -273,6 +304,8 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
         if not 0.0 < self.tau < 1.0:
             raise InputError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
+        if int(self.yaw_degree) != self.yaw_degree or not 0 <= int(self.yaw_degree) <= 3:
+            raise InputError(f"yaw_degree must be an integer in 0..3; got {self.yaw_degree!r}")
         if self.wind_input not in ("section", "mean"):
             raise InputError(f"wind_input must be 'section' or 'mean'; got {self.wind_input!r}")
 
@@ -305,6 +338,10 @@ class VaryingCoefficientSINDy(ModelBase):
         A = np.concatenate([r.A for r in records])
         U = self._wind(np.concatenate([r.U for r in records]))
         dA = np.concatenate([r.dA for r in records])
+        J = int(self.yaw_degree)
+        if J and any(record_yaw(r) is None for r in records):
+            raise InputError("yaw_degree > 0 needs every record to carry the mean wind's yaw (YawRecord)")
+        Z = np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None
         event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
         # Blocks: block_s-long pieces of each event, numbered across the campaign.
         t0 = np.concatenate([np.full(r.n_samples, r.t[0]) for r in records])
@@ -333,15 +370,29 @@ class VaryingCoefficientSINDy(ModelBase):
         self.rss_ = np.zeros(S)
         n_boot = int(self.n_bootstrap)
         self.coef_bootstrap_ = np.zeros((n_boot, S, Mmax, 4))
+        self.coef_yaw_ = np.zeros((S, Mmax, 4, J))
+        self.coef_yaw_bootstrap_ = np.zeros((n_boot, S, Mmax, 4, J))
+        self.yaw_ref_ = np.ones(S)
+        self.yaw_fallback_ = np.zeros(S)
         n_samples = 0
         n_blocks_used = 0
         for k in range(S):
             ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
+            if J:
+                ok &= np.isfinite(Z[:, k])
             n = int(ok.sum())
-            if n < 4 * Mmax + 2:
-                raise InputError(f"section {k + 1}: {n} valid samples are too few for {4 * Mmax} spline coefficients")
+            p_max = 4 * (J + 1) * Mmax
+            if n < p_max + 2:
+                raise InputError(f"section {k + 1}: {n} valid samples are too few for {p_max} spline coefficients")
             n_samples += n
             Ak, Uk, yk = A[ok, k], U[ok, k], dA[ok, k]
+            zk = None
+            if J:
+                # sin^2 psi over its RMS keeps the yaw columns on the scale of the others.
+                zraw = Z[ok, k]
+                self.yaw_fallback_[k] = float(np.median(zraw))
+                self.yaw_ref_[k] = float(np.sqrt(np.mean(zraw**2))) or 1.0
+                zk = zraw / self.yaw_ref_[k]
             ys = float(np.sqrt(np.mean(yk**2))) or 1.0
             aref = float(np.sqrt(np.mean(Ak**2))) or 1.0
             lo, hi = float(Uk.min()), float(Uk.max())
@@ -355,9 +406,9 @@ class VaryingCoefficientSINDy(ModelBase):
             best = None
             for a, M in enumerate(n_basis):
                 knots = uniform_knots(lo, hi, int(M))
-                G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref)
-                P = np.kron(np.eye(4), difference_penalty(int(M)))
-                err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(4 * M, dtype=bool)) / n
+                G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref, zk, J)
+                P = np.kron(np.eye(4 * (J + 1)), difference_penalty(int(M)))
+                err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(4 * (J + 1) * M, dtype=bool)) / n
                 self.cv_error_[k, a] = err
                 j = int(np.argmin(err))
                 if best is None or err[j] < best[0]:
@@ -365,8 +416,8 @@ class VaryingCoefficientSINDy(ModelBase):
             _err, M, lam_rel, knots, G, b, yy, P = best
             keep_orders = np.ones(4, dtype=bool)
             if self.select_orders:
-                keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, M, _err * n)
-            keep = np.repeat(keep_orders, M)
+                keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, (J + 1) * M, _err * n)
+            keep = np.repeat(keep_orders, (J + 1) * M)
             Gs, bs = G.sum(axis=0), b.sum(axis=0)
             lam = np.array([lam_rel * _penalty_scale(Gs, P)])
             c = _solve(Gs, bs, P, lam, keep)[0]
@@ -376,7 +427,10 @@ class VaryingCoefficientSINDy(ModelBase):
                                 * np.trace(Gs[idx[:, None], idx]) / idx.size, Gs[idx[:, None], idx])
             self.edf_[k] = float(np.trace(H))
             to_phys = ys / aref ** np.arange(4)  # (4,)
-            self.coef_[k, :M] = c.reshape(4, M).T * to_phys
+            zscale = self.yaw_ref_[k] ** -np.arange(J + 1.0)  # (J + 1,): coefficients of (sin^2 psi)^j
+            cp = c.reshape(4, J + 1, M).transpose(2, 0, 1) * to_phys[:, None] * zscale  # (M, 4, J + 1)
+            self.coef_[k, :M] = cp[..., 0]
+            self.coef_yaw_[k, :M] = cp[..., 1:]
             self.knots_[k, :M + DEGREE + 1] = knots
             self.n_basis_[k], self.penalty_[k], self.orders_[k] = M, lam_rel, keep_orders
             self.wind_range_[k] = lo, hi
@@ -387,7 +441,9 @@ class VaryingCoefficientSINDy(ModelBase):
                 Gr = np.einsum("rb,bpq->rpq", mult, G)
                 br = mult @ b
                 cr = _solve(Gr, br, P, lam, keep)[:, 0]
-                self.coef_bootstrap_[:, k, :M] = cr.reshape(n_boot, 4, M).transpose(0, 2, 1) * to_phys
+                crp = cr.reshape(n_boot, 4, J + 1, M).transpose(0, 3, 1, 2) * to_phys[:, None] * zscale
+                self.coef_bootstrap_[:, k, :M] = crp[..., 0]
+                self.coef_yaw_bootstrap_[:, k, :M] = crp[..., 1:]
         self.n_samples_ = n_samples
         self.n_blocks_ = n_blocks_used
         self.n_sections_ = S
@@ -427,38 +483,75 @@ class VaryingCoefficientSINDy(ModelBase):
 
     # -- the model protocol --------------------------------------------------------------------------
 
-    def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None) -> np.ndarray:
-        """The curves a_ki at each section's own wind.
+    def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None, yaw=None,
+                           coef_yaw: np.ndarray | None = None) -> np.ndarray:
+        """The curves a_ki at each equation's wind (and yaw, with ``yaw_degree`` > 0).
 
         Parameters
         ----------
         U : ndarray, shape (n, S), m/s
         coef : ndarray, shape (S, M_max, 4) or (R, S, M_max, 4), optional
-            Spline coefficients (default ``coef_``).
+            Spline coefficients at yaw 0 (default ``coef_``).
+        yaw : ndarray, shape (n, S), degrees, optional
+            The mean wind's yaw (None: 0, see Notes).
+        coef_yaw : ndarray, shape (S, M_max, 4, J) or (R, S, M_max, 4, J), optional
+            Coefficients of (sin^2 psi)^j, j = 1..J (default ``coef_yaw_`` when
+            ``coef`` is None, zeros otherwise).
 
         Returns
         -------
         ndarray, shape (n, S, 4) or (R, n, S, 4), m^(1-i)/s; NaN where U is not finite.
+
+        Notes
+        -----
+        ``yaw=None`` means yaw 0 (wind perpendicular to the span): the curves of
+        DESIGN 3.5 are defined there. :meth:`order_contributions` passes the
+        record's yaw (or the fitted median without one).
         """
         self._check_fitted()
-        coef = self.coef_ if coef is None else np.asarray(coef, dtype=float)
+        if coef is None:
+            coef = self.coef_
+            coef_yaw = self.coef_yaw_ if coef_yaw is None else coef_yaw
+        coef = np.asarray(coef, dtype=float)
         U = self._wind(U)
+        J = int(self.yaw_degree)
+        z = None
+        if J and yaw is not None and coef_yaw is not None:
+            z = self._zeta(np.asarray(yaw, dtype=float), U.shape[0])
         out = np.empty(coef.shape[:-3] + (U.shape[0], self.n_sections_, 4))
         for k in range(self.n_sections_):  # a few sections
             M = int(self.n_basis_[k])
             B = bspline_basis(U[:, k], self.knots_[k, :M + DEGREE + 1])
             out[..., k, :] = np.einsum("nm,...mi->...ni", B, coef[..., k, :M, :])
+            if z is not None:
+                Bz = B[:, :, None] * z[:, k, None, None] ** np.arange(1, J + 1)  # (n, M, J)
+                out[..., k, :] += np.einsum("nmj,...mij->...ni", Bz, np.asarray(coef_yaw)[..., k, :M, :, :])
         return out
+
+    def _record_yaw(self, record: Record) -> np.ndarray | None:
+        """Yaw in degrees for evaluating on a record: its own, or the fitted median without one."""
+        if not int(self.yaw_degree):
+            return None
+        yaw = record_yaw(record)
+        if yaw is not None:
+            return yaw
+        return np.degrees(np.arcsin(np.sqrt(np.broadcast_to(self.yaw_fallback_, record.A.shape))))
+
+    def replicate_order_contributions(self, record: Record, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Order contributions of bootstrap replicates ``start:stop``, shape (R, n_samples, S, 4), m/s."""
+        record = self._check_record(record)
+        sl = slice(start, stop)
+        return (self.coefficient_values(record.U, self.coef_bootstrap_[sl], self._record_yaw(record),
+                                        self.coef_yaw_bootstrap_[sl]) * record.A[..., None] ** np.arange(4))
 
     def order_contributions(self, record: Record) -> np.ndarray:
         """r[:, k, i] = a_ki(U_k) A_k^i, shape (n_samples, n_sections, 4), m/s (NaN where A or U is missing)."""
         record = self._check_record(record)
-        return self.coefficient_values(record.U) * record.A[..., None] ** np.arange(4)
+        return self.coefficient_values(record.U, yaw=self._record_yaw(record)) * record.A[..., None] ** np.arange(4)
 
     def order_contributions_bootstrap(self, record: Record) -> np.ndarray:
         """Order contributions of every bootstrap replicate, shape (n_bootstrap, n_samples, S, 4), m/s."""
-        record = self._check_record(record)
-        return self.coefficient_values(record.U, self.coef_bootstrap_) * record.A[..., None] ** np.arange(4)
+        return self.replicate_order_contributions(record)
 
     def predict(self, record: Record) -> np.ndarray:
         """dA/dt of the model, shape (n_samples, n_sections), m/s."""
@@ -493,8 +586,11 @@ class VaryingCoefficientSINDy(ModelBase):
         S = self.n_sections_
         U = record.U[i0:i1]
         Umid = 0.5 * (U[:-1] + U[1:])
-        a = self.coefficient_values(U)  # (n, S, 4)
-        am = self.coefficient_values(Umid) if tt.size > 1 else np.zeros((0, S, 4))
+        yaw = self._record_yaw(record)
+        yaw = None if yaw is None else yaw[i0:i1]
+        ymid = None if yaw is None else 0.5 * (yaw[:-1] + yaw[1:])
+        a = self.coefficient_values(U, yaw=yaw)  # (n, S, 4)
+        am = self.coefficient_values(Umid, yaw=ymid) if tt.size > 1 else np.zeros((0, S, 4))
         A_meas = record.A[i0:i1]
         x = np.asarray(record.A[i0] if A0 is None else A0, dtype=float).copy()
         if x.shape != (S,):
@@ -596,12 +692,19 @@ class VaryingCoefficientSINDy(ModelBase):
                "cv_error_": ("equation", "n_basis_candidate", "penalty_candidate"), "edf_": ("equation",),
                "wind_range_": ("equation", "bound"), "y_scale_": ("equation",), "a_ref_": ("equation",),
                "rss_": ("equation",), "coef_bootstrap_": ("bootstrap", "equation", "basis", "order")}
+    #: Written only with ``yaw_degree`` > 0 (files of models without yaw stay as they were).
+    _YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
+                   "coef_yaw_bootstrap_": ("bootstrap", "equation", "basis", "order", "yaw_power"),
+                   "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",)}
 
     def to_dataset(self) -> xr.Dataset:
         """The fitted model as an xarray Dataset (one variable per fitted array)."""
         self._check_fitted()
         data = {name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(float if name != "orders_" else np.int8))
                 for name, dims in self._ARRAYS.items()}
+        if int(self.yaw_degree):
+            data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name), dtype=float))
+                         for name, dims in self._YAW_ARRAYS.items()})
         attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
                  "n_blocks": self.n_blocks_, "events": json.dumps(self.event_ids_)}
         return xr.Dataset(data, coords={"equation": section_names(self.n_sections_), "order": np.arange(4)},
@@ -621,9 +724,19 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"{path}: not a {cls.__name__} file")
         params = json.loads(ds.attrs["params_json"])
         params["n_basis"], params["penalties"] = tuple(params["n_basis"]), tuple(params["penalties"])
+        params.setdefault("yaw_degree", 0)  # files written before the yaw covariate existed
         model = cls(**params)
         for name in cls._ARRAYS:
             setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+        S, Mmax = model.coef_.shape[:2]
+        J = int(params["yaw_degree"])
+        if J:
+            for name in cls._YAW_ARRAYS:
+                setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+        else:
+            model.coef_yaw_ = np.zeros((S, Mmax, 4, 0))
+            model.coef_yaw_bootstrap_ = np.zeros(model.coef_bootstrap_.shape + (0,))
+            model.yaw_ref_, model.yaw_fallback_ = np.ones(S), np.zeros(S)
         model.n_basis_ = model.n_basis_.astype(int)
         model.orders_ = model.orders_.astype(bool)
         model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])

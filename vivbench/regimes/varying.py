@@ -81,10 +81,8 @@ def varying_window_verdicts(model: VaryingCoefficientSINDy, record: Record, wind
         return {"regime": point, "identifiable": np.zeros(point.shape, dtype=bool),
                 "agreement": np.full(point.shape, np.nan), "order_rms": R}
     same = np.zeros(point.shape)
-    Apow = A[..., None] ** np.arange(4)
     for c0 in range(0, B, chunk):
-        coef = model.coef_bootstrap_[c0:c0 + chunk]
-        r = model.coefficient_values(record.U, coef) * Apow
+        r = model.replicate_order_contributions(record, c0, c0 + chunk)
         Rb, c1b, _ = window_order_stats(r, A, t, window_start, window_end)
         same += (regime_rule(np.nan_to_num(Rb), c1b, model.tau) == point[None]).sum(axis=0)
     agree = same / B
