@@ -46,7 +46,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results  # noqa: E402
+from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results, smooth_wind  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
 from vivbench.models import PooledSINDy, VaryingCoefficientSINDy, YawRecord  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
@@ -61,7 +61,7 @@ def _window_sums(x, t, start, end):
     return c[hi] - c[lo]
 
 
-def load_campaign(camp: Path, results: Path, yaw: bool = True):
+def load_campaign(camp: Path, results: Path, yaw: bool = True, wind_smoothing_s: float = 0.0):
     """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event.
 
     With ``yaw`` both records carry the mean wind's yaw measured from the event's
@@ -88,6 +88,7 @@ def load_campaign(camp: Path, results: Path, yaw: bool = True):
                 az = float(root.attrs["span_azimuth_deg"])
             trec = YawRecord.from_record(trec, event_yaw(tw, u, v, az, trec.t))
             rec = YawRecord.from_record(rec, event_yaw(tw, u, v, az, rec.t))
+        rec = smooth_wind(rec, wind_smoothing_s)  # the measured record only: the truth's U is the deck's
         events.append({"id": rec.event_id, "measured": rec, "truth_rec": trec, "truth": truth, "ws": ws, "we": we,
                        "low_snr": low, "true_regime": truth_window_regimes(truth, ws, we)})
     return [ev["measured"] for ev in events], events
@@ -95,7 +96,7 @@ def load_campaign(camp: Path, results: Path, yaw: bool = True):
 
 def score(model, events, verdicts: str | None = None) -> dict:
     """dA/dt error and regime accuracy on the truth's (A, U); verdicts on the measured record when asked."""
-    errs, hits, n_reg, flagged, flag_ok, n_win = [], 0, 0, 0, 0, 0
+    errs, hits, n_reg, flagged, flag_ok, n_win, flag_self = [], 0, 0, 0, 0, 0, 0
     for ev in events:
         trec, ws, we = ev["truth_rec"], ev["ws"], ev["we"]
         t, true = trec.t, trec.dA
@@ -122,6 +123,7 @@ def score(model, events, verdicts: str | None = None) -> dict:
             flag = v["identifiable"] & ~ev["low_snr"] & valid
             flagged += int(flag.sum())
             flag_ok += int((flag & (v["regime"] == tr)).sum())
+            flag_self += int((flag & (v["regime"] >= 2) & (tr == 1)).sum())
             n_win += int((valid & (v["regime"] > 0)).sum())
     e = np.concatenate(errs)
     out = {"dA_err_median": float(np.median(e)), "dA_err_p90": float(np.percentile(e, 90)), "n_dyn": int(e.size),
@@ -129,12 +131,15 @@ def score(model, events, verdicts: str | None = None) -> dict:
     if verdicts is not None:
         out["coverage"] = flagged / max(n_win, 1)
         out["flag_acc"] = flag_ok / flagged if flagged else float("nan")
+        out["n_flagged"] = flagged
+        out["n_flag_self_excited_wrong"] = flag_self  # flagged 2-4 where the truth is regime 1
     return out
 
 
-def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False) -> dict:
+def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
+        only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float = 0.0) -> dict:
     t0 = time.perf_counter()
-    measured, events = load_campaign(camp, results)
+    measured, events = load_campaign(camp, results, wind_smoothing_s=wind_smoothing_s)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
     rows = {}
@@ -149,7 +154,9 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="section"), "varying"),
     ]
     for name, make, kind in specs:
-        for data, recs in (("measured", measured), ("truth", truth_records)):
+        if only is not None and only not in name:
+            continue
+        for data, recs in (("measured", measured), ("truth", truth_records))[:2 if truth_fits else 1]:
             t1 = time.perf_counter()
             model = make().fit(recs)
             fit_s = time.perf_counter() - t1
@@ -184,12 +191,17 @@ def main(argv=None) -> dict:
     parser.add_argument("--results", action="append", required=True, type=Path)
     parser.add_argument("--pooled-verdicts", action="store_true")
     parser.add_argument("--select-orders", action="store_true")
+    parser.add_argument("--wind-smoothing", type=float, default=0.0,
+                        help="Gaussian smoothing of the measured U and yaw, s (as vivbench pool --wind-smoothing)")
+    parser.add_argument("--only", default=None, help="fit only the models whose name contains this text")
+    parser.add_argument("--no-truth-fits", action="store_true", help="skip the fits on the truth's own (A, U, dA)")
     args = parser.parse_args(argv)
     if len(args.campaign) != len(args.results):
         parser.error("give one --results per --campaign")
     out = {}
     for camp, res in zip(args.campaign, args.results):
-        out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders)
+        out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders, args.only, not args.no_truth_fits,
+                             args.wind_smoothing)
     for camp, rows in out.items():
         print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
     OUT.mkdir(exist_ok=True)

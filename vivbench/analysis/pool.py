@@ -20,6 +20,7 @@ from vivbench.io.result import read_result
 from vivbench.io.campaign_model import MODEL_NAME, POOLED_FORMAT, POOLED_NAME, read_pooled
 from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
+from vivbench.analysis.wind_inputs import smooth_wind, with_yaw
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
            "with_campaign_model", "campaign_model_file", "load_campaign_model"]
@@ -81,7 +82,8 @@ def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
                   dA=_campaign_derivative(ds, derivative))
 
 
-def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None) -> list[Record]:
+def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None,
+                         wind_smoothing_s: float = 0.0) -> list[Record]:
     """The records of identification results, ready for any model of the protocol (DESIGN 7).
 
     Parameters
@@ -97,6 +99,9 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
         ``source_file``): the records then carry the mean wind's yaw measured
         from the event's anemometers (:class:`vivbench.models.YawRecord`,
         :func:`vivbench.analysis.with_yaw`).
+    wind_smoothing_s : float, s
+        Standard deviation of a Gaussian smoothing of U (and yaw) in time
+        (:func:`vivbench.analysis.smooth_wind`; 0: none).
 
     Returns
     -------
@@ -113,13 +118,12 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
     for path in paths:
         ds = read_result(path, ["A", "U", "dA", "segment"])
         rec = _result_record(ds, ds.attrs, derivative)
-        out.append(rec if campaign is None else _with_event_yaw(rec, ds.attrs, campaign))
+        rec = rec if campaign is None else _with_event_yaw(rec, ds.attrs, campaign)
+        out.append(smooth_wind(rec, wind_smoothing_s))
     return out
 
 
 def _with_event_yaw(record: Record, attrs, campaign) -> Record:
-    from vivbench.analysis.yaw import with_yaw
-
     source = attrs.get("source_file")
     if not source:
         raise InputError(f"the result of {record.event_id} names no source_file: its wind's yaw cannot be measured")
@@ -127,7 +131,8 @@ def _with_event_yaw(record: Record, attrs, campaign) -> Record:
 
 
 def pool_results(result_files: Sequence, model=None, *,
-                 derivative: Derivative | None = CAMPAIGN_DERIVATIVE, campaign=None) -> "xr.Dataset":
+                 derivative: Derivative | None = CAMPAIGN_DERIVATIVE, campaign=None,
+                 wind_smoothing_s: float = 0.0) -> "xr.Dataset":
     """Fit the campaign model on identification results and label every window with it.
 
     Parameters
@@ -147,6 +152,10 @@ def pool_results(result_files: Sequence, model=None, *,
         Directory of the results' event files: every record then carries the
         mean wind's yaw measured from its anemometers (needed by a
         ``VaryingCoefficientSINDy`` with ``yaw_degree`` > 0).
+    wind_smoothing_s : float, s
+        Gaussian smoothing of U (and yaw) before the fit and the verdicts
+        (:func:`vivbench.analysis.smooth_wind`): a lower mean-wind cut-off
+        against the point anemometer's errors-in-variables (0: none).
 
     Returns
     -------
@@ -195,6 +204,7 @@ def pool_results(result_files: Sequence, model=None, *,
     records = [_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results]
     if campaign is not None:
         records = [_with_event_yaw(r, attrs, campaign) for r, (_p, _d, attrs, _e) in zip(records, results)]
+    records = [smooth_wind(r, wind_smoothing_s) for r in records]
     if varying and int(model.yaw_degree) and campaign is None:
         raise InputError("the varying model with a yaw covariate (yaw_degree > 0) needs the campaign's event "
                          "files for the wind's yaw (give campaign / --campaign)")
@@ -303,6 +313,8 @@ def pool_results(result_files: Sequence, model=None, *,
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
         "pooled_config_json": model.to_json(),
         "derivative_json": json.dumps(None if derivative is None else dataclasses.asdict(derivative), sort_keys=True),
+        "wind_smoothing_s": float(wind_smoothing_s),
+        "wind_yaw": int(campaign is not None),
         "vivbench_version": vivbench.__version__,
         "change_event": "" if scan["change_index"] < 0 else event_ids[scan["change_index"]],
         "change_p_value": scan["p_value"],

@@ -28,7 +28,7 @@ def run(args) -> int:
     else:
         model = PooledSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement, tau=args.tau,
                             seed=args.seed)
-    ds = pool_results(files, model, campaign=campaign)  # fits ``model`` in place
+    ds = pool_results(files, model, campaign=campaign, wind_smoothing_s=args.wind_smoothing)  # fits ``model`` in place
     out_dir = Path(args.out) if args.out else results_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     out = write_pooled(ds, out_dir)
@@ -65,6 +65,9 @@ def register(sub) -> None:
                         "from their anemometers, becomes a second covariate of the curves")
     s.add_argument("--yaw-degree", type=int, default=None, choices=(0, 1, 2),
                    help="with --model varying: powers of sin^2(yaw) in the curves (default 1 with --campaign, else 0)")
+    s.add_argument("--wind-smoothing", type=float, default=0.0,
+                   help="Gaussian smoothing of the mean wind (and yaw) in time before the fit, standard deviation in s "
+                        "(default 0: none): a lower cut-off against the point anemometer's slow turbulence")
     s.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates (default 100)")
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")
     s.add_argument("--agreement", type=float, default=0.9,

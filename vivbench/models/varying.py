@@ -57,6 +57,10 @@ __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty"]
 #: Spline degree (cubic).
 DEGREE = 3
 
+#: Order subsets of the confidence set of models (all with the linear order 1), rows (0, 1, 2, 3) kept.
+ORDER_SUBSETS = np.array([[o0, True, o2, o3] for o0 in (True, False) for o2 in (True, False)
+                          for o3 in (True, False)])
+
 
 def uniform_knots(lo: float, hi: float, n_basis: int, degree: int = DEGREE) -> np.ndarray:
     """Knot vector of ``n_basis`` B-splines of ``degree`` on uniform intervals over [lo, hi].
@@ -233,7 +237,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
                  n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
-                 wind_input: str = "mean", yaw_degree: int = 0):
+                 wind_input: str = "mean", yaw_degree: int = 0, model_set_level: float = 0.95):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -245,6 +249,7 @@ class VaryingCoefficientSINDy(ModelBase):
         self.seed = seed
         self.wind_input = wind_input
         self.yaw_degree = yaw_degree
+        self.model_set_level = model_set_level
 
     def _wind(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
@@ -256,6 +261,11 @@ class VaryingCoefficientSINDy(ModelBase):
             return np.repeat(m, U.shape[1], axis=1)
         return U
 
+    @staticmethod
+    def _inputs(record: Record) -> tuple[np.ndarray, np.ndarray | None]:
+        """The record's U and yaw (None without)."""
+        return record.U, record_yaw(record)
+
     def _zeta(self, record_or_yaw, n: int) -> np.ndarray | None:
         """The yaw covariate sin^2(psi) of each equation, shape (n, S) (None without ``yaw_degree``).
 
@@ -264,7 +274,7 @@ class VaryingCoefficientSINDy(ModelBase):
         """
         if int(self.yaw_degree) == 0:
             return None
-        yaw = record_yaw(record_or_yaw) if isinstance(record_or_yaw, Record) else record_or_yaw
+        yaw = self._inputs(record_or_yaw)[1] if isinstance(record_or_yaw, Record) else record_or_yaw
         if yaw is None:
             fallback = getattr(self, "yaw_fallback_", None)
             if fallback is None:
@@ -285,6 +295,7 @@ class VaryingCoefficientSINDy(ModelBase):
         params["penalties"] = [float(x) for x in params["penalties"]]
         params["select_orders"] = bool(params["select_orders"])
         params["yaw_degree"] = int(params["yaw_degree"])
+        params["model_set_level"] = float(params["model_set_level"])
         return json.dumps(params, sort_keys=True)
 
     def _validate(self) -> None:
@@ -304,6 +315,8 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
         if not 0.0 < self.tau < 1.0:
             raise InputError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
+        if not 0.5 <= self.model_set_level < 1.0:
+            raise InputError(f"model_set_level must lie in [0.5, 1); got {self.model_set_level!r}")
         if int(self.yaw_degree) != self.yaw_degree or not 0 <= int(self.yaw_degree) <= 3:
             raise InputError(f"yaw_degree must be an integer in 0..3; got {self.yaw_degree!r}")
         if self.wind_input not in ("section", "mean"):
@@ -336,7 +349,7 @@ class VaryingCoefficientSINDy(ModelBase):
                 raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {S}")
         t = np.concatenate([r.t for r in records])
         A = np.concatenate([r.A for r in records])
-        U = self._wind(np.concatenate([r.U for r in records]))
+        U = self._wind(np.concatenate([self._inputs(r)[0] for r in records]))
         dA = np.concatenate([r.dA for r in records])
         J = int(self.yaw_degree)
         if J and any(record_yaw(r) is None for r in records):
@@ -372,6 +385,11 @@ class VaryingCoefficientSINDy(ModelBase):
         self.coef_bootstrap_ = np.zeros((n_boot, S, Mmax, 4))
         self.coef_yaw_ = np.zeros((S, Mmax, 4, J))
         self.coef_yaw_bootstrap_ = np.zeros((n_boot, S, Mmax, 4, J))
+        n_sub = ORDER_SUBSETS.shape[0]
+        self.subset_coef_ = np.zeros((n_sub, S, Mmax, 4))
+        self.subset_coef_yaw_ = np.zeros((n_sub, S, Mmax, 4, J))
+        self.subset_loeo_ = np.full((n_sub, S), np.nan)
+        self.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
         self.yaw_ref_ = np.ones(S)
         self.yaw_fallback_ = np.zeros(S)
         n_samples = 0
@@ -444,6 +462,24 @@ class VaryingCoefficientSINDy(ModelBase):
                 crp = cr.reshape(n_boot, 4, J + 1, M).transpose(0, 3, 1, 2) * to_phys[:, None] * zscale
                 self.coef_bootstrap_[:, k, :M] = crp[..., 0]
                 self.coef_yaw_bootstrap_[:, k, :M] = crp[..., 1:]
+            # The confidence set of order subsets (leave-one-event-out prediction, module docstring).
+            ev_b = np.zeros((n_ev, G.shape[1], G.shape[1]))
+            np.add.at(ev_b, ev_of_block, G)
+            eb = np.zeros((n_ev, G.shape[1]))
+            np.add.at(eb, ev_of_block, b)
+            ey = np.bincount(ev_of_block, weights=yy, minlength=n_ev)
+            has = np.bincount(ev_of_block, minlength=n_ev) > 0
+            loeo = np.full((n_sub, n_ev), np.nan)
+            for a, orders in enumerate(ORDER_SUBSETS):
+                keep_a = np.repeat(orders, (J + 1) * M)
+                held = _solve(Gs[None] - ev_b[has], bs[None] - eb[has], P, lam, keep_a)  # (n_has, 1, p)
+                loeo[a, has] = _quad_error(held, ev_b[has], eb[has], ey[has])[:, 0]
+                ca = _solve(Gs, bs, P, lam, keep_a)[0].reshape(4, J + 1, M).transpose(2, 0, 1)
+                ca = ca * to_phys[:, None] * zscale
+                self.subset_coef_[a, k, :M] = ca[..., 0]
+                self.subset_coef_yaw_[a, k, :M] = ca[..., 1:]
+            self.subset_loeo_[:, k] = np.nansum(loeo, axis=1) * ys**2
+            self.subset_plausible_[:, k] = _confidence_set(loeo[:, has], self.model_set_level)
         self.n_samples_ = n_samples
         self.n_blocks_ = n_blocks_used
         self.n_sections_ = S
@@ -532,7 +568,7 @@ class VaryingCoefficientSINDy(ModelBase):
         """Yaw in degrees for evaluating on a record: its own, or the fitted median without one."""
         if not int(self.yaw_degree):
             return None
-        yaw = record_yaw(record)
+        yaw = self._inputs(record)[1]
         if yaw is not None:
             return yaw
         return np.degrees(np.arcsin(np.sqrt(np.broadcast_to(self.yaw_fallback_, record.A.shape))))
@@ -541,13 +577,25 @@ class VaryingCoefficientSINDy(ModelBase):
         """Order contributions of bootstrap replicates ``start:stop``, shape (R, n_samples, S, 4), m/s."""
         record = self._check_record(record)
         sl = slice(start, stop)
-        return (self.coefficient_values(record.U, self.coef_bootstrap_[sl], self._record_yaw(record),
+        return (self.coefficient_values(self._inputs(record)[0], self.coef_bootstrap_[sl], self._record_yaw(record),
                                         self.coef_yaw_bootstrap_[sl]) * record.A[..., None] ** np.arange(4))
+
+    def subset_order_contributions(self, record: Record) -> np.ndarray:
+        """Order contributions of the models of every order subset (``ORDER_SUBSETS``), shape (n_subsets, n, S, 4), m/s.
+
+        ``subset_plausible_`` (n_subsets, S) says which of them belong to the
+        confidence set (leave-one-event-out prediction not significantly worse
+        than the best subset's).
+        """
+        record = self._check_record(record)
+        return (self.coefficient_values(self._inputs(record)[0], self.subset_coef_, self._record_yaw(record),
+                                        self.subset_coef_yaw_) * record.A[..., None] ** np.arange(4))
 
     def order_contributions(self, record: Record) -> np.ndarray:
         """r[:, k, i] = a_ki(U_k) A_k^i, shape (n_samples, n_sections, 4), m/s (NaN where A or U is missing)."""
         record = self._check_record(record)
-        return self.coefficient_values(record.U, yaw=self._record_yaw(record)) * record.A[..., None] ** np.arange(4)
+        return (self.coefficient_values(self._inputs(record)[0], yaw=self._record_yaw(record))
+                * record.A[..., None] ** np.arange(4))
 
     def order_contributions_bootstrap(self, record: Record) -> np.ndarray:
         """Order contributions of every bootstrap replicate, shape (n_bootstrap, n_samples, S, 4), m/s."""
@@ -584,7 +632,7 @@ class VaryingCoefficientSINDy(ModelBase):
         i1 = int(np.argmin(np.abs(t - (t[-1] if t1 is None else float(t1))))) + 1
         tt = t[i0:i1]
         S = self.n_sections_
-        U = record.U[i0:i1]
+        U = self._inputs(record)[0][i0:i1]
         Umid = 0.5 * (U[:-1] + U[1:])
         yaw = self._record_yaw(record)
         yaw = None if yaw is None else yaw[i0:i1]
@@ -692,16 +740,22 @@ class VaryingCoefficientSINDy(ModelBase):
                "cv_error_": ("equation", "n_basis_candidate", "penalty_candidate"), "edf_": ("equation",),
                "wind_range_": ("equation", "bound"), "y_scale_": ("equation",), "a_ref_": ("equation",),
                "rss_": ("equation",), "coef_bootstrap_": ("bootstrap", "equation", "basis", "order")}
+    #: The confidence set of order subsets (absent from files written before it existed).
+    _SUBSET_ARRAYS = {"subset_coef_": ("subset", "equation", "basis", "order"), "subset_loeo_": ("subset", "equation"),
+                      "subset_plausible_": ("subset", "equation")}
     #: Written only with ``yaw_degree`` > 0 (files of models without yaw stay as they were).
     _YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
                    "coef_yaw_bootstrap_": ("bootstrap", "equation", "basis", "order", "yaw_power"),
-                   "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",)}
+                   "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",),
+                   "subset_coef_yaw_": ("subset", "equation", "basis", "order", "yaw_power")}
 
     def to_dataset(self) -> xr.Dataset:
         """The fitted model as an xarray Dataset (one variable per fitted array)."""
         self._check_fitted()
         data = {name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(float if name != "orders_" else np.int8))
                 for name, dims in self._ARRAYS.items()}
+        data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(float if name != "subset_plausible_" else np.int8))
+                     for name, dims in self._SUBSET_ARRAYS.items()})
         if int(self.yaw_degree):
             data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name), dtype=float))
                          for name, dims in self._YAW_ARRAYS.items()})
@@ -737,12 +791,41 @@ class VaryingCoefficientSINDy(ModelBase):
             model.coef_yaw_ = np.zeros((S, Mmax, 4, 0))
             model.coef_yaw_bootstrap_ = np.zeros(model.coef_bootstrap_.shape + (0,))
             model.yaw_ref_, model.yaw_fallback_ = np.ones(S), np.zeros(S)
+            model.subset_coef_yaw_ = np.zeros((ORDER_SUBSETS.shape[0], S, Mmax, 4, 0))
+        if "subset_coef" in ds:
+            for name in cls._SUBSET_ARRAYS:
+                setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+            model.subset_plausible_ = model.subset_plausible_.astype(bool)
+        else:  # older files: the fitted model alone is its confidence set
+            n_sub = ORDER_SUBSETS.shape[0]
+            model.subset_coef_ = np.broadcast_to(model.coef_, (n_sub,) + model.coef_.shape).copy()
+            model.subset_coef_yaw_ = np.broadcast_to(model.coef_yaw_, (n_sub,) + model.coef_yaw_.shape).copy()
+            model.subset_loeo_ = np.full((n_sub, S), np.nan)
+            model.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
+            model.subset_plausible_[0] = True
         model.n_basis_ = model.n_basis_.astype(int)
         model.orders_ = model.orders_.astype(bool)
         model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
         model.n_sections_ = int(ds.sizes["equation"])
         model.event_ids_ = json.loads(ds.attrs["events"])
         return model
+
+
+def _confidence_set(loss: np.ndarray, level: float) -> np.ndarray:
+    """Models whose per-event held-out loss is not significantly above the best's, shape (n_models,) bool.
+
+    ``loss`` (n_models, n_events): a one-sided paired test of the mean
+    difference to the model with the smallest total, at ``level``, the events
+    as the independent units (z-approximation).
+    """
+    from scipy.stats import norm
+
+    best = int(np.argmin(loss.sum(axis=1)))
+    diff = loss - loss[best]
+    n = loss.shape[1]
+    se = diff.std(axis=1, ddof=1) / np.sqrt(max(n, 1)) if n > 1 else np.zeros(loss.shape[0])
+    z = norm.ppf(level)
+    return diff.mean(axis=1) <= z * se + 1e-12 * np.abs(loss[best]).mean()
 
 
 def _penalty_scale(G: np.ndarray, P: np.ndarray) -> float:
