@@ -183,7 +183,7 @@ def pool_results(result_files: Sequence, model=None, *,
         ``campaign.model.nc``). Written by :func:`write_pooled` as
         ``campaign.pooled.nc``.
     """
-    from vivbench.analysis.changes import change_point_scan, event_residual_checks
+    from vivbench.analysis.changes import change_point_scan, event_residual_checks, model_change_scan
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes.varying import varying_window_verdicts
 
@@ -288,6 +288,18 @@ def pool_results(result_files: Sequence, model=None, *,
                                "for a change just before this event"}),
     })
     event_ids = [str(a["event_id"]) for _p, _d, a, _e in results]
+    model_scan = model_change_scan(model, records, seed=model.seed) if varying else None
+    if model_scan is not None:
+        data.update({
+            "event_misfit": (("event",), model_scan["misfit"],
+                             {"units": "1", "long_name": "leave-one-event-out mean squared dA/dt residual over the median event's"}),
+            "event_misfit_flag": (("event",), model_scan["misfit_flag"].astype(np.int8),
+                                  {"long_name": "1: the model fitted to the other events does not predict this one "
+                                   "(robust outlier of event_misfit)"}),
+            "event_model_split_gain": (("event",), model_scan["split_gain"],
+                                       {"units": "1", "long_name": "relative drop of the penalised RSS when the model is "
+                                        "refitted separately before and after this event"}),
+        })
     coords = {"equation": sections}
     if not varying:
         coords.update(feature=model.feature_names_, bootstrap=np.arange(model.coef_bootstrap_.shape[0]))
@@ -321,6 +333,11 @@ def pool_results(result_files: Sequence, model=None, *,
         "change_detected": int(scan["detected"]),
         "change_heterogeneity_p": scan["heterogeneity_p"],
     })
+    if model_scan is not None:
+        ci = model_scan["change_index"]
+        attrs.update({"model_change_event": "" if ci < 0 else event_ids[ci],
+                      "model_change_p_value": model_scan["p_value"],
+                      "model_change_detected": int(model_scan["detected"])})
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

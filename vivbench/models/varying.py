@@ -52,7 +52,7 @@ from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.models.yaw_record import record_yaw
 
-__all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty"]
+__all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty", "penalised_rss", "ORDER_SUBSETS"]
 
 #: Spline degree (cubic).
 DEGREE = 3
@@ -486,6 +486,48 @@ class VaryingCoefficientSINDy(ModelBase):
         self.event_ids_ = [r.event_id for r in records]
         return self
 
+    def event_statistics(self, records: Sequence[Record]) -> list[dict]:
+        """Per-event sufficient statistics of every equation's penalised regression, at the fitted basis and scales.
+
+        What a time-varying use of the model needs (e.g. fitting it separately
+        to the events before and after a candidate change,
+        :func:`vivbench.analysis.changes.model_change_scan`) without refitting from samples.
+
+        Parameters
+        ----------
+        records : sequence of Record with dA (YawRecord with ``yaw_degree`` > 0), E of them
+
+        Returns
+        -------
+        list of dict, one per equation
+            ``G`` (E, p, p) and ``b`` (E, p): X_e^T X_e and X_e^T y_e of the
+            standardised design and target; ``yy`` (E,); ``n`` (E,) samples;
+            ``P`` (p, p) the penalty; ``penalty`` the relative penalty;
+            ``keep`` (p,) bool, the kept orders' columns.
+        """
+        self._check_fitted()
+        records = [self._check_record(as_record(r, k)) for k, r in enumerate(records)]
+        J = int(self.yaw_degree)
+        out = []
+        U = self._wind(np.concatenate([self._inputs(r)[0] for r in records]))
+        A = np.concatenate([r.A for r in records])
+        dA = np.concatenate([r.dA for r in records])
+        Z = np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None
+        event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
+        E = len(records)
+        for k in range(self.n_sections_):
+            M = int(self.n_basis_[k])
+            knots = self.knots_[k, :M + DEGREE + 1]
+            ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
+            if J:
+                ok &= np.isfinite(Z[:, k])
+            zk = None if not J else Z[ok, k] / self.yaw_ref_[k]
+            G, b, yy, cnt = _block_stats(U[ok, k], A[ok, k], dA[ok, k] / self.y_scale_[k], event[ok], E, knots,
+                                         self.a_ref_[k], zk, J)
+            out.append({"G": G, "b": b, "yy": yy, "n": cnt, "P": np.kron(np.eye(4 * (J + 1)), difference_penalty(M)),
+                        "penalty": float(self.penalty_[k]), "keep": np.repeat(self.orders_[k], (J + 1) * M)})
+        return out
+
     @staticmethod
     def _cv_error(G, b, yy, fold_of_block, K, P, pen, keep) -> np.ndarray:
         """Summed held-out squared error over the K folds, for every relative penalty, shape (L,)."""
@@ -809,6 +851,30 @@ class VaryingCoefficientSINDy(ModelBase):
         model.n_sections_ = int(ds.sizes["equation"])
         model.event_ids_ = json.loads(ds.attrs["events"])
         return model
+
+
+def penalised_rss(G: np.ndarray, b: np.ndarray, yy: np.ndarray, P: np.ndarray, penalty: float,
+                  keep: np.ndarray) -> np.ndarray:
+    """Residual sum of squares of the penalised fit to pooled statistics, batched.
+
+    Parameters
+    ----------
+    G : ndarray, shape (..., p, p); b : ndarray, shape (..., p); yy : ndarray, shape (...)
+        Summed statistics of the samples fitted together (e.g. the events on one side of a split).
+    P : ndarray, shape (p, p); penalty : float, relative (times trace(G) / trace(P) of each fit)
+    keep : ndarray of bool, shape (p,)
+
+    Returns
+    -------
+    ndarray, shape (...): ||y - X c||^2 at the penalised solution c (standardised units).
+    """
+    G, b, yy = np.asarray(G, dtype=float), np.asarray(b, dtype=float), np.asarray(yy, dtype=float)
+    scale = np.trace(G, axis1=-2, axis2=-1) / max(np.trace(P), 1e-300)
+    idx = np.flatnonzero(keep)
+    Gk, bk, Pk = G[..., idx[:, None], idx], b[..., idx], P[idx[:, None], idx]
+    ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / max(idx.size, 1))[..., None, None] * np.eye(idx.size)
+    c = np.linalg.solve(Gk + (penalty * scale)[..., None, None] * Pk + ridge, bk[..., None])[..., 0]
+    return np.einsum("...p,...pq,...q->...", c, Gk, c) - 2.0 * np.einsum("...p,...p->...", c, bk) + yy
 
 
 def _confidence_set(loss: np.ndarray, level: float) -> np.ndarray:
