@@ -390,6 +390,7 @@ class VaryingCoefficientSINDy(ModelBase):
         self.subset_coef_yaw_ = np.zeros((n_sub, S, Mmax, 4, J))
         self.subset_loeo_ = np.full((n_sub, S), np.nan)
         self.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
+        self.subset_loeo_event_ = np.full((n_sub, S, len(records)), np.nan)  # not saved: for studies of the level
         self.yaw_ref_ = np.ones(S)
         self.yaw_fallback_ = np.zeros(S)
         n_samples = 0
@@ -479,6 +480,7 @@ class VaryingCoefficientSINDy(ModelBase):
                 self.subset_coef_[a, k, :M] = ca[..., 0]
                 self.subset_coef_yaw_[a, k, :M] = ca[..., 1:]
             self.subset_loeo_[:, k] = np.nansum(loeo, axis=1) * ys**2
+            self.subset_loeo_event_[:, k] = loeo * ys**2
             self.subset_plausible_[:, k] = _confidence_set(loeo[:, has], self.model_set_level)
         self.n_samples_ = n_samples
         self.n_blocks_ = n_blocks_used
