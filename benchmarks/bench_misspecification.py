@@ -27,7 +27,14 @@ Both are scored on the truth's (A, U):
   PooledSINDy's verdicts (``campaign_window_verdicts``) only with ``--pooled-verdicts`` (slow).
 
 Models: PooledSINDy (STLSQ + AICc on A^i U^j, j <= 5) and VaryingCoefficientSINDy
-(penalised cubic splines in U; M and lambda by 5-fold cross-validation over events).
+(penalised cubic splines in U; M and lambda by 5-fold cross-validation over events),
+with the mean wind's yaw as a second covariate in the "mean U, yaw" row (both
+records carry the yaw measured from the anemometers). ``--wind-smoothing S``
+smooths the measured records' U and yaw (as ``vivbench pool --wind-smoothing``;
+the truth's records are left alone), ``--only TEXT`` fits only the models whose
+name contains TEXT, ``--no-truth-fits`` skips the fits on the truth. The
+verdict columns also count ``n_flag_self_excited_wrong`` (flagged regime 2-4
+where the truth is regime 1) in the JSON.
 Nothing is asserted; the table is printed and written to ``benchmarks/out/misspecification.json``.
 """
 
