@@ -25,14 +25,27 @@ order whose removal does not increase the cross-validated error.
 
 Everything is computed from per-block sufficient statistics (X_b^T X_b, X_b^T y_b,
 y_b^T y_b): the folds, the penalty grid and the block bootstrap of the bands
-are small p x p solves (p = 4 M), with no loop over samples.
+are small p x p solves (p = 4 M without yaw), with no loop over samples.
 
 Only own-section terms are used: in the averaged truth the mode shape makes
 the other sections' amplitudes proportional to A_k, so their terms are
-collinear with A_k's. What this model does not fix: errors in the measured U
-(a point anemometer against the tributary-averaged wind the deck feels) smear
-the bell along U; and it is time-invariant, so changes the wind does not carry
-(damping drift, a step between events) are averaged over.
+collinear with A_k's.
+
+With ``yaw_degree`` > 0 the wind's yaw psi (its angle to the span's normal,
+which the realistic aerodynamics fall off with and U does not carry) is a
+second covariate: every column above is repeated times sin^2j(psi), j = 1..J,
+with the same penalty (p = 4 M (J + 1)). After the fit the same statistics
+give the models of every subset of the orders 0, 2, 3 (order 1 always kept)
+and their leave-one-event-out prediction errors: the confidence set of
+``model_set_level`` used by the window verdicts
+(:func:`vivbench.regimes.varying_window_verdicts`).
+
+What this model does not fix: errors in the measured U (a point anemometer
+against the tributary-averaged wind the deck feels) smear the bell along U
+(``vivbench pool`` smooths U by 30 s for it, :func:`vivbench.analysis.smooth_wind`);
+and it is time-invariant, so changes the wind does not carry (damping drift, a
+step between events) are averaged over (:func:`vivbench.analysis.changes.model_change_scan`
+checks for them).
 """
 
 from __future__ import annotations
@@ -208,6 +221,19 @@ class VaryingCoefficientSINDy(ModelBase):
         median dA/dt error 0.195 against 0.453 with each section's own wind)
         and reported on another (seed 1: 0.235 against 0.456; see
         ``benchmarks/bench_misspecification.py``).
+    yaw_degree : int, 0..3
+        Powers j = 1..J of sin^2(psi), psi the mean wind's yaw, whose spline
+        curves are added: a_ki(U, psi) = sum_j sin^2j(psi) f_kij(U) (0: the
+        wind only). Needs records that carry the yaw (:class:`YawRecord`); a
+        record without one is evaluated at the fitted median yaw. The curves
+        of DESIGN 3.5 are those at yaw 0. Chosen on the seed-0 realistic
+        campaign (``benchmarks/bench_floor.py``): 1 (degree 2 did not help).
+    model_set_level : float, [0.5, 1)
+        Level of the confidence set of order subsets: the models without some
+        of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
+        prediction error is not significantly above the best subset's (a
+        one-sided paired test over events); the window verdict needs them all
+        to give the window's regime.
 
     Attributes
     ----------
@@ -229,6 +255,17 @@ class VaryingCoefficientSINDy(ModelBase):
         RMS of dA_k/dt and of A_k over the fitted samples (the regression's scales).
     rss_ : ndarray, shape (S,), m^2/s^2; n_samples_, n_blocks_, n_sections_ : int
     event_ids_ : list of str
+    coef_yaw_ : ndarray, shape (S, M_max, 4, yaw_degree)
+        Spline coefficients of the yaw terms (coefficients of sin^2j(psi)).
+    coef_yaw_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4, yaw_degree)
+    yaw_ref_, yaw_fallback_ : ndarray, shape (S,)
+        RMS and median of sin^2(psi) over the fitted samples.
+    subset_coef_, subset_coef_yaw_ : ndarray, shapes (n_subsets,) + those of ``coef_``, ``coef_yaw_``
+        The models of every order subset at the selected basis and penalty.
+    subset_loeo_ : ndarray, shape (n_subsets, S), m^2/s^2
+        Their leave-one-event-out squared prediction errors (summed over events).
+    subset_plausible_ : ndarray of bool, shape (n_subsets, S)
+        Membership of the confidence set.
     """
 
     _fitted_attribute = "coef_"
