@@ -27,7 +27,14 @@ Both are scored on the truth's (A, U):
   PooledSINDy's verdicts (``campaign_window_verdicts``) only with ``--pooled-verdicts`` (slow).
 
 Models: PooledSINDy (STLSQ + AICc on A^i U^j, j <= 5) and VaryingCoefficientSINDy
-(penalised cubic splines in U; M and lambda by 5-fold cross-validation over events).
+(penalised cubic splines in U; M and lambda by 5-fold cross-validation over events),
+with the mean wind's yaw as a second covariate in the "mean U, yaw" row (both
+records carry the yaw measured from the anemometers). ``--wind-smoothing S``
+smooths the measured records' U and yaw (as ``vivbench pool --wind-smoothing``;
+the truth's records are left alone), ``--only TEXT`` fits only the models whose
+name contains TEXT, ``--no-truth-fits`` skips the fits on the truth. The
+verdict columns also count ``n_flag_self_excited_wrong`` (flagged regime 2-4
+where the truth is regime 1) in the JSON.
 Nothing is asserted; the table is printed and written to ``benchmarks/out/misspecification.json``.
 """
 
@@ -46,9 +53,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from vivbench.analysis import CAMPAIGN_DERIVATIVE, records_from_results  # noqa: E402
+from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results, smooth_wind  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
-from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
+from vivbench.models import PooledSINDy, VaryingCoefficientSINDy, YawRecord  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
                               varying_window_verdicts)
 
@@ -61,8 +68,12 @@ def _window_sums(x, t, start, end):
     return c[hi] - c[lo]
 
 
-def load_campaign(camp: Path, results: Path):
-    """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event."""
+def load_campaign(camp: Path, results: Path, yaw: bool = True, wind_smoothing_s: float = 0.0):
+    """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event.
+
+    With ``yaw`` both records carry the mean wind's yaw measured from the event's
+    anemometers (the truth's own yaw is not stored: its record gets the measured one).
+    """
     files = sorted(results.glob("*.identify.nc"))
     measured = records_from_results(files, derivative=CAMPAIGN_DERIVATIVE)
     events = []
@@ -77,14 +88,22 @@ def load_campaign(camp: Path, results: Path):
             truth = tr.load()
         trec = Record(event_id=rec.event_id, t=truth["time"].values, A=truth["A"].values, U=truth["U"].values,
                       dA=truth["r"].values.sum(axis=-1))
+        if yaw:
+            with xr.open_dataset(camp / attrs["source_file"], group="wind") as w:
+                tw, u, v = w["time"].values, w["u"].values, w["v"].values
+            with xr.open_dataset(camp / attrs["source_file"]) as root:
+                az = float(root.attrs["span_azimuth_deg"])
+            trec = YawRecord.from_record(trec, event_yaw(tw, u, v, az, trec.t))
+            rec = YawRecord.from_record(rec, event_yaw(tw, u, v, az, rec.t))
+        rec = smooth_wind(rec, wind_smoothing_s)  # the measured record only: the truth's U is the deck's
         events.append({"id": rec.event_id, "measured": rec, "truth_rec": trec, "truth": truth, "ws": ws, "we": we,
                        "low_snr": low, "true_regime": truth_window_regimes(truth, ws, we)})
-    return measured, events
+    return [ev["measured"] for ev in events], events
 
 
 def score(model, events, verdicts: str | None = None) -> dict:
     """dA/dt error and regime accuracy on the truth's (A, U); verdicts on the measured record when asked."""
-    errs, hits, n_reg, flagged, flag_ok, n_win = [], 0, 0, 0, 0, 0
+    errs, hits, n_reg, flagged, flag_ok, n_win, flag_self = [], 0, 0, 0, 0, 0, 0
     for ev in events:
         trec, ws, we = ev["truth_rec"], ev["ws"], ev["we"]
         t, true = trec.t, trec.dA
@@ -111,6 +130,7 @@ def score(model, events, verdicts: str | None = None) -> dict:
             flag = v["identifiable"] & ~ev["low_snr"] & valid
             flagged += int(flag.sum())
             flag_ok += int((flag & (v["regime"] == tr)).sum())
+            flag_self += int((flag & (v["regime"] >= 2) & (tr == 1)).sum())
             n_win += int((valid & (v["regime"] > 0)).sum())
     e = np.concatenate(errs)
     out = {"dA_err_median": float(np.median(e)), "dA_err_p90": float(np.percentile(e, 90)), "n_dyn": int(e.size),
@@ -118,12 +138,15 @@ def score(model, events, verdicts: str | None = None) -> dict:
     if verdicts is not None:
         out["coverage"] = flagged / max(n_win, 1)
         out["flag_acc"] = flag_ok / flagged if flagged else float("nan")
+        out["n_flagged"] = flagged
+        out["n_flag_self_excited_wrong"] = flag_self  # flagged 2-4 where the truth is regime 1
     return out
 
 
-def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False) -> dict:
+def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
+        only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float = 0.0) -> dict:
     t0 = time.perf_counter()
-    measured, events = load_campaign(camp, results)
+    measured, events = load_campaign(camp, results, wind_smoothing_s=wind_smoothing_s)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
     rows = {}
@@ -131,11 +154,16 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         ("PooledSINDy", lambda: PooledSINDy(n_bootstrap=100 if pooled_verdicts else 0), "pooled"),
         # The default evaluates the curves at the mean wind over the sections (chosen on the seed-0 campaign).
         ("VaryingCoefficientSINDy(mean U)", lambda: VaryingCoefficientSINDy(select_orders=select_orders), "varying"),
+        # The wind's yaw as a second covariate (chosen on the seed-0 campaign, benchmarks/bench_floor.py).
+        ("VaryingCoefficientSINDy(mean U, yaw)",
+         lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1), "varying"),
         ("VaryingCoefficientSINDy(own U)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="section"), "varying"),
     ]
     for name, make, kind in specs:
-        for data, recs in (("measured", measured), ("truth", truth_records)):
+        if only is not None and only not in name:
+            continue
+        for data, recs in (("measured", measured), ("truth", truth_records))[:2 if truth_fits else 1]:
             t1 = time.perf_counter()
             model = make().fit(recs)
             fit_s = time.perf_counter() - t1
@@ -170,12 +198,17 @@ def main(argv=None) -> dict:
     parser.add_argument("--results", action="append", required=True, type=Path)
     parser.add_argument("--pooled-verdicts", action="store_true")
     parser.add_argument("--select-orders", action="store_true")
+    parser.add_argument("--wind-smoothing", type=float, default=0.0,
+                        help="Gaussian smoothing of the measured U and yaw, s (as vivbench pool --wind-smoothing)")
+    parser.add_argument("--only", default=None, help="fit only the models whose name contains this text")
+    parser.add_argument("--no-truth-fits", action="store_true", help="skip the fits on the truth's own (A, U, dA)")
     args = parser.parse_args(argv)
     if len(args.campaign) != len(args.results):
         parser.error("give one --results per --campaign")
     out = {}
     for camp, res in zip(args.campaign, args.results):
-        out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders)
+        out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders, args.only, not args.no_truth_fits,
+                             args.wind_smoothing)
     for camp, rows in out.items():
         print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
     OUT.mkdir(exist_ok=True)

@@ -27,11 +27,12 @@ from vivbench.analysis.pool import (
     campaign_model_file,
     load_campaign_model,
 )
+from vivbench.analysis.wind_inputs import event_yaw, smooth_wind, with_yaw
 
 __all__ = [
     "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features", "IdentifyConfig",
     "identify_event", "identify_files", "FEATURE_SETS", "ClusterConfig", "CampaignWindows", "ClusterResult",
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
-    "with_campaign_model", "campaign_model_file", "load_campaign_model",
+    "with_campaign_model", "campaign_model_file", "load_campaign_model", "event_yaw", "smooth_wind", "with_yaw",
 ]

@@ -31,6 +31,27 @@ generator:
   give at least as large a maximum (exchangeable events under "no ordered
   change", so a misfit that merely differs between events does not count),
   and the first event after the best split is ``change_event``.
+
+The offsets see only the linear coefficient, through the fixed model's
+residual; a retrofit that changes the deck's aerodynamics changes every order.
+:func:`model_change_scan` is the time-varying method for a model that exposes
+per-event sufficient statistics (``VaryingCoefficientSINDy.event_statistics``):
+the model is refitted separately to the events before and after every split
+(at its fitted basis and relative penalty; at least ``min_events`` on each
+side; each event's equations weighted by the inverse of its mean square of
+dA/dt, at least ``MISFIT_MS_FLOOR`` of the median event's, so every event
+counts alike but near-zero dynamics are not judged by relative errors), the statistic is the relative drop of the penalised residual sum of
+squares, summed over the equations, and its p-value comes from random
+orderings of the events (a misfit that merely differs between events is
+exchangeable and does not count). It also gives every event its
+leave-one-event-out misfit (held-out mean squared residual over the median
+event's), flagged as "not predicted" when it is a robust outlier (above the
+median by more than ``MISFIT_MADS`` scaled median absolute deviations on a
+log scale) and at least ``MISFIT_FLOOR`` times the median, which unlike
+Cochran's Q does not fire on a model that merely fits some events worse than
+others by the usual spread. An event whose winds lie outside the other events'
+range is predicted by extrapolation and can be flagged without any change.
+The ordered scan then runs over the unflagged events only.
 """
 
 from __future__ import annotations
@@ -41,13 +62,21 @@ import numpy as np
 from scipy.stats import chi2
 
 from vivbench.core.record import Record
+from vivbench.models.varying import penalised_rss
 
-__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "event_residual_checks", "change_point_scan"]
+__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "MISFIT_FLOOR", "MISFIT_MADS", "event_residual_checks", "change_point_scan",
+           "model_change_scan"]
 
 #: Block length of the offsets' robust standard errors, s.
 CHANGE_BLOCK_S = 120.0
 #: Level of the change-point test: a change is reported when its permutation p-value is below it.
 CHANGE_LEVEL = 0.05
+#: Robust outlier rule of the events' held-out misfit: scaled MADs above the median (log scale).
+MISFIT_MADS = 3.5
+#: ... and at least this many times the median event's held-out mean squared residual.
+MISFIT_FLOOR = 2.0
+#: Smallest mean square of dA/dt an event is weighted by, relative to the median event's.
+MISFIT_MS_FLOOR = 0.1
 
 
 def event_residual_checks(model, records: Sequence[Record], *, block_s: float = CHANGE_BLOCK_S) -> dict:
@@ -171,3 +200,110 @@ def change_point_scan(delta, se, weight, *, n_permutations: int = 999, seed: int
     p = float((1 + np.sum(null >= s[best])) / (1 + int(n_permutations)))
     out.update(change_index=int(idx[best + 1]), p_value=p, detected=bool(p < level))
     return out
+
+
+def _split_gain(stats: list[dict], order: np.ndarray, splits: np.ndarray) -> np.ndarray:
+    """Relative drop of the penalised RSS when fitting before/after each split, summed over equations.
+
+    order (R, E) event orderings; splits (K,) numbers of events before the split; returns (R, K).
+    """
+    gain = 0.0
+    for st in stats:
+        G, b, yy = st["G"][order], st["b"][order], st["yy"][order]  # (R, E, ...)
+        cG, cb, cy = np.cumsum(G, axis=1), np.cumsum(b, axis=1), np.cumsum(yy, axis=1)
+        tG, tb, ty = cG[:, -1], cb[:, -1], cy[:, -1]
+        full = penalised_rss(tG, tb, ty, st["P"], st["penalty"], st["keep"])  # (R,)
+        pre = penalised_rss(cG[:, splits - 1], cb[:, splits - 1], cy[:, splits - 1], st["P"], st["penalty"], st["keep"])
+        post = penalised_rss(tG[:, None] - cG[:, splits - 1], tb[:, None] - cb[:, splits - 1],
+                             ty[:, None] - cy[:, splits - 1], st["P"], st["penalty"], st["keep"])
+        gain = gain + (full[:, None] - pre - post) / np.maximum(full[:, None], 1e-300)
+    return np.asarray(gain)
+
+
+def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, n_permutations: int = 99,
+                      seed: int = 0, level: float = CHANGE_LEVEL, chunk: int = 8) -> dict:
+    """The most likely single change of the campaign model over the event sequence, and per-event misfit flags.
+
+    Parameters
+    ----------
+    model : fitted model with ``event_statistics(records)`` (``VaryingCoefficientSINDy``)
+    records : sequence of Record, the events in time order (the records the model was fitted on)
+    min_events : int
+        Fewest events on each side of a split.
+    n_permutations : int
+        Random orderings of the events for the p-value.
+    seed : int
+    level : float
+        A change is reported when the p-value is below it.
+    chunk : int
+        Orderings refitted together (memory: chunk x events x p^2 floats per equation).
+
+    Returns
+    -------
+    dict
+        ``split_gain`` (E,) relative RSS drop of the split just before each
+        event (NaN where not allowed), ``change_index`` (first event after the
+        best split, -1 without one), ``p_value``, ``detected`` (bool),
+        ``misfit`` (E,) leave-one-event-out mean squared residual over the
+        median event's, ``misfit_flag`` (E,) bool (robust outliers, see the
+        module docstring).
+    """
+    stats = model.event_statistics(records)
+    E = len(records)
+    # Every event weighs alike: its statistics over its own mean square of dA/dt, so that one event
+    # with large dynamics (a high plateau extrapolated in A) cannot dominate the scan; but at least
+    # MISFIT_MS_FLOOR of the median event's, so that an event with almost no dynamics is not judged
+    # on the relative error of near-zero values.
+    for st in stats:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ms = np.where(st["n"] > 0, st["yy"] / np.maximum(st["n"], 1), np.nan)
+            floor = MISFIT_MS_FLOOR * np.nanmedian(ms) if np.isfinite(ms).any() else 0.0
+            w = np.where(st["n"] > 0, 1.0 / np.maximum(ms, floor), 0.0)
+            w = np.where(np.isfinite(w), w, 0.0)
+        st["G"], st["b"], st["yy"] = st["G"] * w[:, None, None], st["b"] * w[:, None], st["yy"] * w
+    out = {"split_gain": np.full(E, np.nan), "change_index": -1, "p_value": float("nan"), "detected": False}
+    # Leave-one-event-out misfit of every event (all equations pooled).
+    loo, cnt = np.zeros(E), np.zeros(E)
+    for st in stats:
+        loo += _held_out_error(st["G"], st["b"], st["yy"], st)
+        cnt += st["n"]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mse = np.where(cnt > 0, loo / cnt, np.nan)
+        misfit = mse / np.nanmedian(mse)
+        logm = np.log(misfit)
+    mad = 1.4826 * np.nanmedian(np.abs(logm - np.nanmedian(logm)))
+    out["misfit"] = misfit
+    out["misfit_flag"] = (np.isfinite(logm) & (logm > np.nanmedian(logm) + MISFIT_MADS * max(mad, 1e-12))
+                          & (misfit >= MISFIT_FLOOR))
+    # The ordered scan runs over the events the others predict: one event far off (flagged) would
+    # otherwise pull the split towards itself.
+    use = np.flatnonzero(~out["misfit_flag"] & np.isfinite(misfit))
+    stats = [{**st, "G": st["G"][use], "b": st["b"][use], "yy": st["yy"][use]} for st in stats]
+    n_use = use.size
+    splits = np.arange(max(int(min_events), 1), n_use - max(int(min_events), 1) + 1)
+    if splits.size == 0:
+        return out
+    gain = _split_gain(stats, np.arange(n_use)[None], splits)[0]
+    out["split_gain"][use[splits]] = gain
+    best = int(np.argmax(gain))
+    rng = np.random.default_rng(seed)
+    perms = np.argsort(rng.random((int(n_permutations), n_use)), axis=1)
+    null = np.concatenate([_split_gain(stats, perms[i:i + chunk], splits).max(axis=1)
+                           for i in range(0, perms.shape[0], chunk)]) if n_permutations else np.zeros(0)
+    p = float((1 + np.sum(null >= gain[best])) / (1 + null.size))
+    out.update(change_index=int(use[splits[best]]), p_value=p, detected=bool(p < level))
+    return out
+
+
+def _held_out_error(G, b, yy, st) -> np.ndarray:
+    """Each event's squared error under the model fitted to all other events (standardised), shape (E,)."""
+    idx = np.flatnonzero(st["keep"])
+    tG, tb = G.sum(axis=0), b.sum(axis=0)
+    Gk = (tG[None] - G)[:, idx[:, None], idx]
+    bk = (tb[None] - b)[:, idx]
+    Pk = st["P"][idx[:, None], idx]
+    scale = np.trace(Gk, axis1=-2, axis2=-1) / max(np.trace(st["P"]), 1e-300)
+    ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / idx.size)[:, None, None] * np.eye(idx.size)
+    c = np.linalg.solve(Gk + (st["penalty"] * scale)[:, None, None] * Pk + ridge, bk[..., None])[..., 0]
+    Ge, be = G[:, idx[:, None], idx], b[:, idx]
+    return np.einsum("ep,epq,eq->e", c, Ge, c) - 2.0 * np.einsum("ep,ep->e", c, be) + yy

@@ -16,10 +16,11 @@ from vivbench.core.record import Record
 from vivbench.models.campaign import PooledSINDy
 from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.preprocess.derivative import Derivative
-from vivbench.io.result import read_result
+from vivbench.io.result import read_result, result_noise_std
 from vivbench.io.campaign_model import MODEL_NAME, POOLED_FORMAT, POOLED_NAME, read_pooled
 from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
+from vivbench.analysis.wind_inputs import smooth_wind, with_yaw
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
            "with_campaign_model", "campaign_model_file", "load_campaign_model"]
@@ -77,15 +78,13 @@ def _campaign_derivative(ds, derivative: Derivative | None) -> np.ndarray:
 
 
 def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
-    noise = attrs.get("noise_std_m")
-    noise = None if noise is None else np.atleast_1d(np.asarray(noise, dtype=float))
-    if noise is not None and noise.shape != (ds["A"].shape[1],):
-        noise = None  # a result without one floor per section: unknown
+    noise = result_noise_std(attrs, ds["A"].shape[1])
     return Record(event_id=str(attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
                   dA=_campaign_derivative(ds, derivative), noise_std=noise)
 
 
-def records_from_results(paths: Sequence, *, derivative: Derivative | None = None) -> list[Record]:
+def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None,
+                         wind_smoothing_s: float = 0.0) -> list[Record]:
     """The records of identification results, ready for any model of the protocol (DESIGN 7).
 
     Parameters
@@ -96,6 +95,14 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
         None (default) keeps the results' own dA (the identification's
         smoothed derivative); otherwise dA/dt is recomputed from A on each
         segment as :func:`pool_results` does (e.g. :data:`CAMPAIGN_DERIVATIVE`).
+    campaign : path or None
+        Directory of the events the results were made from (their
+        ``source_file``): the records then carry the mean wind's yaw measured
+        from the event's anemometers (:class:`vivbench.models.YawRecord`,
+        :func:`vivbench.analysis.with_yaw`).
+    wind_smoothing_s : float, s
+        Standard deviation of a Gaussian smoothing of U (and yaw) in time
+        (:func:`vivbench.analysis.smooth_wind`; 0: none).
 
     Returns
     -------
@@ -111,12 +118,22 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
     out = []
     for path in paths:
         ds = read_result(path, ["A", "U", "dA", "segment"])
-        out.append(_result_record(ds, ds.attrs, derivative))
+        rec = _result_record(ds, ds.attrs, derivative)
+        rec = rec if campaign is None else _with_event_yaw(rec, ds.attrs, campaign)
+        out.append(smooth_wind(rec, wind_smoothing_s))
     return out
 
 
+def _with_event_yaw(record: Record, attrs, campaign) -> Record:
+    source = attrs.get("source_file")
+    if not source:
+        raise InputError(f"the result of {record.event_id} names no source_file: its wind's yaw cannot be measured")
+    return with_yaw(record, Path(campaign) / Path(str(source)).name)
+
+
 def pool_results(result_files: Sequence, model=None, *,
-                 derivative: Derivative | None = CAMPAIGN_DERIVATIVE) -> "xr.Dataset":
+                 derivative: Derivative | None = CAMPAIGN_DERIVATIVE, campaign=None,
+                 wind_smoothing_s: float = 0.0) -> "xr.Dataset":
     """Fit the campaign model on identification results and label every window with it.
 
     Parameters
@@ -132,6 +149,14 @@ def pool_results(result_files: Sequence, model=None, *,
         thousands of samples average the noise, but not a smoother's bias):
         with the chain's smoothed dA its median dA/dt error was 0.0121
         against 0.0105 on the default campaign.
+    campaign : path or None
+        Directory of the results' event files: every record then carries the
+        mean wind's yaw measured from its anemometers (needed by a
+        ``VaryingCoefficientSINDy`` with ``yaw_degree`` > 0).
+    wind_smoothing_s : float, s
+        Gaussian smoothing of U (and yaw) before the fit and the verdicts
+        (:func:`vivbench.analysis.smooth_wind`): a lower mean-wind cut-off
+        against the point anemometer's errors-in-variables (0: none).
 
     Returns
     -------
@@ -159,7 +184,7 @@ def pool_results(result_files: Sequence, model=None, *,
         ``campaign.model.nc``). Written by :func:`write_pooled` as
         ``campaign.pooled.nc``.
     """
-    from vivbench.analysis.changes import change_point_scan, event_residual_checks
+    from vivbench.analysis.changes import change_point_scan, event_residual_checks, model_change_scan
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes.varying import varying_window_verdicts
 
@@ -178,6 +203,12 @@ def pool_results(result_files: Sequence, model=None, *,
         if eq != sections:
             raise InputError(f"{path}: equations {eq} differ from {sections} of the other results")
     records = [_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results]
+    if campaign is not None:
+        records = [_with_event_yaw(r, attrs, campaign) for r, (_p, _d, attrs, _e) in zip(records, results)]
+    records = [smooth_wind(r, wind_smoothing_s) for r in records]
+    if varying and int(model.yaw_degree) and campaign is None:
+        raise InputError("the varying model with a yaw covariate (yaw_degree > 0) needs the campaign's event "
+                         "files for the wind's yaw (give campaign / --campaign)")
     model.fit(records)
     keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}
@@ -258,6 +289,18 @@ def pool_results(result_files: Sequence, model=None, *,
                                "for a change just before this event"}),
     })
     event_ids = [str(a["event_id"]) for _p, _d, a, _e in results]
+    model_scan = model_change_scan(model, records, seed=model.seed) if varying else None
+    if model_scan is not None:
+        data.update({
+            "event_misfit": (("event",), model_scan["misfit"],
+                             {"units": "1", "long_name": "leave-one-event-out mean squared dA/dt residual over the median event's"}),
+            "event_misfit_flag": (("event",), model_scan["misfit_flag"].astype(np.int8),
+                                  {"long_name": "1: the model fitted to the other events does not predict this one "
+                                   "(robust outlier of event_misfit)"}),
+            "event_model_split_gain": (("event",), model_scan["split_gain"],
+                                       {"units": "1", "long_name": "relative drop of the penalised RSS when the model is "
+                                        "refitted separately before and after this event"}),
+        })
     coords = {"equation": sections}
     if not varying:
         coords.update(feature=model.feature_names_, bootstrap=np.arange(model.coef_bootstrap_.shape[0]))
@@ -283,12 +326,19 @@ def pool_results(result_files: Sequence, model=None, *,
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
         "pooled_config_json": model.to_json(),
         "derivative_json": json.dumps(None if derivative is None else dataclasses.asdict(derivative), sort_keys=True),
+        "wind_smoothing_s": float(wind_smoothing_s),
+        "wind_yaw": int(campaign is not None),
         "vivbench_version": vivbench.__version__,
         "change_event": "" if scan["change_index"] < 0 else event_ids[scan["change_index"]],
         "change_p_value": scan["p_value"],
         "change_detected": int(scan["detected"]),
         "change_heterogeneity_p": scan["heterogeneity_p"],
     })
+    if model_scan is not None:
+        ci = model_scan["change_index"]
+        attrs.update({"model_change_event": "" if ci < 0 else event_ids[ci],
+                      "model_change_p_value": model_scan["p_value"],
+                      "model_change_detected": int(model_scan["detected"])})
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

@@ -44,7 +44,7 @@ from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "FEATURES_PER_SECTION", "VariableSpec", "VARIABLES", "COORDINATES", "ATTRIBUTES",
     "WINDOW_FIT_VARIABLES", "ResultFormatError", "build_result", "write_result", "read_result", "list_results",
-    "result_path", "result_record", "markdown_table", "markdown_attributes",
+    "result_path", "result_record", "result_noise_std", "markdown_table", "markdown_attributes",
 ]
 
 FORMAT = "vivbench-identify"
@@ -386,7 +386,16 @@ def result_record(ds: xr.Dataset) -> Record:
         what = ", ".join(missing + ([] if "event_id" in ds.attrs else ["the event_id attribute"]))
         raise InputError(f"{source}: cannot make a record of this result: it lacks {what}")
     return Record(event_id=str(ds.attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
-                  dA=ds["dA"].values)
+                  dA=ds["dA"].values, noise_std=result_noise_std(ds.attrs, ds["A"].shape[1]))
+
+
+def result_noise_std(attrs, n_sections: int) -> np.ndarray | None:
+    """The result's noise floor of A per section (attribute ``noise_std_m``), m; None if absent or malformed."""
+    noise = attrs.get("noise_std_m")
+    if noise is None:
+        return None
+    noise = np.atleast_1d(np.asarray(noise, dtype=float))
+    return noise if noise.shape == (n_sections,) else None
 
 
 class _Breach(Exception):

@@ -25,14 +25,27 @@ order whose removal does not increase the cross-validated error.
 
 Everything is computed from per-block sufficient statistics (X_b^T X_b, X_b^T y_b,
 y_b^T y_b): the folds, the penalty grid and the block bootstrap of the bands
-are small p x p solves (p = 4 M), with no loop over samples.
+are small p x p solves (p = 4 M without yaw), with no loop over samples.
 
 Only own-section terms are used: in the averaged truth the mode shape makes
 the other sections' amplitudes proportional to A_k, so their terms are
-collinear with A_k's. What this model does not fix: errors in the measured U
-(a point anemometer against the tributary-averaged wind the deck feels) smear
-the bell along U; and it is time-invariant, so changes the wind does not carry
-(damping drift, a step between events) are averaged over.
+collinear with A_k's.
+
+With ``yaw_degree`` > 0 the wind's yaw psi (its angle to the span's normal,
+which the realistic aerodynamics fall off with and U does not carry) is a
+second covariate: every column above is repeated times sin^2j(psi), j = 1..J,
+with the same penalty (p = 4 M (J + 1)). After the fit the same statistics
+give the models of every subset of the orders 0, 2, 3 (order 1 always kept)
+and their leave-one-event-out prediction errors: the confidence set of
+``model_set_level`` used by the window verdicts
+(:func:`vivbench.regimes.varying_window_verdicts`).
+
+What this model does not fix: errors in the measured U (a point anemometer
+against the tributary-averaged wind the deck feels) smear the bell along U
+(``vivbench pool`` smooths U by 30 s for it, :func:`vivbench.analysis.smooth_wind`);
+and it is time-invariant, so changes the wind does not carry (damping drift, a
+step between events) are averaged over (:func:`vivbench.analysis.changes.model_change_scan`
+checks for them).
 """
 
 from __future__ import annotations
@@ -50,11 +63,16 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.yaw_record import record_yaw
 
-__all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty"]
+__all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty", "penalised_rss", "ORDER_SUBSETS"]
 
 #: Spline degree (cubic).
 DEGREE = 3
+
+#: Order subsets of the confidence set of models (all with the linear order 1), rows (0, 1, 2, 3) kept.
+ORDER_SUBSETS = np.array([[o0, True, o2, o3] for o0 in (True, False) for o2 in (True, False)
+                          for o3 in (True, False)])
 
 
 def uniform_knots(lo: float, hi: float, n_basis: int, degree: int = DEGREE) -> np.ndarray:
@@ -102,15 +120,20 @@ def difference_penalty(n_basis: int, order: int = 2) -> np.ndarray:
     return D.T @ D
 
 
-def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float) -> np.ndarray:
-    """Columns B_m(U) (A / a_ref)^i, ordered (i, m); shape (n, 4 M)."""
+def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,
+            n_yaw: int = 0) -> np.ndarray:
+    """Columns B_m(U) (A / a_ref)^i z^j, ordered (i, j, m); shape (n, 4 (n_yaw + 1) M).
+
+    ``z`` is the scaled yaw covariate (sin^2 psi over its reference), used for j = 1..n_yaw.
+    """
     B = bspline_basis(U, knots)
     Apow = (A / a_ref)[:, None] ** np.arange(4)
-    return (Apow[:, :, None] * B[:, None, :]).reshape(U.size, -1)
+    Zpow = (np.ones_like(U) if z is None else z)[:, None] ** np.arange(n_yaw + 1)
+    return (Apow[:, :, None, None] * Zpow[:, None, :, None] * B[:, None, None, :]).reshape(U.size, -1)
 
 
 def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
-                 knots: np.ndarray, a_ref: float):
+                 knots: np.ndarray, a_ref: float, z: np.ndarray | None = None, n_yaw: int = 0):
     """Per-block sufficient statistics of the design :func:`_design`.
 
     Returns X_b^T X_b (n_blocks, p, p), X_b^T y_b (n_blocks, p), y_b^T y_b and
@@ -120,12 +143,13 @@ def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray,
     order = np.argsort(block, kind="stable")
     bounds = np.searchsorted(block[order], np.arange(n_blocks + 1))
     Us, As, ys = U[order], A[order], y[order]
-    p = 4 * (knots.size - DEGREE - 1)
+    zs = None if z is None else z[order]
+    p = 4 * (n_yaw + 1) * (knots.size - DEGREE - 1)
     G = np.empty((n_blocks, p, p))
     b = np.empty((n_blocks, p))
     for j in range(n_blocks):
         sl = slice(bounds[j], bounds[j + 1])
-        xb = _design(Us[sl], As[sl], knots, a_ref)
+        xb = _design(Us[sl], As[sl], knots, a_ref, None if zs is None else zs[sl], n_yaw)
         G[j] = xb.T @ xb
         b[j] = xb.T @ ys[sl]
     cy = np.concatenate([[0.0], np.cumsum(ys**2)])
@@ -197,6 +221,19 @@ class VaryingCoefficientSINDy(ModelBase):
         median dA/dt error 0.195 against 0.453 with each section's own wind)
         and reported on another (seed 1: 0.235 against 0.456; see
         ``benchmarks/bench_misspecification.py``).
+    yaw_degree : int, 0..3
+        Powers j = 1..J of sin^2(psi), psi the mean wind's yaw, whose spline
+        curves are added: a_ki(U, psi) = sum_j sin^2j(psi) f_kij(U) (0: the
+        wind only). Needs records that carry the yaw (:class:`YawRecord`); a
+        record without one is evaluated at the fitted median yaw. The curves
+        of DESIGN 3.5 are those at yaw 0. Chosen on the seed-0 realistic
+        campaign (``benchmarks/bench_floor.py``): 1 (degree 2 did not help).
+    model_set_level : float, [0.5, 1)
+        Level of the confidence set of order subsets: the models without some
+        of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
+        prediction error is not significantly above the best subset's (a
+        one-sided paired test over events); the window verdict needs them all
+        to give the window's regime.
 
     Attributes
     ----------
@@ -218,6 +255,17 @@ class VaryingCoefficientSINDy(ModelBase):
         RMS of dA_k/dt and of A_k over the fitted samples (the regression's scales).
     rss_ : ndarray, shape (S,), m^2/s^2; n_samples_, n_blocks_, n_sections_ : int
     event_ids_ : list of str
+    coef_yaw_ : ndarray, shape (S, M_max, 4, yaw_degree)
+        Spline coefficients of the yaw terms (coefficients of sin^2j(psi)).
+    coef_yaw_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4, yaw_degree)
+    yaw_ref_, yaw_fallback_ : ndarray, shape (S,)
+        RMS and median of sin^2(psi) over the fitted samples.
+    subset_coef_, subset_coef_yaw_ : ndarray, shapes (n_subsets,) + those of ``coef_``, ``coef_yaw_``
+        The models of every order subset at the selected basis and penalty.
+    subset_loeo_ : ndarray, shape (n_subsets, S), m^2/s^2
+        Their leave-one-event-out squared prediction errors (summed over events).
+    subset_plausible_ : ndarray of bool, shape (n_subsets, S)
+        Membership of the confidence set.
     """
 
     _fitted_attribute = "coef_"
@@ -226,7 +274,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
                  n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
-                 wind_input: str = "mean"):
+                 wind_input: str = "mean", yaw_degree: int = 0, model_set_level: float = 0.95):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -237,6 +285,8 @@ class VaryingCoefficientSINDy(ModelBase):
         self.tau = tau
         self.seed = seed
         self.wind_input = wind_input
+        self.yaw_degree = yaw_degree
+        self.model_set_level = model_set_level
 
     def _wind(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
@@ -248,12 +298,41 @@ class VaryingCoefficientSINDy(ModelBase):
             return np.repeat(m, U.shape[1], axis=1)
         return U
 
+    @staticmethod
+    def _inputs(record: Record) -> tuple[np.ndarray, np.ndarray | None]:
+        """The record's U and yaw (None without)."""
+        return record.U, record_yaw(record)
+
+    def _zeta(self, record_or_yaw, n: int) -> np.ndarray | None:
+        """The yaw covariate sin^2(psi) of each equation, shape (n, S) (None without ``yaw_degree``).
+
+        With ``wind_input="mean"`` it is the mean over the sections, like the wind.
+        A record without yaw gets the median of the fitted samples' (``yaw_fallback_``).
+        """
+        if int(self.yaw_degree) == 0:
+            return None
+        yaw = self._inputs(record_or_yaw)[1] if isinstance(record_or_yaw, Record) else record_or_yaw
+        if yaw is None:
+            fallback = getattr(self, "yaw_fallback_", None)
+            if fallback is None:
+                raise InputError("yaw_degree > 0 needs records with the mean wind's yaw (YawRecord, "
+                                 "vivbench.analysis.records_from_results(..., yaw=...))")
+            return np.broadcast_to(np.asarray(fallback, dtype=float), (n, np.size(fallback))).copy()
+        z = np.sin(np.radians(np.asarray(yaw, dtype=float))) ** 2
+        if self.wind_input == "mean":
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                z = np.repeat(np.nanmean(z, axis=1, keepdims=True), z.shape[1], axis=1)
+        return z
+
     def to_json(self) -> str:
         """The parameters as a JSON object (sorted keys; sequences as lists)."""
         params = self.get_params()
         params["n_basis"] = [int(x) for x in params["n_basis"]]
         params["penalties"] = [float(x) for x in params["penalties"]]
         params["select_orders"] = bool(params["select_orders"])
+        params["yaw_degree"] = int(params["yaw_degree"])
+        params["model_set_level"] = float(params["model_set_level"])
         return json.dumps(params, sort_keys=True)
 
     def _validate(self) -> None:
@@ -273,6 +352,10 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"agreement must lie in (0, 1]; got {self.agreement!r}")
         if not 0.0 < self.tau < 1.0:
             raise InputError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
+        if not 0.5 <= self.model_set_level < 1.0:
+            raise InputError(f"model_set_level must lie in [0.5, 1); got {self.model_set_level!r}")
+        if int(self.yaw_degree) != self.yaw_degree or not 0 <= int(self.yaw_degree) <= 3:
+            raise InputError(f"yaw_degree must be an integer in 0..3; got {self.yaw_degree!r}")
         if self.wind_input not in ("section", "mean"):
             raise InputError(f"wind_input must be 'section' or 'mean'; got {self.wind_input!r}")
 
@@ -303,8 +386,12 @@ class VaryingCoefficientSINDy(ModelBase):
                 raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {S}")
         t = np.concatenate([r.t for r in records])
         A = np.concatenate([r.A for r in records])
-        U = self._wind(np.concatenate([r.U for r in records]))
+        U = self._wind(np.concatenate([self._inputs(r)[0] for r in records]))
         dA = np.concatenate([r.dA for r in records])
+        J = int(self.yaw_degree)
+        if J and any(record_yaw(r) is None for r in records):
+            raise InputError("yaw_degree > 0 needs every record to carry the mean wind's yaw (YawRecord)")
+        Z = np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None
         event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
         # Blocks: block_s-long pieces of each event, numbered across the campaign.
         t0 = np.concatenate([np.full(r.n_samples, r.t[0]) for r in records])
@@ -333,15 +420,35 @@ class VaryingCoefficientSINDy(ModelBase):
         self.rss_ = np.zeros(S)
         n_boot = int(self.n_bootstrap)
         self.coef_bootstrap_ = np.zeros((n_boot, S, Mmax, 4))
+        self.coef_yaw_ = np.zeros((S, Mmax, 4, J))
+        self.coef_yaw_bootstrap_ = np.zeros((n_boot, S, Mmax, 4, J))
+        n_sub = ORDER_SUBSETS.shape[0]
+        self.subset_coef_ = np.zeros((n_sub, S, Mmax, 4))
+        self.subset_coef_yaw_ = np.zeros((n_sub, S, Mmax, 4, J))
+        self.subset_loeo_ = np.full((n_sub, S), np.nan)
+        self.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
+        self.subset_loeo_event_ = np.full((n_sub, S, len(records)), np.nan)  # not saved: for studies of the level
+        self.yaw_ref_ = np.ones(S)
+        self.yaw_fallback_ = np.zeros(S)
         n_samples = 0
         n_blocks_used = 0
         for k in range(S):
             ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
+            if J:
+                ok &= np.isfinite(Z[:, k])
             n = int(ok.sum())
-            if n < 4 * Mmax + 2:
-                raise InputError(f"section {k + 1}: {n} valid samples are too few for {4 * Mmax} spline coefficients")
+            p_max = 4 * (J + 1) * Mmax
+            if n < p_max + 2:
+                raise InputError(f"section {k + 1}: {n} valid samples are too few for {p_max} spline coefficients")
             n_samples += n
             Ak, Uk, yk = A[ok, k], U[ok, k], dA[ok, k]
+            zk = None
+            if J:
+                # sin^2 psi over its RMS keeps the yaw columns on the scale of the others.
+                zraw = Z[ok, k]
+                self.yaw_fallback_[k] = float(np.median(zraw))
+                self.yaw_ref_[k] = float(np.sqrt(np.mean(zraw**2))) or 1.0
+                zk = zraw / self.yaw_ref_[k]
             ys = float(np.sqrt(np.mean(yk**2))) or 1.0
             aref = float(np.sqrt(np.mean(Ak**2))) or 1.0
             lo, hi = float(Uk.min()), float(Uk.max())
@@ -355,9 +462,9 @@ class VaryingCoefficientSINDy(ModelBase):
             best = None
             for a, M in enumerate(n_basis):
                 knots = uniform_knots(lo, hi, int(M))
-                G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref)
-                P = np.kron(np.eye(4), difference_penalty(int(M)))
-                err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(4 * M, dtype=bool)) / n
+                G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref, zk, J)
+                P = np.kron(np.eye(4 * (J + 1)), difference_penalty(int(M)))
+                err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(4 * (J + 1) * M, dtype=bool)) / n
                 self.cv_error_[k, a] = err
                 j = int(np.argmin(err))
                 if best is None or err[j] < best[0]:
@@ -365,8 +472,8 @@ class VaryingCoefficientSINDy(ModelBase):
             _err, M, lam_rel, knots, G, b, yy, P = best
             keep_orders = np.ones(4, dtype=bool)
             if self.select_orders:
-                keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, M, _err * n)
-            keep = np.repeat(keep_orders, M)
+                keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, (J + 1) * M, _err * n)
+            keep = np.repeat(keep_orders, (J + 1) * M)
             Gs, bs = G.sum(axis=0), b.sum(axis=0)
             lam = np.array([lam_rel * _penalty_scale(Gs, P)])
             c = _solve(Gs, bs, P, lam, keep)[0]
@@ -376,7 +483,10 @@ class VaryingCoefficientSINDy(ModelBase):
                                 * np.trace(Gs[idx[:, None], idx]) / idx.size, Gs[idx[:, None], idx])
             self.edf_[k] = float(np.trace(H))
             to_phys = ys / aref ** np.arange(4)  # (4,)
-            self.coef_[k, :M] = c.reshape(4, M).T * to_phys
+            zscale = self.yaw_ref_[k] ** -np.arange(J + 1.0)  # (J + 1,): coefficients of (sin^2 psi)^j
+            cp = c.reshape(4, J + 1, M).transpose(2, 0, 1) * to_phys[:, None] * zscale  # (M, 4, J + 1)
+            self.coef_[k, :M] = cp[..., 0]
+            self.coef_yaw_[k, :M] = cp[..., 1:]
             self.knots_[k, :M + DEGREE + 1] = knots
             self.n_basis_[k], self.penalty_[k], self.orders_[k] = M, lam_rel, keep_orders
             self.wind_range_[k] = lo, hi
@@ -387,12 +497,75 @@ class VaryingCoefficientSINDy(ModelBase):
                 Gr = np.einsum("rb,bpq->rpq", mult, G)
                 br = mult @ b
                 cr = _solve(Gr, br, P, lam, keep)[:, 0]
-                self.coef_bootstrap_[:, k, :M] = cr.reshape(n_boot, 4, M).transpose(0, 2, 1) * to_phys
+                crp = cr.reshape(n_boot, 4, J + 1, M).transpose(0, 3, 1, 2) * to_phys[:, None] * zscale
+                self.coef_bootstrap_[:, k, :M] = crp[..., 0]
+                self.coef_yaw_bootstrap_[:, k, :M] = crp[..., 1:]
+            # The confidence set of order subsets (leave-one-event-out prediction, module docstring).
+            ev_b = np.zeros((n_ev, G.shape[1], G.shape[1]))
+            np.add.at(ev_b, ev_of_block, G)
+            eb = np.zeros((n_ev, G.shape[1]))
+            np.add.at(eb, ev_of_block, b)
+            ey = np.bincount(ev_of_block, weights=yy, minlength=n_ev)
+            has = np.bincount(ev_of_block, minlength=n_ev) > 0
+            loeo = np.full((n_sub, n_ev), np.nan)
+            for a, orders in enumerate(ORDER_SUBSETS):
+                keep_a = np.repeat(orders, (J + 1) * M)
+                held = _solve(Gs[None] - ev_b[has], bs[None] - eb[has], P, lam, keep_a)  # (n_has, 1, p)
+                loeo[a, has] = _quad_error(held, ev_b[has], eb[has], ey[has])[:, 0]
+                ca = _solve(Gs, bs, P, lam, keep_a)[0].reshape(4, J + 1, M).transpose(2, 0, 1)
+                ca = ca * to_phys[:, None] * zscale
+                self.subset_coef_[a, k, :M] = ca[..., 0]
+                self.subset_coef_yaw_[a, k, :M] = ca[..., 1:]
+            self.subset_loeo_[:, k] = np.nansum(loeo, axis=1) * ys**2
+            self.subset_loeo_event_[:, k] = loeo * ys**2
+            self.subset_plausible_[:, k] = _confidence_set(loeo[:, has], self.model_set_level)
         self.n_samples_ = n_samples
         self.n_blocks_ = n_blocks_used
         self.n_sections_ = S
         self.event_ids_ = [r.event_id for r in records]
         return self
+
+    def event_statistics(self, records: Sequence[Record]) -> list[dict]:
+        """Per-event sufficient statistics of every equation's penalised regression, at the fitted basis and scales.
+
+        What a time-varying use of the model needs (e.g. fitting it separately
+        to the events before and after a candidate change,
+        :func:`vivbench.analysis.changes.model_change_scan`) without refitting from samples.
+
+        Parameters
+        ----------
+        records : sequence of Record with dA (YawRecord with ``yaw_degree`` > 0), E of them
+
+        Returns
+        -------
+        list of dict, one per equation
+            ``G`` (E, p, p) and ``b`` (E, p): X_e^T X_e and X_e^T y_e of the
+            standardised design and target; ``yy`` (E,); ``n`` (E,) samples;
+            ``P`` (p, p) the penalty; ``penalty`` the relative penalty;
+            ``keep`` (p,) bool, the kept orders' columns.
+        """
+        self._check_fitted()
+        records = [self._check_record(as_record(r, k)) for k, r in enumerate(records)]
+        J = int(self.yaw_degree)
+        out = []
+        U = self._wind(np.concatenate([self._inputs(r)[0] for r in records]))
+        A = np.concatenate([r.A for r in records])
+        dA = np.concatenate([r.dA for r in records])
+        Z = np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None
+        event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
+        E = len(records)
+        for k in range(self.n_sections_):
+            M = int(self.n_basis_[k])
+            knots = self.knots_[k, :M + DEGREE + 1]
+            ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
+            if J:
+                ok &= np.isfinite(Z[:, k])
+            zk = None if not J else Z[ok, k] / self.yaw_ref_[k]
+            G, b, yy, cnt = _block_stats(U[ok, k], A[ok, k], dA[ok, k] / self.y_scale_[k], event[ok], E, knots,
+                                         self.a_ref_[k], zk, J)
+            out.append({"G": G, "b": b, "yy": yy, "n": cnt, "P": np.kron(np.eye(4 * (J + 1)), difference_penalty(M)),
+                        "penalty": float(self.penalty_[k]), "keep": np.repeat(self.orders_[k], (J + 1) * M)})
+        return out
 
     @staticmethod
     def _cv_error(G, b, yy, fold_of_block, K, P, pen, keep) -> np.ndarray:
@@ -427,38 +600,87 @@ class VaryingCoefficientSINDy(ModelBase):
 
     # -- the model protocol --------------------------------------------------------------------------
 
-    def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None) -> np.ndarray:
-        """The curves a_ki at each section's own wind.
+    def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None, yaw=None,
+                           coef_yaw: np.ndarray | None = None) -> np.ndarray:
+        """The curves a_ki at each equation's wind (and yaw, with ``yaw_degree`` > 0).
 
         Parameters
         ----------
         U : ndarray, shape (n, S), m/s
         coef : ndarray, shape (S, M_max, 4) or (R, S, M_max, 4), optional
-            Spline coefficients (default ``coef_``).
+            Spline coefficients at yaw 0 (default ``coef_``).
+        yaw : ndarray, shape (n, S), degrees, optional
+            The mean wind's yaw (None: 0, see Notes).
+        coef_yaw : ndarray, shape (S, M_max, 4, J) or (R, S, M_max, 4, J), optional
+            Coefficients of (sin^2 psi)^j, j = 1..J (default ``coef_yaw_`` when
+            ``coef`` is None, zeros otherwise).
 
         Returns
         -------
         ndarray, shape (n, S, 4) or (R, n, S, 4), m^(1-i)/s; NaN where U is not finite.
+
+        Notes
+        -----
+        ``yaw=None`` means yaw 0 (wind perpendicular to the span): the curves of
+        DESIGN 3.5 are defined there. :meth:`order_contributions` passes the
+        record's yaw (or the fitted median without one).
         """
         self._check_fitted()
-        coef = self.coef_ if coef is None else np.asarray(coef, dtype=float)
+        if coef is None:
+            coef = self.coef_
+            coef_yaw = self.coef_yaw_ if coef_yaw is None else coef_yaw
+        coef = np.asarray(coef, dtype=float)
         U = self._wind(U)
+        J = int(self.yaw_degree)
+        z = None
+        if J and yaw is not None and coef_yaw is not None:
+            z = self._zeta(np.asarray(yaw, dtype=float), U.shape[0])
         out = np.empty(coef.shape[:-3] + (U.shape[0], self.n_sections_, 4))
         for k in range(self.n_sections_):  # a few sections
             M = int(self.n_basis_[k])
             B = bspline_basis(U[:, k], self.knots_[k, :M + DEGREE + 1])
             out[..., k, :] = np.einsum("nm,...mi->...ni", B, coef[..., k, :M, :])
+            if z is not None:
+                Bz = B[:, :, None] * z[:, k, None, None] ** np.arange(1, J + 1)  # (n, M, J)
+                out[..., k, :] += np.einsum("nmj,...mij->...ni", Bz, np.asarray(coef_yaw)[..., k, :M, :, :])
         return out
+
+    def _record_yaw(self, record: Record) -> np.ndarray | None:
+        """Yaw in degrees for evaluating on a record: its own, or the fitted median without one."""
+        if not int(self.yaw_degree):
+            return None
+        yaw = self._inputs(record)[1]
+        if yaw is not None:
+            return yaw
+        return np.degrees(np.arcsin(np.sqrt(np.broadcast_to(self.yaw_fallback_, record.A.shape))))
+
+    def replicate_order_contributions(self, record: Record, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Order contributions of bootstrap replicates ``start:stop``, shape (R, n_samples, S, 4), m/s."""
+        record = self._check_record(record)
+        sl = slice(start, stop)
+        return (self.coefficient_values(self._inputs(record)[0], self.coef_bootstrap_[sl], self._record_yaw(record),
+                                        self.coef_yaw_bootstrap_[sl]) * record.A[..., None] ** np.arange(4))
+
+    def subset_order_contributions(self, record: Record) -> np.ndarray:
+        """Order contributions of the models of every order subset (``ORDER_SUBSETS``), shape (n_subsets, n, S, 4), m/s.
+
+        ``subset_plausible_`` (n_subsets, S) says which of them belong to the
+        confidence set (leave-one-event-out prediction not significantly worse
+        than the best subset's).
+        """
+        record = self._check_record(record)
+        return (self.coefficient_values(self._inputs(record)[0], self.subset_coef_, self._record_yaw(record),
+                                        self.subset_coef_yaw_) * record.A[..., None] ** np.arange(4))
 
     def order_contributions(self, record: Record) -> np.ndarray:
         """r[:, k, i] = a_ki(U_k) A_k^i, shape (n_samples, n_sections, 4), m/s (NaN where A or U is missing)."""
         record = self._check_record(record)
-        return self.coefficient_values(record.U) * record.A[..., None] ** np.arange(4)
+        return (self.coefficient_values(self._inputs(record)[0], yaw=self._record_yaw(record))
+                * record.A[..., None] ** np.arange(4))
 
     def order_contributions_bootstrap(self, record: Record) -> np.ndarray:
         """Order contributions of every bootstrap replicate, shape (n_bootstrap, n_samples, S, 4), m/s."""
-        record = self._check_record(record)
-        return self.coefficient_values(record.U, self.coef_bootstrap_) * record.A[..., None] ** np.arange(4)
+        return self.replicate_order_contributions(record)
 
     def predict(self, record: Record) -> np.ndarray:
         """dA/dt of the model, shape (n_samples, n_sections), m/s."""
@@ -491,10 +713,13 @@ class VaryingCoefficientSINDy(ModelBase):
         i1 = int(np.argmin(np.abs(t - (t[-1] if t1 is None else float(t1))))) + 1
         tt = t[i0:i1]
         S = self.n_sections_
-        U = record.U[i0:i1]
+        U = self._inputs(record)[0][i0:i1]
         Umid = 0.5 * (U[:-1] + U[1:])
-        a = self.coefficient_values(U)  # (n, S, 4)
-        am = self.coefficient_values(Umid) if tt.size > 1 else np.zeros((0, S, 4))
+        yaw = self._record_yaw(record)
+        yaw = None if yaw is None else yaw[i0:i1]
+        ymid = None if yaw is None else 0.5 * (yaw[:-1] + yaw[1:])
+        a = self.coefficient_values(U, yaw=yaw)  # (n, S, 4)
+        am = self.coefficient_values(Umid, yaw=ymid) if tt.size > 1 else np.zeros((0, S, 4))
         A_meas = record.A[i0:i1]
         x = np.asarray(record.A[i0] if A0 is None else A0, dtype=float).copy()
         if x.shape != (S,):
@@ -596,12 +821,25 @@ class VaryingCoefficientSINDy(ModelBase):
                "cv_error_": ("equation", "n_basis_candidate", "penalty_candidate"), "edf_": ("equation",),
                "wind_range_": ("equation", "bound"), "y_scale_": ("equation",), "a_ref_": ("equation",),
                "rss_": ("equation",), "coef_bootstrap_": ("bootstrap", "equation", "basis", "order")}
+    #: The confidence set of order subsets (absent from files written before it existed).
+    _SUBSET_ARRAYS = {"subset_coef_": ("subset", "equation", "basis", "order"), "subset_loeo_": ("subset", "equation"),
+                      "subset_plausible_": ("subset", "equation")}
+    #: Written only with ``yaw_degree`` > 0 (files of models without yaw stay as they were).
+    _YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
+                   "coef_yaw_bootstrap_": ("bootstrap", "equation", "basis", "order", "yaw_power"),
+                   "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",),
+                   "subset_coef_yaw_": ("subset", "equation", "basis", "order", "yaw_power")}
 
     def to_dataset(self) -> xr.Dataset:
         """The fitted model as an xarray Dataset (one variable per fitted array)."""
         self._check_fitted()
         data = {name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(float if name != "orders_" else np.int8))
                 for name, dims in self._ARRAYS.items()}
+        data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(float if name != "subset_plausible_" else np.int8))
+                     for name, dims in self._SUBSET_ARRAYS.items()})
+        if int(self.yaw_degree):
+            data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name), dtype=float))
+                         for name, dims in self._YAW_ARRAYS.items()})
         attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
                  "n_blocks": self.n_blocks_, "events": json.dumps(self.event_ids_)}
         return xr.Dataset(data, coords={"equation": section_names(self.n_sections_), "order": np.arange(4)},
@@ -621,15 +859,78 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"{path}: not a {cls.__name__} file")
         params = json.loads(ds.attrs["params_json"])
         params["n_basis"], params["penalties"] = tuple(params["n_basis"]), tuple(params["penalties"])
+        params.setdefault("yaw_degree", 0)  # files written before the yaw covariate existed
         model = cls(**params)
         for name in cls._ARRAYS:
             setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+        S, Mmax = model.coef_.shape[:2]
+        J = int(params["yaw_degree"])
+        if J:
+            for name in cls._YAW_ARRAYS:
+                setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+        else:
+            model.coef_yaw_ = np.zeros((S, Mmax, 4, 0))
+            model.coef_yaw_bootstrap_ = np.zeros(model.coef_bootstrap_.shape + (0,))
+            model.yaw_ref_, model.yaw_fallback_ = np.ones(S), np.zeros(S)
+            model.subset_coef_yaw_ = np.zeros((ORDER_SUBSETS.shape[0], S, Mmax, 4, 0))
+        if "subset_coef" in ds:
+            for name in cls._SUBSET_ARRAYS:
+                setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+            model.subset_plausible_ = model.subset_plausible_.astype(bool)
+        else:  # older files: the fitted model alone is its confidence set
+            n_sub = ORDER_SUBSETS.shape[0]
+            model.subset_coef_ = np.broadcast_to(model.coef_, (n_sub,) + model.coef_.shape).copy()
+            model.subset_coef_yaw_ = np.broadcast_to(model.coef_yaw_, (n_sub,) + model.coef_yaw_.shape).copy()
+            model.subset_loeo_ = np.full((n_sub, S), np.nan)
+            model.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
+            model.subset_plausible_[0] = True
         model.n_basis_ = model.n_basis_.astype(int)
         model.orders_ = model.orders_.astype(bool)
         model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
         model.n_sections_ = int(ds.sizes["equation"])
         model.event_ids_ = json.loads(ds.attrs["events"])
         return model
+
+
+def penalised_rss(G: np.ndarray, b: np.ndarray, yy: np.ndarray, P: np.ndarray, penalty: float,
+                  keep: np.ndarray) -> np.ndarray:
+    """Residual sum of squares of the penalised fit to pooled statistics, batched.
+
+    Parameters
+    ----------
+    G : ndarray, shape (..., p, p); b : ndarray, shape (..., p); yy : ndarray, shape (...)
+        Summed statistics of the samples fitted together (e.g. the events on one side of a split).
+    P : ndarray, shape (p, p); penalty : float, relative (times trace(G) / trace(P) of each fit)
+    keep : ndarray of bool, shape (p,)
+
+    Returns
+    -------
+    ndarray, shape (...): ||y - X c||^2 at the penalised solution c (standardised units).
+    """
+    G, b, yy = np.asarray(G, dtype=float), np.asarray(b, dtype=float), np.asarray(yy, dtype=float)
+    scale = np.trace(G, axis1=-2, axis2=-1) / max(np.trace(P), 1e-300)
+    idx = np.flatnonzero(keep)
+    Gk, bk, Pk = G[..., idx[:, None], idx], b[..., idx], P[idx[:, None], idx]
+    ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / max(idx.size, 1))[..., None, None] * np.eye(idx.size)
+    c = np.linalg.solve(Gk + (penalty * scale)[..., None, None] * Pk + ridge, bk[..., None])[..., 0]
+    return np.einsum("...p,...pq,...q->...", c, Gk, c) - 2.0 * np.einsum("...p,...p->...", c, bk) + yy
+
+
+def _confidence_set(loss: np.ndarray, level: float) -> np.ndarray:
+    """Models whose per-event held-out loss is not significantly above the best's, shape (n_models,) bool.
+
+    ``loss`` (n_models, n_events): a one-sided paired test of the mean
+    difference to the model with the smallest total, at ``level``, the events
+    as the independent units (z-approximation).
+    """
+    from scipy.stats import norm
+
+    best = int(np.argmin(loss.sum(axis=1)))
+    diff = loss - loss[best]
+    n = loss.shape[1]
+    se = diff.std(axis=1, ddof=1) / np.sqrt(max(n, 1)) if n > 1 else np.zeros(loss.shape[0])
+    z = norm.ppf(level)
+    return diff.mean(axis=1) <= z * se + 1e-12 * np.abs(loss[best]).mean()
 
 
 def _penalty_scale(G: np.ndarray, P: np.ndarray) -> float:

@@ -33,6 +33,7 @@ from vivbench.preprocess.wind import (
     mean_wind_runs,
 )
 from vivbench.preprocess.windows import window_bounds
+from vivbench.preprocess.yaw import mean_yaw
 
 __all__ = [
     "band_gain", "Preprocessed", "preprocess_arrays", "PreprocessConfig", "DERIVATIVE_METHODS", "Derivative",
@@ -40,5 +41,5 @@ __all__ = [
     "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "trusted_intervals",
     "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid", "welch_psd",
     "spectral_peak", "modal_frequency", "displacement", "envelope", "wind_speed_direction",
-    "perpendicular_speed", "mean_wind", "perpendicular_wind", "mean_wind_runs", "window_bounds",
+    "perpendicular_speed", "mean_wind", "perpendicular_wind", "mean_wind_runs", "window_bounds", "mean_yaw",
 ]
