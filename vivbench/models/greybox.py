@@ -258,7 +258,7 @@ class GreyBoxRefit(ModelBase):
 
     _fitted_attribute = "coef_"
 
-    def __init__(self, *, bridge: BridgeProperties | None = None, n_basis: int = 16, penalty: float = 1e-3,
+    def __init__(self, *, bridge: BridgeProperties | None = None, n_basis: int = 16, penalty: float = 0.1,
                  dt: float = 1.0, shooting_interval: float = 60.0, max_iter: int = 30, tol: float = 1e-3,
                  block_s: float = 300.0, level: float = 0.95, continuity_weight: float = 1e6, warm_start=None):
         self.bridge = bridge
@@ -466,6 +466,23 @@ class GreyBoxRefit(ModelBase):
         F = self.function_values(U, coef)
         a = section_factors(U, self.bridge, self.phi_, self.beta_)
         return _g_from_values(F, a, self.bridge.omega * self.bridge.damping_ratio)
+
+    def amplitude_coefficient_function(self, U):
+        """A function of coefficient draws (c, 4, M) giving g_i at section winds U (n, S): shape (c, n, 4).
+
+        The basis and section factors are evaluated once (for regime verdicts over many draws).
+        """
+        self._check_fitted()
+        U = np.asarray(U, dtype=float)
+        B = self._basis(U)  # (n, S, M)
+        a = section_factors(U, self.bridge, self.phi_, self.beta_)
+        zw = self.bridge.omega * self.bridge.damping_ratio
+
+        def g(coef):
+            F = np.einsum("nsm,cfm->cnsf", B, np.asarray(coef, dtype=float), optimize=True)
+            return _g_from_values(F, a[None], zw)
+
+        return g
 
     def order_contributions(self, record: Record) -> np.ndarray:
         """r_ki = |phi_k| g_i(U) (A_k / |phi_k|)^i, shape (n, S, 4), m/s (NaN where A or U is missing)."""

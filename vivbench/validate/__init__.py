@@ -12,6 +12,7 @@ from vivbench.validate.compare import (
     plan,
     run_comparison,
 )
+from vivbench.validate.greybox import greybox_recovery, truth_y1
 from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
 from vivbench.validate.metrics import (
     REGIMES,
@@ -59,6 +60,7 @@ from vivbench.validate.sweep import (
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 
 __all__ = [
+    "greybox_recovery", "truth_y1",
     "BASE_LEVELS", "DESIGNS", "FACTORS", "CompareConfig", "CompareResult", "compare_cells", "compare_config_from_dict",
     "load_compare_config", "plan", "run_comparison",
     "METRIC_COLUMNS", "SWEEP_PARAMETERS", "SweepConfig", "SweepResult", "SweepTask", "load_sweep_config",
