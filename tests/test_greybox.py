@@ -177,3 +177,28 @@ def test_bridge_properties_are_checked(kwargs, fragment):
     with pytest.raises(InputError, match="lack"):
         BridgeProperties.from_dict({"mass": 1.0})
     assert math.isclose(BridgeProperties(**base).omega, 2 * math.pi * 0.3)
+
+
+def test_cli_greybox_on_a_small_campaign(small_results, tmp_path, capsys):
+    from vivbench.cli import main
+    from vivbench.io.greybox import GREYBOX_NAME
+
+    campaign, results_dir, _ = small_results
+    out = tmp_path / "gb"
+    bridge = tmp_path / "bridge.toml"
+    bridge.write_text("[bridge]\nmass = 27700.0\ndepth = 3.5\ndamping_ratio = 0.003\nmode_shape = [0.707, 1.0, 0.707]\n")
+    code = main(["greybox", str(results_dir), "--out", str(out), "--bridge", str(bridge), "--draws", "20",
+                 "--campaign", str(campaign.files[0].parent)])
+    assert code == 0, capsys.readouterr().err
+    for name in (GREYBOX_NAME, "greybox_events.csv", "greybox_regimes.csv", "greybox_windows.csv.gz", "summary.json",
+                 "greybox_functions.png", "greybox_curves.png", "greybox_simulations.png", "greybox_validation.json"):
+        assert (out / name).is_file(), name
+    model = GreyBoxRefit.load(out / GREYBOX_NAME)
+    assert model.bridge.frequency == pytest.approx(0.327, rel=0.02)  # from the results, as identify found it
+    summary = __import__("json").loads((out / "summary.json").read_text())
+    assert summary["n_events"] == 2 and "truth_curve_error_linear" in summary
+    # without the bridge's mass the fit refuses, in one line (exit 2)
+    capsys.readouterr()
+    code = main(["greybox", str(results_dir), "--out", str(tmp_path / "x"), "--depth", "3.5", "--damping-ratio", "0.003"])
+    err = capsys.readouterr().err
+    assert code == 2 and "mass" in err and err.count("\n") == 1

@@ -389,8 +389,17 @@ class GreyBoxRefit(ModelBase):
         lower = np.concatenate([np.full(M, -np.inf), np.zeros(3 * M)])
         probe = ShootingProblem(grid=grid, amp=amp, scale=scale, g_of=g_of, penalty=R0, lower=lower,
                                 continuity_weight=self.continuity_weight)
+        theta0 = np.maximum(theta0, lower)
+        for shrink in (1.0, 0.5, 0.25, 0.0):  # a start that blows up inside an interval stops Gauss-Newton at once
+            trial = theta0.copy()
+            trial[:M] *= shrink  # Y1 = 0 leaves a damped, forced linear model that cannot blow up
+            if np.isfinite(probe.cost(trial, Qm[:, 0])):
+                break
+        if shrink < 1.0:
+            start += f", Y1 scaled by {shrink:g} (the full start blew up inside an interval)"
+        theta0 = trial
         probe.set_continuity_weight(0.0)  # the penalty's scale: the data part of J^T J only
-        _, H, _, _, _ = probe.linearise(np.maximum(theta0, lower), Qm[:, 0])
+        _, H, _, _, _ = probe.linearise(theta0, Qm[:, 0])
         probe.set_continuity_weight(self.continuity_weight)
         R = np.zeros_like(R0)
         for f in range(4):  # each function's penalty relative to its own block of J^T J
