@@ -15,10 +15,12 @@ from vivbench.report.figures import (
     time_frequency_figure,
     wind_figure,
 )
+from vivbench.report.greybox import greybox_curves_figure, greybox_functions_figure, greybox_section, greybox_simulation_figure
 from vivbench.report.markdown import EXTRA_STEPS, write_report
 
 __all__ = [
     "DPI", "EXTRA_STEPS", "REGIME_COLOURS", "coefficient_map_figure", "decision_graph_figure", "displacement_figure",
     "event_figure", "forecast_figure", "model_forecast_figure", "regime_timeline_figure", "sensor_layout_figure", "term_scale",
-    "time_frequency_figure", "wind_figure", "write_report",
+    "time_frequency_figure", "wind_figure", "write_report", "greybox_curves_figure", "greybox_functions_figure",
+    "greybox_section", "greybox_simulation_figure",
 ]
