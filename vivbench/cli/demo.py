@@ -90,7 +90,8 @@ def run(args) -> int:
            "--terms", REFIT_TERMS, *window], out / "refit", failures)
     # The grey-box reference refit is given the synthetic bridge's properties as a user would give
     # their bridge's (the demo knows its own generator configuration); the fit never reads /truth.
-    _step(["greybox", str(identify), "--out", str(out / "greybox"), *_bridge_options(),
+    # 50 parameter draws per window verdict (100 by default) keep the step within the demo's time budget.
+    _step(["greybox", str(identify), "--out", str(out / "greybox"), *_bridge_options(), "--draws", "50",
            "--campaign", str(campaign)], out / "greybox", failures)
     validate = ["validate", str(campaign), str(identify), "--out", str(out / "validate")]
     if (out / "cluster" / "cluster_labels.csv").is_file():
