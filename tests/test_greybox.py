@@ -108,7 +108,7 @@ def _check_recovery(params, model, records):
     assert max(sims) < 1e-3, f"simulation NMSE {sims}"
 
 
-@settings(max_examples=3, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=2, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(params=params_strategy)
 def test_recovers_drawn_curves_from_noise_free_envelopes(params):
     records = _records(params)

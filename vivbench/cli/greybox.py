@@ -183,7 +183,8 @@ def register(sub) -> None:
     s.add_argument("--tributary-lengths", dest="tributary_lengths", default=None,
                    help="L_k of the sections' strips, m (default: equal)")
     s.add_argument("--n-basis", dest="n_basis", type=int, default=16, help="B-splines per function (default 16)")
-    s.add_argument("--penalty", type=float, default=0.1, help="relative roughness penalty (default 0.1)")
+    s.add_argument("--penalty", type=float, default=1.0,
+                   help="relative roughness penalty (default 1, chosen among 0.01, 0.1, 1, 10 on the default campaign)")
     s.add_argument("--dt", type=float, default=1.0, help="step of the fit grid, s (default 1)")
     s.add_argument("--interval", type=float, default=60.0, help="shooting interval, s (default 60)")
     s.add_argument("--max-iter", dest="max_iter", type=int, default=30,

@@ -258,7 +258,7 @@ class GreyBoxRefit(ModelBase):
 
     _fitted_attribute = "coef_"
 
-    def __init__(self, *, bridge: BridgeProperties | None = None, n_basis: int = 16, penalty: float = 0.1,
+    def __init__(self, *, bridge: BridgeProperties | None = None, n_basis: int = 16, penalty: float = 1.0,
                  dt: float = 1.0, shooting_interval: float = 60.0, max_iter: int = 30, tol: float = 1e-3,
                  block_s: float = 300.0, level: float = 0.95, continuity_weight: float = 1e6, warm_start=None):
         self.bridge = bridge
