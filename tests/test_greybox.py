@@ -197,6 +197,13 @@ def test_cli_greybox_on_a_small_campaign(small_results, tmp_path, capsys):
     assert model.bridge.frequency == pytest.approx(0.327, rel=0.02)  # from the results, as identify found it
     summary = __import__("json").loads((out / "summary.json").read_text())
     assert summary["n_events"] == 2 and "truth_curve_error_linear" in summary
+    # the report's grey-box section shows the comparison table and the figures
+    from vivbench.report.greybox import greybox_section
+
+    written: list = []
+    text = "\n".join(greybox_section(out, tmp_path / "report", written))
+    assert "| quantity | grey-box | campaign model | target |" in text and "greybox_curves.png" in written
+    assert all((tmp_path / "report" / name).is_file() for name in written)
     # without the bridge's mass the fit refuses, in one line (exit 2)
     capsys.readouterr()
     code = main(["greybox", str(results_dir), "--out", str(tmp_path / "x"), "--depth", "3.5", "--damping-ratio", "0.003"])
