@@ -131,7 +131,7 @@ def test_identify_labels_a_per_file_bug_as_internal_and_a_refusal_not(tmp_path, 
         files.append(path)
     errors = {"A.nc": InputError("no valid segment is as long as one window"), "B.nc": ValueError("bad broadcast")}
 
-    def fake_read(path):
+    def fake_read(path, **_options):  # identification reads with truth=False
         raise errors[path.name if hasattr(path, "name") else str(path).rsplit("/", 1)[-1]]
 
     monkeypatch.setattr(identify_module, "read_event", fake_read)

@@ -473,7 +473,8 @@ def _shorten_u(f):
         (lambda f: f.attrs.__setitem__("source", "model"), ["source 'model'"]),
         (lambda f: f.attrs.__setitem__("span_azimuth_deg", np.nan), ["span_azimuth_deg"]),
         (lambda f: f.attrs.__setitem__("source", np.array(["a", "b"], dtype=object)), ["source"]),
-        (lambda f: f["truth"].attrs.__delitem__("config_json"), ["config_json"]),
+        (lambda f: f["truth"].attrs.__setitem__("config_json", "{not json"), ["config_json is not valid JSON"]),
+        (lambda f: f["truth/regime"].attrs.__setitem__("units", "m"), ["/truth/regime has units 'm'", "'1'"]),
     ],
     ids=[
         "missing-group",
@@ -500,12 +501,29 @@ def _shorten_u(f):
         "bad-source",
         "nan-azimuth",
         "array-attribute",
-        "truth-without-config",
+        "truth-config-not-json",
+        "regime-wrong-units",
     ],
 )
 def test_broken_file_is_refused(tmp_path, edit, words):
     path = _edit(_valid_file(tmp_path), edit)
     _refused(path, *words)
+
+
+def test_truth_of_another_generator_is_read(tmp_path):
+    """Validation needs only time, section, U, A, r and regime from /truth (issue 13): no
+    config_json, a regime without units and no coef are read; the identification's reading
+    (truth=False) does not even look at a truth that lacks r."""
+    def strip(f):
+        del f["truth"].attrs["config_json"]
+        del f["truth/regime"].attrs["units"]
+
+    back = io.read_event(_edit(_valid_file(tmp_path, coef=False), strip))
+    assert "config_json" not in back["truth"].attrs and back["truth"]["regime"].values.min() >= 1
+    partial = _edit(_valid_file(tmp_path, name="partial.nc"), lambda f: f.__delitem__("truth/r"))
+    _refused(partial, "missing variable /truth/r")
+    tree = io.read_event(partial, truth=False)
+    assert "truth" not in tree.children and set(tree.children) == {"wind", "accel"}
 
 
 @pytest.mark.parametrize(

@@ -110,6 +110,8 @@ def test_report_sections_and_tables(report, forecast_dir):
             after = "\n\n".join(blocks[i + 1 : i + 3])
             assert "*Produced by:* `vivbench " in after, f"table without its command: {block[:80]}"
     assert f"--campaign {campaign}" in text and f"--results {results}" in text
+    # without --baseline there is no side-by-side section (tests/test_report_baseline.py has it)
+    assert "## In-library against realistic" not in text and "--baseline" not in text and "sbs_" not in text
 
 
 def test_report_is_deterministic(report):

@@ -155,7 +155,9 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         or the wind never varies at a section (see vivbench.io.quality).
     """
     config = config or IdentifyConfig()
-    arr = event_arrays(tree)
+    # The truth is never read here: identification must not see it (and a truth written by
+    # another tool, partial or absent, must not stop it).
+    arr = event_arrays(tree, truth=False)
     sections = list(arr["sections"])
     arr, quality = _data_quality(arr, float(tree.attrs["span_azimuth_deg"]), config)
     pre = preprocess_arrays(wind_time=arr["wind_time"], u=arr["u"], v=arr["v"], accel_time=arr["accel_time"],
@@ -263,7 +265,7 @@ def _data_quality(arr: dict, span_azimuth_deg: float, config: IdentifyConfig) ->
 
 
 def _identify_one(path: str, out_dir: str, config: IdentifyConfig) -> str:
-    tree = read_event(path)
+    tree = read_event(path, truth=False)
     ds = identify_event(tree, config, source=Path(path).name)
     return str(write_result(ds, out_dir))
 

@@ -77,8 +77,12 @@ def _campaign_derivative(ds, derivative: Derivative | None) -> np.ndarray:
 
 
 def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
+    noise = attrs.get("noise_std_m")
+    noise = None if noise is None else np.atleast_1d(np.asarray(noise, dtype=float))
+    if noise is not None and noise.shape != (ds["A"].shape[1],):
+        noise = None  # a result without one floor per section: unknown
     return Record(event_id=str(attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
-                  dA=_campaign_derivative(ds, derivative))
+                  dA=_campaign_derivative(ds, derivative), noise_std=noise)
 
 
 def records_from_results(paths: Sequence, *, derivative: Derivative | None = None) -> list[Record]:

@@ -6,6 +6,13 @@ step as the subcommand a user would run (its exact command is written to
 that fails is reported on one line and the later steps still run where they
 can. Progress and the steps' own output go to stderr; stdout gets a short
 summary: where the report is, and the headline recovery figures.
+
+``--baseline in_library`` runs the same chain (without the refit) on an
+``in_library`` campaign of the same seed and durations (the truth inside the
+identification's model class: the inverse crime, DESIGN 2.8) into
+``OUT/baseline_in_library`` and passes it to ``vivbench report --baseline``,
+which shows both campaigns' recovery side by side. It is off by default: it
+roughly doubles the demo's time (README).
 """
 
 from __future__ import annotations
@@ -50,22 +57,29 @@ def _step(argv: list[str], out_dir: Path | None, failures: list[str]) -> bool:
     return code == 0
 
 
-def run(args) -> int:
+#: Subdirectory of ``--out`` that holds the in-library baseline run (``--baseline in_library``).
+BASELINE_DIR = "baseline_in_library"
+
+
+def _chain(out: Path, *, mode: str, events: int, seed: int, minutes: str, workers: int, failures: list[str],
+           refit: bool = True) -> bool:
+    """Generate, identify, pool, cluster, forecast, (refit) and validate one campaign into ``out``.
+
+    Returns False when nothing could be identified (the later steps then have nothing to work on).
+    """
     from vivbench.validate import clearest_plateau
 
-    out = Path(args.out)
     campaign, identify = out / "campaign", out / "identify"
-    failures: list[str] = []
-    common = ["--workers", str(args.workers)]
-    _step(["synth", "--events", str(args.events), "--seed", str(args.seed), "--duration", _minutes(args.duration),
+    common = ["--workers", str(workers)]
+    _step(["synth", "--events", str(events), "--seed", str(seed), "--duration", minutes, "--mode", mode,
            "--out", str(campaign), *common], None, failures)
     if not list(campaign.glob("E*.nc")):
-        print("vivbench demo: no event was generated; nothing else to do", file=sys.stderr)
-        return 1
+        print(f"vivbench demo: no event was generated in {campaign}; nothing else to do", file=sys.stderr)
+        return False
     _step(["identify", str(campaign), "--out", str(identify), *common], None, failures)
     if not list(identify.glob("*.identify.nc")):
-        print("vivbench demo: no event was identified; nothing else to do", file=sys.stderr)
-        return 1
+        print(f"vivbench demo: no event was identified in {identify}; nothing else to do", file=sys.stderr)
+        return False
     _step(["pool", str(identify)], None, failures)
     _step(["cluster", str(identify), "--out", str(out / "cluster"), "--campaign", str(campaign)], out / "cluster", failures)
     try:
@@ -76,34 +90,59 @@ def run(args) -> int:
         event_id = sorted(p.name.split(".")[0] for p in identify.glob("*.identify.nc"))[0]
     result = identify / f"{event_id}.identify.nc"
     _step(["forecast", str(result), "--out", str(out / "forecast"), "--campaign", str(campaign)], out / "forecast", failures)
-    # The refit on the full identified or true support does not converge in reasonable time (README);
-    # the demo refits a small, identifiable support around the forecast's t0.
-    t0 = _read_json(out / "forecast" / "summary.json").get("t0_s")
-    window = []
-    if isinstance(t0, (int, float)):
-        from vivbench.io.result import read_result
+    if refit:
+        # The refit on the full identified or true support does not converge in reasonable time (README);
+        # the demo refits a small, identifiable support around the forecast's t0.
+        t0 = _read_json(out / "forecast" / "summary.json").get("t0_s")
+        window = []
+        if isinstance(t0, (int, float)):
+            from vivbench.io.result import read_result
 
-        grid = read_result(result, variables=())["time"].values
-        lo, hi = float(grid[0]), float(grid[-1])
-        window = ["--t0", f"{max(lo, t0 - 500.0):g}", "--t1", f"{min(hi, t0 + 300.0):g}"]
-    _step(["refit", str(result), "--out", str(out / "refit"), "--event", str(campaign / f"{event_id}.nc"),
-           "--terms", REFIT_TERMS, *window], out / "refit", failures)
-    # The grey-box reference refit is given the synthetic bridge's properties as a user would give
-    # their bridge's (the demo knows its own generator configuration); the fit never reads /truth.
-    # 50 parameter draws per window verdict (100 by default) keep the step within the demo's time budget.
-    _step(["greybox", str(identify), "--out", str(out / "greybox"), *_bridge_options(), "--draws", "50",
-           "--campaign", str(campaign)], out / "greybox", failures)
+            grid = read_result(result, variables=())["time"].values
+            lo, hi = float(grid[0]), float(grid[-1])
+            window = ["--t0", f"{max(lo, t0 - 500.0):g}", "--t1", f"{min(hi, t0 + 300.0):g}"]
+        _step(["refit", str(result), "--out", str(out / "refit"), "--event", str(campaign / f"{event_id}.nc"),
+               "--terms", REFIT_TERMS, *window], out / "refit", failures)
+    if refit:
+        # The grey-box reference refit is given the synthetic bridge's properties as a user would give
+        # their bridge's (the demo knows its own generator configuration); the fit never reads /truth.
+        # 50 parameter draws per window verdict (100 by default) keep the step within the demo's time budget.
+        _step(["greybox", str(identify), "--out", str(out / "greybox"), *_bridge_options(mode), "--draws", "50",
+               "--campaign", str(campaign)], out / "greybox", failures)
     validate = ["validate", str(campaign), str(identify), "--out", str(out / "validate")]
     if (out / "cluster" / "cluster_labels.csv").is_file():
         validate += ["--clusters", str(out / "cluster" / "cluster_labels.csv")]
     if list((out / "forecast").glob("forecast_*.csv")):
         validate += ["--forecasts", str(out / "forecast")]
     _step(validate, out / "validate", failures)
+    return True
+
+
+def run(args) -> int:
+    out = Path(args.out)
+    campaign, identify = out / "campaign", out / "identify"
+    failures: list[str] = []
+    minutes = _minutes(args.duration)
+    if not _chain(out, mode=args.mode, events=args.events, seed=args.seed, minutes=minutes, workers=args.workers,
+                  failures=failures):
+        return 1
+    baseline = None
+    if args.baseline != "none":
+        # The same bridge scripts and seed with the truth inside the model class (DESIGN 2.8): the report
+        # shows every recovery figure of both side by side. No refit: the report does not pair it.
+        baseline = out / BASELINE_DIR
+        n_base = args.baseline_events or args.events
+        print(f"[demo] baseline: {n_base} {args.baseline} events (seed {args.seed}) into {baseline}", file=sys.stderr)
+        if not _chain(baseline, mode=args.baseline, events=n_base, seed=args.seed, minutes=minutes,
+                      workers=args.workers, failures=failures, refit=False):
+            baseline = None
     report = ["report", "--campaign", str(campaign), "--results", str(identify), "--name", args.name,
               "--out-root", str(args.report_root if args.report_root else out / "reports")]
     for step in ("cluster", "forecast", "refit", "greybox", "validate"):
         if (out / step).is_dir():
             report += [f"--{step}", str(out / step)]
+    if baseline is not None:
+        report += ["--baseline", str(baseline)]
     _step(report, None, failures)
 
     report_md = Path(report[report.index("--out-root") + 1]) / args.name / "report.md"
@@ -144,16 +183,25 @@ def run(args) -> int:
         print(f"forecast: {fc.get('event_id')} from t0 = {fc.get('t0_s', float('nan')):.0f} s: window models NMSE(S2) "
               + ", ".join(f"d={k[9:]} s {_g(fc.get(k))}" for k in ds)
               + f"{'' if fc.get('forecasts_complete') else ' (stopped early)'}; campaign model {_g(fc.get('campaign_model_forecast_nmse_S2'))}")
+    b = _read_json(baseline / "validate" / "summary.json") if baseline is not None else {}
+    if b and s:
+        # The same scores on both campaigns, on the true (A, U): the only dA/dt error a realistic truth has.
+        print(f"baseline: in-library (truth inside the model class: the inverse crime), {b.get('n_events')} events, "
+              f"in {baseline}, against realistic ({s.get('n_events')} events): campaign model coverage "
+              f"{_f(b.get('pooled_regime_coverage'))} / {_f(s.get('pooled_regime_coverage'))}, accuracy all "
+              f"{_f(b.get('pooled_regime_accuracy_all'))} / {_f(s.get('pooled_regime_accuracy_all'))}, median dA/dt "
+              f"error on the true (A, U) {_f(b.get('pooled_median_rhs_error_true_AU_active'))} / "
+              f"{_f(s.get('pooled_median_rhs_error_true_AU_active'))}")
     for line in failures:
         print(f"vivbench demo: {line}", file=sys.stderr)
     return 1 if failures else 0
 
 
-def _bridge_options() -> list[str]:
-    """The demo bridge's properties as ``vivbench greybox`` options (the default generator's structure)."""
+def _bridge_options(mode: str) -> list[str]:
+    """The demo bridge's properties as ``vivbench greybox`` options (the structure of the mode's generator)."""
     from vivbench.synth import GeneratorConfig
 
-    st = GeneratorConfig.realistic().structure
+    st = GeneratorConfig.from_mode(mode).structure
     join = lambda xs: ",".join(f"{x:g}" for x in xs)  # noqa: E731
     return ["--mass", f"{st.mass:g}", "--depth", f"{st.depth:g}", "--frequency", f"{st.frequency:g}",
             "--damping-ratio", f"{st.damping_ratio:g}", "--air-density", f"{st.air_density:g}",
@@ -181,4 +229,13 @@ def register(sub) -> None:
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS)
     s.add_argument("--name", default="demo", help="report name (default demo)")
     s.add_argument("--report-root", default=None, help="parent directory of the report (default OUT/reports)")
+    s.add_argument("--mode", choices=("realistic", "in_library"), default="realistic",
+                   help="generator mode of the main campaign (DESIGN 2.8; default realistic: the truth outside the "
+                        "identification's model class)")
+    s.add_argument("--baseline", choices=("none", "in_library"), default="none",
+                   help="also run the chain on an in_library campaign of the same seed and durations (the truth "
+                        f"inside the model class: the inverse crime) into OUT/{BASELINE_DIR}, and show both side by "
+                        "side in the report (default none)")
+    s.add_argument("--baseline-events", type=int, default=None, metavar="N",
+                   help="events of the baseline campaign (default: --events); the report states the size")
     s.set_defaults(func=run)

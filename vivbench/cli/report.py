@@ -12,7 +12,7 @@ def run(args) -> int:
 
     extra = {step: getattr(args, step) for step in EXTRA_STEPS}
     path = write_report(args.name, args.campaign, args.results, out_root=args.out_root, extra_dirs=extra,
-                        events=args.events, max_rows=args.max_rows)
+                        events=args.events, max_rows=args.max_rows, baseline=args.baseline)
     not_run = [step for step, d in extra.items() if d is None or not Path(d).is_dir()]
     print(f"wrote {path}" + (f" (not run: {', '.join(not_run)})" if not_run else ""))
     return 0
@@ -27,6 +27,11 @@ def register(sub) -> None:
     for step in EXTRA_STEPS:
         s.add_argument(f"--{step}", default=None, metavar="DIR",
                        help=f"output directory of `vivbench {step}` (embedded; listed as not run when absent)")
+    s.add_argument("--baseline", default=None, metavar="DIR",
+                   help="a second run of the chain shown side by side with this one, normally the in-library "
+                        "campaign (truth inside the model class: the inverse crime) of `vivbench demo --mode "
+                        "in_library --out DIR` with the same seed: DIR holds campaign/ and identify/, and "
+                        "optionally cluster/, forecast/, validate/ (default: none; the report is then unchanged)")
     s.add_argument("--events", nargs="+", default=None, metavar="EVENT_ID",
                    help="events featured in the figures (default: the first three with results)")
     s.add_argument("--max-rows", type=int, default=30, help="rows shown of each embedded CSV (default 30)")

@@ -5,16 +5,29 @@ from __future__ import annotations
 import sys
 
 from vivbench.cli.common import DEFAULT_WORKERS, duration, progress
+from vivbench.core.errors import InputError
 
 
 def run(args) -> int:
     from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign, load_config
 
-    if args.config:
-        generator = load_config(args.config, mode=args.mode)
+    if args.scenario:
+        given = [f"--{k}" for k in ("config", "mode", "events", "seed", "duration") if getattr(args, k) is not None]
+        if given:
+            raise InputError(f"--scenario {args.scenario} fixes the campaign (generator, events, duration, seed); "
+                             f"drop {', '.join(given)}")
+        from vivbench.validate.scenarios import scenario
+
+        campaign = scenario(args.scenario).campaign_config()
     else:
-        generator = GeneratorConfig.from_mode(args.mode or "realistic")
-    campaign = CampaignConfig(n_events=args.events, seed=args.seed, duration=args.duration, generator=generator)
+        if args.config:
+            generator = load_config(args.config, mode=args.mode)
+        else:
+            generator = GeneratorConfig.from_mode(args.mode or "realistic")
+        campaign = CampaignConfig(n_events=31 if args.events is None else args.events,
+                                  seed=0 if args.seed is None else args.seed,
+                                  duration=(1200.0, 3600.0) if args.duration is None else args.duration,
+                                  generator=generator)
     bar = progress(campaign.n_events, "synth")
     try:
         result = generate_campaign(campaign, args.out, workers=args.workers, progress=lambda _id: bar.update())
@@ -28,10 +41,10 @@ def run(args) -> int:
 
 def register(sub) -> None:
     s = sub.add_parser("synth", help="generate a synthetic campaign (event files + catalogue.csv)")
-    s.add_argument("--events", type=int, default=31, help="number of events (default 31)")
-    s.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
+    s.add_argument("--events", type=int, default=None, help="number of events (default 31)")
+    s.add_argument("--seed", type=int, default=None, help="campaign seed (default 0)")
     s.add_argument("--out", required=True, help="output directory")
-    s.add_argument("--duration", type=duration, default=(1200.0, 3600.0),
+    s.add_argument("--duration", type=duration, default=None,
                    help="event duration in minutes: N or MIN-MAX (default 20-60)")
     s.add_argument("--config", help="generator configuration (TOML); the --mode defaults otherwise")
     s.add_argument("--mode", choices=("realistic", "in_library"), default=None,
@@ -42,5 +55,9 @@ def register(sub) -> None:
                         "coefficient matrix, for exact-recovery checks). Replaces the --config file's top-level "
                         "`mode` (realistic when the file has none); the file's explicit keys override the mode's "
                         "values. Slow changes stay off in both (the [changes] table)")
+    s.add_argument("--scenario", default=None, metavar="NAME",
+                   help="a named scenario of the leaderboard suite (vivbench.validate.SCENARIOS: in_library, realistic, "
+                        "other_bridge, forced_only, drift, high_noise, dropouts): its fixed generator, events, "
+                        "duration and seed; not combined with --config, --mode, --events, --seed or --duration")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help="worker processes (files do not depend on it)")
     s.set_defaults(func=run)

@@ -36,6 +36,11 @@ class Record:
         Mean wind speed at each section.
     dA : array_like, shape (n_samples, n_sections), m/s, optional
         dA/dt; needed to fit, not to predict or simulate (None: absent).
+    noise_std : array_like, shape (n_sections,), m, optional
+        Noise floor of A per section (the identification's ``noise_std_m``;
+        NaN: unknown). Identifiability verdicts use it: below a few times the
+        floor A is the envelope of noise and no model can give its regime.
+        None: not known.
 
     Notes
     -----
@@ -50,6 +55,7 @@ class Record:
     A: np.ndarray
     U: np.ndarray
     dA: np.ndarray | None = None
+    noise_std: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.event_id, str) or not self.event_id:
@@ -66,7 +72,10 @@ class Record:
             raise ValueError(f"Record.A must have shape (n_samples, n_sections) = ({t.size}, S >= 1); got {A.shape}")
         U = _frozen_array("U", self.U, A.shape)
         dA = None if self.dA is None else _frozen_array("dA", self.dA, A.shape)
-        for name, value in (("t", t), ("A", A), ("U", U), ("dA", dA)):
+        noise = None if self.noise_std is None else _frozen_array("noise_std", self.noise_std, (A.shape[1],))
+        if noise is not None and np.any(noise < 0):
+            raise ValueError("Record.noise_std must be >= 0 (m) or NaN (unknown)")
+        for name, value in (("t", t), ("A", A), ("U", U), ("dA", dA), ("noise_std", noise)):
             object.__setattr__(self, name, value)
 
     @property

@@ -17,8 +17,12 @@ held in memory as an :class:`xarray.DataTree`::
                       curves (equation, order, wind) m^(1-i)/s with
                       wind (wind) m/s (DESIGN 3.5); optional slow changes
                       damping_ratio, mass_factor (time) and aero_factor
-                      (time, order), dimensionless; attributes config_json,
-                      optional tau
+                      (time, order), dimensionless; optional attributes
+                      config_json (vivbench's generator configuration) and tau.
+                      Only time, section, U, A, r and regime are required
+                      (regime may lack its units attribute, order its
+                      coordinate), so truths written by other tools load;
+                      identification never reads /truth.
 
 Times are seconds since ``start_time`` and are authoritative: a gap in the
 data is a run of NaN values, never a missing time. Section labels are
@@ -537,26 +541,35 @@ def _check_variable(ds: xr.Dataset, group: str, var: str, dims: tuple, unit: str
 def _check_truth(ds: xr.Dataset, sections: tuple) -> None:
     _check_time(ds, "truth", None)
     _check_sections(ds, "truth", "section", sections)
-    if "order" not in ds.coords:
-        raise _Breach("missing coordinate /truth/order")
-    order = ds.coords["order"]
-    if order.dims != ("order",) or order.dtype.kind not in "iuf" or order.values.tolist() != [0, 1, 2, 3]:
-        raise _Breach(f"/truth/order is {order.values.tolist()}, expected [0, 1, 2, 3]")
+    # Only what validation uses is required (time, section, U, A, r, regime); the rest is
+    # optional and checked when present, so that truths written by other tools load.
+    if "order" in ds.coords:
+        order = ds.coords["order"]
+        if order.dims != ("order",) or order.dtype.kind not in "iuf" or order.values.tolist() != [0, 1, 2, 3]:
+            raise _Breach(f"/truth/order is {order.values.tolist()}, expected [0, 1, 2, 3]")
+    elif ds.sizes.get("order", 4) != 4:
+        # Without a coordinate the dimension is read as the orders 0..3 of DESIGN 4.
+        raise _Breach(f"/truth has {ds.sizes['order']} orders, expected 4 (0..3)")
     _check_variable(ds, "truth", "U", ("time", "section"), "m/s")
     _check_variable(ds, "truth", "A", ("time", "section"), "m")
     _check_variable(ds, "truth", "r", ("time", "section", "order"), "m/s")
-    regime = _check_variable(ds, "truth", "regime", ("time", "section"), "1", kind="iu").values
+    # A regime is dimensionless: a missing units attribute is read as "1" (CF convention).
+    if "regime" not in ds.data_vars:
+        raise _Breach("missing variable /truth/regime")
+    regime_units = "1" if "units" in ds["regime"].attrs else None
+    regime = _check_variable(ds, "truth", "regime", ("time", "section"), regime_units, kind="iu").values
     outside = (regime < 1) | (regime > 4)
     if outside.any():
         raise _Breach(f"/truth/regime has values {sorted(set(regime[outside].tolist()))[:5]} outside 1..4")
-    if "config_json" not in ds.attrs:
-        raise _Breach("/truth lacks the attribute config_json (generator configuration)")
-    if not isinstance(ds.attrs["config_json"], str):
-        raise _Breach("/truth attribute config_json must be a JSON string")
-    try:
-        json.loads(ds.attrs["config_json"])
-    except (TypeError, ValueError) as exc:
-        raise _Breach(f"/truth attribute config_json is not valid JSON ({exc})") from None
+    # The generator configuration is vivbench's own (config_json); another generator may keep
+    # its configuration under another name or none: whatever needs it is then unavailable.
+    if "config_json" in ds.attrs:
+        if not isinstance(ds.attrs["config_json"], str):
+            raise _Breach("/truth attribute config_json must be a JSON string")
+        try:
+            json.loads(ds.attrs["config_json"])
+        except (TypeError, ValueError) as exc:
+            raise _Breach(f"/truth attribute config_json is not valid JSON ({exc})") from None
     if "tau" in ds.attrs:
         tau = ds.attrs["tau"]
         if not isinstance(tau, numbers.Real) or isinstance(tau, (bool, np.bool_)) or not 0.0 < tau < 1.0:
@@ -638,12 +651,17 @@ def write_event(tree: xr.DataTree, path) -> Path:
     return write_netcdf_atomic(tree, path)
 
 
-def read_event(path) -> xr.DataTree:
+def read_event(path, *, truth: bool = True) -> xr.DataTree:
     """Read an event file fully into memory, close it and validate it.
 
     Parameters
     ----------
     path : str or os.PathLike
+    truth : bool
+        False: the ``/truth`` group is neither read nor checked and the
+        returned tree has none. Identification reads events so: it never uses
+        the truth, and a truth that is absent, partial or written by another
+        generator does not stop it.
 
     Returns
     -------
@@ -664,10 +682,14 @@ def read_event(path) -> xr.DataTree:
     if path.is_dir():
         raise EventFormatError(name, "is a directory, not an event file")
     try:
-        _check_stored_shapes(path)
-        tree = xr.load_datatree(
-            path, engine=NETCDF_ENGINE, decode_times=False, decode_timedelta=False
-        )
+        _check_stored_shapes(path, skip=() if truth else ("/truth",))
+        if truth:
+            tree = xr.load_datatree(path, engine=NETCDF_ENGINE, decode_times=False, decode_timedelta=False)
+        else:
+            with xr.open_datatree(path, engine=NETCDF_ENGINE, decode_times=False, decode_timedelta=False) as lazy:
+                tree = xr.DataTree.from_dict(
+                    {node.path: node.to_dataset(inherit=False) for node in lazy.subtree
+                     if node.path != "/truth" and not node.path.startswith("/truth/")}).load()
     except _Breach as breach:
         raise EventFormatError(name, str(breach)) from None
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not an event file"
@@ -679,7 +701,7 @@ def read_event(path) -> xr.DataTree:
     return tree
 
 
-def _check_stored_shapes(path: Path) -> None:
+def _check_stored_shapes(path: Path, skip: tuple = ()) -> None:
     """Compare each stored array with the lengths of its dimensions.
 
     The netCDF layer silently pads an array shorter than its dimension (with
@@ -690,6 +712,8 @@ def _check_stored_shapes(path: Path) -> None:
         datasets = []
         f.visititems(lambda _, obj: datasets.append(obj) if isinstance(obj, h5py.Dataset) else None)
         for ds in datasets:
+            if any(ds.name == g or ds.name.startswith(g + "/") for g in skip):
+                continue
             for axis, dim in enumerate(ds.dims):
                 if len(dim) == 0:
                     continue
@@ -802,13 +826,15 @@ def peek_event_id(path) -> str | None:
 # ------------------------------------------------------------------------- helpers
 
 
-def event_arrays(tree: xr.DataTree) -> dict:
+def event_arrays(tree: xr.DataTree, *, truth: bool = True) -> dict:
     """The event's data as plain numpy arrays (no copies where avoidable).
 
     Parameters
     ----------
     tree : xarray.DataTree
         A valid event.
+    truth : bool
+        False: leave ``/truth`` alone (identification never reads it).
 
     Returns
     -------
@@ -835,24 +861,24 @@ def event_arrays(tree: xr.DataTree) -> dict:
         "accel_time": accel["time"].values,
         "acc": accel["acc"].values,
     }
-    if "truth" in tree.children:
-        truth = tree["truth"]
+    if truth and "truth" in tree.children:
+        group = tree["truth"]
         out.update(
-            truth_time=truth["time"].values,
-            U=truth["U"].values,
-            A=truth["A"].values,
-            r=truth["r"].values,
-            regime=truth["regime"].values,
+            truth_time=group["time"].values,
+            U=group["U"].values,
+            A=group["A"].values,
+            r=group["r"].values,
+            regime=group["regime"].values,
         )
-        if "coef" in truth.data_vars:
-            out["coef"] = truth["coef"].values
-            out["feature"] = tuple(truth["feature"].values.tolist())
+        if "coef" in group.data_vars:
+            out["coef"] = group["coef"].values
+            out["feature"] = tuple(group["feature"].values.tolist())
         for name in _CHANGE_VARS:
-            if name in truth.data_vars:
-                out[name] = truth[name].values
-        if "curves" in truth.data_vars:
-            out["curves"] = truth["curves"].values
-            out["curve_wind"] = truth["wind"].values
+            if name in group.data_vars:
+                out[name] = group[name].values
+        if "curves" in group.data_vars:
+            out["curves"] = group["curves"].values
+            out["curve_wind"] = group["wind"].values
     return out
 
 

@@ -49,6 +49,7 @@ from vivbench.models.simulate import (
     nmse,
     window_in_force,
 )
+from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
 from vivbench.models.varying import VaryingCoefficientSINDy
 from vivbench.models.window import WindowProblem, WindowedSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
@@ -63,4 +64,5 @@ __all__ = [
     "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",
     "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "WindowedSINDy",
     "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy",
+    "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
 ]

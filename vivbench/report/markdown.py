@@ -34,11 +34,13 @@ from vivbench.core.terms import reference_section, section_exponents
 from vivbench.io.event import read_event_summary
 from vivbench.io.result import read_result, result_record
 from vivbench.core.errors import InputError
+from vivbench.report.leaderboard import leaderboard_section
+from vivbench.report.sidebyside import CampaignRun, baseline_section, campaign_run
 
 __all__ = ["EXTRA_STEPS", "write_report"]
 
 #: The steps whose output directories the report embeds, in report order.
-EXTRA_STEPS = ("cluster", "forecast", "refit", "greybox", "validate", "compare", "sweep")
+EXTRA_STEPS = ("cluster", "forecast", "refit", "greybox", "validate", "compare", "sweep", "leaderboard")
 
 # Canonical command of each step, used when its directory does not record the
 # exact command (a ``command`` key in summary.json or a command.txt file).
@@ -164,7 +166,8 @@ def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
 
 def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                  extra_dirs: Mapping[str, Path | str | None] | None = None, events: Sequence[str] | None = None,
-                 max_rows: int = 30, progress: Callable[[str], None] | None = None) -> Path:
+                 max_rows: int = 30, progress: Callable[[str], None] | None = None,
+                 baseline: Path | str | CampaignRun | None = None) -> Path:
     """Write ``<out_root>/<name>/report.md`` with its figures.
 
     Parameters
@@ -191,6 +194,14 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         Rows of each embedded CSV shown before the table is cut (the report says so).
     progress : callable, optional
         Called with a short label as each part is done.
+    baseline : path or CampaignRun, optional
+        A second run of the chain shown beside this one (normally ``vivbench demo
+        --mode in_library --out DIR``: the same seed with the truth inside the
+        model class), a directory holding ``campaign/`` and ``identify/`` and
+        optionally ``cluster/``, ``forecast/``, ``validate/`` (or a
+        :class:`vivbench.report.sidebyside.CampaignRun` naming them). Adds the section
+        of :func:`vivbench.report.sidebyside.baseline_section` after the
+        recovery tables. Without it the report is unchanged.
 
     Returns
     -------
@@ -213,6 +224,8 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         raise InputError(f"max_rows must be a positive integer; got {max_rows!r}")
     campaign_dir, results_dir = Path(campaign_dir), Path(results_dir)
     extra_dirs = dict(extra_dirs or {})
+    baseline_run = (baseline if isinstance(baseline, CampaignRun) or baseline is None
+                    else campaign_run(baseline))
     unknown = sorted(set(extra_dirs) - set(EXTRA_STEPS))
     step_names = list(EXTRA_STEPS) + unknown
     pairs, missing = _pairs(campaign_dir, results_dir)
@@ -227,7 +240,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                              f"{results_dir}; available: {sorted(by_id)}")
     out_dir = Path(out_root) / name
     out_dir.mkdir(parents=True, exist_ok=True)
-    command = _report_command(name, campaign_dir, results_dir, Path(out_root), extra_dirs)
+    command = _report_command(name, campaign_dir, results_dir, Path(out_root), extra_dirs, baseline)
     say = progress or (lambda _label: None)
 
     info = [_event_info(eid, ev, res) for eid, ev, res in pairs]
@@ -449,9 +462,14 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
 
     md += _recovery_section(info, command)
     say("recovery")
+    if baseline_run is not None:
+        md += _side_by_side_section(campaign_dir, results_dir, extra_dirs, baseline_run, out_dir, command, written, say)
 
     for step in step_names:
-        md += _step_section(step, extra_dirs.get(step), campaign_dir, results_dir, out_dir, written, max_rows)
+        if step == "leaderboard":  # its own section module (vivbench.report.leaderboard)
+            md += leaderboard_section(extra_dirs.get(step), out_dir, written)
+        else:
+            md += _step_section(step, extra_dirs.get(step), campaign_dir, results_dir, out_dir, written, max_rows)
         say(step)
 
     _remove_stale_pngs(out_dir, written)
@@ -461,13 +479,29 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
     return report
 
 
-def _report_command(name, campaign_dir, results_dir, out_root, extra_dirs) -> str:
+def _report_command(name, campaign_dir, results_dir, out_root, extra_dirs, baseline=None) -> str:
     parts = ["vivbench report", f"--campaign {campaign_dir}", f"--results {results_dir}", f"--name {name}",
              f"--out-root {out_root}"]
     for step in EXTRA_STEPS:
         if extra_dirs.get(step) is not None:
             parts.append(f"--{step} {extra_dirs[step]}")
+    if isinstance(baseline, CampaignRun):
+        parts.append(f"--baseline <run of {baseline.campaign} and {baseline.results}>")
+    elif baseline is not None:
+        parts.append(f"--baseline {baseline}")
     return " ".join(parts)
+
+
+def _side_by_side_section(campaign_dir, results_dir, extra_dirs, baseline_run, out_dir, command, written, say):
+    """The baseline campaign beside this one (DESIGN 2.8; :mod:`vivbench.report.sidebyside`)."""
+
+    def step(name):
+        d = extra_dirs.get(name)
+        return Path(d) if d is not None and Path(d).is_dir() else None
+
+    this_run = CampaignRun(campaign=campaign_dir, results=results_dir, cluster=step("cluster"),
+                           forecast=step("forecast"), validate=step("validate"))
+    return baseline_section(this_run, baseline_run, out_dir=out_dir, command=command, written=written, progress=say)
 
 
 def _what_was_run(campaign_dir, results_dir, info, missing, command) -> list[str]:

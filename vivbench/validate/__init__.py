@@ -13,6 +13,43 @@ from vivbench.validate.compare import (
     run_comparison,
 )
 from vivbench.validate.greybox import greybox_recovery, truth_y1
+from vivbench.validate.leaderboard import LeaderboardResult, method_slug, parse_methods, run_leaderboard
+from vivbench.validate.leaderboard_table import (
+    LEADERBOARD_COLUMNS,
+    SCORE_LABELS,
+    SCORES,
+    VALUES,
+    format_score,
+    leaderboard_markdown,
+    plot_leaderboard,
+    read_leaderboard,
+)
+from vivbench.validate.scenarios import (
+    SCENARIO_FINGERPRINTS,
+    SCENARIOS,
+    Scenario,
+    load_scenario_file,
+    scenario,
+    scenarios_from_dict,
+    select_scenarios,
+)
+from vivbench.validate.methods import (
+    BUILTIN_METHODS,
+    SCORE_KEYS,
+    CampaignMethod,
+    FittedWindows,
+    VerdictModel,
+    WindowMethod,
+    above_noise_floor,
+    check_method_spec,
+    default_windows,
+    fit_method,
+    resolve_method,
+    score_fitted,
+    score_method,
+    scoring_inputs,
+    simulation_nmse,
+)
 from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
 from vivbench.validate.metrics import (
     REGIMES,
@@ -61,6 +98,14 @@ from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 
 __all__ = [
     "greybox_recovery", "truth_y1",
+    "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",
+    "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
+    "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
+    "select_scenarios",
+    "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "FittedWindows", "VerdictModel", "WindowMethod", "above_noise_floor",
+    "check_method_spec", "default_windows", "fit_method", "resolve_method", "score_fitted", "score_method",
+    "scoring_inputs",
+    "simulation_nmse",
     "BASE_LEVELS", "DESIGNS", "FACTORS", "CompareConfig", "CompareResult", "compare_cells", "compare_config_from_dict",
     "load_compare_config", "plan", "run_comparison",
     "METRIC_COLUMNS", "SWEEP_PARAMETERS", "SweepConfig", "SweepResult", "SweepTask", "load_sweep_config",

@@ -167,7 +167,8 @@ def event_truth_curves(truth) -> tuple[np.ndarray, np.ndarray] | None:
         from the generator configuration in ``config_json`` with
         :func:`vivbench.synth.event_truth_curves` (the same function the
         generator uses); None when neither gives curves (a drifting damping,
-        or a configuration that is not the generator's).
+        no ``config_json``, as in truths of other generators, or one that is
+        not vivbench's): whatever needs the curves reports them unavailable.
     """
     if "curves" in truth.data_vars:
         return truth["curves"].values, truth["wind"].values
@@ -417,7 +418,8 @@ def _pooled_curve_errors(pooled, model, truth_curves, U, A, excited) -> dict:
     else:
         return {"scored": False, "reason": "the campaign model has no curves (re-run vivbench pool)"}
     if not truth_curves or any(tc is None for tc in truth_curves):
-        return {"scored": False, "reason": "an event's truth has no coefficient curves (damping drift)"}
+        return {"scored": False, "reason": "an event's truth has no coefficient curves (a damping drift, or a truth "
+                                          "without /truth/curves nor vivbench's config_json to rebuild them)"}
     tc0, tw0 = truth_curves[0]
     if any(tw.shape != tw0.shape or not np.array_equal(tw, tw0) or not np.array_equal(tc, tc0)
            for tc, tw in truth_curves[1:]):

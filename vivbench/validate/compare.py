@@ -26,6 +26,23 @@ drift                  realism: relative amplitude of the daily       0
                        in [0, 1)
 ====================== ============================================= ==========================
 
+``method`` (DESIGN 7) names the method scored in the cell: ``"windows"`` (the
+paper's window SINDy: the identification itself, the default), ``"campaign"``,
+``"varying"``, ``"pysindy-cp"`` or ``"package.module:factory"`` (a factory
+with no arguments returning any object with ``fit(records)``; see
+:mod:`vivbench.validate.methods`). Every method of a cell is fitted to the
+records of that cell's identification (its A, U and dA/dt, with the cell's
+``derivative``; :func:`vivbench.analysis.records_from_results`) and scored on
+the identification's windows by :func:`vivbench.validate.score_fitted`, the
+same scores for built-in and plug-in methods: a method without an
+identifiability verdict is scored on all windows, with coverage 0. The
+"windows" rows are the identification's own window models, regimes and
+verdicts (:meth:`vivbench.validate.FittedWindows.from_results`). A grid with
+``method`` adds the columns ``method``, ``curve_error_linear``,
+``curve_error_total``, ``simulation_nmse``, ``simulation_covered`` and
+``fit_time_s`` (the method's fit; for "windows" the identification's wall
+time) to ``compare.csv``; grids without it give the table as before.
+
 The three realism factors change the generator (the other settings of the
 realistic mode, e.g. ``GeneratorConfig.realistic()``, are the two first of
 them at ``realistic`` and ``tributary``); like the noise factors they make
@@ -80,8 +97,9 @@ from vivbench.core.toml import load_toml
 from vivbench.regression.optimizers import OPTIMIZERS
 from vivbench.synth.config import AERO_MODES, FELT_WIND_MODES
 from vivbench.core.errors import InputError, error_line
+from vivbench.validate.methods import BUILTIN_METHODS, check_method_spec
 
-__all__ = ["FACTORS", "DESIGNS", "BASE_LEVELS", "CompareConfig", "CompareResult", "compare_config_from_dict",
+__all__ = ["FACTORS", "METHOD_FACTOR", "DESIGNS", "BASE_LEVELS", "CompareConfig", "CompareResult", "compare_config_from_dict",
            "load_compare_config", "compare_cells", "plan", "run_comparison"]
 
 FACTORS = ("derivative", "scaling", "optimizer", "window", "accel_noise", "anemometer_noise", "turbulence_intensity",
@@ -114,16 +132,40 @@ _LABELS = {
     "felt_wind": "wind felt by the deck",
     "drift": "daily damping drift amplitude (-)",
 }
+#: The method factor (DESIGN 7): not in FACTORS, so that grids without it keep their table.
+METHOD_FACTOR = "method"
+_ALL_FACTORS = FACTORS + (METHOD_FACTOR,)
+_LABELS[METHOD_FACTOR] = "method"
 _CAMPAIGN_FACTORS = ("accel_noise", "anemometer_noise", "turbulence_intensity", "aero", "felt_wind", "drift")
 _METRICS = ("n_scored", "truth_majority_share", "coverage", "accuracy_all", "accuracy_identifiable", "accuracy_not_identifiable",
             "rhs_median_rel_error", "rhs_median_rel_error_active", "rhs_error_true_AU_median_active",
             "no_model_share", "wall_time_s",
             "wall_time_per_event_s", "cpu_time_s")
 _COLUMNS = ("cell_id", "varied") + FACTORS + ("n_events",) + _METRICS + ("error",)
+_METHOD_METRICS = ("curve_error_linear", "curve_error_total", "simulation_nmse", "simulation_covered", "fit_time_s")
+_METHOD_COLUMNS = (("cell_id", "varied") + FACTORS + (METHOD_FACTOR, "n_events") + _METRICS + _METHOD_METRICS
+                   + ("error",))
+
+
+def _has_method(config) -> bool:
+    return METHOD_FACTOR in config.base
+
+
+def _columns(config) -> tuple:
+    return _METHOD_COLUMNS if _has_method(config) else _COLUMNS
+
+
+def _categorical(factor: str) -> bool:
+    return factor in _CATEGORICAL or factor == METHOD_FACTOR
 
 
 def _check_level(factor: str, value, where: str):
     """A valid level of ``factor`` (normalised: floats for numeric factors)."""
+    if factor == METHOD_FACTOR:
+        try:
+            return check_method_spec(value)
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
     if factor in _CATEGORICAL:
         allowed = _CATEGORICAL[factor]
         if value not in allowed:
@@ -173,19 +215,21 @@ class CompareConfig:
     def __post_init__(self) -> None:
         if self.design not in DESIGNS:
             raise InputError(f"design must be one of {', '.join(DESIGNS)}; got {self.design!r}")
-        unknown = sorted(set(self.base) - set(FACTORS))
+        unknown = sorted(set(self.base) - set(_ALL_FACTORS))
         if unknown:
-            raise InputError(f"[base]: unknown factors {unknown}; allowed: {', '.join(FACTORS)}")
-        unknown = sorted(set(self.grid) - set(FACTORS))
+            raise InputError(f"[base]: unknown factors {unknown}; allowed: {', '.join(_ALL_FACTORS)}")
+        unknown = sorted(set(self.grid) - set(_ALL_FACTORS))
         if unknown:
-            raise InputError(f"[grid]: unknown factors {unknown}; allowed: {', '.join(FACTORS)}")
+            raise InputError(f"[grid]: unknown factors {unknown}; allowed: {', '.join(_ALL_FACTORS)}")
         if not self.grid:
-            raise InputError(f"[grid] must name at least one factor with its levels; factors: {', '.join(FACTORS)}")
+            raise InputError(f"[grid] must name at least one factor with its levels; factors: {', '.join(_ALL_FACTORS)}")
         base = dict(BASE_LEVELS)
+        if METHOD_FACTOR in self.grid or METHOD_FACTOR in self.base:
+            base[METHOD_FACTOR] = "windows"
         for k, v in self.base.items():
             base[k] = _check_level(k, v, "[base]")
         grid = {}
-        for k in FACTORS:  # canonical factor order
+        for k in _ALL_FACTORS:  # canonical factor order
             if k not in self.grid:
                 continue
             levels = self.grid[k]
@@ -197,6 +241,12 @@ class CompareConfig:
             grid[k] = levels
         object.__setattr__(self, "base", base)
         object.__setattr__(self, "grid", grid)
+        if METHOD_FACTOR in base:
+            from vivbench.validate.methods import resolve_method
+
+            # A plug-in that cannot be imported or built fails here, in one line, before any campaign is made.
+            for spec in {base[METHOD_FACTOR], *grid.get(METHOD_FACTOR, ())} - set(BUILTIN_METHODS):
+                resolve_method(spec)
         object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
         if isinstance(self.n_events, bool) or not isinstance(self.n_events, int) or not 1 <= self.n_events <= 1000:
             raise InputError(f"[campaign] events must be an integer in 1..1000; got {self.n_events!r}")
@@ -376,6 +426,8 @@ def _run_cell(task: dict) -> dict:
         total += reg.size
         results.append(write_result(ds, out))
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if METHOD_FACTOR in cell:
+        return _score_method_cell(cell, config, task["files"], results, wall, cpu)
     scores = campaign_recovery(task["files"], results, active_share=config.active_share)
     return {
         "n_scored": scores["n"],
@@ -395,6 +447,31 @@ def _run_cell(task: dict) -> dict:
         # CPU time of the worker: less sensitive than wall time to other load on the machine.
         "cpu_time_s": cpu,
     }
+
+
+def _score_method_cell(cell: dict, config: CompareConfig, event_files, results, wall: float, cpu: float) -> dict:
+    """Fit the cell's method on the identification's records and score it (:func:`score_fitted`)."""
+    from vivbench.io.result import read_result
+    from vivbench.validate.methods import FittedWindows, fit_method, resolve_method, score_fitted, scoring_inputs
+
+    spec = cell[METHOD_FACTOR]
+    records, truths, windows = scoring_inputs(event_files, results)
+    w0, c0 = time.perf_counter(), time.process_time()
+    if spec == "windows":
+        # The identification's own window models, regimes and verdicts: its wall time is the fit.
+        fitted, fit_time = FittedWindows.from_results([read_result(r) for r in results]), wall
+    else:
+        fitted, fit_time = fit_method(resolve_method(spec), records)
+    wall += time.perf_counter() - w0
+    cpu += time.process_time() - c0
+    scores = score_fitted(fitted, records, truths, windows=windows, active_share=config.active_share,
+                          fit_time_s=fit_time)
+    out = {k: scores[k] for k in ("n_scored", "truth_majority_share", "coverage", "accuracy_all",
+                                  "accuracy_identifiable", "accuracy_not_identifiable", "rhs_median_rel_error",
+                                  "rhs_median_rel_error_active", "rhs_error_true_AU_median_active",
+                                  "no_model_share") + _METHOD_METRICS}
+    out.update(wall_time_s=wall, wall_time_per_event_s=wall / len(event_files), cpu_time_s=cpu)
+    return out
 
 
 @dataclass(frozen=True)
@@ -468,12 +545,14 @@ def run_comparison(config: CompareConfig, out_dir: str | Path, *, workers: int =
     rows = []
     for c in cells:  # cell-id order, whatever the completion order
         row = {k: c[k] for k in ("cell_id", "varied") + FACTORS}
+        if _has_method(config):
+            row[METHOD_FACTOR] = c[METHOD_FACTOR]
         row["n_events"] = config.n_events
         m = metrics.get(c["cell_id"], {})
-        row.update({k: m.get(k, float("nan")) for k in _METRICS})
+        row.update({k: m.get(k, float("nan")) for k in _METRICS + (_METHOD_METRICS if _has_method(config) else ())})
         row["error"] = errors.get(c["cell_id"], "")
         rows.append(row)
-    table = _write_table(rows, out / "compare.csv")
+    table = _write_table(rows, out / "compare.csv", _columns(config))
     figures = [_plot_factor(rows, config, f, out / f"compare_{f}.png") for f in config.grid]
     summary = _write_summary(rows, config, out / "summary.json")
     return CompareResult(rows=rows, table=table, figures=figures, summary=summary, failures=failures)
@@ -493,14 +572,14 @@ def _fmt(value) -> str:
     return str(value)
 
 
-def _write_table(rows: list[dict], path: Path) -> Path:
+def _write_table(rows: list[dict], path: Path, columns: tuple = _COLUMNS) -> Path:
     from vivbench.io.netcdf import atomic_path
 
     buf = _io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(_COLUMNS), lineterminator="\n")
+    writer = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
     writer.writeheader()
     for r in rows:
-        writer.writerow({k: _fmt(r[k]) for k in _COLUMNS})
+        writer.writerow({k: _fmt(r[k]) for k in columns})
     with atomic_path(path) as tmp:
         tmp.write_text(buf.getvalue())
     return path
@@ -510,7 +589,7 @@ def _levels(config: CompareConfig, factor: str) -> list:
     levels = list(config.grid[factor])
     if config.design == "one_at_a_time" and config.base[factor] not in levels:
         levels.append(config.base[factor])
-    if factor not in _CATEGORICAL:
+    if not _categorical(factor):
         levels.sort()
     return levels
 
@@ -529,6 +608,8 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
     else:
         sel = rows
     sel = [dict(r, cpu_time_per_event_s=r["cpu_time_s"] / r["n_events"]) for r in sel]
+    if _has_method(config):
+        sel = [dict(r, fit_time_per_event_s=r["fit_time_s"] / r["n_events"]) for r in sel]
     pos = {lv: i for i, lv in enumerate(levels)}
     x = np.array([pos[r[factor]] for r in sel], dtype=float)
     panels = [
@@ -539,6 +620,14 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
         ("identification time\nper event (s)", [("wall_time_per_event_s", "wall time"),
                                                 ("cpu_time_per_event_s", "CPU time")], False),
     ]
+    if _has_method(config):
+        # Realistic truths have no exact matrix: the dA/dt error on the true (A, U) is the one always scored.
+        panels[1] = ("median rel. error of dA/dt,\nactive windows (-)",
+                     [("rhs_error_true_AU_median_active", "on the true (A, U)"),
+                      ("rhs_median_rel_error_active", "measured (A, U), exact matrix")], True)
+        panels[2] = ("time per event (s)", [("wall_time_per_event_s", "wall time (identification + fit)"),
+                                            ("cpu_time_per_event_s", "CPU time"),
+                                            ("fit_time_per_event_s", "method fit (windows: identification)")], False)
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
     for ax, (ylabel, metrics, logy) in zip(axes, panels):
         for k, (metric, label) in enumerate(metrics):
@@ -548,7 +637,7 @@ def _plot_factor(rows: list[dict], config: CompareConfig, factor: str, path: Pat
             mean = [np.nanmean(y[x == i]) if np.isfinite(y[x == i]).any() else np.nan for i in range(len(levels))]
             ax.plot(range(len(levels)), mean, "-", color=colour)
         ax.set_xticks(range(len(levels)))
-        ax.set_xticklabels([_fmt(lv) for lv in levels], rotation=20 if factor in _CATEGORICAL else 0)
+        ax.set_xticklabels([_fmt(lv) for lv in levels], rotation=20 if _categorical(factor) else 0)
         ax.set_xlabel(_LABELS[factor])
         ax.set_ylabel(ylabel)
         vals = np.array([r[metrics[0][0]] for r in sel], dtype=float)
