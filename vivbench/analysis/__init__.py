@@ -7,6 +7,7 @@ from vivbench.analysis.clustering import (
     decision_graph,
     order_features,
 )
+from vivbench.analysis.greybox import GreyBoxOutcome, campaign_warm_start, greybox_results, results_frequency
 from vivbench.analysis.identify import IdentifyConfig, identify_event, identify_files
 from vivbench.analysis.interpret import (
     FEATURE_SETS,
@@ -35,4 +36,5 @@ __all__ = [
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
     "with_campaign_model", "campaign_model_file", "load_campaign_model", "event_yaw", "smooth_wind", "with_yaw",
+    "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

@@ -1,6 +1,6 @@
 """``vivbench demo``: the whole chain on the default synthetic campaign (the realistic generator mode).
 
-Generate, identify, pool, cluster, forecast, refit, validate and report, each
+Generate, identify, pool, cluster, forecast, refit, greybox, validate and report, each
 step as the subcommand a user would run (its exact command is written to
 ``command.txt`` in the step's directory, so the report can cite it). A step
 that fails is reported on one line and the later steps still run where they
@@ -103,6 +103,12 @@ def _chain(out: Path, *, mode: str, events: int, seed: int, minutes: str, worker
             window = ["--t0", f"{max(lo, t0 - 500.0):g}", "--t1", f"{min(hi, t0 + 300.0):g}"]
         _step(["refit", str(result), "--out", str(out / "refit"), "--event", str(campaign / f"{event_id}.nc"),
                "--terms", REFIT_TERMS, *window], out / "refit", failures)
+    if refit:
+        # The grey-box reference refit is given the synthetic bridge's properties as a user would give
+        # their bridge's (the demo knows its own generator configuration); the fit never reads /truth.
+        # 50 parameter draws per window verdict (100 by default) keep the step within the demo's time budget.
+        _step(["greybox", str(identify), "--out", str(out / "greybox"), *_bridge_options(mode), "--draws", "50",
+               "--campaign", str(campaign)], out / "greybox", failures)
     validate = ["validate", str(campaign), str(identify), "--out", str(out / "validate")]
     if (out / "cluster" / "cluster_labels.csv").is_file():
         validate += ["--clusters", str(out / "cluster" / "cluster_labels.csv")]
@@ -132,7 +138,7 @@ def run(args) -> int:
             baseline = None
     report = ["report", "--campaign", str(campaign), "--results", str(identify), "--name", args.name,
               "--out-root", str(args.report_root if args.report_root else out / "reports")]
-    for step in ("cluster", "forecast", "refit", "validate"):
+    for step in ("cluster", "forecast", "refit", "greybox", "validate"):
         if (out / step).is_dir():
             report += [f"--{step}", str(out / step)]
     if baseline is not None:
@@ -166,6 +172,12 @@ def run(args) -> int:
         print(f"refit:    {rf.get('event_id')} [{rf.get('t0_s', float('nan')):.0f}, {rf.get('t1_s', float('nan')):.0f}] s on "
               f"'{REFIT_TERMS}' per section: IPOPT {rf.get('ipopt_status')}; mean NMSE refit {_g(rf.get('nmse_refit_mean'))}, "
               f"equation-error fit {_g(rf.get('nmse_lsq_mean'))}, true model {_g(rf.get('nmse_truth_mean'))}")
+    gb = _read_json(out / "greybox" / "summary.json")
+    if gb:
+        print(f"greybox:  {gb.get('n_events')} events in {_g(gb.get('fit_seconds'))} s; median simulation NMSE "
+              f"{_g(gb.get('nmse_median'))}; against the truth: a_k1 error {_f(gb.get('truth_curve_error_linear'))}, "
+              f"Y1 error {_f(gb.get('truth_y1_error'))}, flagged windows with the true regime "
+              f"{_f(gb.get('truth_regime_precision_identifiable'))} (coverage {_f(gb.get('regime_coverage'))})")
     if fc:
         ds = sorted((k for k in fc if k.startswith("nmse_S2_d") and "clip" not in k), key=lambda k: float(k[9:]))
         print(f"forecast: {fc.get('event_id')} from t0 = {fc.get('t0_s', float('nan')):.0f} s: window models NMSE(S2) "
@@ -183,6 +195,17 @@ def run(args) -> int:
     for line in failures:
         print(f"vivbench demo: {line}", file=sys.stderr)
     return 1 if failures else 0
+
+
+def _bridge_options(mode: str) -> list[str]:
+    """The demo bridge's properties as ``vivbench greybox`` options (the structure of the mode's generator)."""
+    from vivbench.synth import GeneratorConfig
+
+    st = GeneratorConfig.from_mode(mode).structure
+    join = lambda xs: ",".join(f"{x:g}" for x in xs)  # noqa: E731
+    return ["--mass", f"{st.mass:g}", "--depth", f"{st.depth:g}", "--frequency", f"{st.frequency:g}",
+            "--damping-ratio", f"{st.damping_ratio:g}", "--air-density", f"{st.air_density:g}",
+            "--mode-shape", join(st.mode_shape), "--tributary-lengths", join(st.tributary_lengths)]
 
 
 def _g(x) -> str:

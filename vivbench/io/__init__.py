@@ -36,6 +36,13 @@ from vivbench.io.result import (
     markdown_attributes,
 )
 from vivbench.io.model_file import ModelFileError, read_model_dataset
+from vivbench.io.greybox import (
+    GREYBOX_NAME,
+    GREYBOX_FORMAT,
+    GREYBOX_VERSION,
+    write_greybox,
+    read_greybox,
+)
 from vivbench.io.campaign_model import (
     POOLED_NAME,
     MODEL_NAME,
@@ -78,6 +85,7 @@ __all__ = [
     "result_record", "result_noise_std", "markdown_table", "markdown_attributes", "ModelFileError", "read_model_dataset",
     "POOLED_NAME", "MODEL_NAME", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION",
     "write_pooled", "read_pooled", "POOLED_MODELS", "pooled_model_name", "write_campaign_model", "read_campaign_model",
+    "GREYBOX_NAME", "GREYBOX_FORMAT", "GREYBOX_VERSION", "write_greybox", "read_greybox",
     "WINDOW_MODEL_FORMAT",
     "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
     "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude",

@@ -11,6 +11,7 @@ from vivbench.models.campaign import (
     window_sums,
     RATIO_LEVEL,
 )
+from vivbench.models.greybox import BridgeProperties, GreyBoxRefit, curves_to_functions
 from vivbench.models.protocol import (
     Method,
     FittedModel,
@@ -55,6 +56,7 @@ from vivbench.models.yaw_record import YawRecord, record_yaw
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
+    "BridgeProperties", "GreyBoxRefit", "curves_to_functions",
     "PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
     "window_record", "window_stats", "window_sums", "RATIO_LEVEL", "Method", "FittedModel", "Predictor",
     "Simulator", "CampaignLevel", "Persistent", "HasEquations", "ModelBase", "NotFittedError", "as_record",

@@ -1,6 +1,7 @@
 """The regime rule applied to models and to the truth, and identifiability verdicts (DESIGN 2.5)."""
 
 from vivbench.regimes.campaign import campaign_window_verdicts
+from vivbench.regimes.greybox import greybox_draws, greybox_window_verdicts
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.regimes.varying import varying_window_verdicts, window_order_stats
@@ -8,5 +9,5 @@ from vivbench.regimes.window import label_windows, window_regimes
 
 __all__ = [
     "campaign_window_verdicts", "model_window_regimes", "truth_window_regimes", "label_windows",
-    "window_regimes", "varying_window_verdicts", "window_order_stats",
+    "window_regimes", "varying_window_verdicts", "window_order_stats", "greybox_draws", "greybox_window_verdicts",
 ]

@@ -40,7 +40,7 @@ from vivbench.report.sidebyside import CampaignRun, baseline_section, campaign_r
 __all__ = ["EXTRA_STEPS", "write_report"]
 
 #: The steps whose output directories the report embeds, in report order.
-EXTRA_STEPS = ("cluster", "forecast", "refit", "validate", "compare", "sweep", "leaderboard")
+EXTRA_STEPS = ("cluster", "forecast", "refit", "greybox", "validate", "compare", "sweep", "leaderboard")
 
 # Canonical command of each step, used when its directory does not record the
 # exact command (a ``command`` key in summary.json or a command.txt file).
@@ -48,6 +48,7 @@ _STEP_COMMANDS = {
     "cluster": "vivbench cluster {results} --out {dir}",
     "forecast": "vivbench forecast {results}/<event_id>.identify.nc --out {dir}",
     "refit": "vivbench refit {results}/<event_id>.identify.nc --out {dir}",
+    "greybox": "vivbench greybox {results} --out {dir} --bridge <bridge.toml>",
     "validate": "vivbench validate {campaign} {results} --out {dir}",
     "compare": "vivbench compare --grid <grid.toml> --out {dir}",
     "sweep": "vivbench sweep --grid <grid.toml> --out {dir}",
@@ -56,6 +57,7 @@ _STEP_TITLES = {
     "cluster": "Clustering of the window models (`vivbench cluster`)",
     "forecast": "Simulation and forecasts (`vivbench forecast`)",
     "refit": "CasADi output-error refit (`vivbench refit`)",
+    "greybox": "Grey-box reference refit (`vivbench greybox`)",
     "validate": "Validation tables (`vivbench validate`)",
     "compare": "Method comparison (`vivbench compare`)",
     "sweep": "Monte-Carlo sweep (`vivbench sweep`)",
@@ -728,6 +730,10 @@ def _step_command(step: str, directory: Path, campaign_dir: Path, results_dir: P
 
 
 def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, max_rows) -> list[str]:
+    if step == "greybox" and directory is not None and (Path(directory) / "summary.json").is_file():
+        from vivbench.report.greybox import greybox_section  # its own module (DESIGN 3.6)
+
+        return greybox_section(directory, out_dir, written, max_rows=max_rows)
     title = _STEP_TITLES.get(step, f"`{step}`")
     out = [f"## {title}", ""]
     if directory is None:

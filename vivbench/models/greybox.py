@@ -1,0 +1,691 @@
+"""Grey-box reference refit: the averaged Simiu-Scanlan amplitude equation with spline functions of the wind.
+
+The model is the amplitude equation of DESIGN 2.3 for the modal amplitude Q
+(section amplitudes A_k = |phi_k| Q):
+
+    dQ/dt = sum_k beta_k rho U_k^2 D C_L / (4 m w)
+            + [ -zeta w + sum_k beta_k phi_k c_k / 2 ] Q
+            - sum_k beta_k phi_k c_k (2 / (3 pi)) (e1 |phi_k| / D) Q^2
+            - sum_k beta_k phi_k c_k (1 / 8) (e2 phi_k^2 / D^2) Q^3,
+    c_k = rho U_k D Y1(U_k) / m,
+
+with Y1, e1, e2 and C_L evaluated at each section's own wind U_k. They are
+unknown smooth functions of the reduced velocity Ur = U / (f D), each a cubic
+B-spline (P-spline: uniform knots over the data's range of Ur, a
+second-difference roughness penalty), not the generator's parametric shapes,
+so the refit commits no inverse crime. The bridge's properties (modal mass per
+length m, deck depth D, frequency f, air density rho, structural damping
+ratio zeta, mode shape phi and tributary lengths L, beta_k = L_k phi_k / sum_l
+L_l phi_l^2) are the user's (:class:`BridgeProperties`); without a mode shape
+|phi| is taken from the median amplitude ratios of the data (largest 1).
+
+Structural damping and Y1. Both enter the linear coefficient, -zeta w and
+sum_k beta_k phi_k rho U_k D Y1(U_k) / (2 m), and with Y1 a free function of U
+they cannot be told apart from amplitude records alone (Y1 = -K / U would mimic
+any damping). The damping ratio is therefore *given*: measured from free
+decays at quiet wind, where the aerodynamic part rho U D Y1 / m vanishes with
+U, or from the design value. A wrong zeta moves Y1 by (delta zeta) 2 m w /
+(rho U D sum beta phi) and leaves the fitted dynamics (the curves a_k1 and
+dA/dt) unchanged, so the curves of DESIGN 3.5 do not depend on it.
+
+Fit (output error, all events at once): multiple shooting of Q over
+intervals of ``shooting_interval`` seconds on a grid of step ``dt``, RK4 with
+the wind linear between grid samples, residuals |phi_k| Q - A_k of every
+section divided by the event's amplitude scale (so each event weighs as its
+NMSE), Gauss-Newton/Levenberg-Marquardt on the exact Jacobian from CasADi
+(:mod:`vivbench.models.greybox_solve`). Bounds: e1, e2, C_L >= 0 (the
+limiting terms damp, the locked force feeds energy). Start: the campaign
+model's curves (``warm_start``), else an equation-error fit of the same model
+in product form (Y1, Y1 e1, Y1 e2, C_L as splines: linear least squares on
+finite differences of Q).
+
+Uncertainty: block sandwich covariance of the spline coefficients (see
+:mod:`vivbench.models.greybox_solve`); bands by the delta method at
+``level``. They cover the estimator's variance, not the smoothing bias of the
+penalty nor the model's own limits (the records carry no wind direction, so a
+yaw dependence of the truth is averaged into the curves).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+
+import casadi as ca
+import numpy as np
+import xarray as xr
+from scipy.stats import norm
+
+from vivbench.core.errors import InputError
+from vivbench.core.record import Record
+from vivbench.models.campaign import amplitude_ratios
+from vivbench.models.greybox_shooting import rk4_step_function, shooting_grid
+from vivbench.models.greybox_solve import ShootingProblem, solve_gauss_newton
+from vivbench.models.protocol import ModelBase, as_record, section_names
+from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots
+
+__all__ = ["BridgeProperties", "GreyBoxRefit", "FUNCTIONS", "curves_to_functions"]
+
+#: The unknown functions, in the order of the coefficient rows.
+FUNCTIONS = ("Y1", "e1", "e2", "C_L")
+
+
+@dataclass(frozen=True, kw_only=True)
+class BridgeProperties:
+    """What the user knows about the bridge and its mode (never read from a synthetic truth by the fit).
+
+    Parameters
+    ----------
+    mass : float, kg/m
+        Equivalent modal mass per unit length m.
+    depth : float, m
+        Deck depth D.
+    frequency : float, Hz
+        The mode's frequency f.
+    damping_ratio : float
+        Structural damping ratio zeta (dimensionless, >= 0).
+    air_density : float, kg/m^3
+    mode_shape : tuple of float or None
+        phi_k at the instrumented sections; None: |phi| from the data's amplitude ratios.
+    tributary_lengths : tuple of float or None, m
+        L_k of the sections' strips; None: equal lengths.
+    """
+
+    mass: float
+    depth: float
+    frequency: float
+    damping_ratio: float
+    air_density: float = 1.225
+    mode_shape: tuple[float, ...] | None = None
+    tributary_lengths: tuple[float, ...] | None = None
+
+    def __post_init__(self):
+        for name in ("mass", "depth", "frequency", "air_density"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"bridge {name} must be a finite positive number; got {v!r}")
+        if not (isinstance(self.damping_ratio, (int, float)) and math.isfinite(self.damping_ratio)
+                and 0 <= self.damping_ratio < 1):
+            raise InputError(f"bridge damping_ratio must lie in [0, 1); got {self.damping_ratio!r}")
+        for name in ("mode_shape", "tributary_lengths"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            try:
+                arr = tuple(float(x) for x in v)
+            except (TypeError, ValueError):
+                raise InputError(f"bridge {name} must be a list of numbers; got {v!r}") from None
+            if not arr or not all(math.isfinite(x) for x in arr):
+                raise InputError(f"bridge {name} must be a non-empty list of finite numbers; got {v!r}")
+            if name == "tributary_lengths" and min(arr) <= 0:
+                raise InputError(f"bridge tributary_lengths must be positive; got {v!r}")
+            object.__setattr__(self, name, arr)
+
+    @property
+    def omega(self) -> float:
+        """Circular frequency w = 2 pi f, rad/s."""
+        return 2.0 * math.pi * self.frequency
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "BridgeProperties":
+        allowed = {"mass", "depth", "frequency", "damping_ratio", "air_density", "mode_shape", "tributary_lengths"}
+        unknown = set(data) - allowed
+        if unknown:
+            raise InputError(f"unknown bridge propert{'ies' if len(unknown) > 1 else 'y'} {sorted(unknown)}; "
+                             f"allowed: {sorted(allowed)}")
+        missing = {"mass", "depth", "frequency", "damping_ratio"} - set(data)
+        if missing:
+            raise InputError(f"bridge properties lack {sorted(missing)} (kg/m, m, Hz, ratio)")
+        return cls(**data)
+
+
+def section_factors(U: np.ndarray, bridge: BridgeProperties, phi: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """Factors a_ik with g_0 = sum a_0k C_L, g_1 = sum a_1k Y1, g_2 = sum a_2k Y1 e1, g_3 = sum a_3k Y1 e2.
+
+    Parameters
+    ----------
+    U : ndarray, shape (..., S), m/s
+
+    Returns
+    -------
+    ndarray, shape (..., S, 4); units of g_i (m^(1-i)/s) per unit function.
+    """
+    rho, D, m, w = bridge.air_density, bridge.depth, bridge.mass, bridge.omega
+    U = np.asarray(U, dtype=float)
+    return np.stack([
+        beta * rho * U**2 * D / (4.0 * m * w),
+        beta * phi * rho * U * D / (2.0 * m),
+        -beta * phi * np.abs(phi) * rho * U * (2.0 / (3.0 * math.pi)) / m,
+        -beta * phi**3 * rho * U / (8.0 * m * D),
+    ], axis=-1)
+
+
+def _g_from_values(F: np.ndarray, a: np.ndarray, zw: float) -> np.ndarray:
+    """g (..., 4) from function values F (..., S, 4) [Y1, e1, e2, C_L] and factors a (..., S, 4)."""
+    Y, E1, E2, CL = F[..., 0], F[..., 1], F[..., 2], F[..., 3]
+    return np.stack([(a[..., 0] * CL).sum(-1), (a[..., 1] * Y).sum(-1) - zw,
+                     (a[..., 2] * Y * E1).sum(-1), (a[..., 3] * Y * E2).sum(-1)], axis=-1)
+
+
+def _penalised_fit(B: np.ndarray, v: np.ndarray, K: np.ndarray, lam: float = 1e-3) -> np.ndarray:
+    """Spline coefficients of values v (n,) on basis B (n, M) with a small roughness penalty."""
+    ok = np.isfinite(v)
+    G = B[ok].T @ B[ok]
+    return np.linalg.solve(G + lam * np.trace(G) / np.trace(K) * K + 1e-12 * np.eye(K.shape[0]), B[ok].T @ v[ok])
+
+
+def curves_to_functions(wind: np.ndarray, p: np.ndarray, bridge: BridgeProperties, phi: np.ndarray,
+                        beta: np.ndarray, *, share: float = 0.3) -> np.ndarray:
+    """Y1, e1, e2, C_L on a wind grid from the amplitude-equation coefficients p_i(U) (all sections at U).
+
+    Parameters
+    ----------
+    wind : ndarray, shape (n,), m/s
+    p : ndarray, shape (4, n)
+        p_i(U) such that dQ/dt = sum_i p_i Q^i (p_1 includes -zeta w).
+    share : float
+        e1 and e2 are read only where Y1 exceeds this share of its largest
+        value (elsewhere Y1 e is near 0/0); outside, their median there.
+
+    Returns
+    -------
+    ndarray, shape (4, n) [Y1, e1, e2, C_L]; e and C_L clipped at 0.
+    """
+    U = np.repeat(np.asarray(wind, dtype=float)[:, None], phi.size, axis=1)
+    k = section_factors(U, bridge, phi, beta).sum(axis=1)  # (n, 4)
+    Y = (p[1] + bridge.omega * bridge.damping_ratio) / k[:, 1]
+    CL = np.clip(p[0] / k[:, 0], 0.0, None)
+    out = [Y]
+    big = np.isfinite(Y) & (Y > share * np.nanmax(np.where(np.isfinite(Y), Y, -np.inf), initial=0.0)) & (Y > 0)
+    for i in (2, 3):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = p[i] / (k[:, i] * Y)
+        ok = big & np.isfinite(e) & (e > 0)
+        fill = float(np.median(e[ok])) if ok.any() else 1.0
+        out.append(np.where(ok, e, fill))
+    out.append(CL)
+    return np.stack(out)
+
+
+class GreyBoxRefit(ModelBase):
+    """Grey-box output-error refit of Y1, e1, e2, C_L over a campaign (DESIGN 3.6).
+
+    Parameters
+    ----------
+    bridge : BridgeProperties
+    n_basis : int
+        B-splines per function (cubic, uniform in reduced velocity over the data).
+    penalty : float
+        Roughness penalty of each function relative to its share of the
+        Gauss-Newton matrix at the start (trace ratio), a dimensionless weight.
+    dt : float, s
+        Step of the fit grid (a multiple of the records' step; the envelope is slow).
+    shooting_interval : float, s
+        Length of a shooting interval.
+    max_iter : int
+        Gauss-Newton iterations at most.
+    tol : float
+        Relative decrease of the cost below which the iterations stop.
+    block_s : float, s
+        Block length of the sandwich covariance.
+    level : float
+        Level of the confidence bands.
+    continuity_weight : float
+        Weight of a continuity defect relative to one grid sample.
+    warm_start : xarray.Dataset or None
+        Curves of DESIGN 3.5 (``curves``, e.g. the campaign model's ``curves(wind)``)
+        to start from; None: an equation-error start.
+
+    Attributes
+    ----------
+    coef_ : ndarray, shape (4, n_basis)
+        Spline coefficients of Y1, e1, e2, C_L (dimensionless functions).
+    cov_ : ndarray, shape (4 n_basis, 4 n_basis)
+        Their covariance (row-major flattening of ``coef_``).
+    knots_ : ndarray, reduced velocity
+    phi_, beta_ : ndarray, shape (S,)
+    wind_range_ : (float, float), m/s, the fitted data's range of wind
+    fit_info_ : dict
+        cost, iterations, converged, message, max_defect, seconds, n_intervals,
+        n_samples, start.
+    """
+
+    _fitted_attribute = "coef_"
+
+    def __init__(self, *, bridge: BridgeProperties | None = None, n_basis: int = 16, penalty: float = 1.0,
+                 dt: float = 1.0, shooting_interval: float = 60.0, max_iter: int = 30, tol: float = 1e-3,
+                 block_s: float = 300.0, level: float = 0.95, continuity_weight: float = 1e6, warm_start=None):
+        self.bridge = bridge
+        self.n_basis = n_basis
+        self.penalty = penalty
+        self.dt = dt
+        self.shooting_interval = shooting_interval
+        self.max_iter = max_iter
+        self.tol = tol
+        self.block_s = block_s
+        self.level = level
+        self.continuity_weight = continuity_weight
+        self.warm_start = warm_start
+
+    def _validate(self) -> None:
+        if not isinstance(self.bridge, BridgeProperties):
+            raise InputError("GreyBoxRefit needs bridge=BridgeProperties(mass=..., depth=..., frequency=..., "
+                             "damping_ratio=...)")
+        if not (isinstance(self.n_basis, (int, np.integer)) and 5 <= self.n_basis <= 60):
+            raise InputError(f"n_basis must be an integer in 5..60; got {self.n_basis!r}")
+        for name in ("penalty", "dt", "shooting_interval", "tol", "block_s", "continuity_weight"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be a finite positive number; got {v!r}")
+        if self.shooting_interval < self.dt:
+            raise InputError(f"shooting_interval ({self.shooting_interval}) must be at least dt ({self.dt})")
+        if not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
+            raise InputError(f"max_iter must be a positive integer; got {self.max_iter!r}")
+        if not 0 < self.level < 1:
+            raise InputError(f"level must lie strictly between 0 and 1; got {self.level!r}")
+
+    # ------------------------------------------------------------------ helpers
+
+    def _ur(self, U):
+        return np.asarray(U, dtype=float) / (self.bridge.frequency * self.bridge.depth)
+
+    def _basis(self, U: np.ndarray) -> np.ndarray:
+        """B-spline values at winds U (any shape), shape U.shape + (M,)."""
+        U = np.asarray(U, dtype=float)
+        return bspline_basis(self._ur(U).ravel(), self.knots_).reshape(U.shape + (self.knots_.size - 4,))
+
+    def function_values(self, U, coef: np.ndarray | None = None) -> np.ndarray:
+        """Y1, e1, e2, C_L at winds U (any shape), shape U.shape + (4,) (dimensionless)."""
+        self._check_fitted()
+        coef = self.coef_ if coef is None else coef
+        return self._basis(U) @ coef.T
+
+    def _geometry(self, records: Sequence[Record]):
+        S = records[0].n_sections
+        b = self.bridge
+        if b.mode_shape is not None:
+            if len(b.mode_shape) != S:
+                raise InputError(f"bridge mode_shape has {len(b.mode_shape)} values; the records have {S} sections")
+            phi = np.array(b.mode_shape)
+        else:
+            ratios = amplitude_ratios(np.concatenate([r.A for r in records]))
+            ref = int(np.nanargmax(np.nanmedian(ratios, axis=0)))  # the section others are largest against
+            phi = np.abs(ratios[ref])
+            phi = np.where(np.isfinite(phi), phi, 1.0)
+            phi = phi / phi.max()
+        L = np.ones(S) if b.tributary_lengths is None else np.array(b.tributary_lengths)
+        if L.size != S:
+            raise InputError(f"bridge tributary_lengths has {L.size} values; the records have {S} sections")
+        beta = L * phi / np.sum(L * phi**2)
+        return phi, beta
+
+    # ------------------------------------------------------------------ fit
+
+    def fit(self, records: Sequence[Record | tuple], callback=None) -> "GreyBoxRefit":
+        """Fit the spline functions to the envelopes of all records at once.
+
+        Parameters
+        ----------
+        records : sequence of Record (A and U are used; dA is not)
+        callback : callable or None
+            ``callback(iteration, cost, mu)`` after each accepted Gauss-Newton step.
+
+        Returns
+        -------
+        self
+        """
+        self._validate()
+        records = [as_record(r, i) for i, r in enumerate(records)]
+        if not records:
+            raise InputError("GreyBoxRefit.fit needs at least one record")
+        S = records[0].n_sections
+        if any(r.n_sections != S for r in records):
+            raise InputError("all records must have the same number of sections")
+        phi, beta = self._geometry(records)
+        amp = np.abs(phi)
+        n_steps = max(1, int(round(self.shooting_interval / self.dt)))
+        grid = shooting_grid(records, dt=self.dt, n_steps=n_steps)
+        lo, hi = float(np.min(grid.U)), float(np.max(grid.U))  # padding repeats real samples
+        self.knots_ = uniform_knots(*self._ur(np.array([lo, hi])), self.n_basis)
+        self.phi_, self.beta_, self.n_sections_ = phi, beta, S
+        self.wind_range_ = (lo, hi)
+        M = self.n_basis
+        B = self._basis(grid.U)  # (I, 2n+1, S, M)
+        a = section_factors(grid.U, self.bridge, phi, beta)  # (I, 2n+1, S, 4)
+        zw = self.bridge.omega * self.bridge.damping_ratio
+        scale = np.array([np.sqrt(np.nanmean(r.A**2)) for r in records])[grid.event]
+        if np.any(~(scale > 0)):
+            raise InputError("a record has no positive amplitude: the grey-box fit needs vibration data")
+        Qm = (grid.A @ amp) / np.sum(amp**2)  # least-squares Q of the sections, (I, n+1)
+
+        # basis and factors at the start, midpoint and end of every step: (I, n, 3, S, .)
+        B3 = np.stack([B[:, 0:-1:2], B[:, 1::2], B[:, 2::2]], axis=2)
+        a3 = np.stack([a[:, 0:-1:2], a[:, 1::2], a[:, 2::2]], axis=2)
+
+        def g_of(theta):
+            C = theta.reshape(4, M)
+            F = B @ C.T  # (I, 2n+1, S, 4)
+            g = _g_from_values(F, a, zw)
+            F3 = np.stack([F[:, 0:-1:2], F[:, 1::2], F[:, 2::2]], axis=2)
+
+            def dg(w):
+                Y, E1, E2 = F3[..., 0], F3[..., 1], F3[..., 2]
+                w0, w1, w2, w3 = (w[..., i][..., None] for i in range(4))
+                cw = np.stack([w1 * a3[..., 1] + w2 * a3[..., 2] * E1 + w3 * a3[..., 3] * E2,
+                               w2 * a3[..., 2] * Y, w3 * a3[..., 3] * Y, w0 * a3[..., 0]], axis=-1)
+                return np.einsum("ijpsm,ijpsf->ijfm", B3, cw, optimize=True).reshape(B3.shape[0], B3.shape[1], 4 * M)
+
+            return g, dg
+
+        theta0, start = self._start(records, grid, B, a, zw, Qm, phi, beta)
+        K = difference_penalty(M)
+        R0 = np.zeros((4 * M, 4 * M))
+        lower = np.concatenate([np.full(M, -np.inf), np.zeros(3 * M)])
+        probe = ShootingProblem(grid=grid, amp=amp, scale=scale, g_of=g_of, penalty=R0, lower=lower,
+                                continuity_weight=self.continuity_weight)
+        theta0 = np.maximum(theta0, lower)
+        for shrink in (1.0, 0.5, 0.25, 0.0):  # a start that blows up inside an interval stops Gauss-Newton at once
+            trial = theta0.copy()
+            trial[:M] *= shrink  # Y1 = 0 leaves a damped, forced linear model that cannot blow up
+            if np.isfinite(probe.cost(trial, Qm[:, 0])):
+                break
+        if shrink < 1.0:
+            start += f", Y1 scaled by {shrink:g} (the full start blew up inside an interval)"
+        theta0 = trial
+        probe.set_continuity_weight(0.0)  # the penalty's scale: the data part of J^T J only
+        _, H, _, _, _ = probe.linearise(theta0, Qm[:, 0])
+        probe.set_continuity_weight(self.continuity_weight)
+        R = np.zeros_like(R0)
+        for f in range(4):  # each function's penalty relative to its own block of J^T J
+            sl = slice(f * M, (f + 1) * M)
+            R[sl, sl] = self.penalty * max(np.trace(H[sl, sl]), 1e-300) / np.trace(K) * K
+        probe.penalty = R
+        res = solve_gauss_newton(probe, theta0, Qm[:, 0], max_iter=self.max_iter, tol=self.tol,
+                                 block_s=self.block_s, callback=callback)
+        self.coef_ = res.theta.reshape(4, M)
+        self.cov_ = res.cov
+        self.penalty_matrix_ = R
+        self.fit_info_ = {"cost": res.cost, "iterations": res.iterations, "converged": bool(res.converged),
+                          "message": res.message, "max_defect": res.max_defect, "seconds": res.seconds,
+                          "n_intervals": grid.n_intervals, "n_samples": int(grid.weight.sum()),
+                          "n_records": len(records), "start": start}
+        return self
+
+    def _start(self, records, grid, B, a, zw, Qm, phi, beta):
+        """Start coefficients: the warm-start curves or an equation-error fit (product form)."""
+        M = self.n_basis
+        K = difference_penalty(M)
+        wind = np.linspace(*self.wind_range_, 200)
+        if self.warm_start is not None:
+            ws = self.warm_start
+            try:
+                cur = np.asarray(ws["curves"].values, dtype=float)
+                w = np.asarray(ws["wind"].values, dtype=float)
+            except (KeyError, TypeError) as exc:
+                raise InputError(f"warm_start must be a curves dataset of DESIGN 3.5 ({exc})") from None
+            if cur.shape[0] != phi.size or cur.shape[1] != 4:
+                raise InputError(f"warm_start curves must have shape ({phi.size}, 4, n_wind); got {cur.shape}")
+            ref = int(np.argmax(np.abs(phi)))
+            p = cur[ref] * phi[ref] ** (np.arange(4) - 1)[:, None]  # a_ki = phi_k^(1-i) p_i
+            p = np.stack([np.interp(wind, w, pi) for pi in p])
+            start = "warm start from curves"
+        else:
+            p = self._equation_error(grid, B, a, zw, Qm, wind, phi, beta)
+            start = "equation error (product form)"
+        F = curves_to_functions(wind, p, self.bridge, phi, beta)
+        Bw = self._basis(wind)
+        theta = np.concatenate([_penalised_fit(Bw, F[f], K) for f in range(4)])
+        return theta, start
+
+    def _equation_error(self, grid, B, a, zw, Qm, wind, phi, beta) -> np.ndarray:
+        """p_i(U) on ``wind`` from linear least squares of dQ/dt in the product form."""
+        M = self.n_basis
+        Bg, ag = B[:, 0::2], a[:, 0::2]  # grid points
+        dQ = np.gradient(Qm, grid.h, axis=1)
+        powers = Qm[..., None] ** np.arange(4)  # (I, n+1, 4)
+        X = np.einsum("ijsm,ijsf,ijf->ijfm", Bg, ag, powers)  # columns (CL*, Y, H2, H3) by order
+        ok = grid.weight > 0
+        Xf = X[ok].reshape(-1, 4 * M)
+        y = dQ[ok] + zw * Qm[ok]
+        sc = np.sqrt(np.mean(Xf**2, axis=0)) + 1e-300
+        K = difference_penalty(M)
+        Pen = np.kron(np.eye(4), K)
+        G = (Xf / sc).T @ (Xf / sc)
+        c = np.linalg.solve(G + 1e-3 * np.trace(G) / np.trace(Pen) * Pen + 1e-10 * np.eye(4 * M), (Xf / sc).T @ y) / sc
+        c = c.reshape(4, M)  # order-major: C_L, Y1, Y1 e1, Y1 e2
+        Uw = np.repeat(wind[:, None], phi.size, axis=1)
+        k = section_factors(Uw, self.bridge, phi, beta).sum(axis=1)
+        vals = self._basis(wind) @ c.T  # (n, 4)
+        p = (k * vals).T
+        p[1] -= zw
+        return p
+
+    # ------------------------------------------------------------------ evaluation
+
+    def amplitude_coefficients(self, U, coef: np.ndarray | None = None) -> np.ndarray:
+        """g_i(t) of dQ/dt = sum_i g_i Q^i at section winds U (..., S), shape (..., 4)."""
+        self._check_fitted()
+        U = np.asarray(U, dtype=float)
+        F = self.function_values(U, coef)
+        a = section_factors(U, self.bridge, self.phi_, self.beta_)
+        return _g_from_values(F, a, self.bridge.omega * self.bridge.damping_ratio)
+
+    def amplitude_coefficient_function(self, U):
+        """A function of coefficient draws (c, 4, M) giving g_i at section winds U (n, S): shape (c, n, 4).
+
+        The basis and section factors are evaluated once (for regime verdicts over many draws).
+        """
+        self._check_fitted()
+        U = np.asarray(U, dtype=float)
+        B = self._basis(U)  # (n, S, M)
+        a = section_factors(U, self.bridge, self.phi_, self.beta_)
+        zw = self.bridge.omega * self.bridge.damping_ratio
+
+        def g(coef):
+            F = np.einsum("nsm,cfm->cnsf", B, np.asarray(coef, dtype=float), optimize=True)
+            return _g_from_values(F, a[None], zw)
+
+        return g
+
+    def order_contributions(self, record: Record) -> np.ndarray:
+        """r_ki = |phi_k| g_i(U) (A_k / |phi_k|)^i, shape (n, S, 4), m/s (NaN where A or U is missing)."""
+        record = self._check_record(record)
+        amp = np.abs(self.phi_)
+        g = self.amplitude_coefficients(record.U)  # (n, 4)
+        Q = record.A / amp
+        return amp[None, :, None] * g[:, None, :] * Q[..., None] ** np.arange(4)
+
+    def predict(self, record: Record) -> np.ndarray:
+        """dA/dt, shape (n, S), m/s."""
+        return self.order_contributions(record).sum(axis=-1)
+
+    def simulate(self, record: Record, t0: float | None = None, t1: float | None = None, A0=None) -> Simulation:
+        """Integrate Q by RK4 on the record's grid from A0 (default the measured A at t0) with its wind.
+
+        The run covers the record's samples from t0 to t1 while U is finite;
+        it stops at the first missing wind sample or a non-finite amplitude.
+        """
+        record = self._check_record(record)
+        t = record.t
+        i0 = 0 if t0 is None else int(np.argmin(np.abs(t - t0)))
+        i1 = t.size - 1 if t1 is None else int(np.argmin(np.abs(t - t1)))
+        amp = np.abs(self.phi_)
+        A0 = record.A[i0] if A0 is None else np.asarray(A0, dtype=float)
+        ok = np.isfinite(A0)
+        Q0 = float(np.sum(A0[ok] * amp[ok]) / np.sum(amp[ok] ** 2)) if ok.any() else np.nan
+        ts, U = t[i0:i1 + 1], record.U[i0:i1 + 1]
+        badU = ~np.isfinite(U).all(axis=1)
+        stop_at = int(np.argmax(badU)) if badU.any() else ts.size
+        n = max(stop_at - 1, 0)
+        Q = np.full(ts.size, np.nan)
+        Q[0] = Q0
+        if n > 0:
+            h = np.diff(ts[:n + 1])
+            Umid = 0.5 * (U[:n] + U[1:n + 1])
+            ga, gm, gb = (self.amplitude_coefficients(x) for x in (U[:n], Umid, U[1:n + 1]))
+            step = rk4_step_function()
+            run = step.mapaccum("run", n)
+            traj = np.asarray(run(Q0, np.concatenate([ga, gm, gb], axis=1).T, h[None, :])).ravel()
+            Q[1:n + 1] = traj
+        bad = ~np.isfinite(Q)
+        stopped_at, reason = None, None
+        if bad.any():
+            k = int(np.argmax(bad))
+            Q[k:] = np.nan
+            stopped_at = float(ts[k])
+            reason = "missing wind" if k >= stop_at else "non-finite amplitude"
+        A_sim = Q[:, None] * amp[None, :]
+        A_meas = record.A[i0:i1 + 1]
+        covered = 1.0 if stopped_at is None else float((stopped_at - ts[0]) / max(ts[-1] - ts[0], 1e-300))
+        return Simulation(t=ts, A_sim=A_sim, A_meas=A_meas, stopped_at=stopped_at, reason=reason,
+                          nmse=nmse(A_sim, A_meas), covered=covered, windows=np.zeros(0, dtype=int))
+
+    # ------------------------------------------------------------------ curves
+
+    def _z(self) -> float:
+        return float(norm.ppf(0.5 + 0.5 * self.level))
+
+    def _bands(self, value: np.ndarray, grad: np.ndarray):
+        """value (...), grad (..., P) -> lower, upper by the delta method."""
+        sd = np.sqrt(np.maximum(np.einsum("...a,ab,...b->...", grad, self.cov_, grad), 0.0))
+        return value - self._z() * sd, value + self._z() * sd
+
+    def default_wind(self, step: float = 0.1) -> np.ndarray:
+        """The fitted data's wind range on multiples of ``step`` (m/s)."""
+        self._check_fitted()
+        lo, hi = self.wind_range_
+        return np.arange(math.ceil(lo / step - 1e-9), math.floor(hi / step + 1e-9) + 1) * step
+
+    def physical_curves(self, wind=None) -> xr.Dataset:
+        """Y1, e1, e2, C_L against wind with their bands (``<name>_lower``, ``<name>_upper``)."""
+        self._check_fitted()
+        wind = self.default_wind() if wind is None else np.atleast_1d(np.asarray(wind, dtype=float))
+        B = self._basis(wind)  # (n, M)
+        M = self.n_basis
+        data = {}
+        for f, name in enumerate(FUNCTIONS):
+            val = B @ self.coef_[f]
+            grad = np.zeros((wind.size, 4 * M))
+            grad[:, f * M:(f + 1) * M] = B
+            lo, hi = self._bands(val, grad)
+            data[name] = ("wind", val, {"units": "1", "long_name": f"{name} at wind U (yaw 0)"})
+            data[f"{name}_lower"] = ("wind", lo, {"units": "1", "long_name": f"lower {self.level:g} band of {name}"})
+            data[f"{name}_upper"] = ("wind", hi, {"units": "1", "long_name": f"upper {self.level:g} band of {name}"})
+        return xr.Dataset(data, coords={"wind": ("wind", wind, {"units": "m/s"}),
+                                        "reduced_velocity": ("wind", self._ur(wind), {"units": "1"})})
+
+    def curves(self, wind=None) -> xr.Dataset:
+        """Coefficient curves a_ki(U) of DESIGN 3.5 with delta-method bands.
+
+        a_ki = phi_k^(1-i) p_i(U), p_i the amplitude-equation coefficients with
+        every section at wind U (p_1 includes -zeta w).
+
+        Returns
+        -------
+        xarray.Dataset
+            ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind), m^(1-i)/s.
+        """
+        self._check_fitted()
+        wind = self.default_wind() if wind is None else np.atleast_1d(np.asarray(wind, dtype=float))
+        if wind.ndim != 1 or not np.all(np.isfinite(wind)) or np.any(wind <= 0):
+            raise ValueError("wind must be a 1-D array of finite positive speeds in m/s")
+        S, M = self.n_sections_, self.n_basis
+        U = np.repeat(wind[:, None], S, axis=1)
+        k = section_factors(U, self.bridge, self.phi_, self.beta_).sum(axis=1)  # (n, 4)
+        B = self._basis(wind)
+        F = B @ self.coef_.T  # (n, 4)
+        Y, E1, E2, CL = F.T
+        p = np.stack([k[:, 0] * CL, k[:, 1] * Y - self.bridge.omega * self.bridge.damping_ratio,
+                      k[:, 2] * Y * E1, k[:, 3] * Y * E2])  # (4, n)
+        grad = np.zeros((4, wind.size, 4, M))
+        grad[0, :, 3] = k[:, 0, None] * B
+        grad[1, :, 0] = k[:, 1, None] * B
+        grad[2, :, 0] = (k[:, 2] * E1)[:, None] * B
+        grad[2, :, 1] = (k[:, 2] * Y)[:, None] * B
+        grad[3, :, 0] = (k[:, 3] * E2)[:, None] * B
+        grad[3, :, 2] = (k[:, 3] * Y)[:, None] * B
+        lo, hi = self._bands(p, grad.reshape(4, wind.size, 4 * M))
+        fac = self.phi_[:, None] ** (1 - np.arange(4))[None, :]  # (S, 4)
+        point = fac[..., None] * p[None]
+        lower = np.where(fac[..., None] >= 0, fac[..., None] * lo[None], fac[..., None] * hi[None])
+        upper = np.where(fac[..., None] >= 0, fac[..., None] * hi[None], fac[..., None] * lo[None])
+        dims = ("equation", "order", "wind")
+        units = "m^(1-order) s-1"
+        return xr.Dataset(
+            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (DESIGN 3.5)"}),
+             "curves_lower": (dims, lower, {"units": units, "long_name": f"lower {self.level:g} delta-method band"}),
+             "curves_upper": (dims, upper, {"units": units, "long_name": f"upper {self.level:g} delta-method band"})},
+            coords={"equation": section_names(S), "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})},
+            attrs={"model": type(self).__name__},
+        )
+
+    def equations(self, precision: int = 3) -> list[str]:
+        """One line per section: its amplitude equation with the functions named."""
+        self._check_fitted()
+        out = []
+        for k, name in enumerate(section_names(self.n_sections_)):
+            out.append(f"dA{k + 1}/dt = |phi_{k + 1}| dQ/dt, Q = A{k + 1}/{abs(self.phi_[k]):.{precision}g}; "
+                       f"dQ/dt = averaged Simiu-Scanlan with spline Y1, e1, e2, C_L of U/(f D) "
+                       f"({self.n_basis} B-splines each)")
+        return out
+
+    # ------------------------------------------------------------------ persistence
+
+    def to_dataset(self, wind=None) -> xr.Dataset:
+        """Everything :meth:`load` needs plus the curves (physical and DESIGN 3.5) on ``wind``."""
+        self._check_fitted()
+        M = self.n_basis
+        params = {k: v for k, v in self.get_params().items() if k not in ("bridge", "warm_start")}
+        ds = xr.Dataset(
+            {"coef": (("function", "basis"), self.coef_, {"units": "1", "long_name": "B-spline coefficients"}),
+             "coef_cov": (("parameter", "parameter_"), self.cov_,
+                          {"units": "1", "long_name": "sandwich covariance of coef (row-major flattening)"}),
+             "knots": (("knot",), self.knots_, {"units": "1", "long_name": "knots in reduced velocity U/(f D)"}),
+             "mode_shape": (("section",), self.phi_, {"units": "1"}),
+             "participation": (("section",), self.beta_, {"units": "1"})},
+            coords={"function": list(FUNCTIONS), "section": section_names(self.n_sections_)},
+            attrs={"model": type(self).__name__, "bridge_json": self.bridge.to_json(),
+                   "params_json": json.dumps(params, sort_keys=True),
+                   "fit_info_json": json.dumps(self.fit_info_, sort_keys=True),
+                   "wind_min": self.wind_range_[0], "wind_max": self.wind_range_[1], "n_basis_": M},
+        )
+        cur = self.curves(wind)
+        phys = self.physical_curves(cur["wind"].values)
+        ds = ds.merge(cur.drop_vars("equation")).merge(phys)
+        ds = ds.assign_coords(equation=section_names(self.n_sections_))
+        ds.attrs.update(model=type(self).__name__)
+        return ds
+
+    def save(self, path, wind=None):
+        """Write the grey-box file (:mod:`vivbench.io.greybox`) atomically; returns the path."""
+        from vivbench.io.greybox import write_greybox
+
+        return write_greybox(self.to_dataset(wind), path)
+
+    @classmethod
+    def load(cls, path) -> "GreyBoxRefit":
+        """A fitted model from a file written by :meth:`save`."""
+        from vivbench.io.greybox import read_greybox
+
+        ds = read_greybox(path)
+        return cls.from_dataset(ds)
+
+    @classmethod
+    def from_dataset(cls, ds: xr.Dataset) -> "GreyBoxRefit":
+        bridge = BridgeProperties.from_dict(json.loads(ds.attrs["bridge_json"]))
+        model = cls(bridge=bridge, **json.loads(ds.attrs["params_json"]))
+        model.coef_ = np.asarray(ds["coef"].values, dtype=float)
+        model.cov_ = np.asarray(ds["coef_cov"].values, dtype=float)
+        model.knots_ = np.asarray(ds["knots"].values, dtype=float)
+        model.phi_ = np.asarray(ds["mode_shape"].values, dtype=float)
+        model.beta_ = np.asarray(ds["participation"].values, dtype=float)
+        model.n_sections_ = int(model.phi_.size)
+        model.wind_range_ = (float(ds.attrs["wind_min"]), float(ds.attrs["wind_max"]))
+        model.fit_info_ = json.loads(ds.attrs["fit_info_json"])
+        return model

@@ -1,0 +1,327 @@
+"""Gauss-Newton (Levenberg-Marquardt) solution of the grey-box multiple-shooting problem, and its covariance.
+
+Decision variables x = [theta (P spline coefficients), s (one node state per
+shooting interval)]. The objective is
+
+    Phi(x) = sum r^2 + sum d^2 + theta^T R theta
+
+with the data residuals r (simulated minus measured section amplitudes, each
+event divided by its amplitude scale), the continuity defects d (end of an
+interval minus the next node, heavily weighted: a quadratic penalty that
+leaves defects orders of magnitude below the data misfit; the largest is
+reported) and the roughness penalty R. Each iteration builds the exact
+residual Jacobian J from the CasADi step Jacobians
+(:mod:`vivbench.models.greybox_shooting`) and solves the Gauss-Newton
+system (J^T J + R + mu diag) dx = -(J^T r + R theta) densely (a few thousand
+unknowns); a step is kept only when Phi falls (Levenberg-Marquardt control of
+mu). Lower bounds (non-negative limiting terms and locked force) are kept by
+projection, with the variables pinned at a bound that the step would push
+out frozen for that step.
+
+Covariance: a sandwich H^-1 M H^-1 with H = J^T J + R at the solution and
+M = sum_b g_b g_b^T the outer products of the scores of contiguous blocks of
+intervals (``block_s`` seconds of one event): residuals are correlated inside
+a block (envelope noise is band-limited, model error is slow) and taken as
+independent between blocks.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import scipy.linalg as sla
+
+from vivbench.models.greybox_shooting import ShootingGrid, StepFunctions, propagate
+
+__all__ = ["ShootingProblem", "GaussNewtonResult", "solve_gauss_newton", "block_ids"]
+
+
+@dataclass
+class ShootingProblem:
+    """What the solver needs to evaluate residuals and their Jacobian.
+
+    Attributes
+    ----------
+    grid : ShootingGrid
+    amp : ndarray, shape (S,)
+        |phi_k|: A_k = amp_k Q.
+    scale : ndarray, shape (I,)
+        Amplitude scale of each interval's event, m.
+    g_of : callable
+        ``g_of(theta)`` -> (g (I, 2n+1, 4), dg_dtheta(p, w) -> (I, P)).
+    penalty : ndarray, shape (P, P)
+        R.
+    lower : ndarray, shape (P,)
+        Lower bounds of theta (-inf where free).
+    continuity_weight : float
+        Weight of a defect relative to one sample's residual (squared scale).
+    """
+
+    grid: ShootingGrid
+    amp: np.ndarray
+    scale: np.ndarray
+    g_of: Callable
+    penalty: np.ndarray
+    lower: np.ndarray
+    continuity_weight: float = 1e4
+
+    def __post_init__(self):
+        self.funcs = StepFunctions(self.grid.n_intervals, self.grid.n_steps, self.grid.h)
+        grid = self.grid
+        self.sw = grid.weight / self.scale[:, None]  # (I, n+1)
+        self.set_continuity_weight(self.continuity_weight)
+        self.has_next = grid.next >= 0
+        self.P = self.penalty.shape[0]
+
+    def set_continuity_weight(self, weight: float) -> None:
+        """Weight of a continuity defect relative to one grid sample (all sections)."""
+        self.continuity_weight = float(weight)
+        self.cw = np.sqrt(self.continuity_weight * float(np.sum(self.amp**2))) / self.scale
+
+    def residuals(self, Q: np.ndarray, s: np.ndarray):
+        """Data residuals (I, n+1, S) and continuity defects (I,) (0 where no next interval)."""
+        r = self.sw[..., None] * (self.amp * Q[..., None] - self.grid.A)
+        nxt = np.where(self.has_next, self.grid.next, 0)
+        d = np.where(self.has_next, self.cw * (Q[:, -1] - s[nxt]), 0.0)
+        return r, d
+
+    def cost(self, theta: np.ndarray, s: np.ndarray) -> float:
+        g, _ = self.g_of(theta)
+        Q, _ = propagate(self.funcs, s, g, self.grid.h)
+        r, d = self.residuals(Q, s)
+        val = float(np.sum(r**2) + np.sum(d**2) + theta @ self.penalty @ theta)
+        return val if np.isfinite(val) else np.inf
+
+    def linearise(self, theta: np.ndarray, s: np.ndarray):
+        """Cost, Gauss-Newton matrix H = J^T J (no penalty), J^T r, and per-interval scores.
+
+        Returns
+        -------
+        cost : float
+        H : ndarray, shape (P + I, P + I)
+        grad : ndarray, shape (P + I,)
+        local : (ndarray (I, 1 + P), ndarray (I, 1 + P), ndarray (I,))
+            Per interval: J^T r of its data residuals on (s_i, theta); the
+            continuity row a_i on (s_i, theta) and its value d_i (the row also
+            holds -cw_i on s_next).
+        """
+        P, I = self.P, self.grid.n_intervals
+        g, dg = self.g_of(theta)
+        Q, sens = propagate(self.funcs, s, g, self.grid.h, dg)
+        r, d = self.residuals(Q, s)
+        cost = float(np.sum(r**2) + np.sum(d**2) + theta @ self.penalty @ theta)
+        c = self.sw**2 * float(np.sum(self.amp**2))  # (I, n+1)
+        X = sens * np.sqrt(c)[..., None]
+        G = np.matmul(X.transpose(0, 2, 1), X)  # (I, 1+P, 1+P)
+        u = self.sw * np.einsum("ijk,k->ij", r, self.amp)
+        gloc = np.einsum("ij,ija->ia", u, sens)
+        arow = np.where(self.has_next[:, None], self.cw[:, None] * sens[:, -1], 0.0)  # (I, 1+P)
+        bval = np.where(self.has_next, -self.cw, 0.0)
+        nxt = np.where(self.has_next, self.grid.next, 0)
+        n = P + I
+        H = np.zeros((n, n))
+        grad = np.zeros(n)
+        si = P + np.arange(I)
+        sn = P + nxt
+        H[:P, :P] = G[:, 1:, 1:].sum(axis=0) + arow[:, 1:].T @ arow[:, 1:]
+        H[si, si] += G[:, 0, 0] + arow[:, 0] ** 2
+        H[:P, si] += G[:, 1:, 0].T + (arow[:, 1:] * arow[:, :1]).T
+        np.add.at(H, (slice(0, P), sn), (arow[:, 1:] * bval[:, None]).T)
+        np.add.at(H, (si, sn), arow[:, 0] * bval)
+        np.add.at(H, (sn, sn), bval**2)
+        # the blocks above were filled in the upper triangle (theta before s, s_i before s_next)
+        H = np.triu(H) + np.triu(H, 1).T
+        grad[:P] = gloc[:, 1:].sum(axis=0) + arow[:, 1:].T @ d
+        grad[P:] += gloc[:, 0] + arow[:, 0] * d
+        np.add.at(grad, sn, bval * d)
+        return cost, H, grad, (gloc, arow, d), Q
+
+
+@dataclass
+class GaussNewtonResult:
+    """Solution, covariance and diagnostics of :func:`solve_gauss_newton`."""
+
+    theta: np.ndarray
+    s: np.ndarray
+    cov: np.ndarray
+    cost: float
+    iterations: int
+    converged: bool
+    message: str
+    max_defect: float
+    seconds: float
+    history: list
+    Q: np.ndarray
+
+
+def block_ids(grid: ShootingGrid, block_s: float) -> np.ndarray:
+    """Block of every interval: contiguous ``block_s`` seconds of one event (compact ids)."""
+    t0 = grid.t[:, 0]
+    first = {}
+    for e, t in zip(grid.event, t0):  # one entry per interval (a few thousand)
+        first.setdefault(int(e), float(t))
+    rel = t0 - np.array([first[int(e)] for e in grid.event])
+    key = grid.event.astype(np.int64) * 1_000_000 + np.floor(rel / block_s).astype(np.int64)
+    return np.unique(key, return_inverse=True)[1]
+
+
+def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndarray, *, max_iter: int = 40,
+                       tol: float = 1e-7, block_s: float = 300.0, callback=None,
+                       first_weight: float = 1e2) -> GaussNewtonResult:
+    """Levenberg-Marquardt iterations on the Gauss-Newton model, then the sandwich covariance.
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+    theta0 : ndarray, shape (P,)
+    s0 : ndarray, shape (I,)
+    max_iter : int
+        Jacobian evaluations at most.
+    tol : float
+        Stop when an accepted step lowers the cost by less than ``tol`` times the cost.
+    block_s : float, s
+        Length of the blocks of the covariance's score sum.
+    callback : callable or None
+        ``callback(iteration, cost, mu)`` after every accepted step (progress).
+    first_weight : float
+        Continuation: the continuity weight starts here and grows 100-fold
+        after each converged stage up to the problem's own weight (started
+        at full weight, the defects of node states taken from the noisy
+        measurement dominate and the iterations crawl: measured on
+        noise-free envelopes, cost 57 after 15 iterations against 0.3 after 4
+        with the weight at 1e3).
+
+    Returns
+    -------
+    GaussNewtonResult
+    """
+    t_start = time.perf_counter()
+    target = problem.continuity_weight
+    weights = [target]
+    while weights[-1] / 100.0 >= first_weight:
+        weights.append(weights[-1] / 100.0)
+    theta = np.maximum(np.asarray(theta0, dtype=float), problem.lower)
+    s = np.asarray(s0, dtype=float).copy()
+    history = []
+    total = 0
+    for weight in weights[::-1]:
+        problem.set_continuity_weight(weight)
+        theta, s, lin, it, converged, message = _levenberg_marquardt(problem, theta, s, max_iter, tol, history,
+                                                                     callback, total)
+        total += it
+    it = total
+    cost, H, grad, (gloc, arow, d), Q = lin
+    history.append(cost)
+    cov = _sandwich(problem, H, gloc, arow, d, block_ids(problem.grid, block_s))
+    nxt = np.where(problem.has_next, problem.grid.next, 0)
+    defect = np.where(problem.has_next, np.abs(Q[:, -1] - s[nxt]) / problem.scale, 0.0)
+    return GaussNewtonResult(theta=theta, s=s, cov=cov, cost=cost, iterations=it, converged=converged,
+                             message=message, max_defect=float(defect.max(initial=0.0)),
+                             seconds=time.perf_counter() - t_start, history=history, Q=Q)
+
+
+def _levenberg_marquardt(problem, theta, s, max_iter, tol, history, callback, offset):
+    """Levenberg-Marquardt iterations at the problem's current continuity weight."""
+    P = problem.P
+    R = problem.penalty
+    mu = 1e-3
+    converged, message = False, "iteration limit"
+    it = 0
+    lin = problem.linearise(theta, s)
+    if not np.isfinite(lin[0]):
+        raise ValueError("the grey-box start gives a non-finite cost (a simulation blows up inside an interval)")
+    for it in range(1, max_iter + 1):
+        cost, H, grad, _, _ = lin
+        history.append(cost)
+        x = np.concatenate([theta, s])
+        Hp = H.copy()
+        Hp[:P, :P] += R
+        gp = grad.copy()
+        gp[:P] += R @ theta
+        lower = np.concatenate([problem.lower, np.full(s.size, -np.inf)])
+        pinned = (x <= lower) & (gp > 0)  # at the bound and pushed outwards
+        diag_all = np.diag(Hp)
+        floor = 1e-12 * max(float(diag_all.max()), 1e-300)
+        accepted = False
+        for _ in range(25):
+            dx = _bounded_step(Hp, gp, x, lower, pinned, mu * diag_all + floor)
+            if dx is None:
+                mu *= 10.0
+                continue
+            xn = np.maximum(x + dx, lower)
+            new_cost = problem.cost(xn[:P], xn[P:])
+            if new_cost < cost:
+                accepted = True
+                theta, s = xn[:P], xn[P:]
+                mu = max(mu / 3.0, 1e-9)
+                break
+            mu *= 4.0
+        if not accepted:
+            converged, message = True, "no step lowers the cost (local minimum within rounding)"
+            break
+        if callback is not None:
+            callback(offset + it, new_cost, mu)
+        lin = problem.linearise(theta, s)
+        if cost - new_cost < tol * cost:
+            converged, message = True, f"relative decrease below {tol:g}"
+            break
+    return theta, s, lin, it, converged, message
+
+
+def _bounded_step(H, g, x, lower, pinned, damping, max_rounds: int = 6):
+    """Damped Gauss-Newton step that stops at the lower bounds (a few rounds of an active set).
+
+    Variables that the step carries below their bound are moved to it and
+    fixed, and the rest is solved again with that move, so the projected step
+    stays a minimiser of the quadratic model on the remaining variables.
+    None when the damped matrix is not positive definite.
+    """
+    fixed = pinned.copy()
+    dx = np.zeros_like(x)
+    for _ in range(max_rounds):  # usually one or two rounds
+        free = ~fixed
+        dx_fixed = np.where(fixed, np.where(pinned, 0.0, lower - x), 0.0)
+        dx_fixed = np.where(np.isfinite(dx_fixed), dx_fixed, 0.0)
+        rhs = -g[free] - H[np.ix_(free, fixed)] @ dx_fixed[fixed]
+        A = H[np.ix_(free, free)] + np.diag(damping[free])
+        try:
+            sol = sla.cho_solve(sla.cho_factor(A, lower=False, check_finite=False), rhs, check_finite=False)
+        except (np.linalg.LinAlgError, ValueError):
+            return None
+        dx = dx_fixed.copy()
+        dx[free] = sol
+        out = free & (x + dx < lower)
+        if not out.any():
+            break
+        fixed |= out
+    return dx
+
+
+def _sandwich(problem: ShootingProblem, H, gloc, arow, d, block: np.ndarray) -> np.ndarray:
+    """Block sandwich covariance of theta, shape (P, P)."""
+    P, I = problem.P, problem.grid.n_intervals
+    Hp = H.copy()
+    Hp[:P, :P] += problem.penalty
+    n_blocks = int(block.max()) + 1
+    # score of every interval on (theta, s_i, s_next): data part plus its continuity row
+    sc_theta = gloc[:, 1:] + arow[:, 1:] * d[:, None]
+    sc_s = gloc[:, 0] + arow[:, 0] * d
+    sc_next = np.where(problem.has_next, -problem.cw * d, 0.0)
+    Gb = np.zeros((n_blocks, P + I))
+    np.add.at(Gb, (block, slice(0, P)), sc_theta)
+    np.add.at(Gb, (block, P + np.arange(I)), sc_s)
+    nxt = np.where(problem.has_next, problem.grid.next, 0)
+    np.add.at(Gb, (block, P + nxt), sc_next)
+    # Jacobi scaling first: spline coefficients (e2 ~ 1e2, C_L ~ 1e-2) and node states (~1e-2 m)
+    # differ by orders of magnitude, which alone would make H look singular
+    dsc = 1.0 / np.sqrt(np.maximum(np.diag(Hp), 1e-300))
+    Hs = Hp * dsc[:, None] * dsc[None, :]
+    rhs = np.zeros((P + I, P))
+    rhs[np.arange(P), np.arange(P)] = dsc[:P]
+    Hinv_rows = (sla.solve(Hs, rhs, assume_a="pos", check_finite=False) * dsc[:, None]).T  # (P, P + I)
+    KG = Hinv_rows @ Gb.T
+    factor = n_blocks / max(n_blocks - 1, 1)
+    return factor * (KG @ KG.T)

@@ -1,0 +1,92 @@
+"""Regimes of the grey-box refit per window and their identifiability (DESIGN 2.5).
+
+A window's regime is the rule of DESIGN 2.5 applied to the grey-box model's
+order contributions over the window's data. It counts as identifiable when at
+least ``agreement`` of ``n_draws`` parameter draws from the model's sandwich
+covariance (a Gaussian around the fitted spline coefficients) give the window
+the same regime: the draws are the confidence band evaluated on the window's
+own (A, U). The covariance does not include the penalty's smoothing bias or
+the model's own limits, so the verdict is only as honest as the bands (the
+validation reports how often flagged windows carry the true regime).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vivbench.core.record import Record
+from vivbench.core.regime import DEFAULT_TAU, regime_rule
+from vivbench.models.greybox import GreyBoxRefit
+from vivbench.regimes.varying import window_order_stats
+
+__all__ = ["greybox_window_verdicts", "greybox_draws"]
+
+
+def greybox_draws(model: GreyBoxRefit, n_draws: int, seed: int = 0) -> np.ndarray:
+    """Spline coefficients drawn from the fitted model's covariance, shape (n_draws, 4, M).
+
+    The bounds of the fit (e1, e2, C_L >= 0) are kept by clipping the draws.
+    """
+    rng = np.random.default_rng(seed)
+    mean = model.coef_.ravel()
+    cov = 0.5 * (model.cov_ + model.cov_.T)
+    w, V = np.linalg.eigh(cov)
+    z = rng.standard_normal((n_draws, mean.size))
+    draws = mean + (z * np.sqrt(np.clip(w, 0.0, None))) @ V.T
+    draws = draws.reshape(n_draws, 4, -1)
+    draws[:, 1:] = np.maximum(draws[:, 1:], 0.0)
+    return draws
+
+
+def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, window_end, *,
+                            tau: float = DEFAULT_TAU, agreement: float = 0.95, n_draws: int = 100, seed: int = 0,
+                            chunk: int = 25, sample_step: float = 1.0) -> dict:
+    """Regimes of a fitted grey-box model over a record's windows, and their identifiability.
+
+    Parameters
+    ----------
+    model : GreyBoxRefit (fitted)
+    record : Record
+    window_start, window_end : array_like, shape (W,), s (a window holds start <= t < end)
+    tau : float
+        Regime threshold (DESIGN 2.5).
+    agreement : float
+        Share of the draws that must give the window's regime.
+    n_draws : int
+        Parameter draws from the covariance.
+    seed : int
+        Seed of the draws (the same for every record, so verdicts do not depend on the order of events).
+    chunk : int
+        Draws evaluated together (memory: chunk x n_samples x S x 4 floats).
+    sample_step : float, s
+        Window statistics use the record's samples thinned to about this
+        spacing (the envelope is slow; a 50 s window keeps 50 samples), which
+        makes the verdicts of a campaign several times cheaper.
+
+    Returns
+    -------
+    dict
+        ``regime`` (W, S) int8 (0: no valid sample), ``identifiable`` (W, S) bool,
+        ``agreement`` (W, S) share of draws with the same regime, ``order_rms`` (W, S, 4) m/s,
+        ``c1`` (W, S) 1/s.
+    """
+    stride = 1
+    if record.t.size > 1:
+        stride = max(1, int(round(sample_step / float(np.median(np.diff(record.t))))))
+    t, A, U = record.t[::stride], record.A[::stride], record.U[::stride]
+    record = Record(event_id=record.event_id, t=t, A=A, U=U)
+    R, c1, nv = window_order_stats(model.order_contributions(record), A, t, window_start, window_end)
+    point = np.where(nv > 0, regime_rule(np.nan_to_num(R), c1, tau), 0).astype(np.int8)
+    draws = greybox_draws(model, n_draws, seed)
+    amp = np.abs(model.phi_)
+    Qpow = (A / amp)[..., None] ** np.arange(4)  # (n, S, 4)
+    same = np.zeros(point.shape)
+    g_of = model.amplitude_coefficient_function(record.U)  # the basis once, then one product per chunk of draws
+    for c0 in range(0, n_draws, chunk):
+        g = g_of(draws[c0:c0 + chunk])  # (c, n, 4)
+        r = amp[None, None, :, None] * g[:, :, None, :] * Qpow[None]
+        Rb, c1b, _ = window_order_stats(r, A, t, window_start, window_end)
+        same += (regime_rule(np.nan_to_num(Rb), c1b, tau) == point[None]).sum(axis=0)
+    agree = same / n_draws
+    return {"regime": point, "identifiable": (agree >= agreement) & (point > 0), "agreement": agree,
+            "order_rms": R, "c1": c1}

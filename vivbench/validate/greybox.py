@@ -1,0 +1,181 @@
+"""The grey-box refit against the truth: curves, net linear growth rate, Y1, bands, regimes, NMSE.
+
+Validation may read an event's ``/truth`` (the fit never does). The truth's
+coefficient curves (DESIGN 3.5, ``/truth/curves`` or rebuilt from the
+generator configuration) and its aerodynamic function Y1 (from the
+configuration, at yaw 0) are compared with the grey-box model's over the
+lock-in range: the winds of the truth samples in a self-excited regime (2..4).
+Scores (relative RMS errors, band coverage) are those of
+:func:`vivbench.validate.curve_errors` on the reference section, so the
+campaign model's numbers (``vivbench validate``) compare one to one.
+
+Note: the truth's curves are at yaw 0, while the records carry no wind
+direction; a truth whose Y1 and C_L fall with yaw is averaged over the
+events' yaw angles by any model fitted to A and U alone.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+
+import numpy as np
+
+from vivbench.core.terms import reference_section
+from vivbench.models.greybox import GreyBoxRefit
+from vivbench.regimes.truth import truth_window_regimes
+from vivbench.validate.metrics import curve_errors
+from vivbench.validate.recovery import finite_median, model_window_rhs_errors_true_AU, regime_scores
+
+__all__ = ["greybox_recovery", "truth_y1"]
+
+
+def truth_y1(truth, wind: np.ndarray) -> np.ndarray | None:
+    """The generator's Y1 at winds ``wind`` (yaw 0) from an event's ``config_json``; None if not readable."""
+    from vivbench.synth import config_from_dict
+
+    try:
+        meta = json.loads(truth.attrs["config_json"])
+        config = config_from_dict(meta["generator"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    s = config.structure
+    return np.asarray(config.aero.Y1.at_wind(np.asarray(wind, dtype=float), s.frequency, s.depth), dtype=float)
+
+
+def _coverage(lower, upper, truth) -> float:
+    ok = np.isfinite(truth) & np.isfinite(lower) & np.isfinite(upper)
+    return float(np.mean((truth[ok] >= lower[ok]) & (truth[ok] <= upper[ok]))) if ok.any() else float("nan")
+
+
+def _rel_rms(x, ref) -> float:
+    ok = np.isfinite(x) & np.isfinite(ref)
+    if not ok.any():
+        return float("nan")
+    return float(np.sqrt(np.mean((x[ok] - ref[ok]) ** 2)) / np.sqrt(np.mean(ref[ok] ** 2)))
+
+
+def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events: Sequence[dict], *,
+                     campaign_curves=None, tau: float = 0.2, active_share: float = 0.1) -> dict:
+    """Score a fitted grey-box model against the truth of a synthetic campaign.
+
+    Parameters
+    ----------
+    model : GreyBoxRefit, fitted on the campaign's results
+    event_files : the synthetic event files (with ``/truth``)
+    windows : xarray.Dataset of :func:`vivbench.analysis.greybox_results` (regimes, verdicts)
+    events : its per-event rows (``event_id``, ``nmse``)
+    campaign_curves : xarray.Dataset or None
+        Curves (DESIGN 3.5) of another campaign-level model (the campaign
+        model) scored the same way, for comparison.
+    tau : regime threshold of the truth's window regimes
+    active_share : see :func:`vivbench.validate.model_window_rhs_errors_true_AU`
+
+    Returns
+    -------
+    dict
+        ``curves`` (per-equation :func:`curve_errors` and the reference
+        section's ``linear``, ``total``, ``linear_band_coverage`` and
+        ``lock_in_wind``), ``y1`` (relative RMS error and band coverage of Y1
+        over the lock-in range; NaN when the truth's Y1 is not readable),
+        ``regime`` (:func:`regime_scores` plus ``precision_identifiable``: share
+        of flagged windows with the true regime), ``rhs_error_true_AU_median``
+        (and ``_active``), ``nmse_median``, ``campaign_curves`` (the same
+        scores for ``campaign_curves``, or None), ``summary`` (flat numbers).
+    """
+    from vivbench.io.event import read_event
+    from vivbench.validate.campaign import event_truth_curves
+
+    truths = {}
+    for path in event_files:
+        tree = read_event(path)
+        truths[str(tree.attrs["event_id"])] = tree["truth"].ds
+    event_of = windows["event_id"].values.astype(str)
+    U, A, excited, regimes, truth_reg, flags, errs, errs_act = [], [], [], [], [], [], [], []
+    truth_curves = None
+    for event_id in dict.fromkeys(event_of):
+        if event_id not in truths:
+            continue
+        truth = truths[event_id]
+        if truth_curves is None:
+            truth_curves = event_truth_curves(truth)
+        sel = event_of == event_id
+        start, end = windows["window_start"].values[sel], windows["window_end"].values[sel]
+        regimes.append(windows["regime"].values[sel])
+        flags.append(windows["identifiable"].values[sel])
+        truth_reg.append(truth_window_regimes(truth, start, end, tau=tau))
+        U.append(truth["U"].values)
+        A.append(truth["A"].values)
+        excited.append(truth["regime"].values >= 2)
+        e, act = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
+                                                 active_share=active_share)
+        errs.append(e.ravel())
+        errs_act.append(np.where(act, e, np.nan).ravel())
+    out: dict = {"n_events_scored": len(U)}
+    k = reference_section(model.n_sections_)
+    cur = model.curves()
+    wind = cur["wind"].values
+    if truth_curves is not None and U:
+        tc, tw = truth_curves
+        Uc, Ac, Xc = np.concatenate(U), np.concatenate(A), np.concatenate(excited)
+        err = curve_errors(cur["curves"].values, wind, tc, tw, Uc, Ac, Xc)
+        lock = err["lock_in_wind"][k]
+        g = (wind >= lock[0]) & (wind <= lock[1]) if lock else np.zeros(wind.size, dtype=bool)
+        a_true = np.interp(wind, tw, tc[k, 1], left=np.nan, right=np.nan)
+        cov_lin = _coverage(cur["curves_lower"].values[k, 1, g], cur["curves_upper"].values[k, 1, g], a_true[g])
+        out["curves"] = {**err, "reference_equation": f"S{k + 1}", "linear": err["linear"][k],
+                         "total": err["total"][k], "linear_band_coverage": cov_lin, "lock_in_wind": lock}
+        phys = model.physical_curves(wind)
+        y1_true = truth_y1(next(iter(truths.values())), wind)
+        if y1_true is not None and g.any():
+            out["y1"] = {"error": _rel_rms(phys["Y1"].values[g], y1_true[g]),
+                         "band_coverage": _coverage(phys["Y1_lower"].values[g], phys["Y1_upper"].values[g],
+                                                    y1_true[g])}
+        else:
+            out["y1"] = {"error": float("nan"), "band_coverage": float("nan")}
+        if campaign_curves is not None:
+            cw = campaign_curves["wind"].values
+            e2 = curve_errors(campaign_curves["curves"].values, cw, tc, tw, Uc, Ac, Xc)
+            g2 = (cw >= lock[0]) & (cw <= lock[1]) if lock else np.zeros(cw.size, dtype=bool)
+            a2 = np.interp(cw, tw, tc[k, 1], left=np.nan, right=np.nan)
+            cov2 = (_coverage(campaign_curves["curves_lower"].values[k, 1, g2],
+                              campaign_curves["curves_upper"].values[k, 1, g2], a2[g2])
+                    if "curves_lower" in campaign_curves else float("nan"))
+            out["campaign_curves"] = {"linear": e2["linear"][k], "total": e2["total"][k],
+                                      "linear_band_coverage": cov2}
+        else:
+            out["campaign_curves"] = None
+    else:
+        out["curves"] = None
+        out["y1"] = {"error": float("nan"), "band_coverage": float("nan")}
+        out["campaign_curves"] = None
+    if regimes:
+        ident, tr, fl = np.concatenate(regimes), np.concatenate(truth_reg), np.concatenate(flags).astype(bool)
+        sc = regime_scores(ident, tr, fl)
+        m = fl & (tr > 0) & (ident > 0)
+        sc["precision_identifiable"] = float(np.mean(ident[m] == tr[m])) if m.any() else float("nan")
+        sc["n_identifiable"] = int(m.sum())
+        out["regime"] = sc
+    else:
+        out["regime"] = None
+    out["rhs_error_true_AU_median"] = finite_median(np.concatenate(errs)) if errs else float("nan")
+    out["rhs_error_true_AU_median_active"] = finite_median(np.concatenate(errs_act)) if errs_act else float("nan")
+    nm = np.array([row["nmse"] for row in events], dtype=float)
+    out["nmse_median"] = finite_median(nm)
+    c = out["curves"] or {}
+    summary = {
+        "curve_error_linear": c.get("linear", float("nan")), "curve_error_total": c.get("total", float("nan")),
+        "linear_band_coverage": c.get("linear_band_coverage", float("nan")),
+        "y1_error": out["y1"]["error"], "y1_band_coverage": out["y1"]["band_coverage"],
+        "nmse_median": out["nmse_median"], "rhs_error_true_AU_median_active": out["rhs_error_true_AU_median_active"],
+    }
+    if out["regime"] is not None:
+        summary.update(regime_coverage=out["regime"]["coverage"],
+                       regime_precision_identifiable=out["regime"]["precision_identifiable"],
+                       regime_accuracy_all=out["regime"]["accuracy_all"])
+    if out["campaign_curves"] is not None:
+        summary.update(campaign_curve_error_linear=out["campaign_curves"]["linear"],
+                       campaign_curve_error_total=out["campaign_curves"]["total"],
+                       campaign_linear_band_coverage=out["campaign_curves"]["linear_band_coverage"])
+    out["summary"] = summary
+    return out
