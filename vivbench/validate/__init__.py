@@ -77,6 +77,7 @@ from vivbench.validate.recovery import (
     regime_scores,
     rhs_relative_error,
     truth_record,
+    record_yaw_on,
     window_rhs_errors,
     window_rhs_errors_true_AU,
 )
@@ -141,5 +142,6 @@ __all__ = [
     "model_window_rhs_errors_true_AU",
     "window_rhs_errors_true_AU",
     "truth_record",
+    "record_yaw_on",
     "write_validation",
 ]

@@ -82,7 +82,8 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import curve_errors
-from vivbench.validate.recovery import finite_median, model_window_rhs_errors, model_window_rhs_errors_true_AU, regime_scores
+from vivbench.validate.recovery import (finite_median, model_window_rhs_errors, model_window_rhs_errors_true_AU,
+                                       record_yaw_on, regime_scores)
 
 __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
            "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
@@ -344,8 +345,9 @@ def resolve_method(spec: str):
     spec : str
         ``"windows"`` (:class:`WindowMethod`: the paper's window SINDy with the chain's verdict),
         ``"campaign"`` (:class:`CampaignMethod`: ``PooledSINDy`` with its bootstrap and
-        confidence-region verdict), ``"varying"`` (``VaryingCoefficientSINDy`` with its bootstrap
-        verdict), ``"pysindy-cp"`` (:class:`vivbench.models.PySINDyCP`, no verdict), or
+        confidence-region verdict), ``"varying"`` (``VaryingCoefficientSINDy`` with its own defaults,
+        those of ``vivbench pool --model varying``: the yaw covariate when the records carry the
+        yaw, 30 s wind smoothing; bootstrap and confidence-set verdict), ``"pysindy-cp"`` (:class:`vivbench.models.PySINDyCP`, no verdict), or
         ``"package.module:factory"``: the module is imported and ``factory()`` called with no
         arguments; it must return an object with a callable ``fit``.
 
@@ -587,8 +589,10 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
         else:
             ok = np.zeros(r.shape, dtype=bool)  # no verdict: scored on all windows, coverage 0
         flag.append(ok)
+        # The truth stores no yaw: a model using it sees the measured record's (as on field data).
         e, act = model_window_rhs_errors_true_AU(predictor, truth, start, end, event_id=rec.event_id,
-                                                 active_share=active_share)
+                                                 active_share=active_share,
+                                                 yaw=record_yaw_on(rec, truth["time"].values))
         et.append(e.ravel())
         et_act.append(np.where(act, e, np.nan).ravel())
         if "coef" in truth.data_vars:
