@@ -32,10 +32,10 @@ with the mean wind's yaw as a second covariate in the "mean U, yaw" row (the
 measured records carry the results' ``yaw``, or for older results the yaw
 measured from the event's anemometers; the truth's record gets the latter on
 its own grid). ``--wind-smoothing S`` is the varying models' ``wind_smoothing_s``
-(default: the model's, 30 s; the model smooths every record it fits or
-evaluates, the truth's included); ``--measured-only-smoothing`` instead smooths
-only the measured records by S before the fit (the protocol of the first
-measurements, model smoothing 0), ``--only TEXT`` fits only the models whose
+(default: the model's, 30 s): the fit on the measured records smooths their U
+and yaw, the verdicts use ``model.measured_wind`` of the measured record, the
+truth's (A, U) is evaluated as it is (the deck's own wind; fits on the truth
+use no smoothing), ``--only TEXT`` fits only the models whose
 name contains TEXT, ``--no-truth-fits`` skips the fits on the truth. The
 verdict columns also count ``n_flag_self_excited_wrong`` (flagged regime 2-4
 where the truth is regime 1) in the JSON.
@@ -59,7 +59,7 @@ import xarray as xr  # noqa: E402
 
 import dataclasses  # noqa: E402
 
-from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results, smooth_wind  # noqa: E402
+from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
 from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
@@ -74,7 +74,7 @@ def _window_sums(x, t, start, end):
     return c[hi] - c[lo]
 
 
-def load_campaign(camp: Path, results: Path, yaw: bool = True, wind_smoothing_s: float = 0.0):
+def load_campaign(camp: Path, results: Path, yaw: bool = True):
     """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event.
 
     With ``yaw`` both records carry the mean wind's yaw measured from the event's
@@ -102,7 +102,6 @@ def load_campaign(camp: Path, results: Path, yaw: bool = True, wind_smoothing_s:
             trec = dataclasses.replace(trec, yaw=event_yaw(tw, u, v, az, trec.t))
         else:
             rec = dataclasses.replace(rec, yaw=None)
-        rec = smooth_wind(rec, wind_smoothing_s)  # the measured record only: the truth's U is the deck's
         events.append({"id": rec.event_id, "measured": rec, "truth_rec": trec, "truth": truth, "ws": ws, "we": we,
                        "low_snr": low, "true_regime": truth_window_regimes(truth, ws, we)})
     return [ev["measured"] for ev in events], events
@@ -131,7 +130,7 @@ def score(model, events, verdicts: str | None = None) -> dict:
         if verdicts is not None:
             rec = ev["measured"]
             if verdicts == "varying":
-                v = varying_window_verdicts(model, rec, ws, we)
+                v = varying_window_verdicts(model, model.measured_wind(rec), ws, we)
             else:
                 v = campaign_window_verdicts(model, rec.t, rec.A, rec.U, ws, we)
             flag = v["identifiable"] & ~ev["low_snr"] & valid
@@ -151,14 +150,10 @@ def score(model, events, verdicts: str | None = None) -> dict:
 
 
 def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
-        only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float | None = None,
-        measured_only_smoothing: bool = False) -> dict:
+        only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float | None = None) -> dict:
     t0 = time.perf_counter()
-    if measured_only_smoothing:
-        pre, vary = (wind_smoothing_s or 0.0), {"wind_smoothing_s": 0.0}
-    else:
-        pre, vary = 0.0, ({} if wind_smoothing_s is None else {"wind_smoothing_s": wind_smoothing_s})
-    measured, events = load_campaign(camp, results, wind_smoothing_s=pre)
+    vary = {} if wind_smoothing_s is None else {"wind_smoothing_s": wind_smoothing_s}
+    measured, events = load_campaign(camp, results)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
     rows = {}
@@ -178,7 +173,10 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
             continue
         for data, recs in (("measured", measured), ("truth", truth_records))[:2 if truth_fits else 1]:
             t1 = time.perf_counter()
-            model = make().fit(recs)
+            model = make()
+            if kind == "varying" and data == "truth":
+                model.set_params(wind_smoothing_s=0.0)  # the deck's own wind: nothing to correct
+            model = model.fit(recs)
             fit_s = time.perf_counter() - t1
             want = None if data == "truth" or (kind == "pooled" and not pooled_verdicts) else kind
             row = score(model, events, verdicts=want)
@@ -213,8 +211,6 @@ def main(argv=None) -> dict:
     parser.add_argument("--select-orders", action="store_true")
     parser.add_argument("--wind-smoothing", type=float, default=None,
                         help="the varying models' wind_smoothing_s, s (default: the model's own, 30)")
-    parser.add_argument("--measured-only-smoothing", action="store_true",
-                        help="smooth only the measured records by --wind-smoothing before the fit (model smoothing 0)")
     parser.add_argument("--only", default=None, help="fit only the models whose name contains this text")
     parser.add_argument("--no-truth-fits", action="store_true", help="skip the fits on the truth's own (A, U, dA)")
     args = parser.parse_args(argv)
@@ -223,7 +219,7 @@ def main(argv=None) -> dict:
     out = {}
     for camp, res in zip(args.campaign, args.results):
         out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders, args.only, not args.no_truth_fits,
-                             args.wind_smoothing, args.measured_only_smoothing)
+                             args.wind_smoothing)
     for camp, rows in out.items():
         print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
     OUT.mkdir(exist_ok=True)

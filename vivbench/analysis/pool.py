@@ -222,6 +222,9 @@ def pool_results(result_files: Sequence, model=None, *,
                          "result to store the wind's yaw (identify it again) or the campaign's event files "
                          "(campaign / --campaign)")
     model.fit(records)
+    if varying:
+        # Verdicts and checks on the wind the model was fitted on (its smoothing of the measured wind).
+        records = [model.measured_wind(r) for r in records]
     keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}
     for (_path, ds, attrs, _eq), record in zip(results, records):
