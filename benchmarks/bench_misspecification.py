@@ -28,10 +28,14 @@ Both are scored on the truth's (A, U):
 
 Models: PooledSINDy (STLSQ + AICc on A^i U^j, j <= 5) and VaryingCoefficientSINDy
 (penalised cubic splines in U; M and lambda by 5-fold cross-validation over events),
-with the mean wind's yaw as a second covariate in the "mean U, yaw" row (both
-records carry the yaw measured from the anemometers). ``--wind-smoothing S``
-smooths the measured records' U and yaw (as ``vivbench pool --wind-smoothing``;
-the truth's records are left alone), ``--only TEXT`` fits only the models whose
+with the mean wind's yaw as a second covariate in the "mean U, yaw" row (the
+measured records carry the results' ``yaw``, or for older results the yaw
+measured from the event's anemometers; the truth's record gets the latter on
+its own grid). ``--wind-smoothing S`` is the varying models' ``wind_smoothing_s``
+(default: the model's, 30 s): the fit on the measured records smooths their U
+and yaw, the verdicts use ``model.measured_wind`` of the measured record, the
+truth's (A, U) is evaluated as it is (the deck's own wind; fits on the truth
+use no smoothing), ``--only TEXT`` fits only the models whose
 name contains TEXT, ``--no-truth-fits`` skips the fits on the truth. The
 verdict columns also count ``n_flag_self_excited_wrong`` (flagged regime 2-4
 where the truth is regime 1) in the JSON.
@@ -53,9 +57,11 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results, smooth_wind  # noqa: E402
+import dataclasses  # noqa: E402
+
+from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
-from vivbench.models import PooledSINDy, VaryingCoefficientSINDy, YawRecord  # noqa: E402
+from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
                               varying_window_verdicts)
 
@@ -68,14 +74,14 @@ def _window_sums(x, t, start, end):
     return c[hi] - c[lo]
 
 
-def load_campaign(camp: Path, results: Path, yaw: bool = True, wind_smoothing_s: float = 0.0):
+def load_campaign(camp: Path, results: Path, yaw: bool = True):
     """Measured records, truth records (with dA), truth datasets, windows and noise-floor flags per event.
 
     With ``yaw`` both records carry the mean wind's yaw measured from the event's
     anemometers (the truth's own yaw is not stored: its record gets the measured one).
     """
     files = sorted(results.glob("*.identify.nc"))
-    measured = records_from_results(files, derivative=CAMPAIGN_DERIVATIVE)
+    measured = records_from_results(files, derivative=CAMPAIGN_DERIVATIVE, campaign=camp if yaw else None)
     events = []
     for f, rec in zip(files, measured):
         with xr.open_dataset(f) as ds:
@@ -93,9 +99,9 @@ def load_campaign(camp: Path, results: Path, yaw: bool = True, wind_smoothing_s:
                 tw, u, v = w["time"].values, w["u"].values, w["v"].values
             with xr.open_dataset(camp / attrs["source_file"]) as root:
                 az = float(root.attrs["span_azimuth_deg"])
-            trec = YawRecord.from_record(trec, event_yaw(tw, u, v, az, trec.t))
-            rec = YawRecord.from_record(rec, event_yaw(tw, u, v, az, rec.t))
-        rec = smooth_wind(rec, wind_smoothing_s)  # the measured record only: the truth's U is the deck's
+            trec = dataclasses.replace(trec, yaw=event_yaw(tw, u, v, az, trec.t))
+        else:
+            rec = dataclasses.replace(rec, yaw=None)
         events.append({"id": rec.event_id, "measured": rec, "truth_rec": trec, "truth": truth, "ws": ws, "we": we,
                        "low_snr": low, "true_regime": truth_window_regimes(truth, ws, we)})
     return [ev["measured"] for ev in events], events
@@ -124,7 +130,7 @@ def score(model, events, verdicts: str | None = None) -> dict:
         if verdicts is not None:
             rec = ev["measured"]
             if verdicts == "varying":
-                v = varying_window_verdicts(model, rec, ws, we)
+                v = varying_window_verdicts(model, model.measured_wind(rec), ws, we)
             else:
                 v = campaign_window_verdicts(model, rec.t, rec.A, rec.U, ws, we)
             flag = v["identifiable"] & ~ev["low_snr"] & valid
@@ -144,28 +150,33 @@ def score(model, events, verdicts: str | None = None) -> dict:
 
 
 def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
-        only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float = 0.0) -> dict:
+        only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float | None = None) -> dict:
     t0 = time.perf_counter()
-    measured, events = load_campaign(camp, results, wind_smoothing_s=wind_smoothing_s)
+    vary = {} if wind_smoothing_s is None else {"wind_smoothing_s": wind_smoothing_s}
+    measured, events = load_campaign(camp, results)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
     rows = {}
     specs = [
         ("PooledSINDy", lambda: PooledSINDy(n_bootstrap=100 if pooled_verdicts else 0), "pooled"),
         # The default evaluates the curves at the mean wind over the sections (chosen on the seed-0 campaign).
-        ("VaryingCoefficientSINDy(mean U)", lambda: VaryingCoefficientSINDy(select_orders=select_orders), "varying"),
+        ("VaryingCoefficientSINDy(mean U)", lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=0, **vary), "varying"),
         # The wind's yaw as a second covariate (chosen on the seed-0 campaign, benchmarks/bench_floor.py).
         ("VaryingCoefficientSINDy(mean U, yaw)",
-         lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1), "varying"),
+         lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1, **vary), "varying"),
         ("VaryingCoefficientSINDy(own U)",
-         lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="section"), "varying"),
+         lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="section", yaw_degree=0, **vary),
+         "varying"),
     ]
     for name, make, kind in specs:
         if only is not None and only not in name:
             continue
         for data, recs in (("measured", measured), ("truth", truth_records))[:2 if truth_fits else 1]:
             t1 = time.perf_counter()
-            model = make().fit(recs)
+            model = make()
+            if kind == "varying" and data == "truth":
+                model.set_params(wind_smoothing_s=0.0)  # the deck's own wind: nothing to correct
+            model = model.fit(recs)
             fit_s = time.perf_counter() - t1
             want = None if data == "truth" or (kind == "pooled" and not pooled_verdicts) else kind
             row = score(model, events, verdicts=want)
@@ -198,8 +209,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--results", action="append", required=True, type=Path)
     parser.add_argument("--pooled-verdicts", action="store_true")
     parser.add_argument("--select-orders", action="store_true")
-    parser.add_argument("--wind-smoothing", type=float, default=0.0,
-                        help="Gaussian smoothing of the measured U and yaw, s (as vivbench pool --wind-smoothing)")
+    parser.add_argument("--wind-smoothing", type=float, default=None,
+                        help="the varying models' wind_smoothing_s, s (default: the model's own, 30)")
     parser.add_argument("--only", default=None, help="fit only the models whose name contains this text")
     parser.add_argument("--no-truth-fits", action="store_true", help="skip the fits on the truth's own (A, U, dA)")
     args = parser.parse_args(argv)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter1d
 
-from vivbench.analysis import smooth_wind
+from vivbench.preprocess import smooth_wind
 from vivbench.core import Record
-from vivbench.models import VaryingCoefficientSINDy, YawRecord
+from vivbench.models import VaryingCoefficientSINDy
 from vivbench.models.varying import ORDER_SUBSETS
 from vivbench.regimes import varying_window_verdicts
 
@@ -76,9 +76,9 @@ def test_smooth_wind_keeps_level_gaps_and_yaw():
     rng = np.random.default_rng(2)
     U = 8.0 + 0.3 * rng.standard_normal((t.size, 2))
     U[100:120, 1] = np.nan
-    rec = YawRecord(event_id="e", t=t, A=np.ones_like(U), U=U, yaw=np.full(U.shape, 10.0))
+    rec = Record(event_id="e", t=t, A=np.ones_like(U), U=U, yaw=np.full(U.shape, 10.0))
     out = smooth_wind(rec, 30.0)
-    assert isinstance(out, YawRecord) and np.isnan(out.U[100:120, 1]).all()
+    assert out.yaw is not None and np.isnan(out.U[100:120, 1]).all()
     # white noise through a 30 s Gaussian at 2 Hz: rms factor (2 sqrt(pi) 60)^-1/2 = 0.069 (plus the gap)
     assert np.isfinite(out.U[:100]).all() and np.nanstd(out.U) < 0.15 * np.nanstd(U)
     np.testing.assert_allclose(np.nanmean(out.U), 8.0, atol=0.02)

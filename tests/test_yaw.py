@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from vivbench.core import Record
 from vivbench.core.errors import InputError
-from vivbench.models import VaryingCoefficientSINDy, YawRecord
+from vivbench.models import VaryingCoefficientSINDy
 from vivbench.preprocess import mean_yaw
 
 
@@ -48,13 +51,14 @@ def _records(n_events=10, seed=0, S=2, with_yaw=True):
         A = A[:, None] * np.linspace(1.0, 0.6, S)[None, :]
         dA = bell(U) * (1 - 4 * np.sin(np.radians(psi)) ** 2) * A - 2.0 * A**3
         rec = Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=dA)
-        out.append(YawRecord.from_record(rec, psi) if with_yaw else rec)
+        out.append(dataclasses.replace(rec, yaw=psi) if with_yaw else rec)
     return out
 
 
 @pytest.fixture(scope="module")
 def yaw_model():
-    return VaryingCoefficientSINDy(n_bootstrap=5, n_basis=(15,), yaw_degree=1).fit(_records())
+    # Exact inputs (no errors-in-variables): the default 30 s wind smoothing would only blur them.
+    return VaryingCoefficientSINDy(n_bootstrap=5, n_basis=(15,), yaw_degree=1, wind_smoothing_s=0.0).fit(_records())
 
 
 def _err(model, rec):
@@ -63,7 +67,7 @@ def _err(model, rec):
 
 def test_yaw_covariate_recovers_what_the_wind_alone_cannot(yaw_model):
     rec = _records(2, seed=7)[1]
-    without = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(15,)).fit(_records())
+    without = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(15,), yaw_degree=0, wind_smoothing_s=0.0).fit(_records())
     assert _err(yaw_model, rec) < 5e-3
     assert _err(without, rec) > 10 * _err(yaw_model, rec)
     # The curves of DESIGN 3.5 are those at yaw 0: the bell itself.
@@ -83,3 +87,50 @@ def test_yaw_model_save_load_and_records_without_yaw(yaw_model, tmp_path):
         VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(11,), yaw_degree=1).fit(_records(3, with_yaw=False))
     with pytest.raises(InputError, match="yaw_degree"):
         VaryingCoefficientSINDy(yaw_degree=5).fit(_records(3))
+
+
+def test_yaw_and_smoothing_defaults_follow_the_records():
+    """One default for every caller: yaw degree 1 when every record carries the yaw, else 0; 30 s smoothing."""
+    with_yaw = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,)).fit(_records(3))
+    assert with_yaw.yaw_degree_ == 1 and with_yaw.wind_smoothing_s == 30.0
+    plain = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,)).fit(_records(3, with_yaw=False))
+    assert plain.yaw_degree_ == 0 and plain.coef_yaw_.shape[-1] == 0
+    # The fit smooths the (measured) wind; measured_wind applies the same to a record for evaluation,
+    # while predict takes a record's wind as given (a truth's own wind).
+    from vivbench.preprocess import smooth_wind
+
+    rec = _records(1, seed=5)[0]
+    pre = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,), wind_smoothing_s=0.0)
+    pre.fit([smooth_wind(r, 30.0) for r in _records(3)])
+    np.testing.assert_allclose(pre.coef_, with_yaw.coef_, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(with_yaw.predict(with_yaw.measured_wind(rec)), pre.predict(smooth_wind(rec, 30.0)),
+                               rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(with_yaw.predict(rec), pre.predict(rec), rtol=1e-9, atol=1e-12)
+
+
+def test_identify_stores_the_yaw_and_records_carry_it(small_results, tmp_path):
+    """The result's ``yaw`` is the anemometers' (as measured from the event file); records read it.
+
+    A result written before the variable existed (``yaw`` dropped here) gets the same yaw from
+    its event file through ``campaign``, and without it none.
+    """
+    import xarray as xr
+
+    from vivbench.analysis import records_from_results, with_yaw
+    from vivbench.io.result import read_result
+
+    campaign, _dir, files = small_results
+    ds = read_result(files[0])
+    assert ds["yaw"].attrs["units"] == "degree" and ds["yaw"].shape == ds["U"].shape
+    rec = records_from_results(files[:1])[0]
+    np.testing.assert_array_equal(rec.yaw, ds["yaw"].values)
+    plain = dataclasses.replace(rec, yaw=None)
+    measured = with_yaw(plain, campaign.files[0])
+    ok = np.isfinite(rec.U).all(axis=1)
+    # identify's wind is despiked first; the small campaign has no spikes, so the two agree closely.
+    np.testing.assert_allclose(measured.yaw[ok], rec.yaw[ok], atol=1e-6)
+    old = tmp_path / files[0].name
+    xr.load_dataset(files[0]).drop_vars("yaw").to_netcdf(old)
+    assert records_from_results([old])[0].yaw is None
+    back = records_from_results([old], campaign=Path(campaign.files[0]).parent)[0]
+    np.testing.assert_allclose(back.yaw[ok], rec.yaw[ok], atol=1e-6)

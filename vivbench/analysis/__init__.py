@@ -28,7 +28,9 @@ from vivbench.analysis.pool import (
     campaign_model_file,
     load_campaign_model,
 )
-from vivbench.analysis.wind_inputs import event_yaw, smooth_wind, with_yaw
+from vivbench.analysis.wind_inputs import with_yaw
+from vivbench.preprocess.yaw import event_yaw  # re-exported: analysis is where campaign scripts look
+from vivbench.preprocess.wind_smoothing import smooth_wind  # re-exported, likewise
 
 __all__ = [
     "KERNELS", "DensityPeaks", "coefficient_features", "decision_graph", "order_features", "IdentifyConfig",

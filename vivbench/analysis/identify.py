@@ -30,6 +30,7 @@ from vivbench.regression.optimizers import OPTIMIZERS
 from vivbench.regimes.window import label_windows
 from vivbench.preprocess.config import PreprocessConfig
 from vivbench.preprocess.wind import perpendicular_speed, wind_speed_direction
+from vivbench.preprocess.yaw import event_yaw
 from vivbench.preprocess.chain import preprocess_arrays
 from vivbench.io.event import event_arrays, peek_event_id, read_event
 from vivbench.io.result import WINDOW_FIT_VARIABLES, build_result, write_result
@@ -163,6 +164,9 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
     pre = preprocess_arrays(wind_time=arr["wind_time"], u=arr["u"], v=arr["v"], accel_time=arr["accel_time"],
                             acc=arr["acc"], span_azimuth_deg=float(tree.attrs["span_azimuth_deg"]),
                             config=config.preprocess)
+    # The mean wind's yaw on the same grid: the varying campaign model's second covariate (U does not carry it).
+    yaw = event_yaw(arr["wind_time"], arr["u"], arr["v"], float(tree.attrs["span_azimuth_deg"]), pre.t,
+                    config.preprocess)
     dA = np.full_like(pre.A, np.nan)
     parts, starts, ends, segs = [], [], [], []
     est = config.estimator()
@@ -216,7 +220,8 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         fit=fit, window_start=window_start, window_end=window_end, window_segment=np.concatenate(segs),
         amplitude_snr=snr, time=pre.t, A=pre.A, U=pre.U, dA=dA, segment=pre.segment, sections=sections,
         features=est.feature_names_ if n_w else [], derivative_method=config.derivative.method, attrs=attrs,
-        inclusion=np.concatenate([p["inclusion"] for p in parts]) if config.optimizer == "ensemble" else None)
+        inclusion=np.concatenate([p["inclusion"] for p in parts]) if config.optimizer == "ensemble" else None,
+        yaw=yaw)
 
 
 # Resolution floors of the spike rule's MAD: 0.05 m/s for sonic anemometers (records are

@@ -20,7 +20,8 @@ from vivbench.io.result import read_result, result_noise_std
 from vivbench.io.campaign_model import MODEL_NAME, POOLED_FORMAT, POOLED_NAME, read_pooled
 from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
-from vivbench.analysis.wind_inputs import smooth_wind, with_yaw
+from vivbench.analysis.wind_inputs import with_yaw
+from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
            "with_campaign_model", "campaign_model_file", "load_campaign_model"]
@@ -79,8 +80,9 @@ def _campaign_derivative(ds, derivative: Derivative | None) -> np.ndarray:
 
 def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
     noise = result_noise_std(attrs, ds["A"].shape[1])
+    yaw = ds["yaw"].values if "yaw" in ds else None  # results written before identify stored the yaw have none
     return Record(event_id=str(attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
-                  dA=_campaign_derivative(ds, derivative), noise_std=noise)
+                  dA=_campaign_derivative(ds, derivative), noise_std=noise, yaw=yaw)
 
 
 def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None,
@@ -90,16 +92,17 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
     Parameters
     ----------
     paths : paths of ``<event_id>.identify.nc``
-        Their ``time``, ``A``, ``U``, ``dA`` and ``segment`` are read.
+        Their ``time``, ``A``, ``U``, ``dA``, ``segment`` and (when present)
+        ``yaw`` are read: the records carry the mean wind's yaw (``Record.yaw``).
     derivative : Derivative or None
         None (default) keeps the results' own dA (the identification's
         smoothed derivative); otherwise dA/dt is recomputed from A on each
         segment as :func:`pool_results` does (e.g. :data:`CAMPAIGN_DERIVATIVE`).
     campaign : path or None
         Directory of the events the results were made from (their
-        ``source_file``): the records then carry the mean wind's yaw measured
-        from the event's anemometers (:class:`vivbench.models.YawRecord`,
-        :func:`vivbench.analysis.with_yaw`).
+        ``source_file``): results without a ``yaw`` variable (written before
+        identification stored it) get the yaw measured from the event's
+        anemometers (:func:`vivbench.analysis.with_yaw`); others keep their own.
     wind_smoothing_s : float, s
         Standard deviation of a Gaussian smoothing of U (and yaw) in time
         (:func:`vivbench.analysis.smooth_wind`; 0: none).
@@ -117,9 +120,9 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
     """
     out = []
     for path in paths:
-        ds = read_result(path, ["A", "U", "dA", "segment"])
+        ds = read_result(path, ["A", "U", "dA", "segment"], optional=["yaw"])
         rec = _result_record(ds, ds.attrs, derivative)
-        rec = rec if campaign is None else _with_event_yaw(rec, ds.attrs, campaign)
+        rec = rec if campaign is None or rec.yaw is not None else _with_event_yaw(rec, ds.attrs, campaign)
         out.append(smooth_wind(rec, wind_smoothing_s))
     return out
 
@@ -150,13 +153,16 @@ def pool_results(result_files: Sequence, model=None, *,
         with the chain's smoothed dA its median dA/dt error was 0.0121
         against 0.0105 on the default campaign.
     campaign : path or None
-        Directory of the results' event files: every record then carries the
-        mean wind's yaw measured from its anemometers (needed by a
-        ``VaryingCoefficientSINDy`` with ``yaw_degree`` > 0).
+        Directory of the results' event files, for results without the
+        ``yaw`` variable (written before identification stored it): their
+        records get the yaw measured from the anemometers. Results with
+        ``yaw`` need none (a ``VaryingCoefficientSINDy`` uses the yaw whenever
+        every record carries it, see its ``yaw_degree``).
     wind_smoothing_s : float, s
-        Gaussian smoothing of U (and yaw) before the fit and the verdicts
-        (:func:`vivbench.analysis.smooth_wind`): a lower mean-wind cut-off
-        against the point anemometer's errors-in-variables (0: none).
+        Gaussian smoothing of U (and yaw) before the fit and the verdicts of a
+        ``PooledSINDy`` (:func:`vivbench.preprocess.smooth_wind`; 0: none). A
+        ``VaryingCoefficientSINDy`` smooths its own wind (its
+        ``wind_smoothing_s``): must be 0 with it.
 
     Returns
     -------
@@ -194,7 +200,8 @@ def pool_results(result_files: Sequence, model=None, *,
         raise InputError(f"pool_results takes a PooledSINDy or a VaryingCoefficientSINDy; got {type(model).__name__}")
     results = []
     for path in result_files:
-        ds = read_result(path, ["A", "U", "dA", "segment", "window_start", "window_end"], optional=["amplitude_snr"])
+        ds = read_result(path, ["A", "U", "dA", "segment", "window_start", "window_end"],
+                         optional=["amplitude_snr", "yaw"])
         results.append((str(path), ds, dict(ds.attrs), [str(s) for s in ds["equation"].values]))
     if not results:
         raise InputError("no identification results to pool")
@@ -202,14 +209,22 @@ def pool_results(result_files: Sequence, model=None, *,
     for path, _ds, _attrs, eq in results:
         if eq != sections:
             raise InputError(f"{path}: equations {eq} differ from {sections} of the other results")
+    if varying and wind_smoothing_s:
+        raise InputError("the varying model smooths its own wind (VaryingCoefficientSINDy(wind_smoothing_s=...)): "
+                         "give pool_results wind_smoothing_s=0 with it")
     records = [_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results]
     if campaign is not None:
-        records = [_with_event_yaw(r, attrs, campaign) for r, (_p, _d, attrs, _e) in zip(records, results)]
+        records = [r if r.yaw is not None else _with_event_yaw(r, attrs, campaign)
+                   for r, (_p, _d, attrs, _e) in zip(records, results)]
     records = [smooth_wind(r, wind_smoothing_s) for r in records]
-    if varying and int(model.yaw_degree) and campaign is None:
-        raise InputError("the varying model with a yaw covariate (yaw_degree > 0) needs the campaign's event "
-                         "files for the wind's yaw (give campaign / --campaign)")
+    if varying and model.yaw_degree and any(r.yaw is None for r in records):
+        raise InputError(f"the varying model with a yaw covariate (yaw_degree = {model.yaw_degree}) needs every "
+                         "result to store the wind's yaw (identify it again) or the campaign's event files "
+                         "(campaign / --campaign)")
     model.fit(records)
+    if varying:
+        # Verdicts and checks on the wind the model was fitted on (its smoothing of the measured wind).
+        records = [model.measured_wind(r) for r in records]
     keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}
     for (_path, ds, attrs, _eq), record in zip(results, records):
@@ -326,8 +341,8 @@ def pool_results(result_files: Sequence, model=None, *,
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
         "pooled_config_json": model.to_json(),
         "derivative_json": json.dumps(None if derivative is None else dataclasses.asdict(derivative), sort_keys=True),
-        "wind_smoothing_s": float(wind_smoothing_s),
-        "wind_yaw": int(campaign is not None),
+        "wind_smoothing_s": float(model.wind_smoothing_s if varying else wind_smoothing_s),
+        "wind_yaw": int(all(r.yaw is not None for r in records)),
         "vivbench_version": vivbench.__version__,
         "change_event": "" if scan["change_index"] < 0 else event_ids[scan["change_index"]],
         "change_p_value": scan["p_value"],

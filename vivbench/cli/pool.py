@@ -17,22 +17,22 @@ def run(args) -> int:
     results_dir = Path(args.results)
     files = list_results(results_dir)
     campaign = Path(args.campaign) if args.campaign else None
+    smoothing = 0.0
     if args.model == "varying":
-        # The wind's yaw is a second covariate whenever the events are at hand (their anemometers give it).
-        yaw_degree = (1 if campaign is not None else 0) if args.yaw_degree is None else args.yaw_degree
-        if yaw_degree and campaign is None:
-            from vivbench.core.errors import InputError
-            raise InputError(f"{results_dir}: --yaw-degree {yaw_degree} needs --campaign (the events' anemometers give the yaw)")
+        # The model's own defaults (yaw when the results store it, 30 s wind smoothing) unless overridden.
+        extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing))
+                 if v is not None}
         model = VaryingCoefficientSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement,
-                                        tau=args.tau, seed=args.seed, yaw_degree=yaw_degree)
+                                        tau=args.tau, seed=args.seed, **extra)
     else:
         model = PooledSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement, tau=args.tau,
                             seed=args.seed)
-    smoothing = args.wind_smoothing
-    if smoothing is None:
-        # 30 s for the varying model: the cross-validated choice on the tuning campaign (README); none for PooledSINDy.
-        smoothing = 30.0 if args.model == "varying" else 0.0
+        smoothing = 0.0 if args.wind_smoothing is None else args.wind_smoothing
     ds = pool_results(files, model, campaign=campaign, wind_smoothing_s=smoothing)  # fits ``model`` in place
+    if args.model == "varying" and not ds.attrs["wind_yaw"]:
+        print(f"vivbench pool: {results_dir}: the results store no wind yaw (identified before vivbench stored it): "
+              "the varying model was fitted without its yaw covariate; identify again or give --campaign",
+              file=sys.stderr)
     out_dir = Path(args.out) if args.out else results_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     out = write_pooled(ds, out_dir)
@@ -69,14 +69,15 @@ def register(sub) -> None:
                    help="campaign model: sindy (PooledSINDy, the 69-term library; default) or varying "
                         "(VaryingCoefficientSINDy, spline curves in U for realistic bridges)")
     s.add_argument("--campaign", default=None,
-                   help="directory of the results' event files: with --model varying the mean wind's yaw, measured "
-                        "from their anemometers, becomes a second covariate of the curves")
+                   help="directory of the results' event files, only for results identified before the result "
+                        "stored the wind's yaw: their yaw is then measured from the events' anemometers")
     s.add_argument("--yaw-degree", type=int, default=None, choices=(0, 1, 2),
-                   help="with --model varying: powers of sin^2(yaw) in the curves (default 1 with --campaign, else 0)")
+                   help="with --model varying: powers of sin^2(yaw) in the curves (default: 1 when the results "
+                        "store the yaw, else 0)")
     s.add_argument("--wind-smoothing", type=float, default=None,
-                   help="Gaussian smoothing of the mean wind (and yaw) in time before the fit, standard deviation in s, "
-                        "a lower cut-off against the point anemometer's slow turbulence (default 30 with --model "
-                        "varying, chosen by cross-validation over events; 0 with --model sindy)")
+                   help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
+                        "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "
+                        "30 s, chosen by cross-validation over events; 0 with --model sindy)")
     s.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates (default 100)")
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")
     s.add_argument("--agreement", type=float, default=0.9,

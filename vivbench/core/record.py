@@ -41,6 +41,12 @@ class Record:
         NaN: unknown). Identifiability verdicts use it: below a few times the
         floor A is the envelope of noise and no model can give its regime.
         None: not known.
+    yaw : array_like, shape (n_samples, n_sections), degrees, optional
+        Angle between the low-passed mean wind and the span's normal (0:
+        perpendicular), e.g. the identification result's ``yaw``
+        (:func:`vivbench.preprocess.mean_yaw`); NaN where unknown, None: not
+        measured. The realistic aerodynamics fall off with it, and
+        U = V |sin theta| does not carry it.
 
     Notes
     -----
@@ -56,6 +62,7 @@ class Record:
     U: np.ndarray
     dA: np.ndarray | None = None
     noise_std: np.ndarray | None = None
+    yaw: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.event_id, str) or not self.event_id:
@@ -75,7 +82,8 @@ class Record:
         noise = None if self.noise_std is None else _frozen_array("noise_std", self.noise_std, (A.shape[1],))
         if noise is not None and np.any(noise < 0):
             raise ValueError("Record.noise_std must be >= 0 (m) or NaN (unknown)")
-        for name, value in (("t", t), ("A", A), ("U", U), ("dA", dA), ("noise_std", noise)):
+        yaw = None if self.yaw is None else _frozen_array("yaw", self.yaw, A.shape)
+        for name, value in (("t", t), ("A", A), ("U", U), ("dA", dA), ("noise_std", noise), ("yaw", yaw)):
             object.__setattr__(self, name, value)
 
     @property
@@ -100,4 +108,4 @@ class Record:
     def __repr__(self) -> str:
         span = f"{self.t[0]:g}..{self.t[-1]:g} s"
         return (f"Record(event_id={self.event_id!r}, n_samples={self.n_samples}, n_sections={self.n_sections}, "
-                f"t={span}, dA={'yes' if self.dA is not None else 'no'})")
+                f"t={span}, dA={'yes' if self.dA is not None else 'no'}, yaw={'yes' if self.yaw is not None else 'no'})")

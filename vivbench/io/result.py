@@ -21,7 +21,8 @@ One NetCDF-4 file per identified event, a flat dataset (no groups)::
                  equation, order); inclusion (window, equation, feature),
                  ensemble optimiser only
     per window   cond, n_samples, window_start, window_end, window_segment
-    per sample   A, U, dA (time, section); segment (time)
+    per sample   A, U, dA (time, section); segment (time); yaw (time,
+                 section), optional (files written before it existed lack it)
 
 :data:`VARIABLES` and :data:`COORDINATES` give dims, dtype, units and meaning
 of each; ``docs/formats.md`` is generated from them (:func:`markdown_table`).
@@ -116,6 +117,9 @@ VARIABLES: dict[str, VariableSpec] = {
     "U": VariableSpec(("time", "section"), "float64", "m/s", "mean wind speed perpendicular to the span"),
     "dA": VariableSpec(("time", "section"), "float64", "m/s", "dA/dt ({method})"),
     "segment": VariableSpec(("time",), "int32", "1", "contiguous segment (-1: excluded)"),
+    "yaw": VariableSpec(("time", "section"), "float64", "degree",
+                        "yaw of the low-passed mean wind: signed angle to the span's normal from the anemometers' u, v "
+                        "(NaN in wind gaps); absent from files written before it existed", required=False),
 }
 
 #: Variables with one value per (window, equation) model as fitted by the window estimator, in write order.
@@ -180,7 +184,7 @@ class ResultFormatError(InputError):
 
 def build_result(*, fit: Mapping[str, np.ndarray], window_start, window_end, window_segment, amplitude_snr,
                  time, A, U, dA, segment, sections: Sequence[str], features: Sequence[str],
-                 derivative_method: str, attrs: Mapping, inclusion=None) -> xr.Dataset:
+                 derivative_method: str, attrs: Mapping, inclusion=None, yaw=None) -> xr.Dataset:
     """Assemble a result dataset in the layout of this format.
 
     Parameters
@@ -216,6 +220,8 @@ def build_result(*, fit: Mapping[str, np.ndarray], window_start, window_end, win
         :data:`ATTRIBUTES`), in the order they are to be written.
     inclusion : array_like, shape (n_window, n_section, 23 n_section), optional
         Ensemble inclusion probabilities.
+    yaw : array_like, shape (n_time, n_section), degrees, optional
+        Yaw of the low-passed mean wind on the preprocessing grid.
 
     Returns
     -------
@@ -227,6 +233,8 @@ def build_result(*, fit: Mapping[str, np.ndarray], window_start, window_end, win
         values[name] = np.asarray(values[name]).astype(np.int8)  # NetCDF has no boolean type
     if inclusion is not None:
         values["inclusion"] = inclusion
+    if yaw is not None:
+        values["yaw"] = np.asarray(yaw, dtype=float)
     values.update(amplitude_snr=amplitude_snr, window_start=window_start, window_end=window_end,
                   window_segment=np.asarray(window_segment).astype(np.int32), A=A, U=U, dA=dA,
                   segment=np.asarray(segment).astype(np.int32))
@@ -371,8 +379,9 @@ def result_record(ds: xr.Dataset) -> Record:
     Returns
     -------
     Record
-        ``event_id`` from the attribute; ``t``, ``A``, ``U``, ``dA`` copied from
-        the result (dA is NaN outside the identification's segments).
+        ``event_id`` from the attribute; ``t``, ``A``, ``U``, ``dA`` and (when
+        the result has it) ``yaw`` copied from the result (dA is NaN outside
+        the identification's segments).
 
     Raises
     ------
@@ -386,7 +395,8 @@ def result_record(ds: xr.Dataset) -> Record:
         what = ", ".join(missing + ([] if "event_id" in ds.attrs else ["the event_id attribute"]))
         raise InputError(f"{source}: cannot make a record of this result: it lacks {what}")
     return Record(event_id=str(ds.attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
-                  dA=ds["dA"].values, noise_std=result_noise_std(ds.attrs, ds["A"].shape[1]))
+                  dA=ds["dA"].values, noise_std=result_noise_std(ds.attrs, ds["A"].shape[1]),
+                  yaw=ds["yaw"].values if "yaw" in ds.data_vars else None)
 
 
 def result_noise_std(attrs, n_sections: int) -> np.ndarray | None:

@@ -52,7 +52,6 @@ from vivbench.models.simulate import (
 from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
 from vivbench.models.varying import VaryingCoefficientSINDy
 from vivbench.models.window import WindowProblem, WindowedSINDy
-from vivbench.models.yaw_record import YawRecord, record_yaw
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
@@ -64,6 +63,6 @@ __all__ = [
     "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients", "order_rms",
     "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",
     "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "WindowedSINDy",
-    "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "YawRecord", "record_yaw",
+    "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
 ]

@@ -31,7 +31,7 @@ Only own-section terms are used: in the averaged truth the mode shape makes
 the other sections' amplitudes proportional to A_k, so their terms are
 collinear with A_k's.
 
-With ``yaw_degree`` > 0 the wind's yaw psi (its angle to the span's normal,
+With the wind's yaw (``yaw_degree`` > 0; by default whenever the records carry it) its yaw psi (its angle to the span's normal,
 which the realistic aerodynamics fall off with and U does not carry) is a
 second covariate: every column above is repeated times sin^2j(psi), j = 1..J,
 with the same penalty (p = 4 M (J + 1)). After the fit the same statistics
@@ -42,7 +42,9 @@ and their leave-one-event-out prediction errors: the confidence set of
 
 What this model does not fix: errors in the measured U (a point anemometer
 against the tributary-averaged wind the deck feels) smear the bell along U
-(``vivbench pool`` smooths U by 30 s for it, :func:`vivbench.analysis.smooth_wind`);
+(the model is therefore fitted on the records' U and yaw smoothed by a Gaussian of
+``wind_smoothing_s`` = 30 s, :func:`vivbench.preprocess.smooth_wind`; measured records are
+evaluated through :meth:`VaryingCoefficientSINDy.measured_wind`);
 and it is time-invariant, so changes the wind does not carry (damping drift, a
 step between events) are averaged over (:func:`vivbench.analysis.changes.model_change_scan`
 checks for them).
@@ -63,7 +65,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
-from vivbench.models.yaw_record import record_yaw
+from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty", "penalised_rss", "ORDER_SUBSETS"]
 
@@ -221,13 +223,26 @@ class VaryingCoefficientSINDy(ModelBase):
         median dA/dt error 0.195 against 0.453 with each section's own wind)
         and reported on another (seed 1: 0.235 against 0.456; see
         ``benchmarks/bench_misspecification.py``).
-    yaw_degree : int, 0..3
+    yaw_degree : int, 0..3, or None
         Powers j = 1..J of sin^2(psi), psi the mean wind's yaw, whose spline
         curves are added: a_ki(U, psi) = sum_j sin^2j(psi) f_kij(U) (0: the
-        wind only). Needs records that carry the yaw (:class:`YawRecord`); a
-        record without one is evaluated at the fitted median yaw. The curves
-        of DESIGN 3.5 are those at yaw 0. Chosen on the seed-0 realistic
-        campaign (``benchmarks/bench_floor.py``): 1 (degree 2 did not help).
+        wind only). None (default): 1 when every fitted record carries the yaw
+        (``Record.yaw``, e.g. from the identification result), else 0 (the
+        fitted value is ``yaw_degree_``). A degree > 0 needs records with yaw
+        to fit; a record without one is evaluated at the fitted median yaw.
+        The curves of DESIGN 3.5 are those at yaw 0. Chosen on the seed-0
+        realistic campaign (``benchmarks/bench_floor.py``): 1 (degree 2 did
+        not help).
+    wind_smoothing_s : float, s
+        Standard deviation of the Gaussian smoothing in time of the fitted
+        records' U and yaw (:func:`vivbench.preprocess.smooth_wind`; 0: none),
+        which are taken to be measured: a lower mean-wind cut-off against the
+        point anemometer's errors-in-variables. Evaluate measured records
+        through :meth:`measured_wind` (as ``vivbench pool`` and the method
+        API's ``"varying"`` do); records of the deck's own wind (a synthetic
+        truth) as they are; fit such records with 0. Default 30 s, chosen by the 5-fold cross-validated
+        error over events on the measured data of the seed-0 realistic campaign
+        (0, 15, 30, 45, 60 s: 0.113, 0.097, 0.093, 0.103, 0.115).
     model_set_level : float, [0.5, 1)
         Level of the confidence set of order subsets: the models without some
         of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
@@ -255,7 +270,9 @@ class VaryingCoefficientSINDy(ModelBase):
         RMS of dA_k/dt and of A_k over the fitted samples (the regression's scales).
     rss_ : ndarray, shape (S,), m^2/s^2; n_samples_, n_blocks_, n_sections_ : int
     event_ids_ : list of str
-    coef_yaw_ : ndarray, shape (S, M_max, 4, yaw_degree)
+    yaw_degree_ : int
+        The fitted yaw degree J (``yaw_degree``, or its default from the records).
+    coef_yaw_ : ndarray, shape (S, M_max, 4, J)
         Spline coefficients of the yaw terms (coefficients of sin^2j(psi)).
     coef_yaw_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4, yaw_degree)
     yaw_ref_, yaw_fallback_ : ndarray, shape (S,)
@@ -274,7 +291,8 @@ class VaryingCoefficientSINDy(ModelBase):
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
                  n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
-                 wind_input: str = "mean", yaw_degree: int = 0, model_set_level: float = 0.95):
+                 wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
+                 wind_smoothing_s: float = 30.0):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -287,6 +305,7 @@ class VaryingCoefficientSINDy(ModelBase):
         self.wind_input = wind_input
         self.yaw_degree = yaw_degree
         self.model_set_level = model_set_level
+        self.wind_smoothing_s = wind_smoothing_s
 
     def _wind(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
@@ -300,8 +319,21 @@ class VaryingCoefficientSINDy(ModelBase):
 
     @staticmethod
     def _inputs(record: Record) -> tuple[np.ndarray, np.ndarray | None]:
-        """The record's U and yaw (None without)."""
-        return record.U, record_yaw(record)
+        """The record's U and yaw (None without); records reach here smoothed (:meth:`_check_record`)."""
+        return record.U, record.yaw
+
+    def measured_wind(self, record: Record) -> Record:
+        """``record`` with its measured U and yaw smoothed as the model's were at fit (``wind_smoothing_s``).
+
+        For evaluating the model on measured data (verdicts, window regimes,
+        simulations of an identified record): the fit saw the measured wind
+        smoothed, a lower cut-off against the point anemometer's
+        errors-in-variables. The evaluation methods (:meth:`predict`,
+        :meth:`order_contributions`, ...) take a record's wind as given, so a
+        record of the wind the deck itself feels (a synthetic truth) is
+        evaluated as it is.
+        """
+        return smooth_wind(as_record(record), float(self.wind_smoothing_s))
 
     def _zeta(self, record_or_yaw, n: int) -> np.ndarray | None:
         """The yaw covariate sin^2(psi) of each equation, shape (n, S) (None without ``yaw_degree``).
@@ -309,14 +341,14 @@ class VaryingCoefficientSINDy(ModelBase):
         With ``wind_input="mean"`` it is the mean over the sections, like the wind.
         A record without yaw gets the median of the fitted samples' (``yaw_fallback_``).
         """
-        if int(self.yaw_degree) == 0:
+        if self.yaw_degree_ == 0:
             return None
         yaw = self._inputs(record_or_yaw)[1] if isinstance(record_or_yaw, Record) else record_or_yaw
         if yaw is None:
             fallback = getattr(self, "yaw_fallback_", None)
             if fallback is None:
-                raise InputError("yaw_degree > 0 needs records with the mean wind's yaw (YawRecord, "
-                                 "vivbench.analysis.records_from_results(..., yaw=...))")
+                raise InputError("yaw_degree > 0 needs records with the mean wind's yaw (Record.yaw, e.g. "
+                                 "vivbench.analysis.records_from_results of results that store it)")
             return np.broadcast_to(np.asarray(fallback, dtype=float), (n, np.size(fallback))).copy()
         z = np.sin(np.radians(np.asarray(yaw, dtype=float))) ** 2
         if self.wind_input == "mean":
@@ -331,7 +363,8 @@ class VaryingCoefficientSINDy(ModelBase):
         params["n_basis"] = [int(x) for x in params["n_basis"]]
         params["penalties"] = [float(x) for x in params["penalties"]]
         params["select_orders"] = bool(params["select_orders"])
-        params["yaw_degree"] = int(params["yaw_degree"])
+        params["yaw_degree"] = None if params["yaw_degree"] is None else int(params["yaw_degree"])
+        params["wind_smoothing_s"] = float(params["wind_smoothing_s"])
         params["model_set_level"] = float(params["model_set_level"])
         return json.dumps(params, sort_keys=True)
 
@@ -354,8 +387,11 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
         if not 0.5 <= self.model_set_level < 1.0:
             raise InputError(f"model_set_level must lie in [0.5, 1); got {self.model_set_level!r}")
-        if int(self.yaw_degree) != self.yaw_degree or not 0 <= int(self.yaw_degree) <= 3:
-            raise InputError(f"yaw_degree must be an integer in 0..3; got {self.yaw_degree!r}")
+        if self.yaw_degree is not None and (int(self.yaw_degree) != self.yaw_degree or not 0 <= int(self.yaw_degree) <= 3):
+            raise InputError(f"yaw_degree must be None (1 when the records carry the yaw, else 0) or an integer "
+                             f"in 0..3; got {self.yaw_degree!r}")
+        if not (np.isfinite(self.wind_smoothing_s) and self.wind_smoothing_s >= 0):
+            raise InputError(f"wind_smoothing_s must be a number of seconds >= 0; got {self.wind_smoothing_s!r}")
         if self.wind_input not in ("section", "mean"):
             raise InputError(f"wind_input must be 'section' or 'mean'; got {self.wind_input!r}")
 
@@ -375,7 +411,7 @@ class VaryingCoefficientSINDy(ModelBase):
         self
         """
         self._validate()
-        records = [as_record(r, k) for k, r in enumerate(records)]
+        records = [smooth_wind(as_record(r, k), float(self.wind_smoothing_s)) for k, r in enumerate(records)]
         if not records:
             raise InputError("no records to fit")
         S = records[0].n_sections
@@ -388,9 +424,11 @@ class VaryingCoefficientSINDy(ModelBase):
         A = np.concatenate([r.A for r in records])
         U = self._wind(np.concatenate([self._inputs(r)[0] for r in records]))
         dA = np.concatenate([r.dA for r in records])
-        J = int(self.yaw_degree)
-        if J and any(record_yaw(r) is None for r in records):
-            raise InputError("yaw_degree > 0 needs every record to carry the mean wind's yaw (YawRecord)")
+        with_yaw = all(r.yaw is not None for r in records)
+        J = (1 if with_yaw else 0) if self.yaw_degree is None else int(self.yaw_degree)
+        if J and not with_yaw:
+            raise InputError("yaw_degree > 0 needs every record to carry the mean wind's yaw (Record.yaw)")
+        self.yaw_degree_ = J
         Z = np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None
         event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
         # Blocks: block_s-long pieces of each event, numbered across the campaign.
@@ -534,7 +572,7 @@ class VaryingCoefficientSINDy(ModelBase):
 
         Parameters
         ----------
-        records : sequence of Record with dA (YawRecord with ``yaw_degree`` > 0), E of them
+        records : sequence of Record with dA (with yaw when ``yaw_degree_`` > 0), E of them
 
         Returns
         -------
@@ -546,7 +584,7 @@ class VaryingCoefficientSINDy(ModelBase):
         """
         self._check_fitted()
         records = [self._check_record(as_record(r, k)) for k, r in enumerate(records)]
-        J = int(self.yaw_degree)
+        J = self.yaw_degree_
         out = []
         U = self._wind(np.concatenate([self._inputs(r)[0] for r in records]))
         A = np.concatenate([r.A for r in records])
@@ -631,7 +669,7 @@ class VaryingCoefficientSINDy(ModelBase):
             coef_yaw = self.coef_yaw_ if coef_yaw is None else coef_yaw
         coef = np.asarray(coef, dtype=float)
         U = self._wind(U)
-        J = int(self.yaw_degree)
+        J = self.yaw_degree_
         z = None
         if J and yaw is not None and coef_yaw is not None:
             z = self._zeta(np.asarray(yaw, dtype=float), U.shape[0])
@@ -647,7 +685,7 @@ class VaryingCoefficientSINDy(ModelBase):
 
     def _record_yaw(self, record: Record) -> np.ndarray | None:
         """Yaw in degrees for evaluating on a record: its own, or the fitted median without one."""
-        if not int(self.yaw_degree):
+        if not self.yaw_degree_:
             return None
         yaw = self._inputs(record)[1]
         if yaw is not None:
@@ -824,7 +862,7 @@ class VaryingCoefficientSINDy(ModelBase):
     #: The confidence set of order subsets (absent from files written before it existed).
     _SUBSET_ARRAYS = {"subset_coef_": ("subset", "equation", "basis", "order"), "subset_loeo_": ("subset", "equation"),
                       "subset_plausible_": ("subset", "equation")}
-    #: Written only with ``yaw_degree`` > 0 (files of models without yaw stay as they were).
+    #: Written only with ``yaw_degree_`` > 0 (files of models without yaw stay as they were).
     _YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
                    "coef_yaw_bootstrap_": ("bootstrap", "equation", "basis", "order", "yaw_power"),
                    "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",),
@@ -837,7 +875,7 @@ class VaryingCoefficientSINDy(ModelBase):
                 for name, dims in self._ARRAYS.items()}
         data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(float if name != "subset_plausible_" else np.int8))
                      for name, dims in self._SUBSET_ARRAYS.items()})
-        if int(self.yaw_degree):
+        if self.yaw_degree_:
             data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name), dtype=float))
                          for name, dims in self._YAW_ARRAYS.items()})
         attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
@@ -860,11 +898,14 @@ class VaryingCoefficientSINDy(ModelBase):
         params = json.loads(ds.attrs["params_json"])
         params["n_basis"], params["penalties"] = tuple(params["n_basis"]), tuple(params["penalties"])
         params.setdefault("yaw_degree", 0)  # files written before the yaw covariate existed
+        # Files written before the model smoothed its own wind: it was smoothed (or not) before the fit.
+        params.setdefault("wind_smoothing_s", 0.0)
         model = cls(**params)
         for name in cls._ARRAYS:
             setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
         S, Mmax = model.coef_.shape[:2]
-        J = int(params["yaw_degree"])
+        J = int(ds.sizes["yaw_power"]) if "coef_yaw" in ds else 0
+        model.yaw_degree_ = J
         if J:
             for name in cls._YAW_ARRAYS:
                 setattr(model, name, np.asarray(ds[name.rstrip("_")].values))

@@ -18,7 +18,7 @@ from vivbench.preprocess.config import PreprocessConfig
 from vivbench.preprocess.runs import as_2d, check_time
 from vivbench.preprocess.wind import mean_wind_runs
 
-__all__ = ["mean_yaw"]
+__all__ = ["event_yaw", "mean_yaw"]
 
 
 def mean_yaw(t, u, v, span_azimuth_deg: float, config: PreprocessConfig | None = None) -> np.ndarray:
@@ -52,3 +52,23 @@ def mean_yaw(t, u, v, span_azimuth_deg: float, config: PreprocessConfig | None =
     both, _ = mean_wind_runs(t, np.concatenate([along, across], axis=1), config)
     S = u.shape[1]
     return np.degrees(np.arctan2(both[:, :S], np.abs(both[:, S:])))
+
+
+def event_yaw(t_wind, u, v, span_azimuth_deg: float, t_out, config: PreprocessConfig | None = None) -> np.ndarray:
+    """The low-passed mean wind's yaw (:func:`mean_yaw`) at times ``t_out``.
+
+    Parameters
+    ----------
+    t_wind : ndarray, shape (n,), s; u, v : ndarray, shape (n, S), m/s (east, north)
+    span_azimuth_deg : float, degrees from north
+    t_out : ndarray, shape (m,), s (e.g. the identification's preprocessing grid)
+    config : PreprocessConfig, optional (the mean-wind filter)
+
+    Returns
+    -------
+    ndarray, shape (m, S), degrees (NaN outside the wind record or in its gaps)
+    """
+    yaw = mean_yaw(t_wind, u, v, span_azimuth_deg, config)
+    t_out = np.asarray(t_out, dtype=float)
+    return np.stack([np.interp(t_out, np.asarray(t_wind, dtype=float), yaw[:, k], left=np.nan, right=np.nan)
+                     for k in range(yaw.shape[1])], axis=1)

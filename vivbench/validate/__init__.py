@@ -39,6 +39,7 @@ from vivbench.validate.methods import (
     CampaignMethod,
     FittedWindows,
     VerdictModel,
+    MeasuredWindVerdictModel,
     WindowMethod,
     above_noise_floor,
     check_method_spec,
@@ -78,6 +79,7 @@ from vivbench.validate.recovery import (
     regime_scores,
     rhs_relative_error,
     truth_record,
+    record_yaw_on,
     window_rhs_errors,
     window_rhs_errors_true_AU,
 )
@@ -102,7 +104,7 @@ __all__ = [
     "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
     "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
     "select_scenarios",
-    "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "FittedWindows", "VerdictModel", "WindowMethod", "above_noise_floor",
+    "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel", "WindowMethod", "above_noise_floor",
     "check_method_spec", "default_windows", "fit_method", "resolve_method", "score_fitted", "score_method",
     "scoring_inputs",
     "simulation_nmse",
@@ -143,5 +145,6 @@ __all__ = [
     "model_window_rhs_errors_true_AU",
     "window_rhs_errors_true_AU",
     "truth_record",
+    "record_yaw_on",
     "write_validation",
 ]

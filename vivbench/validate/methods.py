@@ -82,12 +82,13 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import curve_errors
-from vivbench.validate.recovery import finite_median, model_window_rhs_errors, model_window_rhs_errors_true_AU, regime_scores
+from vivbench.validate.recovery import (finite_median, model_window_rhs_errors, model_window_rhs_errors_true_AU,
+                                       record_yaw_on, regime_scores)
 
 __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
            "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
            "CampaignMethod",
-           "FittedWindows", "VerdictModel"]
+           "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel"]
 
 #: Names of the built-in methods.
 BUILTIN_METHODS = ("windows", "campaign", "varying", "pysindy-cp")
@@ -129,6 +130,42 @@ class VerdictModel:
         """
         ok = np.asarray(self._verdict(self.model, record, window_start, window_end)["identifiable"], dtype=bool)
         return ok & above_noise_floor(record, window_start, window_end)
+
+
+class MeasuredWindVerdictModel(VerdictModel):
+    """A :class:`VerdictModel` whose model is evaluated on measured records through ``model.measured_wind``.
+
+    The varying model is fitted on the measured wind smoothed (its ``wind_smoothing_s``): its
+    verdict, window regimes and simulations of a measured record use that wind too, as
+    ``vivbench pool`` does, while ``predict`` and ``order_contributions`` take a record's wind
+    as given (the truth's own wind, for the dA/dt error on the true (A, U)).
+    """
+
+    def __init__(self, model, verdict):
+        super().__init__(model, verdict)
+        self._last = None  # (record, windows, verdict): identifiable and window_regimes ask for the same in turn
+
+    def _measured_verdict(self, record: Record, window_start, window_end) -> dict:
+        start = np.atleast_1d(np.asarray(window_start, dtype=float))
+        end = np.atleast_1d(np.asarray(window_end, dtype=float))
+        key = (start.tobytes(), end.tobytes())
+        # The record itself is kept with the verdict (identity, not equality: records compare by identity).
+        if self._last is None or self._last[0] is not record or self._last[1] != key:
+            self._last = (record, key, self._verdict(self.model, self.model.measured_wind(record), start, end))
+        return self._last[2]
+
+    def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
+        """Bool (W, S): the verdict on the measured record, and the window above the noise floor."""
+        ok = np.asarray(self._measured_verdict(record, window_start, window_end)["identifiable"], dtype=bool)
+        return ok & above_noise_floor(record, window_start, window_end)
+
+    def window_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
+        """Int (W, S): the model's regime of each window of the measured record (the verdict's point regimes)."""
+        return np.asarray(self._measured_verdict(record, window_start, window_end)["regime"], dtype=int)
+
+    def simulate(self, record: Record, *args, **kwargs):
+        """The model's ``simulate`` on the measured record's wind as the model was fitted on it."""
+        return self.model.simulate(self.model.measured_wind(record), *args, **kwargs)
 
 
 def above_noise_floor(record: Record, window_start, window_end, min_snr: float | None = None) -> np.ndarray:
@@ -188,7 +225,9 @@ class CampaignMethod:
 
         if self.kind == "campaign":
             return VerdictModel(PooledSINDy(**self.params).fit(records), _campaign_verdict)
-        return VerdictModel(VaryingCoefficientSINDy(**self.params).fit(records), _varying_verdict)
+        model = VaryingCoefficientSINDy(**self.params).fit(records)
+        # Measured records are evaluated on the wind the model was fitted on; the truth's own wind as it is.
+        return MeasuredWindVerdictModel(model, _varying_verdict)
 
 
 class FittedWindows:
@@ -344,8 +383,9 @@ def resolve_method(spec: str):
     spec : str
         ``"windows"`` (:class:`WindowMethod`: the paper's window SINDy with the chain's verdict),
         ``"campaign"`` (:class:`CampaignMethod`: ``PooledSINDy`` with its bootstrap and
-        confidence-region verdict), ``"varying"`` (``VaryingCoefficientSINDy`` with its bootstrap
-        verdict), ``"pysindy-cp"`` (:class:`vivbench.models.PySINDyCP`, no verdict), or
+        confidence-region verdict), ``"varying"`` (``VaryingCoefficientSINDy`` with its own defaults,
+        those of ``vivbench pool --model varying``: the yaw covariate when the records carry the
+        yaw, 30 s wind smoothing; bootstrap and confidence-set verdict), ``"pysindy-cp"`` (:class:`vivbench.models.PySINDyCP`, no verdict), or
         ``"package.module:factory"``: the module is imported and ``factory()`` called with no
         arguments; it must return an object with a callable ``fit``.
 
@@ -587,8 +627,10 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
         else:
             ok = np.zeros(r.shape, dtype=bool)  # no verdict: scored on all windows, coverage 0
         flag.append(ok)
+        # The truth stores no yaw: a model using it sees the measured record's (as on field data).
         e, act = model_window_rhs_errors_true_AU(predictor, truth, start, end, event_id=rec.event_id,
-                                                 active_share=active_share)
+                                                 active_share=active_share,
+                                                 yaw=record_yaw_on(rec, truth["time"].values))
         et.append(e.ravel())
         et_act.append(np.where(act, e, np.nan).ravel())
         if "coef" in truth.data_vars:

@@ -28,7 +28,7 @@ from vivbench.regimes.truth import truth_window_regimes
 
 __all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
            "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU",
-           "truth_window_activity", "truth_rhs_errors", "finite_median"]
+           "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -171,7 +171,7 @@ def model_window_rhs_errors(model, record, coef_true: np.ndarray, truth_r: np.nd
     return errors, active
 
 
-def truth_record(truth: xr.Dataset, event_id: str = "truth") -> Record:
+def truth_record(truth: xr.Dataset, event_id: str = "truth", yaw=None) -> Record:
     """The truth of an event as a record of the model protocol.
 
     Parameters
@@ -181,6 +181,9 @@ def truth_record(truth: xr.Dataset, event_id: str = "truth") -> Record:
         in m and m/s, ``r`` (n_t, S, 4) in m/s.
     event_id : str
         The record's event id (window models look their coefficients up by it).
+    yaw : array_like, shape (n_t, S), degrees, optional
+        The mean wind's yaw on the truth's grid (the truth stores none; e.g. the
+        measured record's, :func:`record_yaw_on`), for models that use it.
 
     Returns
     -------
@@ -190,7 +193,23 @@ def truth_record(truth: xr.Dataset, event_id: str = "truth") -> Record:
     """
     r = np.asarray(truth["r"].values, dtype=float)
     return Record(event_id=str(event_id), t=truth["time"].values, A=truth["A"].values, U=truth["U"].values,
-                  dA=r.sum(axis=-1))
+                  dA=r.sum(axis=-1), yaw=yaw)
+
+
+def record_yaw_on(record: Record, t) -> np.ndarray | None:
+    """The record's yaw (degrees) interpolated to times ``t`` (s), held at its first and last known values.
+
+    Returns None when the record carries no yaw. Shape (len(t), n_sections).
+    """
+    if record.yaw is None:
+        return None
+    t = np.asarray(t, dtype=float)
+    out = np.full((t.size, record.n_sections), np.nan)
+    for k in range(record.n_sections):
+        ok = np.isfinite(record.yaw[:, k])
+        if ok.any():
+            out[:, k] = np.interp(t, record.t[ok], record.yaw[ok, k])
+    return out
 
 
 def _window_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start, end, scale: np.ndarray,
@@ -210,7 +229,7 @@ def _window_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start
 
 
 def model_window_rhs_errors_true_AU(model, truth: xr.Dataset, window_start, window_end, *, event_id: str = "truth",
-                                    active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+                                    active_share: float = 0.1, yaw=None) -> tuple[np.ndarray, np.ndarray]:
     """Relative dA/dt error of any model of the protocol on the true (A, U), window by window.
 
     The model's ``predict`` on :func:`truth_record` (the truth's own time, A and
@@ -229,6 +248,8 @@ def model_window_rhs_errors_true_AU(model, truth: xr.Dataset, window_start, wind
     active_share : float
         A window-equation has dynamics (is active) when the RMS of its true dA/dt
         is at least this share of the event's RMS true dA/dt of that section.
+    yaw : array_like, shape (n_t, S), degrees, optional
+        The mean wind's yaw on the truth's grid (see :func:`truth_record`).
 
     Returns
     -------
@@ -238,7 +259,7 @@ def model_window_rhs_errors_true_AU(model, truth: xr.Dataset, window_start, wind
         true dynamics).
     active : ndarray of bool, shape (W, S)
     """
-    record = truth_record(truth, event_id)
+    record = truth_record(truth, event_id, yaw)
     f_model = np.asarray(model.predict(record), dtype=float)
     if f_model.shape != record.A.shape:
         raise ValueError(f"predict must return shape {record.A.shape} (n_samples, n_sections); got {f_model.shape}")
