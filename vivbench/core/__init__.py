@@ -15,8 +15,10 @@ from vivbench.core.regime import DEFAULT_TAU, classify_regime, order_rms, regime
 from vivbench.core.errors import InputError, error_line
 from vivbench.core.toml import load_toml
 from vivbench.core.parallel import Outcome, run_tasks, parse_scheduler
+from vivbench.core.lock import exclusive_directory
 
 __all__ = [
+    "exclusive_directory",
     "A_POWERS", "U_POWERS", "SECTIONS", "reference_section", "section_exponents", "feature_exponents",
     "feature_names", "evaluate_library", "Record", "DEFAULT_TAU", "classify_regime", "order_rms",
     "regime_rule", "InputError", "error_line", "load_toml", "Outcome", "run_tasks", "parse_scheduler",

@@ -36,11 +36,12 @@ import json
 import re
 import shutil
 from collections.abc import Callable, Sequence
-from contextlib import closing, contextmanager
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 
 from vivbench.core.errors import InputError, error_line
+from vivbench.core.lock import exclusive_directory
 from vivbench.core.parallel import run_tasks
 from vivbench.io.netcdf import atomic_path
 from vivbench.validate.leaderboard_table import VALUES, plot_leaderboard, write_csv, write_markdown
@@ -237,23 +238,9 @@ class LeaderboardResult:
     failures: dict[str, str]
 
 
-@contextmanager
 def _exclusive(out: Path):
-    """Hold ``OUT/.leaderboard.lock``: two runs writing one directory would regenerate each other's campaigns."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX: no lock
-        yield
-        return
-    fh = (out / ".leaderboard.lock").open("a")
-    try:
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            raise InputError(f"{out}: another leaderboard run is writing to this directory") from None
-        yield
-    finally:
-        fh.close()
+    # Two runs writing one directory would regenerate each other's campaigns.
+    return exclusive_directory(out, ".leaderboard.lock", "leaderboard run")
 
 
 def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_dir: str | Path, *,

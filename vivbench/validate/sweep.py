@@ -30,7 +30,7 @@ import math
 import shutil
 import tempfile
 from collections.abc import Callable
-from contextlib import closing, contextmanager
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,6 +52,7 @@ from vivbench.validate.recovery import campaign_recovery
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 from vivbench.validate.sweep_parameters import PARAMETERS, SWEEP_PARAMETERS
 from vivbench.core.errors import InputError, error_line
+from vivbench.core.lock import exclusive_directory
 
 __all__ = [
     "SWEEP_PARAMETERS",
@@ -512,23 +513,9 @@ class SweepResult:
     repaired_lines: int
 
 
-@contextmanager
 def _exclusive(out: Path):
-    """Hold ``OUT/.sweep.lock``: two sweeps writing one journal would interleave their lines."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX: no lock
-        yield
-        return
-    fh = (out / ".sweep.lock").open("a")
-    try:
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            raise InputError(f"{out}: another sweep is writing to this directory") from None
-        yield
-    finally:
-        fh.close()
+    # Two sweeps writing one journal would interleave their lines.
+    return exclusive_directory(out, ".sweep.lock", "sweep")
 
 
 def _check_config_record(out: Path, config: SweepConfig) -> None:
