@@ -74,7 +74,8 @@ def run(args) -> int:
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, dt=args.dt,
-                             shooting_interval=args.interval, max_iter=args.max_iter)
+                             shooting_interval=args.interval, max_iter=args.max_iter, yaw_factor=not args.no_yaw,
+                             n_starts=args.starts, seed=args.seed)
     t0 = time.perf_counter()
 
     def progress(it, cost, mu):
@@ -109,6 +110,8 @@ def run(args) -> int:
                "n_events": len(files), "warm_start": outcome.warm_start, "fit_seconds": info["seconds"],
                "total_seconds": seconds, "iterations": info["iterations"], "converged": info["converged"],
                "max_continuity_defect": info["max_defect"], "n_intervals": info["n_intervals"],
+               "start": info["start"], "starts": info.get("starts", []), "yaw": info.get("yaw"),
+               "yaw_coef": model.yaw_coef_,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean())}
     campaign_curves = None
     truth_curves = truth_functions = None
@@ -152,6 +155,10 @@ def run(args) -> int:
     print(f"wrote {path}: {len(files)} events, {info['iterations']} Gauss-Newton iterations in {info['seconds']:.1f} s "
           f"({'converged' if info['converged'] else 'NOT converged: ' + info['message']}), median simulation NMSE "
           f"{summary['nmse_median']:.3g}, regime coverage {summary['regime_coverage']:.3f}")
+    yc = model.yaw_curve()
+    print(f"start: {info['start']}; {info.get('yaw', '')}" + (
+        f"; c = {model.yaw_coef_:.3g} [{float(yc['yaw_coef_lower']):.3g}, {float(yc['yaw_coef_upper']):.3g}]"
+        if model.yaw_used_ else ""))
     if args.campaign:
         s = v["summary"]
         print(f"against the truth: a_k1 error {s['curve_error_linear']:.3f} (band coverage "
@@ -191,6 +198,13 @@ def register(sub) -> None:
                    help="Gauss-Newton iterations per continuation stage (default 30)")
     s.add_argument("--no-warm-start", dest="no_warm_start", action="store_true",
                    help="start from an equation-error fit instead of the campaign model's curves")
+    s.add_argument("--no-yaw", dest="no_yaw", action="store_true",
+                   help="no yaw factor: Y1 and C_L independent of the measured yaw (default: 1 - c sin^2(yaw), "
+                        "c fitted, when the results carry the yaw)")
+    s.add_argument("--starts", type=int, default=4,
+                   help="multi-start: warm start, equation-error start and perturbed starts, screened by their "
+                        "penalised cost (default 4; 1: the first only)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the perturbed starts (default 0)")
     s.add_argument("--tau", type=float, default=0.2, help="regime threshold (DESIGN 2.5)")
     s.add_argument("--agreement", type=float, default=0.95,
                    help="share of parameter draws that must agree on a window's regime (default 0.95)")

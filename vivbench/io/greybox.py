@@ -7,7 +7,11 @@ model needs (spline knots and coefficients, their covariance, the bridge's
 properties, mode shape and participation factors) and, on the wind grid of
 the fitted data, the physical curves Y1, e1, e2, C_L with their bands and
 the coefficient curves ``curves`` of DESIGN 3.5 with ``curves_lower`` and
-``curves_upper``. Documented in ``docs/formats.md``.
+``curves_upper`` (all at yaw 0), and the yaw factor: ``yaw_coef`` c of
+1 - c sin^2(yaw) on Y1 and C_L with its band and ``yaw_factor`` against
+``yaw`` (degrees); attribute ``yaw_used`` (0: not fitted, factor 1, and files
+written before the yaw factor), ``yaw_model`` says how. Documented in
+``docs/formats.md``.
 """
 
 from __future__ import annotations
@@ -48,8 +52,10 @@ GREYBOX_ATTRIBUTES = ("model", "bridge_json", "params_json", "fit_info_json", "w
 
 def _check(ds: xr.Dataset, path) -> None:
     M = ds.sizes["basis"]
-    if ds.sizes["function"] != 4 or ds.sizes["parameter"] != 4 * M or ds.sizes["parameter_"] != 4 * M:
-        raise ModelFileError(f"{path}: coef must be (4, M) and coef_cov (4 M, 4 M); got {dict(ds.sizes)}")
+    P = 4 * M + int(bool(int(ds.attrs.get("yaw_used", 0))))  # the yaw coefficient last, when fitted
+    if ds.sizes["function"] != 4 or ds.sizes["parameter"] != P or ds.sizes["parameter_"] != P:
+        raise ModelFileError(f"{path}: coef must be (4, M) and coef_cov (P, P) with P = 4 M (+1 with the yaw "
+                             f"coefficient, attribute yaw_used = 1); got {dict(ds.sizes)}")
     if ds.sizes["knot"] != M + 4:
         raise ModelFileError(f"{path}: {M} cubic B-splines need {M + 4} knots; got {ds.sizes['knot']}")
     if ds.sizes["section"] != ds.sizes["equation"] or ds.sizes["order"] != 4:

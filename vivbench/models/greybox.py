@@ -72,6 +72,9 @@ __all__ = ["BridgeProperties", "GreyBoxRefit", "FUNCTIONS", "curves_to_functions
 #: The unknown functions, in the order of the coefficient rows.
 FUNCTIONS = ("Y1", "e1", "e2", "C_L")
 
+#: Continuity weight of the first continuation stage (and of the screening of the starts).
+_FIRST_WEIGHT = 1e2
+
 
 @dataclass(frozen=True, kw_only=True)
 class BridgeProperties:
@@ -241,26 +244,51 @@ class GreyBoxRefit(ModelBase):
     warm_start : xarray.Dataset or None
         Curves of DESIGN 3.5 (``curves``, e.g. the campaign model's ``curves(wind)``)
         to start from; None: an equation-error start.
+    yaw_factor : bool
+        Multiply Y1 and C_L by 1 - c sin^2(yaw) of the records' measured yaw
+        (``Record.yaw``), c >= 0 fitted with the splines. Records without a
+        yaw get factor 1 (all of them: c is not fitted).
+    n_starts : int
+        Starts of the multi-start: the warm start (if given), the
+        equation-error start, then perturbed copies of the first. Each runs
+        ``screen_iter`` iterations at the loosest continuity weight; the one
+        with the lowest penalised cost there is iterated to convergence.
+        1: the first start only.
+    screen_iter : int
+        Gauss-Newton iterations of a start's screening.
+    start_spread : float
+        Standard deviation of the log of the factors that scale each function
+        in a perturbed start.
+    seed : int
+        Seed of the perturbed starts (the fit is deterministic).
 
     Attributes
     ----------
     coef_ : ndarray, shape (4, n_basis)
         Spline coefficients of Y1, e1, e2, C_L (dimensionless functions).
-    cov_ : ndarray, shape (4 n_basis, 4 n_basis)
-        Their covariance (row-major flattening of ``coef_``).
+    yaw_coef_ : float
+        c of the yaw factor 1 - c sin^2(yaw) (0 when not fitted).
+    yaw_used_ : bool
+        Whether the yaw factor was fitted.
+    cov_ : ndarray, shape (P, P)
+        Covariance of the row-major flattening of ``coef_`` followed, when
+        ``yaw_used_``, by ``yaw_coef_`` (P = 4 n_basis + 1).
     knots_ : ndarray, reduced velocity
     phi_, beta_ : ndarray, shape (S,)
     wind_range_ : (float, float), m/s, the fitted data's range of wind
     fit_info_ : dict
         cost, iterations, converged, message, max_defect, seconds, n_intervals,
-        n_samples, start.
+        n_samples, start (the start that won), starts (each start and its
+        screened cost), yaw (how the yaw entered).
     """
 
     _fitted_attribute = "coef_"
 
     def __init__(self, *, bridge: BridgeProperties | None = None, n_basis: int = 16, penalty: float = 1.0,
                  dt: float = 1.0, shooting_interval: float = 60.0, max_iter: int = 30, tol: float = 1e-3,
-                 block_s: float = 300.0, level: float = 0.95, continuity_weight: float = 1e6, warm_start=None):
+                 block_s: float = 300.0, level: float = 0.95, continuity_weight: float = 1e6, warm_start=None,
+                 yaw_factor: bool = True, n_starts: int = 4, screen_iter: int = 6, start_spread: float = 0.4,
+                 seed: int = 0):
         self.bridge = bridge
         self.n_basis = n_basis
         self.penalty = penalty
@@ -272,6 +300,11 @@ class GreyBoxRefit(ModelBase):
         self.level = level
         self.continuity_weight = continuity_weight
         self.warm_start = warm_start
+        self.yaw_factor = yaw_factor
+        self.n_starts = n_starts
+        self.screen_iter = screen_iter
+        self.start_spread = start_spread
+        self.seed = seed
 
     def _validate(self) -> None:
         if not isinstance(self.bridge, BridgeProperties):
@@ -289,6 +322,17 @@ class GreyBoxRefit(ModelBase):
             raise InputError(f"max_iter must be a positive integer; got {self.max_iter!r}")
         if not 0 < self.level < 1:
             raise InputError(f"level must lie strictly between 0 and 1; got {self.level!r}")
+        for name in ("n_starts", "screen_iter"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, np.integer)) and v >= 1):
+                raise InputError(f"{name} must be a positive integer; got {v!r}")
+        if not (isinstance(self.start_spread, (int, float)) and math.isfinite(self.start_spread)
+                and self.start_spread >= 0):
+            raise InputError(f"start_spread must be a finite number >= 0; got {self.start_spread!r}")
+        if not isinstance(self.seed, (int, np.integer)):
+            raise InputError(f"seed must be an integer; got {self.seed!r}")
+        if not isinstance(self.yaw_factor, (bool, np.bool_)):
+            raise InputError(f"yaw_factor must be True or False; got {self.yaw_factor!r}")
 
     # ------------------------------------------------------------------ helpers
 
@@ -328,13 +372,14 @@ class GreyBoxRefit(ModelBase):
     # ------------------------------------------------------------------ fit
 
     def fit(self, records: Sequence[Record | tuple], callback=None) -> "GreyBoxRefit":
-        """Fit the spline functions to the envelopes of all records at once.
+        """Fit the spline functions (and the yaw coefficient) to the envelopes of all records at once.
 
         Parameters
         ----------
-        records : sequence of Record (A and U are used; dA is not)
+        records : sequence of Record (A, U and, when present, yaw are used; dA is not)
         callback : callable or None
-            ``callback(iteration, cost, mu)`` after each accepted Gauss-Newton step.
+            ``callback(iteration, cost, mu)`` after each accepted Gauss-Newton step
+            (of the screening of the starts, then of the final fit).
 
         Returns
         -------
@@ -356,6 +401,9 @@ class GreyBoxRefit(ModelBase):
         self.phi_, self.beta_, self.n_sections_ = phi, beta, S
         self.wind_range_ = (lo, hi)
         M = self.n_basis
+        use_yaw = bool(self.yaw_factor) and bool(grid.has_yaw.any())
+        self.yaw_used_ = use_yaw
+        P = 4 * M + int(use_yaw)
         B = self._basis(grid.U)  # (I, 2n+1, S, M)
         a = section_factors(grid.U, self.bridge, phi, beta)  # (I, 2n+1, S, 4)
         zw = self.bridge.omega * self.bridge.damping_ratio
@@ -365,63 +413,120 @@ class GreyBoxRefit(ModelBase):
         Qm = (grid.A @ amp) / np.sum(amp**2)  # least-squares Q of the sections, (I, n+1)
 
         # basis and factors at the start, midpoint and end of every step: (I, n, 3, S, .)
-        B3 = np.stack([B[:, 0:-1:2], B[:, 1::2], B[:, 2::2]], axis=2)
-        a3 = np.stack([a[:, 0:-1:2], a[:, 1::2], a[:, 2::2]], axis=2)
+        def thirds(x):
+            return np.stack([x[:, 0:-1:2], x[:, 1::2], x[:, 2::2]], axis=2)
+
+        B3, a3 = thirds(B), thirds(a)
+        s2 = np.sin(np.radians(grid.yaw)) ** 2 if use_yaw else None  # (I, 2n+1, S)
+        s2_3 = thirds(s2) if use_yaw else None
 
         def g_of(theta):
-            C = theta.reshape(4, M)
+            C = theta[:4 * M].reshape(4, M)
             F = B @ C.T  # (I, 2n+1, S, 4)
-            g = _g_from_values(F, a, zw)
-            F3 = np.stack([F[:, 0:-1:2], F[:, 1::2], F[:, 2::2]], axis=2)
+            # every order holds Y1 or C_L exactly once: the yaw factor scales each section's factors
+            w = 1.0 - theta[4 * M] * s2 if use_yaw else None
+            g = _g_from_values(F, a if w is None else a * w[..., None], zw)
+            F3 = thirds(F)
+            aw3 = a3 if w is None else a3 * thirds(w)[..., None]
 
-            def dg(w):
+            def dg(wt):
                 Y, E1, E2 = F3[..., 0], F3[..., 1], F3[..., 2]
-                w0, w1, w2, w3 = (w[..., i][..., None] for i in range(4))
-                cw = np.stack([w1 * a3[..., 1] + w2 * a3[..., 2] * E1 + w3 * a3[..., 3] * E2,
-                               w2 * a3[..., 2] * Y, w3 * a3[..., 3] * Y, w0 * a3[..., 0]], axis=-1)
-                return np.einsum("ijpsm,ijpsf->ijfm", B3, cw, optimize=True).reshape(B3.shape[0], B3.shape[1], 4 * M)
+                w0, w1, w2, w3 = (wt[..., i][..., None] for i in range(4))
+                cw = np.stack([w1 * aw3[..., 1] + w2 * aw3[..., 2] * E1 + w3 * aw3[..., 3] * E2,
+                               w2 * aw3[..., 2] * Y, w3 * aw3[..., 3] * Y, w0 * aw3[..., 0]], axis=-1)
+                d = np.einsum("ijpsm,ijpsf->ijfm", B3, cw, optimize=True).reshape(B3.shape[0], B3.shape[1], 4 * M)
+                if not use_yaw:
+                    return d
+                hyaw = _g_from_values(F3, a3 * s2_3[..., None], 0.0)  # dg/dc = -hyaw, (I, n, 3, 4)
+                return np.concatenate([d, -np.einsum("ijpf,ijpf->ij", wt, hyaw)[..., None]], axis=2)
 
             return g, dg
 
-        theta0, start = self._start(records, grid, B, a, zw, Qm, phi, beta)
-        K = difference_penalty(M)
-        R0 = np.zeros((4 * M, 4 * M))
-        lower = np.concatenate([np.full(M, -np.inf), np.zeros(3 * M)])
-        probe = ShootingProblem(grid=grid, amp=amp, scale=scale, g_of=g_of, penalty=R0, lower=lower,
+        lower = np.concatenate([np.full(M, -np.inf), np.zeros(3 * M), np.zeros(P - 4 * M)])
+        probe = ShootingProblem(grid=grid, amp=amp, scale=scale, g_of=g_of, penalty=np.zeros((P, P)), lower=lower,
                                 continuity_weight=self.continuity_weight)
-        theta0 = np.maximum(theta0, lower)
-        for shrink in (1.0, 0.5, 0.25, 0.0):  # a start that blows up inside an interval stops Gauss-Newton at once
-            trial = theta0.copy()
-            trial[:M] *= shrink  # Y1 = 0 leaves a damped, forced linear model that cannot blow up
-            if np.isfinite(probe.cost(trial, Qm[:, 0])):
-                break
-        if shrink < 1.0:
-            start += f", Y1 scaled by {shrink:g} (the full start blew up inside an interval)"
-        theta0 = trial
-        probe.set_continuity_weight(0.0)  # the penalty's scale: the data part of J^T J only
-        _, H, _, _, _ = probe.linearise(theta0, Qm[:, 0])
-        probe.set_continuity_weight(self.continuity_weight)
-        R = np.zeros_like(R0)
+        reference, starts = self._starts(grid, B, a, zw, Qm, phi, beta, P, s2)
+
+        def finite_start(name, theta0):
+            theta0 = np.maximum(theta0, lower)
+            for shrink in (1.0, 0.5, 0.25, 0.0):  # a start that blows up inside an interval stops Gauss-Newton
+                trial = theta0.copy()
+                trial[:M] *= shrink  # Y1 = 0 leaves a damped, forced linear model that cannot blow up
+                if np.isfinite(probe.cost(trial, Qm[:, 0])):
+                    break
+            if shrink < 1.0:
+                name += f", Y1 scaled by {shrink:g} (the full start blew up inside an interval)"
+            return name, trial
+
+        safe = [finite_start(n, t) for n, t in starts]
+        # the penalty's scale: the data part of J^T J at the equation-error start, which depends on the data
+        # only, so the objective is one and the same whichever start is used or wins
+        probe.set_continuity_weight(0.0)
+        _, H, _, _, _ = probe.linearise(finite_start("reference", reference)[1], Qm[:, 0])
+        K = difference_penalty(M)
+        R = np.zeros((P, P))
         for f in range(4):  # each function's penalty relative to its own block of J^T J
             sl = slice(f * M, (f + 1) * M)
             R[sl, sl] = self.penalty * max(np.trace(H[sl, sl]), 1e-300) / np.trace(K) * K
         probe.penalty = R
-        res = solve_gauss_newton(probe, theta0, Qm[:, 0], max_iter=self.max_iter, tol=self.tol,
+        screened = []
+        if len(safe) > 1:
+            # screening: a few iterations of every start at the first (loosest) continuity weight, compared by
+            # the penalised cost there
+            probe.set_continuity_weight(_FIRST_WEIGHT)
+            for name, theta0 in safe:
+                try:
+                    res = solve_gauss_newton(probe, theta0, Qm[:, 0], max_iter=self.screen_iter, tol=self.tol,
+                                             first_weight=_FIRST_WEIGHT, covariance=False, callback=callback)
+                    screened.append((res.cost, name, res.theta, res.s))
+                except ValueError:  # a start with a non-finite cost is dropped
+                    screened.append((np.inf, name, theta0, Qm[:, 0]))
+            best = min(range(len(screened)), key=lambda j: screened[j][0])  # first of equal costs: deterministic
+            _, start, theta0, s0 = screened[best]
+        else:
+            start, theta0 = safe[0]
+            s0 = Qm[:, 0]
+        probe.set_continuity_weight(self.continuity_weight)
+        res = solve_gauss_newton(probe, theta0, s0, max_iter=self.max_iter, tol=self.tol, first_weight=_FIRST_WEIGHT,
                                  block_s=self.block_s, callback=callback)
-        self.coef_ = res.theta.reshape(4, M)
+        self.coef_ = res.theta[:4 * M].reshape(4, M)
+        self.yaw_coef_ = float(res.theta[4 * M]) if use_yaw else 0.0
         self.cov_ = res.cov
         self.penalty_matrix_ = R
+        if use_yaw:
+            n_with = len({int(e) for e in grid.event[grid.has_yaw]})
+            yaw_note = (f"yaw factor 1 - c sin^2(yaw) on Y1 and C_L, c fitted; {n_with} of {len(records)} records "
+                        f"carry a measured yaw (the others: factor 1)")
+        elif self.yaw_factor:
+            yaw_note = ("no record carries a measured yaw: factor 1, so Y1 and C_L are averages over the events' "
+                        "yaw angles, not their values at yaw 0")
+        else:
+            yaw_note = "yaw factor switched off (yaw_factor=False): factor 1"
         self.fit_info_ = {"cost": res.cost, "iterations": res.iterations, "converged": bool(res.converged),
                           "message": res.message, "max_defect": res.max_defect, "seconds": res.seconds,
                           "n_intervals": grid.n_intervals, "n_samples": int(grid.weight.sum()),
-                          "n_records": len(records), "start": start}
+                          "n_records": len(records), "start": start, "yaw": yaw_note,
+                          "starts": [{"start": n, "screened_cost": float(c)} for c, n, _, _ in screened]}
         return self
 
-    def _start(self, records, grid, B, a, zw, Qm, phi, beta):
-        """Start coefficients: the warm-start curves or an equation-error fit (product form)."""
+    def _starts(self, grid, B, a, zw, Qm, phi, beta, P, s2):
+        """The equation-error start (the penalty's reference) and the named starts of the multi-start.
+
+        The starts, in order: the warm start (if given), the equation-error
+        start, then perturbed copies of the first (seeded), ``n_starts`` in all;
+        their yaw coefficient is 0 except in the perturbed ones.
+        """
         M = self.n_basis
         K = difference_penalty(M)
         wind = np.linspace(*self.wind_range_, 200)
+        Bw = self._basis(wind)
+
+        def from_p(p):
+            F = curves_to_functions(wind, p, self.bridge, phi, beta)
+            return np.concatenate([_penalised_fit(Bw, F[f], K) for f in range(4)] + [np.zeros(P - 4 * M)])
+
+        eq = from_p(self._equation_error(grid, B, a, zw, Qm, wind, phi, beta))
+        starts = []
         if self.warm_start is not None:
             ws = self.warm_start
             try:
@@ -433,15 +538,21 @@ class GreyBoxRefit(ModelBase):
                 raise InputError(f"warm_start curves must have shape ({phi.size}, 4, n_wind); got {cur.shape}")
             ref = int(np.argmax(np.abs(phi)))
             p = cur[ref] * phi[ref] ** (np.arange(4) - 1)[:, None]  # a_ki = phi_k^(1-i) p_i
-            p = np.stack([np.interp(wind, w, pi) for pi in p])
-            start = "warm start from curves"
-        else:
-            p = self._equation_error(grid, B, a, zw, Qm, wind, phi, beta)
-            start = "equation error (product form)"
-        F = curves_to_functions(wind, p, self.bridge, phi, beta)
-        Bw = self._basis(wind)
-        theta = np.concatenate([_penalised_fit(Bw, F[f], K) for f in range(4)])
-        return theta, start
+            starts.append(("warm start from curves", from_p(np.stack([np.interp(wind, w, pi) for pi in p]))))
+        starts.append(("equation error (product form)", eq))
+        base = starts[0][1]
+        rng = np.random.default_rng(self.seed)
+        # the yaw coefficient of a perturbed start: up to a factor 1/2 at the largest measured yaw
+        c_hi = 0.5 / max(float(np.max(s2)), 1e-6) if s2 is not None else 0.0
+        for j in range(self.n_starts - len(starts)):
+            # each function scaled by a log-normal factor, which keeps the signs and the bounds
+            factor = np.exp(self.start_spread * rng.standard_normal(4))
+            c = np.atleast_1d(rng.uniform(0.0, c_hi))[:P - 4 * M]
+            theta = np.concatenate([(base[:4 * M].reshape(4, M) * factor[:, None]).ravel(), c])
+            starts.append((f"perturbed start {j + 1} (seed {self.seed}; function factors "
+                           f"{', '.join(f'{x:.2f}' for x in factor)}"
+                           + (f", yaw coefficient {c[0]:.3g})" if c.size else ")"), theta))
+        return eq, starts[:self.n_starts]
 
     def _equation_error(self, grid, B, a, zw, Qm, wind, phi, beta) -> np.ndarray:
         """p_i(U) on ``wind`` from linear least squares of dQ/dt in the product form."""
@@ -468,36 +579,66 @@ class GreyBoxRefit(ModelBase):
 
     # ------------------------------------------------------------------ evaluation
 
-    def amplitude_coefficients(self, U, coef: np.ndarray | None = None) -> np.ndarray:
-        """g_i(t) of dQ/dt = sum_i g_i Q^i at section winds U (..., S), shape (..., 4)."""
+    def yaw_factor_values(self, yaw, yaw_coef: float | None = None) -> np.ndarray:
+        """The factor 1 - c sin^2(yaw) on Y1 and C_L at yaw angles ``yaw`` (degrees, any shape; NaN: 0).
+
+        1 everywhere when the yaw factor was not fitted.
+        """
+        self._check_fitted()
+        c = getattr(self, "yaw_coef_", 0.0) if yaw_coef is None else yaw_coef
+        psi = np.nan_to_num(np.asarray(yaw, dtype=float), nan=0.0)
+        return 1.0 - c * np.sin(np.radians(psi)) ** 2
+
+    def _yaw_sin2(self, yaw, shape) -> np.ndarray:
+        """sin^2 of the yaw (degrees) broadcast to ``shape``; 0 without a yaw or a fitted yaw factor."""
+        if yaw is None or not getattr(self, "yaw_used_", False):
+            return np.zeros(shape)
+        return np.broadcast_to(np.sin(np.radians(np.nan_to_num(np.asarray(yaw, dtype=float), nan=0.0))) ** 2, shape)
+
+    def amplitude_coefficients(self, U, coef: np.ndarray | None = None, yaw=None) -> np.ndarray:
+        """g_i(t) of dQ/dt = sum_i g_i Q^i at section winds U (..., S), shape (..., 4).
+
+        ``yaw`` (degrees, the shape of U; None: 0) enters through the fitted yaw factor.
+        """
         self._check_fitted()
         U = np.asarray(U, dtype=float)
         F = self.function_values(U, coef)
-        a = section_factors(U, self.bridge, self.phi_, self.beta_)
+        a = section_factors(U, self.bridge, self.phi_, self.beta_) * self.yaw_factor_values(
+            np.zeros(U.shape) if yaw is None else yaw)[..., None]
         return _g_from_values(F, a, self.bridge.omega * self.bridge.damping_ratio)
 
-    def amplitude_coefficient_function(self, U):
-        """A function of coefficient draws (c, 4, M) giving g_i at section winds U (n, S): shape (c, n, 4).
+    def amplitude_coefficient_function(self, U, yaw=None):
+        """A function of draws giving g_i at section winds U (n, S) and yaw (n, S) degrees: shape (c, n, 4).
 
-        The basis and section factors are evaluated once (for regime verdicts over many draws).
+        ``g(coef, yaw_coef=None)`` with spline coefficient draws (c, 4, M) and
+        yaw coefficient draws (c,) (None: the fitted one). The basis and
+        section factors are evaluated once (for regime verdicts over many draws).
         """
         self._check_fitted()
         U = np.asarray(U, dtype=float)
         B = self._basis(U)  # (n, S, M)
         a = section_factors(U, self.bridge, self.phi_, self.beta_)
+        s2 = self._yaw_sin2(yaw, U.shape)
         zw = self.bridge.omega * self.bridge.damping_ratio
 
-        def g(coef):
-            F = np.einsum("nsm,cfm->cnsf", B, np.asarray(coef, dtype=float), optimize=True)
-            return _g_from_values(F, a[None], zw)
+        def g(coef, yaw_coef=None):
+            coef = np.asarray(coef, dtype=float)
+            c = np.broadcast_to(np.asarray(self.yaw_coef_ if yaw_coef is None else yaw_coef, dtype=float),
+                                (coef.shape[0],))
+            F = np.einsum("nsm,cfm->cnsf", B, coef, optimize=True)
+            w = 1.0 - c[:, None, None] * s2[None]  # (c, n, S)
+            return _g_from_values(F, a[None] * w[..., None], zw)
 
         return g
 
     def order_contributions(self, record: Record) -> np.ndarray:
-        """r_ki = |phi_k| g_i(U) (A_k / |phi_k|)^i, shape (n, S, 4), m/s (NaN where A or U is missing)."""
+        """r_ki = |phi_k| g_i(U, yaw) (A_k / |phi_k|)^i, shape (n, S, 4), m/s (NaN where A or U is missing).
+
+        The record's yaw (``Record.yaw``) enters through the yaw factor; none: yaw 0.
+        """
         record = self._check_record(record)
         amp = np.abs(self.phi_)
-        g = self.amplitude_coefficients(record.U)  # (n, 4)
+        g = self.amplitude_coefficients(record.U, yaw=record.yaw)  # (n, 4)
         Q = record.A / amp
         return amp[None, :, None] * g[:, None, :] * Q[..., None] ** np.arange(4)
 
@@ -528,7 +669,9 @@ class GreyBoxRefit(ModelBase):
         if n > 0:
             h = np.diff(ts[:n + 1])
             Umid = 0.5 * (U[:n] + U[1:n + 1])
-            ga, gm, gb = (self.amplitude_coefficients(x) for x in (U[:n], Umid, U[1:n + 1]))
+            Y = np.zeros_like(U) if record.yaw is None else np.nan_to_num(record.yaw[i0:i1 + 1], nan=0.0)
+            ga, gm, gb = (self.amplitude_coefficients(x, yaw=y) for x, y in
+                          ((U[:n], Y[:n]), (Umid, 0.5 * (Y[:n] + Y[1:n + 1])), (U[1:n + 1], Y[1:n + 1])))
             step = rk4_step_function()
             run = step.mapaccum("run", n)
             traj = np.asarray(run(Q0, np.concatenate([ga, gm, gb], axis=1).T, h[None, :])).ravel()
@@ -553,7 +696,8 @@ class GreyBoxRefit(ModelBase):
 
     def _bands(self, value: np.ndarray, grad: np.ndarray):
         """value (...), grad (..., P) -> lower, upper by the delta method."""
-        sd = np.sqrt(np.maximum(np.einsum("...a,ab,...b->...", grad, self.cov_, grad), 0.0))
+        P = grad.shape[-1]  # the spline block (curves at yaw 0 do not depend on the yaw coefficient)
+        sd = np.sqrt(np.maximum(np.einsum("...a,ab,...b->...", grad, self.cov_[:P, :P], grad), 0.0))
         return value - self._z() * sd, value + self._z() * sd
 
     def default_wind(self, step: float = 0.1) -> np.ndarray:
@@ -579,6 +723,38 @@ class GreyBoxRefit(ModelBase):
             data[f"{name}_upper"] = ("wind", hi, {"units": "1", "long_name": f"upper {self.level:g} band of {name}"})
         return xr.Dataset(data, coords={"wind": ("wind", wind, {"units": "m/s"}),
                                         "reduced_velocity": ("wind", self._ur(wind), {"units": "1"})})
+
+    def yaw_curve(self, yaw=None) -> xr.Dataset:
+        """The yaw coefficient c and the factor 1 - c sin^2(yaw) on Y1 and C_L, with bands.
+
+        Parameters
+        ----------
+        yaw : array_like or None, degrees (default -30..30 by 1)
+
+        Returns
+        -------
+        xarray.Dataset
+            ``yaw_coef`` (scalar, with ``yaw_coef_lower``, ``yaw_coef_upper``)
+            and ``yaw_factor`` (yaw) with ``yaw_factor_lower``/``_upper``;
+            c = 0 with a zero-width band when the yaw factor was not fitted
+            (attribute ``yaw_used`` 0).
+        """
+        self._check_fitted()
+        yaw = np.arange(-30.0, 30.5, 1.0) if yaw is None else np.atleast_1d(np.asarray(yaw, dtype=float))
+        c = float(self.yaw_coef_)
+        sd = float(np.sqrt(max(self.cov_[-1, -1], 0.0))) if self.yaw_used_ else 0.0
+        lo, hi = max(c - self._z() * sd, 0.0), c + self._z() * sd  # c >= 0 is a bound of the fit
+        s2 = np.sin(np.radians(yaw)) ** 2
+        att = {"units": "1"}
+        return xr.Dataset(
+            {"yaw_coef": ((), c, {**att, "long_name": "c of the yaw factor 1 - c sin^2(yaw) on Y1 and C_L"}),
+             "yaw_coef_lower": ((), lo, {**att, "long_name": f"lower {self.level:g} band of yaw_coef (>= 0)"}),
+             "yaw_coef_upper": ((), hi, {**att, "long_name": f"upper {self.level:g} band of yaw_coef"}),
+             "yaw_factor": ("yaw", 1.0 - c * s2, {**att, "long_name": "factor on Y1 and C_L at the yaw angle"}),
+             "yaw_factor_lower": ("yaw", 1.0 - hi * s2, {**att, "long_name": f"lower {self.level:g} band"}),
+             "yaw_factor_upper": ("yaw", 1.0 - lo * s2, {**att, "long_name": f"upper {self.level:g} band"})},
+            coords={"yaw": ("yaw", yaw, {"units": "degree", "long_name": "mean wind's angle to the span's normal"})},
+            attrs={"yaw_used": int(self.yaw_used_)})
 
     def curves(self, wind=None) -> xr.Dataset:
         """Coefficient curves a_ki(U) of DESIGN 3.5 with delta-method bands.
@@ -653,11 +829,12 @@ class GreyBoxRefit(ModelBase):
             attrs={"model": type(self).__name__, "bridge_json": self.bridge.to_json(),
                    "params_json": json.dumps(params, sort_keys=True),
                    "fit_info_json": json.dumps(self.fit_info_, sort_keys=True),
-                   "wind_min": self.wind_range_[0], "wind_max": self.wind_range_[1], "n_basis_": M},
+                   "wind_min": self.wind_range_[0], "wind_max": self.wind_range_[1], "n_basis_": M,
+                   "yaw_used": int(self.yaw_used_), "yaw_model": self.fit_info_.get("yaw", "")},
         )
         cur = self.curves(wind)
         phys = self.physical_curves(cur["wind"].values)
-        ds = ds.merge(cur.drop_vars("equation")).merge(phys)
+        ds = ds.merge(cur.drop_vars("equation")).merge(phys).merge(self.yaw_curve())
         ds = ds.assign_coords(equation=section_names(self.n_sections_))
         ds.attrs.update(model=type(self).__name__)
         return ds
@@ -688,4 +865,7 @@ class GreyBoxRefit(ModelBase):
         model.n_sections_ = int(model.phi_.size)
         model.wind_range_ = (float(ds.attrs["wind_min"]), float(ds.attrs["wind_max"]))
         model.fit_info_ = json.loads(ds.attrs["fit_info_json"])
+        # files written before the yaw factor have neither: factor 1
+        model.yaw_used_ = bool(int(ds.attrs.get("yaw_used", 0)))
+        model.yaw_coef_ = float(ds["yaw_coef"].values) if "yaw_coef" in ds else 0.0
         return model

@@ -59,6 +59,12 @@ class ShootingGrid:
         Times of the grid points (padded points continue the grid).
     h : float, s
         Step of the fit grid.
+    yaw : ndarray, shape (I, 2 n + 1, S), degrees
+        The mean wind's yaw at the stage points, like ``U``; 0 where the
+        record carries none or it is missing (perpendicular wind: no yaw
+        effect is assumed there).
+    has_yaw : ndarray of bool, shape (I,)
+        Whether the interval's record carries a measured yaw.
     """
 
     U: np.ndarray
@@ -68,6 +74,8 @@ class ShootingGrid:
     next: np.ndarray
     t: np.ndarray
     h: float
+    yaw: np.ndarray
+    has_yaw: np.ndarray
 
     @property
     def n_intervals(self) -> int:
@@ -103,7 +111,7 @@ def shooting_grid(records, *, dt: float, n_steps: int, min_points: int = 10) -> 
     -------
     ShootingGrid
     """
-    Us, As, Ws, Ev, Ts, nxt = [], [], [], [], [], []
+    Us, As, Ws, Ev, Ts, nxt, Ys, HY = [], [], [], [], [], [], [], []
     for e, rec in enumerate(records):
         t = rec.t
         if t.size < 2:
@@ -114,6 +122,8 @@ def shooting_grid(records, *, dt: float, n_steps: int, min_points: int = 10) -> 
             raise ValueError(f"record {rec.event_id}: its step {step:g} s does not divide the fit step {dt:g} s")
         idx = np.arange(0, t.size, stride)
         ts, A, U = t[idx], rec.A[idx], rec.U[idx]
+        measured = getattr(rec, "yaw", None) is not None
+        Y = np.nan_to_num(rec.yaw[idx], nan=0.0) if measured else np.zeros_like(U)
         ok = np.isfinite(A).all(axis=1) & np.isfinite(U).all(axis=1) & (U > 0).all(axis=1)
         # a gap in time (samples missing from the record) also ends a run
         ok[1:] &= np.abs(np.diff(ts) - stride * step) < 0.5 * step
@@ -126,6 +136,7 @@ def shooting_grid(records, *, dt: float, n_steps: int, min_points: int = 10) -> 
             sl = slice(a, b)
             Ar = np.concatenate([A[sl], np.repeat(A[b - 1:b], pad, axis=0)])
             Ur = np.concatenate([U[sl], np.repeat(U[b - 1:b], pad, axis=0)])
+            Yr = np.concatenate([Y[sl], np.repeat(Y[b - 1:b], pad, axis=0)])
             tr = ts[a] + dt * np.arange(n_pts + pad)
             wr = np.concatenate([np.ones(n_pts), np.zeros(pad)])
             first = len(Ev)
@@ -138,6 +149,11 @@ def shooting_grid(records, *, dt: float, n_steps: int, min_points: int = 10) -> 
                 Ufine = np.empty((2 * n_steps + 1, Uj.shape[1]))
                 Ufine[0::2], Ufine[1::2] = Uj, Umid
                 Us.append(Ufine)
+                Yj = Yr[sl_j]
+                Yfine = np.empty_like(Ufine)
+                Yfine[0::2], Yfine[1::2] = Yj, 0.5 * (Yj[1:] + Yj[:-1])
+                Ys.append(Yfine)
+                HY.append(measured)
                 As.append(Aj)
                 Ws.append(wj)
                 Ts.append(tr[sl_j])
@@ -146,7 +162,7 @@ def shooting_grid(records, *, dt: float, n_steps: int, min_points: int = 10) -> 
     if not Ev:
         raise ValueError("no run of finite samples long enough for the grey-box fit")
     return ShootingGrid(U=np.stack(Us), A=np.stack(As), weight=np.stack(Ws), event=np.array(Ev),
-                        next=np.array(nxt), t=np.stack(Ts), h=float(dt))
+                        next=np.array(nxt), t=np.stack(Ts), h=float(dt), yaw=np.stack(Ys), has_yaw=np.array(HY))
 
 
 def rk4_step_function() -> ca.Function:

@@ -170,7 +170,7 @@ def block_ids(grid: ShootingGrid, block_s: float) -> np.ndarray:
 
 def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndarray, *, max_iter: int = 40,
                        tol: float = 1e-7, block_s: float = 300.0, callback=None,
-                       first_weight: float = 1e2) -> GaussNewtonResult:
+                       first_weight: float = 1e2, covariance: bool = True) -> GaussNewtonResult:
     """Levenberg-Marquardt iterations on the Gauss-Newton model, then the sandwich covariance.
 
     Parameters
@@ -193,6 +193,9 @@ def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndar
         measurement dominate and the iterations crawl: measured on
         noise-free envelopes, cost 57 after 15 iterations against 0.3 after 4
         with the weight at 1e3).
+    covariance : bool
+        False: skip the sandwich covariance (``cov`` is empty), e.g. when
+        screening the starts of a multi-start.
 
     Returns
     -------
@@ -215,7 +218,8 @@ def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndar
     it = total
     cost, H, grad, (gloc, arow, d), Q = lin
     history.append(cost)
-    cov = _sandwich(problem, H, gloc, arow, d, block_ids(problem.grid, block_s))
+    cov = (_sandwich(problem, H, gloc, arow, d, block_ids(problem.grid, block_s)) if covariance
+           else np.zeros((0, 0)))
     nxt = np.where(problem.has_next, problem.grid.next, 0)
     defect = np.where(problem.has_next, np.abs(Q[:, -1] - s[nxt]) / problem.scale, 0.0)
     return GaussNewtonResult(theta=theta, s=s, cov=cov, cost=cost, iterations=it, converged=converged,

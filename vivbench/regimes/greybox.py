@@ -3,9 +3,9 @@
 A window's regime is the rule of DESIGN 2.5 applied to the grey-box model's
 order contributions over the window's data. It counts as identifiable when at
 least ``agreement`` of ``n_draws`` parameter draws from the model's sandwich
-covariance (a Gaussian around the fitted spline coefficients) give the window
+covariance (a Gaussian around the fitted spline and yaw coefficients) give the window
 the same regime: the draws are the confidence band evaluated on the window's
-own (A, U). The covariance does not include the penalty's smoothing bias or
+own (A, U, yaw). The covariance does not include the penalty's smoothing bias or
 the model's own limits, so the verdict is only as honest as the bands (the
 validation reports how often flagged windows carry the true regime).
 """
@@ -22,20 +22,29 @@ from vivbench.regimes.varying import window_order_stats
 __all__ = ["greybox_window_verdicts", "greybox_draws"]
 
 
-def greybox_draws(model: GreyBoxRefit, n_draws: int, seed: int = 0) -> np.ndarray:
+def greybox_draws(model: GreyBoxRefit, n_draws: int, seed: int = 0, *, with_yaw: bool = False):
     """Spline coefficients drawn from the fitted model's covariance, shape (n_draws, 4, M).
 
-    The bounds of the fit (e1, e2, C_L >= 0) are kept by clipping the draws.
+    The bounds of the fit (e1, e2, C_L >= 0 and the yaw coefficient c >= 0)
+    are kept by clipping the draws. With ``with_yaw``, also the yaw
+    coefficients drawn jointly, shape (n_draws,) (the fitted 0 when the yaw
+    factor was not fitted): returns ``(coef, yaw_coef)``.
     """
     rng = np.random.default_rng(seed)
     mean = model.coef_.ravel()
+    if model.yaw_used_:
+        mean = np.append(mean, model.yaw_coef_)
     cov = 0.5 * (model.cov_ + model.cov_.T)
     w, V = np.linalg.eigh(cov)
     z = rng.standard_normal((n_draws, mean.size))
     draws = mean + (z * np.sqrt(np.clip(w, 0.0, None))) @ V.T
-    draws = draws.reshape(n_draws, 4, -1)
-    draws[:, 1:] = np.maximum(draws[:, 1:], 0.0)
-    return draws
+    M = model.coef_.shape[1]
+    coef = draws[:, :4 * M].reshape(n_draws, 4, M)
+    coef[:, 1:] = np.maximum(coef[:, 1:], 0.0)
+    if not with_yaw:
+        return coef
+    yaw = np.maximum(draws[:, 4 * M], 0.0) if model.yaw_used_ else np.zeros(n_draws)
+    return coef, yaw
 
 
 def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, window_end, *,
@@ -74,16 +83,17 @@ def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, w
     if record.t.size > 1:
         stride = max(1, int(round(sample_step / float(np.median(np.diff(record.t))))))
     t, A, U = record.t[::stride], record.A[::stride], record.U[::stride]
-    record = Record(event_id=record.event_id, t=t, A=A, U=U)
+    yaw = None if record.yaw is None else record.yaw[::stride]
+    record = Record(event_id=record.event_id, t=t, A=A, U=U, yaw=yaw)
     R, c1, nv = window_order_stats(model.order_contributions(record), A, t, window_start, window_end)
     point = np.where(nv > 0, regime_rule(np.nan_to_num(R), c1, tau), 0).astype(np.int8)
-    draws = greybox_draws(model, n_draws, seed)
+    draws, yaw_draws = greybox_draws(model, n_draws, seed, with_yaw=True)
     amp = np.abs(model.phi_)
     Qpow = (A / amp)[..., None] ** np.arange(4)  # (n, S, 4)
     same = np.zeros(point.shape)
-    g_of = model.amplitude_coefficient_function(record.U)  # the basis once, then one product per chunk of draws
+    g_of = model.amplitude_coefficient_function(record.U, yaw)  # the basis once, then one product per chunk of draws
     for c0 in range(0, n_draws, chunk):
-        g = g_of(draws[c0:c0 + chunk])  # (c, n, 4)
+        g = g_of(draws[c0:c0 + chunk], yaw_draws[c0:c0 + chunk])  # (c, n, 4)
         r = amp[None, None, :, None] * g[:, :, None, :] * Qpow[None]
         Rb, c1b, _ = window_order_stats(r, A, t, window_start, window_end)
         same += (regime_rule(np.nan_to_num(Rb), c1b, tau) == point[None]).sum(axis=0)
