@@ -43,13 +43,16 @@ class GreyBoxOutcome:
         Per event: ``event_id``, ``nmse`` (mean over sections), ``nmse_S1``..,
         ``stopped_at`` (s or NaN), ``duration_s``.
     warm_start : str
-        Where the start came from.
+        Where the warm start came from.
+    records : list of Record
+        The fitted records (A, U, yaw).
     """
 
     model: GreyBoxRefit
     windows: xr.Dataset
     events: list
     warm_start: str
+    records: list = dataclasses.field(default_factory=list)
 
 
 def results_frequency(result_files: Sequence) -> float | None:
@@ -135,4 +138,4 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
     windows = xr.concat(parts, dim="window_all") if parts else xr.Dataset()
     windows = windows.assign_coords(equation=[f"S{k + 1}" for k in range(model.n_sections_)], order=np.arange(4))
     windows.attrs.update(tau=tau, agreement=agreement, n_draws=n_draws)
-    return GreyBoxOutcome(model=model, windows=windows, events=events, warm_start=source)
+    return GreyBoxOutcome(model=model, windows=windows, events=events, warm_start=source, records=records)

@@ -130,7 +130,7 @@ def run(args) -> int:
 
         event_files = event_paths([args.campaign])
         v = greybox_recovery(model, event_files, outcome.windows, outcome.events, campaign_curves=campaign_curves,
-                             tau=args.tau)
+                             tau=args.tau, records=outcome.records)
         with atomic_path(out_dir / "greybox_validation.json", suffix=".json") as tmp:
             tmp.write_text(json.dumps(v, indent=1, default=float) + "\n")
         summary.update({f"truth_{k}": val for k, val in v["summary"].items()})

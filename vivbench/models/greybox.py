@@ -445,7 +445,7 @@ class GreyBoxRefit(ModelBase):
         lower = np.concatenate([np.full(M, -np.inf), np.zeros(3 * M), np.zeros(P - 4 * M)])
         probe = ShootingProblem(grid=grid, amp=amp, scale=scale, g_of=g_of, penalty=np.zeros((P, P)), lower=lower,
                                 continuity_weight=self.continuity_weight)
-        reference, starts = self._starts(grid, B, a, zw, Qm, phi, beta, P, s2)
+        starts = self._starts(grid, B, a, zw, Qm, phi, beta, P, s2)
 
         def finite_start(name, theta0):
             theta0 = np.maximum(theta0, lower)
@@ -459,10 +459,10 @@ class GreyBoxRefit(ModelBase):
             return name, trial
 
         safe = [finite_start(n, t) for n, t in starts]
-        # the penalty's scale: the data part of J^T J at the equation-error start, which depends on the data
-        # only, so the objective is one and the same whichever start is used or wins
+        # the penalty's scale: the data part of J^T J at the first start (the warm start if given), fixed before
+        # any start is iterated, so every start minimises one and the same objective
         probe.set_continuity_weight(0.0)
-        _, H, _, _, _ = probe.linearise(finite_start("reference", reference)[1], Qm[:, 0])
+        _, H, _, _, _ = probe.linearise(safe[0][1], Qm[:, 0])
         K = difference_penalty(M)
         R = np.zeros((P, P))
         for f in range(4):  # each function's penalty relative to its own block of J^T J
@@ -510,7 +510,7 @@ class GreyBoxRefit(ModelBase):
         return self
 
     def _starts(self, grid, B, a, zw, Qm, phi, beta, P, s2):
-        """The equation-error start (the penalty's reference) and the named starts of the multi-start.
+        """The named starts of the multi-start.
 
         The starts, in order: the warm start (if given), the equation-error
         start, then perturbed copies of the first (seeded), ``n_starts`` in all;
@@ -552,7 +552,7 @@ class GreyBoxRefit(ModelBase):
             starts.append((f"perturbed start {j + 1} (seed {self.seed}; function factors "
                            f"{', '.join(f'{x:.2f}' for x in factor)}"
                            + (f", yaw coefficient {c[0]:.3g})" if c.size else ")"), theta))
-        return eq, starts[:self.n_starts]
+        return starts[:self.n_starts]
 
     def _equation_error(self, grid, B, a, zw, Qm, wind, phi, beta) -> np.ndarray:
         """p_i(U) on ``wind`` from linear least squares of dQ/dt in the product form."""

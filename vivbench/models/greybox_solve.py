@@ -91,8 +91,9 @@ class ShootingProblem:
     def cost(self, theta: np.ndarray, s: np.ndarray) -> float:
         g, _ = self.g_of(theta)
         Q, _ = propagate(self.funcs, s, g, self.grid.h)
-        r, d = self.residuals(Q, s)
-        val = float(np.sum(r**2) + np.sum(d**2) + theta @ self.penalty @ theta)
+        with np.errstate(over="ignore", invalid="ignore"):  # a trial step that blows up costs inf: rejected
+            r, d = self.residuals(Q, s)
+            val = float(np.sum(r**2) + np.sum(d**2) + theta @ self.penalty @ theta)
         return val if np.isfinite(val) else np.inf
 
     def linearise(self, theta: np.ndarray, s: np.ndarray):

@@ -9,9 +9,11 @@ Scores (relative RMS errors, band coverage) are those of
 :func:`vivbench.validate.curve_errors` on the reference section, so the
 campaign model's numbers (``vivbench validate``) compare one to one.
 
-Note: the truth's curves are at yaw 0, while the records carry no wind
-direction; a truth whose Y1 and C_L fall with yaw is averaged over the
-events' yaw angles by any model fitted to A and U alone.
+The truth's curves and Y1 are at yaw 0, as are the grey-box curves (its yaw
+factor is 1 there); a grey-box model fitted without the measured yaw
+averages a truth whose Y1 and C_L fall with yaw over the events' yaw angles.
+The dynamics on the true (A, U) are evaluated at the records' measured yaw
+(when given), as the truth's are at its own.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from vivbench.core.terms import reference_section
 from vivbench.models.greybox import GreyBoxRefit
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import curve_errors
-from vivbench.validate.recovery import finite_median, model_window_rhs_errors_true_AU, regime_scores
+from vivbench.validate.recovery import finite_median, model_window_rhs_errors_true_AU, record_yaw_on, regime_scores
 
 __all__ = ["greybox_recovery", "truth_y1"]
 
@@ -56,7 +58,7 @@ def _rel_rms(x, ref) -> float:
 
 
 def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events: Sequence[dict], *,
-                     campaign_curves=None, tau: float = 0.2, active_share: float = 0.1) -> dict:
+                     campaign_curves=None, tau: float = 0.2, active_share: float = 0.1, records=None) -> dict:
     """Score a fitted grey-box model against the truth of a synthetic campaign.
 
     Parameters
@@ -70,6 +72,9 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         model) scored the same way, for comparison.
     tau : regime threshold of the truth's window regimes
     active_share : see :func:`vivbench.validate.model_window_rhs_errors_true_AU`
+    records : sequence of Record or None
+        The fitted records: their measured yaw (``Record.yaw``), put on the
+        truth's grid, is the yaw of the model's dA/dt on the true (A, U).
 
     Returns
     -------
@@ -93,6 +98,7 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
     event_of = windows["event_id"].values.astype(str)
     U, A, excited, regimes, truth_reg, flags, errs, errs_act = [], [], [], [], [], [], [], []
     truth_curves = None
+    by_id = {r.event_id: r for r in (records or [])}
     for event_id in dict.fromkeys(event_of):
         if event_id not in truths:
             continue
@@ -107,8 +113,10 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         U.append(truth["U"].values)
         A.append(truth["A"].values)
         excited.append(truth["regime"].values >= 2)
+        rec = by_id.get(event_id)
+        yaw = None if rec is None else record_yaw_on(rec, truth["time"].values)
         e, act = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
-                                                 active_share=active_share)
+                                                 active_share=active_share, yaw=yaw)
         errs.append(e.ravel())
         errs_act.append(np.where(act, e, np.nan).ravel())
     out: dict = {"n_events_scored": len(U)}
