@@ -83,7 +83,7 @@ def campaign_warm_start(results_dir, wind: np.ndarray):
 
 def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: GreyBoxRefit | None = None,
                     warm_start: str | xr.Dataset | None = "auto", tau: float = 0.2, agreement: float = 0.95,
-                    n_draws: int = 100, callback=None) -> GreyBoxOutcome:
+                    n_draws: int = 100, callback=None, wind_smoothing_s: float = 0.0) -> GreyBoxOutcome:
     """Fit the grey-box model to identification results; regimes, verdicts and simulations per event.
 
     Parameters
@@ -97,6 +97,11 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
         "auto": the campaign model beside the first result (``vivbench pool``), if it has curves.
     tau, agreement, n_draws : regime threshold and verdict settings (:func:`greybox_window_verdicts`)
     callback : progress callback of :meth:`GreyBoxRefit.fit`
+    wind_smoothing_s : float, s
+        Gaussian smoothing of the measured wind (and yaw) in time before the
+        fit, the verdicts and the simulations (:func:`records_from_results`;
+        0: none): the deck feels the wind averaged over its tributary
+        length, the anemometer is one point.
 
     Returns
     -------
@@ -105,7 +110,7 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
     files = [Path(p) for p in result_files]
     if not files:
         raise InputError("no identification results to fit the grey-box model on")
-    records = records_from_results(files)
+    records = records_from_results(files, wind_smoothing_s=wind_smoothing_s)
     wind = curve_wind_grid(np.concatenate([r.U.ravel() for r in records]))
     source = "given curves"
     if isinstance(warm_start, str):

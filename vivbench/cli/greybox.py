@@ -82,7 +82,8 @@ def run(args) -> int:
         print(f"\rvivbench greybox: Gauss-Newton iteration {it}, cost {cost:.6g}", end="", file=sys.stderr)
 
     outcome = greybox_results(files, bridge, model=estimator, warm_start=None if args.no_warm_start else "auto",
-                              tau=args.tau, agreement=args.agreement, n_draws=args.draws, callback=progress)
+                              tau=args.tau, agreement=args.agreement, n_draws=args.draws, callback=progress,
+                              wind_smoothing_s=args.wind_smoothing)
     print("", file=sys.stderr)
     seconds = time.perf_counter() - t0
     model = outcome.model
@@ -111,7 +112,7 @@ def run(args) -> int:
                "total_seconds": seconds, "iterations": info["iterations"], "converged": info["converged"],
                "max_continuity_defect": info["max_defect"], "n_intervals": info["n_intervals"],
                "start": info["start"], "starts": info.get("starts", []), "yaw": info.get("yaw"),
-               "yaw_coef": model.yaw_coef_,
+               "yaw_coef": model.yaw_coef_, "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean())}
     campaign_curves = None
     truth_curves = truth_functions = None
@@ -146,7 +147,7 @@ def run(args) -> int:
     order = np.argsort(-events["nmse"].fillna(np.inf).values)
     picks = [order[len(order) // 2], order[0], order[-1]] if len(order) >= 3 else list(order)
     from vivbench.analysis.pool import records_from_results
-    recs = records_from_results([files[i] for i in picks])
+    recs = records_from_results([files[i] for i in picks], wind_smoothing_s=args.wind_smoothing)
     sims = [(r.event_id, model.simulate(r)) for r in recs]
     greybox_simulation_figure(sims, out_dir / "greybox_simulations.png")
     with atomic_path(out_dir / "summary.json", suffix=".json") as tmp:
@@ -205,6 +206,9 @@ def register(sub) -> None:
                    help="multi-start: warm start, equation-error start and perturbed starts, screened by their "
                         "penalised cost (default 4; 1: the first only)")
     s.add_argument("--seed", type=int, default=0, help="seed of the perturbed starts (default 0)")
+    s.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=0.0, metavar="S",
+                   help="Gaussian smoothing of the measured wind and yaw in time, standard deviation in s "
+                        "(the deck feels the tributary-averaged wind, the anemometer is a point; default 0)")
     s.add_argument("--tau", type=float, default=0.2, help="regime threshold (DESIGN 2.5)")
     s.add_argument("--agreement", type=float, default=0.95,
                    help="share of parameter draws that must agree on a window's regime (default 0.95)")

@@ -9,7 +9,8 @@ The model is the amplitude equation of DESIGN 2.3 for the modal amplitude Q
             - sum_k beta_k phi_k c_k (1 / 8) (e2 phi_k^2 / D^2) Q^3,
     c_k = rho U_k D Y1(U_k) / m,
 
-with Y1, e1, e2 and C_L evaluated at each section's own wind U_k. They are
+with Y1, e1, e2 and C_L evaluated at each section's own wind U_k, and Y1 and
+C_L multiplied by a yaw factor (below). They are
 unknown smooth functions of the reduced velocity Ur = U / (f D), each a cubic
 B-spline (P-spline: uniform knots over the data's range of Ur, a
 second-difference roughness penalty), not the generator's parametric shapes,
@@ -34,22 +35,44 @@ the wind linear between grid samples, residuals |phi_k| Q - A_k of every
 section divided by the event's amplitude scale (so each event weighs as its
 NMSE), Gauss-Newton/Levenberg-Marquardt on the exact Jacobian from CasADi
 (:mod:`vivbench.models.greybox_solve`). Bounds: e1, e2, C_L >= 0 (the
-limiting terms damp, the locked force feeds energy). Start: the campaign
-model's curves (``warm_start``), else an equation-error fit of the same model
-in product form (Y1, Y1 e1, Y1 e2, C_L as splines: linear least squares on
-finite differences of Q).
+limiting terms damp, the locked force feeds energy).
+
+Yaw. Vortex shedding weakens as the mean wind turns away from the span's
+normal, and U = V |cos yaw| does not carry that angle. When the records carry
+the measured yaw psi_k(t) (``Record.yaw``, degrees), Y1 and C_L at section k
+are multiplied by w_k = 1 - c sin^2(psi_k), one coefficient c >= 0 fitted
+jointly with the splines (a low-order even function of sin psi, not the
+generator's Gaussian in psi). Every term of the amplitude equation holds Y1
+or C_L exactly once, so w_k scales all of section k's factors. Records
+without a yaw get w = 1; when none carries one, c is not fitted and the fit
+says so (``fit_info_["yaw"]``): Y1 and C_L are then averages over the
+events' yaw angles. The curves (DESIGN 3.5) and the physical functions are
+reported at yaw 0 (w = 1), as the truth's are.
+
+Starts (multi-start against wrong local minima). The candidates are the
+campaign model's curves (``warm_start``), an equation-error fit of the same
+model in product form (Y1, Y1 e1, Y1 e2, C_L as splines: linear least
+squares on finite differences of Q) and ``n_starts - 2`` copies of the first
+with every function scaled by a seeded log-normal factor and a random yaw
+coefficient. The roughness penalty is scaled once, at the first start,
+before any start is iterated, so all starts minimise one objective; each
+start runs ``screen_iter`` Gauss-Newton iterations at the loosest continuity
+weight, and the one with the lowest penalised cost there is iterated to
+convergence. The draws come from ``seed``: the same data and seed give the
+same fit.
 
 Uncertainty: block sandwich covariance of the spline coefficients (see
 :mod:`vivbench.models.greybox_solve`); bands by the delta method at
 ``level``. They cover the estimator's variance, not the smoothing bias of the
-penalty nor the model's own limits (the records carry no wind direction, so a
-yaw dependence of the truth is averaged into the curves).
+penalty nor the model's own limits (e.g. a truth whose yaw dependence is not
+of the form 1 - c sin^2 psi).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
@@ -277,7 +300,8 @@ class GreyBoxRefit(ModelBase):
     phi_, beta_ : ndarray, shape (S,)
     wind_range_ : (float, float), m/s, the fitted data's range of wind
     fit_info_ : dict
-        cost, iterations, converged, message, max_defect, seconds, n_intervals,
+        cost, iterations (of the final solve), converged, message, max_defect,
+        seconds (the whole fit), final_solve_seconds, n_intervals,
         n_samples, start (the start that won), starts (each start and its
         screened cost), yaw (how the yaw entered).
     """
@@ -386,6 +410,7 @@ class GreyBoxRefit(ModelBase):
         self
         """
         self._validate()
+        t_fit = time.perf_counter()
         records = [as_record(r, i) for i, r in enumerate(records)]
         if not records:
             raise InputError("GreyBoxRefit.fit needs at least one record")
@@ -503,7 +528,8 @@ class GreyBoxRefit(ModelBase):
         else:
             yaw_note = "yaw factor switched off (yaw_factor=False): factor 1"
         self.fit_info_ = {"cost": res.cost, "iterations": res.iterations, "converged": bool(res.converged),
-                          "message": res.message, "max_defect": res.max_defect, "seconds": res.seconds,
+                          "message": res.message, "max_defect": res.max_defect,
+                          "seconds": time.perf_counter() - t_fit, "final_solve_seconds": res.seconds,
                           "n_intervals": grid.n_intervals, "n_samples": int(grid.weight.sum()),
                           "n_records": len(records), "start": start, "yaw": yaw_note,
                           "starts": [{"start": n, "screened_cost": float(c)} for c, n, _, _ in screened]}
