@@ -75,7 +75,7 @@ def run(args) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, dt=args.dt,
                              shooting_interval=args.interval, max_iter=args.max_iter, yaw_factor=not args.no_yaw,
-                             n_starts=args.starts, seed=args.seed)
+                             n_starts=args.starts, seed=args.seed, block_s=args.block)
     t0 = time.perf_counter()
 
     def progress(it, cost, mu):
@@ -112,7 +112,8 @@ def run(args) -> int:
                "total_seconds": seconds, "iterations": info["iterations"], "converged": info["converged"],
                "max_continuity_defect": info["max_defect"], "n_intervals": info["n_intervals"],
                "start": info["start"], "starts": info.get("starts", []), "yaw": info.get("yaw"),
-               "yaw_coef": model.yaw_coef_, "wind_smoothing_s": args.wind_smoothing,
+               "yaw_coef": model.yaw_coef_, "yaw_coef_lower": float(model.yaw_curve()["yaw_coef_lower"]),
+               "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean())}
     campaign_curves = None
     truth_curves = truth_functions = None
@@ -206,6 +207,10 @@ def register(sub) -> None:
                    help="multi-start: warm start, equation-error start and perturbed starts, screened by their "
                         "penalised cost (default 4; 1: the first only)")
     s.add_argument("--seed", type=int, default=0, help="seed of the perturbed starts (default 0)")
+    s.add_argument("--block", type=float, default=300.0, metavar="S",
+                   help="block length of the sandwich covariance, s: residuals are taken as correlated within a "
+                        "block of one event, independent between blocks (default 300; longer than any event: "
+                        "one block per event)")
     s.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=0.0, metavar="S",
                    help="Gaussian smoothing of the measured wind and yaw in time, standard deviation in s "
                         "(the deck feels the tributary-averaged wind, the anemometer is a point; default 0)")
