@@ -1,7 +1,7 @@
 """Time and peak memory of the grey-box refit of a whole campaign (issue 14: at most 60 s and 2 GB on 2 cores).
 
 Run: ``.venv/bin/python benchmarks/bench_greybox.py --results demo/identify --campaign demo/campaign
-[--figure greybox_benchmark.png] [--starts 4] [--wind-smoothing 0]``. The bridge's properties are read
+[--figure greybox_benchmark.png] [--starts 4] [--wind-smoothing 30]``. The bridge's properties are read
 from the first event's generator configuration (a benchmark may; the fit never
 does), the warm start is the campaign model beside the results. The fit is
 the default one: yaw factor (when the results carry the yaw) and the
@@ -49,8 +49,8 @@ def main(argv=None) -> dict:
     p.add_argument("--campaign", default=str(HERE.parent / "demo" / "campaign"))
     p.add_argument("--figure", default=None, help="write the benchmark figure (PNG) here")
     p.add_argument("--starts", type=int, default=4, help="starts of the multi-start (default 4)")
-    p.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=0.0,
-                   help="Gaussian smoothing of the wind, s (default 0)")
+    p.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=30.0,
+                   help="Gaussian smoothing of the wind, s (default 30, as vivbench greybox)")
     args = p.parse_args(argv)
     from vivbench.analysis.greybox import campaign_warm_start
     from vivbench.analysis.pool import curve_wind_grid, records_from_results

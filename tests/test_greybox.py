@@ -252,7 +252,8 @@ def test_cli_greybox_on_a_small_campaign(small_results, tmp_path, capsys):
                  "--campaign", str(campaign.files[0].parent)])
     assert code == 0, capsys.readouterr().err
     for name in (GREYBOX_NAME, "greybox_events.csv", "greybox_regimes.csv", "greybox_windows.csv.gz", "summary.json",
-                 "greybox_functions.png", "greybox_curves.png", "greybox_simulations.png", "greybox_validation.json"):
+                 "greybox_functions.png", "greybox_curves.png", "greybox_simulations.png", "greybox_validation.json",
+                 "greybox_yaw.png"):
         assert (out / name).is_file(), name
     model = GreyBoxRefit.load(out / GREYBOX_NAME)
     assert model.bridge.frequency == pytest.approx(0.327, rel=0.02)  # from the results, as identify found it

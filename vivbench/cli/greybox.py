@@ -66,7 +66,7 @@ def run(args) -> int:
     from vivbench.io.result import list_results
     from vivbench.models.greybox import GreyBoxRefit
     from vivbench.report.greybox import (greybox_curves_figure, greybox_functions_figure,
-                                         greybox_simulation_figure)
+                                         greybox_simulation_figure, greybox_yaw_figure)
 
     results_dir = Path(args.results)
     files = list_results(results_dir)
@@ -116,7 +116,7 @@ def run(args) -> int:
                "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean())}
     campaign_curves = None
-    truth_curves = truth_functions = None
+    truth_curves = truth_functions = truth_yaw = None
     from vivbench.analysis.pool import campaign_model_file, load_campaign_model
     cm_path = campaign_model_file(results_dir)
     if cm_path is not None:
@@ -128,7 +128,7 @@ def run(args) -> int:
         from vivbench.cli.common import event_paths
         from vivbench.io.event import read_event
         from vivbench.validate.campaign import event_truth_curves
-        from vivbench.validate.greybox import greybox_recovery, truth_y1
+        from vivbench.validate.greybox import greybox_recovery, truth_y1, truth_yaw_factor
 
         event_files = event_paths([args.campaign])
         v = greybox_recovery(model, event_files, outcome.windows, outcome.events, campaign_curves=campaign_curves,
@@ -143,8 +143,12 @@ def run(args) -> int:
         y1 = truth_y1(truth, wind)
         if y1 is not None:
             truth_functions = {"Ur": ur, "Y1": y1}
+        truth_yaw = truth_yaw_factor(truth, model.yaw_curve()["yaw"].values)
     greybox_functions_figure(model.physical_curves(), out_dir / "greybox_functions.png", truth=truth_functions)
     greybox_curves_figure(model.curves(), out_dir / "greybox_curves.png", campaign=campaign_curves, truth=truth_curves)
+    measured_yaw = [r.yaw for r in outcome.records if r.yaw is not None]
+    greybox_yaw_figure(model.yaw_curve(), out_dir / "greybox_yaw.png", truth=truth_yaw,
+                       measured=np.concatenate([y.ravel() for y in measured_yaw]) if measured_yaw else None)
     order = np.argsort(-events["nmse"].fillna(np.inf).values)
     picks = [order[len(order) // 2], order[0], order[-1]] if len(order) >= 3 else list(order)
     from vivbench.analysis.pool import records_from_results
@@ -192,8 +196,8 @@ def register(sub) -> None:
     s.add_argument("--tributary-lengths", dest="tributary_lengths", default=None,
                    help="L_k of the sections' strips, m (default: equal)")
     s.add_argument("--n-basis", dest="n_basis", type=int, default=16, help="B-splines per function (default 16)")
-    s.add_argument("--penalty", type=float, default=1.0,
-                   help="relative roughness penalty (default 1, chosen among 0.01, 0.1, 1, 10 on the default campaign)")
+    s.add_argument("--penalty", type=float, default=0.3,
+                   help="relative roughness penalty (default 0.3, chosen on the default campaign)")
     s.add_argument("--dt", type=float, default=1.0, help="step of the fit grid, s (default 1)")
     s.add_argument("--interval", type=float, default=60.0, help="shooting interval, s (default 60)")
     s.add_argument("--max-iter", dest="max_iter", type=int, default=30,
@@ -207,13 +211,13 @@ def register(sub) -> None:
                    help="multi-start: warm start, equation-error start and perturbed starts, screened by their "
                         "penalised cost (default 4; 1: the first only)")
     s.add_argument("--seed", type=int, default=0, help="seed of the perturbed starts (default 0)")
-    s.add_argument("--block", type=float, default=300.0, metavar="S",
+    s.add_argument("--block", type=float, default=86400.0, metavar="S",
                    help="block length of the sandwich covariance, s: residuals are taken as correlated within a "
-                        "block of one event, independent between blocks (default 300; longer than any event: "
-                        "one block per event)")
-    s.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=0.0, metavar="S",
+                        "block of one event, independent between blocks (default a day: one block per event)")
+    s.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=30.0, metavar="S",
                    help="Gaussian smoothing of the measured wind and yaw in time, standard deviation in s "
-                        "(the deck feels the tributary-averaged wind, the anemometer is a point; default 0)")
+                        "(the deck feels the tributary-averaged wind, the anemometer is a point; default 30, "
+                        "chosen on the default campaign; 0: none)")
     s.add_argument("--tau", type=float, default=0.2, help="regime threshold (DESIGN 2.5)")
     s.add_argument("--agreement", type=float, default=0.95,
                    help="share of parameter draws that must agree on a window's regime (default 0.95)")

@@ -15,7 +15,8 @@ from vivbench.report.figures import (
     time_frequency_figure,
     wind_figure,
 )
-from vivbench.report.greybox import greybox_curves_figure, greybox_functions_figure, greybox_section, greybox_simulation_figure
+from vivbench.report.greybox import (greybox_curves_figure, greybox_functions_figure, greybox_section,
+                                     greybox_simulation_figure, greybox_yaw_figure)
 from vivbench.report.leaderboard import LEADERBOARD_TITLE, leaderboard_section
 from vivbench.report.markdown import EXTRA_STEPS, write_report
 from vivbench.report.pair_figures import PAIR_COLOURS, recovery_pair_figure
@@ -26,5 +27,5 @@ __all__ = [
     "inverse_crime_paragraph", "leaderboard_section", "recovery_pair_figure", "REGIME_COLOURS", "coefficient_map_figure", "decision_graph_figure", "displacement_figure",
     "event_figure", "forecast_figure", "model_forecast_figure", "regime_timeline_figure", "sensor_layout_figure", "term_scale",
     "time_frequency_figure", "wind_figure", "write_report", "greybox_curves_figure", "greybox_functions_figure",
-    "greybox_section", "greybox_simulation_figure",
+    "greybox_section", "greybox_simulation_figure", "greybox_yaw_figure",
 ]

@@ -6,6 +6,8 @@
   reference section (DESIGN 3.5) of the grey-box model, the campaign model
   and the truth.
 - :func:`greybox_simulation_figure`: measured and simulated envelopes of a few events.
+- :func:`greybox_yaw_figure`: the fitted yaw factor on Y1 and C_L with its band,
+  beside the truth's when known.
 - :func:`greybox_section`: the Markdown of the report's grey-box section from
   a ``vivbench greybox`` output directory.
 """
@@ -28,14 +30,15 @@ import xarray as xr  # noqa: E402
 from vivbench.core.terms import reference_section  # noqa: E402
 from vivbench.io.netcdf import atomic_path  # noqa: E402
 
-__all__ = ["greybox_functions_figure", "greybox_curves_figure", "greybox_simulation_figure", "greybox_section",
-           "GREYBOX_FIGURES"]
+__all__ = ["greybox_functions_figure", "greybox_curves_figure", "greybox_simulation_figure", "greybox_yaw_figure",
+           "greybox_section", "GREYBOX_FIGURES"]
 
 DPI = 100
 _UNITS = ("m/s", "1/s", "1/(m s)", "1/(m$^2$ s)")
 _COLOURS = {"greybox": "#d95f02", "campaign": "#7570b3", "truth": "k"}
 #: The figures ``vivbench greybox`` writes, in report order.
-GREYBOX_FIGURES = ("greybox_functions.png", "greybox_curves.png", "greybox_simulations.png", "greybox_benchmark.png")
+GREYBOX_FIGURES = ("greybox_functions.png", "greybox_yaw.png", "greybox_curves.png", "greybox_simulations.png",
+                   "greybox_benchmark.png")
 
 
 @contextmanager
@@ -74,6 +77,37 @@ def greybox_functions_figure(phys: xr.Dataset, path, *, truth: dict | None = Non
         for ax in axes[1]:
             ax.set_xlabel("reduced velocity U/(f D) (-)")
         axes[0, 0].legend(loc="best", fontsize=8)
+    return Path(path)
+
+
+def greybox_yaw_figure(yaw: xr.Dataset, path, *, truth: np.ndarray | None = None,
+                       measured: np.ndarray | None = None) -> Path:
+    """The yaw factor 1 - c sin^2(yaw) on Y1 and C_L with its band against the yaw angle.
+
+    Parameters
+    ----------
+    yaw : xarray.Dataset of :meth:`vivbench.models.GreyBoxRefit.yaw_curve`
+    path : output PNG
+    truth : ndarray, shape (n_yaw,), or None
+        The truth's factor at the same angles, drawn in black.
+    measured : ndarray or None, degrees
+        Measured yaw angles of the fitted records (their range is shaded).
+    """
+    psi = yaw["yaw"].values
+    with _figure(path, 1, 1, figsize=(6, 4), constrained_layout=True) as (fig, ax):
+        if measured is not None and np.isfinite(measured).any():
+            ax.axvspan(np.nanmin(measured), np.nanmax(measured), color="0.9", label="measured yaw range")
+        if truth is not None:
+            ax.plot(psi, truth, color=_COLOURS["truth"], lw=1.8, label="truth")
+        ax.fill_between(psi, yaw["yaw_factor_lower"].values, yaw["yaw_factor_upper"].values,
+                        color=_COLOURS["greybox"], alpha=0.25, lw=0, label="grey-box: 95 % band")
+        ax.plot(psi, yaw["yaw_factor"].values, color=_COLOURS["greybox"], lw=1.4, ls="--",
+                label=f"grey-box: 1 - {float(yaw['yaw_coef']):.3g} sin$^2$(yaw)" if int(yaw.attrs.get("yaw_used", 0))
+                else "grey-box: no yaw measured (factor 1)")
+        ax.set_xlabel("yaw: mean wind's angle to the span's normal (degree)")
+        ax.set_ylabel("factor on Y1 and C_L (-)")
+        ax.set_title("yaw factor", fontsize=10, loc="left")
+        ax.legend(loc="lower center", fontsize=8)
     return Path(path)
 
 

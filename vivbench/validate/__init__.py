@@ -12,7 +12,7 @@ from vivbench.validate.compare import (
     plan,
     run_comparison,
 )
-from vivbench.validate.greybox import greybox_recovery, truth_y1
+from vivbench.validate.greybox import greybox_recovery, truth_y1, truth_yaw_factor
 from vivbench.validate.leaderboard import LeaderboardResult, method_slug, parse_methods, run_leaderboard
 from vivbench.validate.leaderboard_table import (
     LEADERBOARD_COLUMNS,
@@ -99,7 +99,7 @@ from vivbench.validate.sweep import (
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 
 __all__ = [
-    "greybox_recovery", "truth_y1",
+    "greybox_recovery", "truth_y1", "truth_yaw_factor",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",
     "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
     "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",

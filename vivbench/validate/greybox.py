@@ -29,7 +29,7 @@ from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import curve_errors
 from vivbench.validate.recovery import finite_median, model_window_rhs_errors_true_AU, record_yaw_on, regime_scores
 
-__all__ = ["greybox_recovery", "truth_y1"]
+__all__ = ["greybox_recovery", "truth_y1", "truth_yaw_factor"]
 
 
 def truth_y1(truth, wind: np.ndarray) -> np.ndarray | None:
@@ -43,6 +43,21 @@ def truth_y1(truth, wind: np.ndarray) -> np.ndarray | None:
         return None
     s = config.structure
     return np.asarray(config.aero.Y1.at_wind(np.asarray(wind, dtype=float), s.frequency, s.depth), dtype=float)
+
+
+def truth_yaw_factor(truth, yaw_deg: np.ndarray) -> np.ndarray | None:
+    """The generator's factor on Y1 at yaw angles ``yaw_deg`` (degrees); 1 without one; None if not readable."""
+    from vivbench.synth import config_from_dict
+
+    try:
+        config = config_from_dict(json.loads(truth.attrs["config_json"])["generator"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    yaw_deg = np.asarray(yaw_deg, dtype=float)
+    f = config.aero.yaw
+    if f is None or "Y1" not in f.applies_to:
+        return np.ones_like(yaw_deg)
+    return np.asarray(f(yaw_deg), dtype=float)
 
 
 def _coverage(lower, upper, truth) -> float:
