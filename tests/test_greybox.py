@@ -162,7 +162,7 @@ def test_multi_start_is_deterministic_and_keeps_the_lowest_screened_cost():
     params = {"peak": 18.0, "center": 6.8, "width": 1.1, "baseline": -4.0, "e1": 25.0, "e2": 400.0, "cl": 0.03}
     records = _records(params, n_events=2, duration=800.0)
     start = _true_curves(params, np.arange(2.5, 13.01, 0.1), scale=(0.8, 1.2, 0.8, 1.2))
-    kw = dict(bridge=BRIDGE, warm_start=start, n_basis=8, screen_iter=3)
+    kw = {"bridge": BRIDGE, "warm_start": start, "n_basis": 8, "screen_iter": 3}
     one = GreyBoxRefit(n_starts=1, **kw).fit(records)
     multi = GreyBoxRefit(n_starts=3, seed=5, **kw).fit(records)
     again = GreyBoxRefit(n_starts=3, seed=5, **kw).fit(records)
