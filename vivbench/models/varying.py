@@ -659,7 +659,8 @@ class VaryingCoefficientSINDy(ModelBase):
             ``G`` (E, p, p) and ``b`` (E, p): X_e^T X_e and X_e^T y_e of the
             standardised design and target; ``yy`` (E,); ``n`` (E,) samples;
             ``P`` (p, p) the penalty; ``penalty`` the relative penalty;
-            ``keep`` (p,) bool, the kept orders' columns.
+            ``keep`` (p,) bool, the kept orders' columns; ``n_basis`` M (the
+            first M columns are the constant term's B-splines).
         """
         self._check_fitted()
         records = [self._check_record(as_record(r, k)) for k, r in enumerate(records)]
@@ -681,7 +682,8 @@ class VaryingCoefficientSINDy(ModelBase):
             G, b, yy, cnt = _block_stats(U[ok, k], A[ok, k], dA[ok, k] / self.y_scale_[k], event[ok], E, knots,
                                          self.a_ref_[k], zk, J)
             out.append({"G": G, "b": b, "yy": yy, "n": cnt, "P": np.kron(np.eye(4 * (J + 1)), difference_penalty(M)),
-                        "penalty": float(self.penalty_[k]), "keep": np.repeat(self.orders_[k], (J + 1) * M)})
+                        "penalty": float(self.penalty_[k]), "keep": np.repeat(self.orders_[k], (J + 1) * M),
+                        "n_basis": M})
         return out
 
     @staticmethod
