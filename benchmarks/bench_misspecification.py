@@ -38,7 +38,8 @@ and yaw, the verdicts use ``model.measured_wind`` of the measured record, the
 truth's (A, U) is evaluated as it is (the deck's own wind; fits on the truth
 use no smoothing), ``--only TEXT`` fits only the models whose
 name contains TEXT, ``--no-truth-fits`` skips the fits on the truth, ``--n-basis 6,8,...``
-sets the varying models' candidate numbers of B-splines. The
+sets the varying models' candidate numbers of B-splines, ``--model-set-level L`` their
+``model_set_level``. The
 verdict columns also count ``n_flag_self_excited_wrong`` (flagged regime 2-4
 where the truth is regime 1) in the JSON.
 Nothing is asserted; the table is printed and written to ``benchmarks/out/misspecification.json``.
@@ -154,7 +155,7 @@ def score(model, events, verdicts: str | None = None) -> dict:
 
 def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
         only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float | None = None,
-        n_basis: tuple[int, ...] | None = None) -> dict:
+        n_basis: tuple[int, ...] | None = None, model_set_level: float | None = None) -> dict:
     t0 = time.perf_counter()
     if wind_smoothing_s == "cv":  # chosen per campaign by the model's cross-validation over events
         vary = {"wind_smoothing_grid": WIND_SMOOTHING_GRID}
@@ -162,6 +163,8 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         vary = {} if wind_smoothing_s is None else {"wind_smoothing_s": float(wind_smoothing_s)}
     if n_basis is not None:
         vary["n_basis"] = tuple(n_basis)
+    if model_set_level is not None:
+        vary["model_set_level"] = float(model_set_level)
     measured, events = load_campaign(camp, results)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
@@ -225,6 +228,8 @@ def main(argv=None) -> dict:
                              "chosen by the model's cross-validation from WIND_SMOOTHING_GRID")
     parser.add_argument("--n-basis", default=None,
                         help="comma-separated candidate numbers of B-splines of the varying models (default: the model's)")
+    parser.add_argument("--model-set-level", type=float, default=None,
+                        help="the varying models' model_set_level (default: the model's)")
     parser.add_argument("--only", default=None, help="fit only the models whose name contains this text")
     parser.add_argument("--json", type=Path, default=OUT / "misspecification.json", help="where the rows are written")
     parser.add_argument("--no-truth-fits", action="store_true", help="skip the fits on the truth's own (A, U, dA)")
@@ -235,7 +240,8 @@ def main(argv=None) -> dict:
     for camp, res in zip(args.campaign, args.results):
         out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders, args.only, not args.no_truth_fits,
                              args.wind_smoothing,
-                             None if args.n_basis is None else tuple(int(x) for x in args.n_basis.split(",")))
+                             None if args.n_basis is None else tuple(int(x) for x in args.n_basis.split(",")),
+                             args.model_set_level)
     for camp, rows in out.items():
         print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
     args.json.parent.mkdir(parents=True, exist_ok=True)
