@@ -263,7 +263,14 @@ class VaryingCoefficientSINDy(ModelBase):
         of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
         prediction error is not significantly above the best subset's (a
         one-sided paired test over events); the window verdict needs them all
-        to give the window's regime.
+        to give the window's regime. Default 0.9, chosen on the seed-0
+        realistic campaign (``benchmarks/bench_misspecification.py``): at 0.95
+        the model without order 0 stays in the set there (its test statistic
+        lies between the 0.9 and 0.95 quantiles) and no window of regimes 3
+        or 4 is ever flagged: coverage 0.289 (flagged accuracy 0.9996), at
+        0.9 0.553 (0.9956); held out on seed 1 and on a second bridge the
+        level changed nothing (coverage 0.468 and 0.454, accuracy 0.999), on
+        a forced-only bridge no window got a self-excited regime.
 
     Attributes
     ----------
@@ -311,7 +318,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
                  n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
-                 wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
+                 wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.9,
                  wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None):
         self.n_basis = n_basis
