@@ -30,8 +30,8 @@ without a change, power with one), the share of detections that locate the
 change within one event, and the events flagged as not predicted (misfit flags).
 Nothing is asserted; the table is printed and written as JSON (``--json``).
 
-Measured (15 subsets of 12 events per campaign, 99 orderings; the nodrift campaign is a
-20-event seed-0 campaign, so it shares its generator seed with A):
+Measured (15 subsets of 12 events per campaign, 99 orderings; nodrift is /tmp/realism-nodrift,
+20 shorter events of seed 0: A's kinds and start times, other draws; drift /tmp/realism-drift):
 
 =========  ======  ==========================  ==========================
 campaign   events  free permutation            stratified (4 per stratum)
