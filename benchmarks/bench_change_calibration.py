@@ -149,7 +149,7 @@ def main(argv=None) -> dict:
         for null in args.null.split(","):
             r = res[null]
             print(f"{name:<10} {null:<12} {res['events']:6d} {r['full']['p_value']:7.3f} "
-                  f"{str(r['full']['change_event']):>10} {','.join(r['full']['misfit_flagged']) or '-':>16} "
+                  f"{r['full']['change_event']!s:>10} {','.join(r['full']['misfit_flagged']) or '-':>16} "
                   f"{r['n_subsets']:7d} {r['rate_p_lt_level']:7.3f} {r.get('located_share_of_detected', float('nan')):7.3f}")
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(out, indent=2) + "\n")

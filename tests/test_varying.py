@@ -161,7 +161,7 @@ def _measured(records, seed: int = 0, rms: float = 1.0, tau_s: float = 20.0):
 
 def test_wind_smoothing_chosen_by_cross_validation(tmp_path):
     grid = (0.0, 30.0, 300.0)  # 300 s wipes out the 600-1500 s variations of the deck's wind
-    params = dict(n_bootstrap=0, n_basis=(11,), wind_smoothing_grid=grid)
+    params = {"n_basis": (11,), "n_bootstrap": 0, "wind_smoothing_grid": grid}
     exact = VaryingCoefficientSINDy(**params).fit(_records(8))
     # The deck's own wind: any smoothing only blurs it.
     assert exact.wind_smoothing_s_ == 0.0 and exact.fitted_wind_smoothing() == 0.0

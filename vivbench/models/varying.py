@@ -474,7 +474,6 @@ class VaryingCoefficientSINDy(ModelBase):
         _total, self.wind_smoothing_s_, prep, sel = chosen
         records = prep["records"]
         S, J, K, n_ev, rng = prep["S"], prep["J"], prep["K"], prep["n_ev"], prep["rng"]
-        event = prep["event"]
         n_basis = np.array(self.n_basis, dtype=int)
         pen = np.asarray(self.penalties, dtype=float)
         Mmax = int(n_basis.max())
