@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 
 def _step_records(n=12, change_at=None, seed=0):
@@ -37,3 +39,41 @@ def test_model_change_scan_locates_a_step_and_stays_quiet_without_one():
     assert not scan["detected"]
     # One event's winds reach beyond the others' (held-out: extrapolated curves): at most that one is flagged.
     assert scan["misfit_flag"].sum() <= 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(strata=st.lists(st.integers(0, 3), min_size=2, max_size=15), seed=st.integers(0, 100))
+def test_stratified_permutations_keep_every_event_in_its_stratum(strata, seed):
+    from vivbench.analysis.changes import stratified_permutations
+
+    strata = np.array(strata)
+    perms = stratified_permutations(strata, 20, np.random.default_rng(seed))
+    assert perms.shape == (20, strata.size)
+    assert np.all(np.sort(perms, axis=1) == np.arange(strata.size))  # orderings of all events
+    assert np.all(strata[perms] == strata[None, :])  # each position keeps its stratum
+
+
+def test_one_stratum_is_a_plain_permutation():
+    from vivbench.analysis.changes import stratified_permutations
+
+    perms = stratified_permutations(np.zeros(8, dtype=int), 50, np.random.default_rng(0))
+    assert len({tuple(p) for p in perms}) > 40
+
+
+def test_wind_strata_group_events_of_similar_wind():
+    from vivbench.analysis.changes import wind_strata
+    from vivbench.core import Record
+    from vivbench.models import VaryingCoefficientSINDy
+
+    rng = np.random.default_rng(1)
+    recs = []
+    centres = [6.0, 12.0, 6.5, 11.5, 9.0, 6.2, 12.2, 9.2]
+    for e, c in enumerate(centres):
+        t = np.arange(0.0, 600.0, 1.0)
+        U = c + 0.5 * np.sin(2 * np.pi * t / 300 + e)
+        A = 0.05 + 0.05 * rng.random(t.size)
+        recs.append(Record(event_id=f"E{e}", t=t, A=A[:, None], U=U[:, None], dA=(-0.01 * A)[:, None]))
+    model = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,), wind_smoothing_s=0.0).fit(recs)
+    strata = wind_strata(model.event_statistics(recs), size=3)
+    # ranks by mean wind: 6.0, 6.2, 6.5 | 9.0, 9.2, 11.5 | 12.0, 12.2 (2 left over: their own stratum)
+    assert strata.tolist() == [0, 2, 0, 1, 1, 0, 2, 1]

@@ -12,6 +12,7 @@ from vivbench.core.errors import InputError
 from vivbench.models import (CampaignLevel, FittedModel, HasEquations, Method, NotFittedError, Persistent, Predictor,
                              Simulator, VaryingCoefficientSINDy)
 from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots
+from vivbench.preprocess import smooth_wind
 from vivbench.regimes import model_window_regimes, varying_window_verdicts
 
 
@@ -139,3 +140,42 @@ def test_larger_penalty_is_not_rougher(seed, low, factor):
     small = VaryingCoefficientSINDy(n_basis=(15,), penalties=(10.0**low,), n_bootstrap=0).fit(noisy)
     large = VaryingCoefficientSINDy(n_basis=(15,), penalties=(10.0**low * factor,), n_bootstrap=0).fit(noisy)
     assert _roughness(large) <= _roughness(small) * (1 + 1e-9) + 1e-12
+
+
+def _measured(records, seed: int = 0, rms: float = 1.0, tau_s: float = 20.0):
+    """``records`` with a point anemometer's slow turbulence added to U: the deck does not feel it (m/s).
+
+    Gaussian-smoothed white noise of RMS ``rms`` with a ``tau_s`` time scale, independent of dA/dt.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for r in records:
+        dt = float(r.t[1] - r.t[0])
+        w = gaussian_filter1d(rng.standard_normal(r.t.size), tau_s / dt)
+        w *= rms / w.std()
+        out.append(Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U + w[:, None], dA=r.dA))
+    return out
+
+
+def test_wind_smoothing_chosen_by_cross_validation(tmp_path):
+    grid = (0.0, 30.0, 300.0)  # 300 s wipes out the 600-1500 s variations of the deck's wind
+    params = {"n_basis": (11,), "n_bootstrap": 0, "wind_smoothing_grid": grid}
+    exact = VaryingCoefficientSINDy(**params).fit(_records(8))
+    # The deck's own wind: any smoothing only blurs it.
+    assert exact.wind_smoothing_s_ == 0.0 and exact.fitted_wind_smoothing() == 0.0
+    assert exact.wind_smoothing_cv_.shape == (3,) and np.argmin(exact.wind_smoothing_cv_) == 0
+    # The same model with the chosen smoothing fixed is the same fit (the choice is an outer loop).
+    fixed = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(11,), wind_smoothing_s=0.0).fit(_records(8))
+    np.testing.assert_array_equal(exact.coef_, fixed.coef_)
+    # A point anemometer's 20 s turbulence the deck does not feel: smoothing it away predicts better.
+    measured = VaryingCoefficientSINDy(**params).fit(_measured(_records(8)))
+    assert measured.wind_smoothing_s_ == 30.0, measured.wind_smoothing_cv_
+    rec = _measured(_records(1, seed=9), seed=9)[0]
+    np.testing.assert_array_equal(measured.measured_wind(rec).U, smooth_wind(rec, 30.0).U)
+    loaded = VaryingCoefficientSINDy.load(measured.save(tmp_path / "cv.nc"))
+    assert loaded.wind_smoothing_s_ == 30.0 and loaded.get_params() == measured.get_params()
+    np.testing.assert_array_equal(loaded.wind_smoothing_cv_, measured.wind_smoothing_cv_)
+    with pytest.raises(InputError, match="wind_smoothing_grid"):
+        VaryingCoefficientSINDy(wind_smoothing_grid=(-1.0,)).fit(_records(2))
