@@ -25,7 +25,8 @@ import numpy as np
 
 import vivbench
 from vivbench.io.campaign_model import POOLED_NAME, read_pooled
-from vivbench.analysis.pool import campaign_model_file, load_campaign_model
+from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
+from vivbench.models.model_input import measured_input
 from vivbench.io.netcdf import atomic_path
 from vivbench.regimes.model import model_window_regimes
 from vivbench.io.event import list_events, read_event
@@ -387,6 +388,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)
         varying = pooled.attrs.get("model") == "VaryingCoefficientSINDy"
+        smoothing = pooled_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
         if varying:
             intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
                      "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
@@ -421,7 +423,8 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
             start, end = r["window_start"].values, r["window_end"].values
             if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
                 raise InputError(f"{pooled_path}: its windows of {e} differ from the result's; re-run vivbench pool")
-            reg = model_window_regimes(model, result_record(r), start, end, tau=float(getattr(model, "tau", DEFAULT_TAU)))
+            reg = model_window_regimes(model, measured_input(model, result_record(r), wind_smoothing_s=smoothing),
+                                       start, end, tau=float(getattr(model, "tau", DEFAULT_TAU)))
             r["regime"] = (r["regime"].dims, reg["regime"])
             r["identifiable"] = (r["identifiable"].dims, pooled["identifiable"].values[sel])
             pres.append(r)
@@ -456,7 +459,8 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         figure("fig11b_forecast_campaign_model.png", "Fig. 11b: simulation and forecast with the campaign model",
                "As Fig. 11, with the campaign model (`model.simulate(record, t0, t1)`) over the span of the "
                "windows and from the same t0: one fixed model, so there is one forecast (d plays no role).",
-               lambda p: F.model_forecast_figure(model, result_record(res0), p, t0=t0_cm, span=span0,
+               lambda p: F.model_forecast_figure(model, measured_input(model, result_record(res0),
+                                                                       wind_smoothing_s=smoothing), p, t0=t0_cm, span=span0,
                                                  name="campaign model"),
                "model_forecast_figure")
 
