@@ -391,11 +391,16 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         smoothing = pooled_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
         if varying:
             intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
-                     "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
+                     "penalised cubic B-splines in U (`vivbench.models.varying`, the default of `vivbench pool`). A "
                      "window's regime is the rule of DESIGN 2.5 applied to this model's order contributions over the "
                      "window's data; it counts as identifiable when at least "
                      f"{json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap replicates "
-                     "of the spline coefficients agree and the amplitude is above the noise floor. "
+                     "of the spline coefficients agree, every order subset in the model's confidence set "
+                     "(leave-one-event-out) gives the same regime, and the amplitude is above the noise floor. "
+                     f"The measured wind (and its yaw, a second covariate when the results store it: "
+                     f"{'yes' if int(pooled.attrs.get('wind_yaw', 0)) else 'no'}) is smoothed over "
+                     f"{smoothing:g} s (Gaussian sigma) before the fit and every evaluation on measured records; "
+                     "the truth's felt wind is used as it is. "
                      f"B-splines per curve: {', '.join(str(int(k)) for k in pooled['n_basis'].values)}; "
                      f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
                      f"coverage {float(pooled.attrs['coverage']):.3f}.")
@@ -414,7 +419,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                f"Model file: `{model_path.name}`"
                + ("" if model_path.name != POOLED_NAME else
                   " (no campaign.model.nc: the model is rebuilt from the pooled result's coefficients)") + ".", "",
-               _produced_by(f"vivbench pool {results_dir}"), ""]
+               _produced_by(f"vivbench pool {results_dir}" + ("" if varying else " --model pooled")), ""]
         ev_of = pooled["event_id"].values.astype(str)
         pres = []
         for e in events:
