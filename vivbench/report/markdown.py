@@ -391,7 +391,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         smoothing = pooled_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
         if varying:
             intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
-                     "penalised cubic B-splines in U (`vivbench.models.varying`, the default of `vivbench pool`). A "
+                     "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
                      "window's regime is the rule of DESIGN 2.5 applied to this model's order contributions over the "
                      "window's data; it counts as identifiable when at least "
                      f"{json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap replicates "
@@ -419,7 +419,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                f"Model file: `{model_path.name}`"
                + ("" if model_path.name != POOLED_NAME else
                   " (no campaign.model.nc: the model is rebuilt from the pooled result's coefficients)") + ".", "",
-               _produced_by(f"vivbench pool {results_dir}" + ("" if varying else " --model pooled")), ""]
+               _produced_by(f"vivbench pool {results_dir}" + (" --model varying" if varying else "")), ""]
         ev_of = pooled["event_id"].values.astype(str)
         pres = []
         for e in events:
