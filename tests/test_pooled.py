@@ -143,7 +143,7 @@ def test_cli_pool_and_validation_of_the_campaign_model(small_results_in_library,
     camp, res_dir, results = small_results_in_library
     res = tmp_path / "res"
     shutil.copytree(res_dir, res)
-    assert main(["pool", str(res), "--bootstrap", "10", "--block", "20"]) == 0
+    assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "10", "--block", "20"]) == 0
     assert (res / POOLED_NAME).is_file() and not list(res.glob("*.tmp*"))
     v = validate_campaign(camp.files[0].parent, res)
     direct = pooled_recovery(camp.files[:2], res / POOLED_NAME, sorted(res.glob("*.identify.nc")))
@@ -172,7 +172,7 @@ def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_u
     res = tmp_path / "res"
     shutil.copytree(res_dir, res)
     before = {f.name for f in res.iterdir()}
-    assert main(["pool", str(res), "--bootstrap", "4", "--block", "20"]) == 0
+    assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
     assert {f.name for f in res.iterdir()} - before == {POOLED_NAME, MODEL_NAME}
     pooled = read_pooled(res / POOLED_NAME)
     model = CampaignSINDy.load(res / MODEL_NAME)

@@ -53,7 +53,7 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
         load_campaign_model(res / POOLED_NAME)
     other = tmp_path / "other"
     shutil.copytree(res_dir, other)
-    assert main(["pool", str(other), "--bootstrap", "4", "--block", "20"]) == 0
+    assert main(["pool", str(other), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
     shutil.copy(other / MODEL_NAME, res / MODEL_NAME)
     with pytest.raises(InputError, match="re-run vivbench pool"):
         load_campaign_model(res)

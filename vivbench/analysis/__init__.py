@@ -27,6 +27,7 @@ from vivbench.analysis.pool import (
     with_campaign_model,
     campaign_model_file,
     load_campaign_model,
+    pooled_wind_smoothing,
 )
 from vivbench.analysis.wind_inputs import with_yaw
 from vivbench.preprocess.yaw import event_yaw  # re-exported: analysis is where campaign scripts look
@@ -37,6 +38,6 @@ __all__ = [
     "identify_event", "identify_files", "FEATURE_SETS", "ClusterConfig", "CampaignWindows", "ClusterResult",
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
-    "with_campaign_model", "campaign_model_file", "load_campaign_model", "event_yaw", "smooth_wind", "with_yaw",
+    "with_campaign_model", "campaign_model_file", "load_campaign_model", "pooled_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

@@ -22,9 +22,10 @@ from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
 from vivbench.analysis.wind_inputs import with_yaw
 from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.models.model_input import measured_input
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
-           "with_campaign_model", "campaign_model_file", "load_campaign_model"]
+           "with_campaign_model", "campaign_model_file", "load_campaign_model", "pooled_wind_smoothing"]
 
 #: Spacing of the wind grid of the campaign model's coefficient curves, m/s.
 CURVE_STEP = 0.1
@@ -216,15 +217,13 @@ def pool_results(result_files: Sequence, model=None, *,
     if campaign is not None:
         records = [r if r.yaw is not None else _with_event_yaw(r, attrs, campaign)
                    for r, (_p, _d, attrs, _e) in zip(records, results)]
-    records = [smooth_wind(r, wind_smoothing_s) for r in records]
     if varying and model.yaw_degree and any(r.yaw is None for r in records):
         raise InputError(f"the varying model with a yaw covariate (yaw_degree = {model.yaw_degree}) needs every "
                          "result to store the wind's yaw (identify it again) or the campaign's event files "
                          "(campaign / --campaign)")
-    model.fit(records)
-    if varying:
-        # Verdicts and checks on the wind the model was fitted on (its smoothing of the measured wind).
-        records = [model.measured_wind(r) for r in records]
+    model.fit(records if varying else [smooth_wind(r, wind_smoothing_s) for r in records])
+    # Verdicts and checks on the wind the model was fitted on: the varying model smooths its own.
+    records = [measured_input(model, r, wind_smoothing_s=wind_smoothing_s) for r in records]
     keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}
     for (_path, ds, attrs, _eq), record in zip(results, records):
@@ -232,7 +231,7 @@ def pool_results(result_files: Sequence, model=None, *,
         if varying:
             out = varying_window_verdicts(model, record, s, e)
         else:
-            out = campaign_window_verdicts(model, ds["time"].values, ds["A"].values, ds["U"].values, s, e)
+            out = campaign_window_verdicts(model, record.t, record.A, record.U, s, e)
         min_snr = json.loads(attrs.get("identify_config_json", "{}")).get("min_snr")
         if min_snr is not None and "amplitude_snr" in ds:
             # The identification's noise-floor test holds for any model: below the floor A is noise.
@@ -355,6 +354,30 @@ def pool_results(result_files: Sequence, model=None, *,
                       "model_change_p_value": model_scan["p_value"],
                       "model_change_detected": int(model_scan["detected"])})
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def pooled_wind_smoothing(pooled) -> float:
+    """The smoothing of the measured wind, s, a campaign model of ``vivbench pool`` was fitted with.
+
+    For :func:`vivbench.models.measured_input` of a model that does not know
+    it itself (a ``PooledSINDy`` of ``vivbench pool --wind-smoothing S``; a
+    ``VaryingCoefficientSINDy`` uses its own ``wind_smoothing_s``).
+
+    Parameters
+    ----------
+    pooled : xarray.Dataset or None
+        A ``campaign.pooled.nc`` (:func:`vivbench.io.campaign_model.read_pooled`).
+
+    Returns
+    -------
+    float, s
+        Its ``wind_smoothing_s`` attribute; 0 without a pooled result or for
+        outputs written before the attribute existed (no smoothing then).
+    """
+    if pooled is None:
+        return 0.0
+    value = float(pooled.attrs.get("wind_smoothing_s", 0.0))
+    return value if np.isfinite(value) and value >= 0 else 0.0
 
 
 def campaign_model_file(directory) -> Path | None:

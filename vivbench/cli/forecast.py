@@ -129,7 +129,9 @@ def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None, ref=1, section
 def run(args) -> int:
     from vivbench.models.simulate import CLIP_MODES, forecast, simulate_identified
     from vivbench.io.result import read_result, result_record
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
+    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+    from vivbench.models.model_input import measured_input
     from vivbench.models.simulate import model_jacobian
     from vivbench.io.netcdf import atomic_path
     from vivbench.core.terms import reference_section
@@ -186,7 +188,10 @@ def run(args) -> int:
         if model.n_sections_ != len(sections):
             raise InputError(f"{model_path}: the campaign model has {model.n_sections_} sections, "
                              f"{args.result} {len(sections)}")
-        record = result_record(result)
+        # The measured record on the wind as the model saw it at fit (the varying model's smoothing).
+        beside = model_path.parent / POOLED_NAME
+        smoothing = pooled_wind_smoothing(read_pooled(beside) if beside.is_file() else None)
+        record = measured_input(model, result_record(result), wind_smoothing_s=smoothing)
         span = (float(result["window_start"].values.min()), float(result["window_end"].values.max()))
         csim = model.simulate(record, *span)
         cfc = model.simulate(record, t0, t0 + horizon)

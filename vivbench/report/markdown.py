@@ -25,7 +25,8 @@ import numpy as np
 
 import vivbench
 from vivbench.io.campaign_model import POOLED_NAME, read_pooled
-from vivbench.analysis.pool import campaign_model_file, load_campaign_model
+from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
+from vivbench.models.model_input import measured_input
 from vivbench.io.netcdf import atomic_path
 from vivbench.regimes.model import model_window_regimes
 from vivbench.io.event import list_events, read_event
@@ -387,13 +388,19 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)
         varying = pooled.attrs.get("model") == "VaryingCoefficientSINDy"
+        smoothing = pooled_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
         if varying:
             intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
                      "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
                      "window's regime is the rule of DESIGN 2.5 applied to this model's order contributions over the "
                      "window's data; it counts as identifiable when at least "
                      f"{json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap replicates "
-                     "of the spline coefficients agree and the amplitude is above the noise floor. "
+                     "of the spline coefficients agree, every order subset in the model's confidence set "
+                     "(leave-one-event-out) gives the same regime, and the amplitude is above the noise floor. "
+                     f"The measured wind (and its yaw, a second covariate when the results store it: "
+                     f"{'yes' if int(pooled.attrs.get('wind_yaw', 0)) else 'no'}) is smoothed over "
+                     f"{smoothing:g} s (Gaussian sigma) before the fit and every evaluation on measured records; "
+                     "the truth's felt wind is used as it is. "
                      f"B-splines per curve: {', '.join(str(int(k)) for k in pooled['n_basis'].values)}; "
                      f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
                      f"coverage {float(pooled.attrs['coverage']):.3f}.")
@@ -412,7 +419,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                f"Model file: `{model_path.name}`"
                + ("" if model_path.name != POOLED_NAME else
                   " (no campaign.model.nc: the model is rebuilt from the pooled result's coefficients)") + ".", "",
-               _produced_by(f"vivbench pool {results_dir}"), ""]
+               _produced_by(f"vivbench pool {results_dir}" + (" --model varying" if varying else "")), ""]
         ev_of = pooled["event_id"].values.astype(str)
         pres = []
         for e in events:
@@ -421,7 +428,8 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
             start, end = r["window_start"].values, r["window_end"].values
             if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
                 raise InputError(f"{pooled_path}: its windows of {e} differ from the result's; re-run vivbench pool")
-            reg = model_window_regimes(model, result_record(r), start, end, tau=float(getattr(model, "tau", DEFAULT_TAU)))
+            reg = model_window_regimes(model, measured_input(model, result_record(r), wind_smoothing_s=smoothing),
+                                       start, end, tau=float(getattr(model, "tau", DEFAULT_TAU)))
             r["regime"] = (r["regime"].dims, reg["regime"])
             r["identifiable"] = (r["identifiable"].dims, pooled["identifiable"].values[sel])
             pres.append(r)
@@ -456,7 +464,8 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         figure("fig11b_forecast_campaign_model.png", "Fig. 11b: simulation and forecast with the campaign model",
                "As Fig. 11, with the campaign model (`model.simulate(record, t0, t1)`) over the span of the "
                "windows and from the same t0: one fixed model, so there is one forecast (d plays no role).",
-               lambda p: F.model_forecast_figure(model, result_record(res0), p, t0=t0_cm, span=span0,
+               lambda p: F.model_forecast_figure(model, measured_input(model, result_record(res0),
+                                                                       wind_smoothing_s=smoothing), p, t0=t0_cm, span=span0,
                                                  name="campaign model"),
                "model_forecast_figure")
 

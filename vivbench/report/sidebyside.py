@@ -318,8 +318,9 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     list of str
         Markdown lines; the baseline column comes first.
     """
-    from vivbench.analysis.pool import campaign_model_file, curve_wind_grid, load_campaign_model
+    from vivbench.analysis.pool import campaign_model_file, curve_wind_grid, load_campaign_model, pooled_wind_smoothing
     from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+    from vivbench.models.model_input import measured_input
     from vivbench.io.result import read_result, result_record
     from vivbench.report.figures import curves_figure, model_forecast_figure
     from vivbench.report.pair_figures import recovery_pair_figure
@@ -464,8 +465,12 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
             t0 = float(starts[np.argmin(np.abs(starts - (span[0] + 0.4 * (span[1] - span[0]))))])
         fname = f"sbs_forecast_{k + 1}_{modes[k]}.png"
         try:
-            model_forecast_figure(load_campaign_model(model_path), result_record(res), out_dir / fname,
-                                    t0=float(t0), span=span, name=f"campaign model ({_SHORT.get(modes[k], modes[k])})")
+            model = load_campaign_model(model_path)
+            pooled_path = r.results / POOLED_NAME
+            smoothing = pooled_wind_smoothing(read_pooled(pooled_path) if pooled_path.is_file() else None)
+            record = measured_input(model, result_record(res), wind_smoothing_s=smoothing)
+            model_forecast_figure(model, record, out_dir / fname,
+                                  t0=float(t0), span=span, name=f"campaign model ({_SHORT.get(modes[k], modes[k])})")
         except (ValueError, np.linalg.LinAlgError) as exc:
             cells.append(f"figure not made: {' '.join(str(exc).split())}")
             continue

@@ -30,11 +30,13 @@ from vivbench.validate.metrics import (
     rhs_error_summary,
     support_scores,
 )
+from vivbench.models.model_input import measured_input
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.recovery import (
     model_window_rhs_errors,
     model_window_rhs_errors_true_AU,
+    record_yaw_on,
     window_rhs_errors,
     window_rhs_errors_true_AU,
 )
@@ -261,7 +263,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     # model object (campaign.model.nc, or rebuilt from the pooled result's coef for older outputs)
     # through the protocol, the windows' identifiability verdicts from the pooled result.
     from vivbench.io.campaign_model import POOLED_NAME, read_pooled
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
 
     pooled_path = results_dir / POOLED_NAME
     pooled = model = model_path = None
@@ -270,6 +272,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)
         model_tau = float(getattr(model, "tau", DEFAULT_TAU))
+        smoothing = pooled_wind_smoothing(pooled)
     p_reg, p_ok, p_errs, p_act, p_errs_true, p_act_true = [], [], [], [], [], []
     for event_id, ep, rp in pairs:
         tree = read_event(ep)
@@ -296,7 +299,9 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
             sel = pooled["event_id"].values.astype(str) == event_id
             if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
                 raise InputError(f"{pooled_path}: its windows of {event_id} differ from {rp}; re-run vivbench pool")
-            record = result_record(res)
+            measured = result_record(res)
+            # The model on the measured record's wind as it was at fit; the truth's own wind below as it is.
+            record = measured_input(model, measured, wind_smoothing_s=smoothing)
             p_reg.append(model_window_regimes(model, record, start, end, tau=model_tau)["regime"].astype(int))
             p_ok.append(pooled["identifiable"].values[sel].astype(bool))
             if "coef" in truth.data_vars:
@@ -304,8 +309,10 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
                                                    active_share=active_share)
                 p_errs.append(pe.ravel())
                 p_act.append(pact.ravel())
+            # The truth stores no yaw: a model using it sees the measured record's (as score_fitted does).
             pet, pact_t = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
-                                                          active_share=active_share)
+                                                          active_share=active_share,
+                                                          yaw=record_yaw_on(measured, truth["time"].values))
             p_errs_true.append(pet.ravel())
             p_act_true.append(pact_t.ravel())
         et, act_t = window_rhs_errors_true_AU(res, truth, active_share=active_share)

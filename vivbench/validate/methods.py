@@ -79,6 +79,7 @@ import numpy as np
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
+from vivbench.models.model_input import measured_input
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import curve_errors
@@ -133,7 +134,7 @@ class VerdictModel:
 
 
 class MeasuredWindVerdictModel(VerdictModel):
-    """A :class:`VerdictModel` whose model is evaluated on measured records through ``model.measured_wind``.
+    """A :class:`VerdictModel` whose model is evaluated on measured records through :func:`vivbench.models.measured_input`.
 
     The varying model is fitted on the measured wind smoothed (its ``wind_smoothing_s``): its
     verdict, window regimes and simulations of a measured record use that wind too, as
@@ -151,7 +152,7 @@ class MeasuredWindVerdictModel(VerdictModel):
         key = (start.tobytes(), end.tobytes())
         # The record itself is kept with the verdict (identity, not equality: records compare by identity).
         if self._last is None or self._last[0] is not record or self._last[1] != key:
-            self._last = (record, key, self._verdict(self.model, self.model.measured_wind(record), start, end))
+            self._last = (record, key, self._verdict(self.model, measured_input(self.model, record), start, end))
         return self._last[2]
 
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
@@ -165,7 +166,7 @@ class MeasuredWindVerdictModel(VerdictModel):
 
     def simulate(self, record: Record, *args, **kwargs):
         """The model's ``simulate`` on the measured record's wind as the model was fitted on it."""
-        return self.model.simulate(self.model.measured_wind(record), *args, **kwargs)
+        return self.model.simulate(measured_input(self.model, record), *args, **kwargs)
 
 
 def above_noise_floor(record: Record, window_start, window_end, min_snr: float | None = None) -> np.ndarray:

@@ -4,7 +4,9 @@ The model is used through the model protocol (DESIGN 7): regimes by
 :func:`vivbench.regimes.model_window_regimes` on its order contributions,
 right-hand sides by its ``predict`` (on the results' measured A and U against
 the exact matrix where the truth has one, and on the truth's own A and U
-against its dA/dt for any truth). The identifiability verdict of each
+against its dA/dt for any truth). Measured records reach the model through
+:func:`vivbench.models.measured_input` (the wind as at fit: the varying
+model's smoothing); the truth's felt wind is used as it is. The identifiability verdict of each
 window (bootstrap agreement, confidence-region margins) is the one written in
 the pooled result ``campaign.pooled.nc``.
 """
@@ -20,9 +22,11 @@ from vivbench.validate.recovery import (
     finite_median,
     model_window_rhs_errors,
     model_window_rhs_errors_true_AU,
+    record_yaw_on,
     regime_scores,
     truth_window_activity,
 )
+from vivbench.models.model_input import measured_input
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.core.errors import InputError
@@ -59,7 +63,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         truth's own A and U against the truth's dA/dt, any truth:
         :func:`vivbench.validate.model_window_rhs_errors_true_AU`).
     """
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
     from vivbench.io.campaign_model import read_pooled
     from vivbench.io.event import read_event
     from vivbench.io.result import read_result, result_record
@@ -68,6 +72,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     if model is None:
         model = load_campaign_model(campaign_model_file(Path(pooled_file).parent) or pooled_file)
     model_tau = float(getattr(model, "tau", DEFAULT_TAU))
+    smoothing = pooled_wind_smoothing(pooled)
     truths = {}
     for path in event_files:
         tree = read_event(path)
@@ -89,7 +94,9 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         start, end = res["window_start"].values, res["window_end"].values
         if not np.array_equal(pooled["window_start"].values[sel], start):
             raise InputError(f"{pooled_file}: its windows of {event_id} differ from the result's; re-run vivbench pool")
-        record = result_record(res)
+        measured = result_record(res)
+        # The model on the measured record's wind as it was at fit; the truth's own wind below as it is.
+        record = measured_input(model, measured, wind_smoothing_s=smoothing)
         regimes.append(model_window_regimes(model, record, start, end, tau=model_tau)["regime"])
         flags.append(pooled["identifiable"].values[sel].astype(bool))
         truths_w.append(truth_window_regimes(truth, start, end, tau=tau))
@@ -101,8 +108,10 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
             e = np.full(act.shape, np.nan)
         errs.append(e.ravel())
         errs_active.append(np.where(act, e, np.nan).ravel())
+        # The truth stores no yaw: a model using it sees the measured record's (as score_fitted does).
         et, act_t = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
-                                                    active_share=active_share)
+                                                    active_share=active_share,
+                                                    yaw=record_yaw_on(measured, truth["time"].values))
         errs_true.append(et.ravel())
         errs_true_active.append(np.where(act_t, et, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))
