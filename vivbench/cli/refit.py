@@ -79,7 +79,7 @@ def run(args) -> int:
               "no true-model comparison", file=sys.stderr)
     config = RefitConfig(shooting_interval=args.shooting_interval, substeps=args.substeps, max_iter=args.max_iter,
                          tol=args.tol, ridge=args.ridge, hessian=args.hessian,
-                         free_initial_state=args.free_initial_state)
+                         free_initial_state=args.free_initial_state, max_wall_time=args.max_wall_time)
     support = _own_section_mask(args.terms, result["feature"].values) if args.terms else args.support
     try:
         ev = refit_event(result, t0=args.t0, t1=args.t1, support=support, truth_coef=truth, config=config)
@@ -126,4 +126,5 @@ def register(sub) -> None:
                    help="IPOPT Hessian (auto: exact up to 24 supported terms, limited-memory above)")
     s.add_argument("--free-initial-state", action="store_true",
                    help="fit the initial state too (default: fixed to the first measured A, as in the scoring)")
+    s.add_argument("--max-wall-time", type=float, default=None, help="solver wall-clock limit, s (default none)")
     s.set_defaults(func=run)

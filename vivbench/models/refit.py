@@ -67,6 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from vivbench.models.refit_shooting import LibraryShooting, solve_library_gauss_newton
 from vivbench.models.simulate import Simulation, simulate_identified, window_in_force
 from vivbench.core.terms import evaluate_library, feature_exponents, feature_names, section_exponents
 from vivbench.core.errors import InputError
@@ -79,6 +80,7 @@ _HESSIANS = ("auto", "exact", "limited-memory")
 #: it, CasADi's exact Hessian of the expanded intervals costs gigabytes.
 _EXACT_HESSIAN_MAX_TERMS = 24
 _SUPPORTS = ("identified", "window", "truth")
+_SOLVERS = ("gauss-newton", "ipopt")
 #: Library terms per section (A^i U^j, i <= 3, j <= 5, not both 0): S sections give 23 S columns.
 _TERMS_PER_SECTION = section_exponents().shape[0]
 
@@ -94,9 +96,11 @@ class RefitConfig:
     substeps : int
         RK4 steps per grid step inside the intervals.
     max_iter : int
-        IPOPT iteration limit.
+        Iteration limit: IPOPT iterations, or Gauss-Newton linearisations per
+        continuation stage of the continuity weight.
     tol : float
-        IPOPT convergence tolerance (on the scaled problem).
+        Convergence tolerance: IPOPT's (on the scaled problem), or for
+        Gauss-Newton the relative decrease of the cost below which a stage stops.
     ridge : float
         Weight of the squared norm of the scaled coefficients in the objective
         (0: none). Scaled coefficients are O(1), so 1e-6..1e-3 is "small".
@@ -122,6 +126,19 @@ class RefitConfig:
         state in 7 of 8).
     bound_factor, negative_tolerance : float
         Blow-up bounds of the evaluation simulations (see vivbench.models.simulate).
+    max_wall_time : float or None, s
+        Wall-clock limit of IPOPT (None: none; the Gauss-Newton solver is
+        bounded by ``max_iter``).
+    solver : {"gauss-newton", "ipopt"}
+        ``"gauss-newton"`` (default): Levenberg-Marquardt on the exact
+        Gauss-Newton matrix (:mod:`vivbench.models.refit_shooting`), the
+        continuity conditions as a heavily weighted penalty. ``"ipopt"``: the
+        NLP with exact continuity constraints; kept for comparison (see
+        ``benchmarks/bench_refit.py``), it does not converge on large supports.
+    continuity_weight : float
+        Gauss-Newton only: final weight of a squared continuity defect
+        relative to one grid sample's squared residual (reached by 100-fold
+        continuation from 100).
     """
 
     shooting_interval: float = 20.0
@@ -135,6 +152,9 @@ class RefitConfig:
     free_initial_state: bool = False
     bound_factor: float = 10.0
     negative_tolerance: float = 0.05
+    max_wall_time: float | None = None
+    solver: str = "gauss-newton"
+    continuity_weight: float = 1e6
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.shooting_interval) and self.shooting_interval > 0):
@@ -151,6 +171,12 @@ class RefitConfig:
             raise InputError(f"rank_rtol must be in [0, 1); got {self.rank_rtol}")
         if self.hessian not in _HESSIANS:
             raise InputError(f"hessian must be one of {_HESSIANS}; got {self.hessian!r}")
+        if self.solver not in _SOLVERS:
+            raise InputError(f"solver must be one of {_SOLVERS}; got {self.solver!r}")
+        if not (np.isfinite(self.continuity_weight) and self.continuity_weight >= 1e2):
+            raise InputError(f"continuity_weight must be a finite number >= 100; got {self.continuity_weight}")
+        if self.max_wall_time is not None and not (np.isfinite(self.max_wall_time) and self.max_wall_time > 0):
+            raise InputError(f"max_wall_time must be a positive number of seconds or None; got {self.max_wall_time}")
         if not (self.bound_factor > 1 and self.negative_tolerance >= 0):
             raise InputError(f"need bound_factor > 1 and negative_tolerance >= 0; got {self.bound_factor}, "
                              f"{self.negative_tolerance}")
@@ -166,11 +192,11 @@ class RefitResult:
         Refit coefficients in physical units (zeros off the support), S sections.
     support : ndarray of bool, shape (S, 23 S)
     success : bool
-        IPOPT reported success.
+        The solver reported success (IPOPT) or convergence (Gauss-Newton).
     status : str
-        IPOPT return status.
+        IPOPT return status, or the Gauss-Newton stopping message.
     iterations : int
-        IPOPT iterations.
+        IPOPT iterations, or Gauss-Newton linearisations (all stages).
     objective : float
         Final objective (scaled, see module docstring).
     simulation : Simulation
@@ -190,6 +216,11 @@ class RefitResult:
         (when that stays bounded), ``coef0`` with the nodes on the measured
         A, or zero coefficients when ``coef0`` made the model blow up inside
         a shooting interval (non-finite objective or derivatives).
+    solver : {"gauss-newton", "ipopt"}
+    max_defect : float
+        Largest continuity defect at the solution (scaled state, -): 0 up to
+        IPOPT's tolerance for IPOPT, small but nonzero for the Gauss-Newton
+        penalty.
     """
 
     coef: np.ndarray
@@ -205,6 +236,8 @@ class RefitResult:
     cond: np.ndarray
     wall_time: float
     start: str = "coef0"
+    solver: str = "ipopt"
+    max_defect: float = 0.0
 
     @property
     def identifiable(self) -> bool:
@@ -472,6 +505,8 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
             "ipopt.tol": float(config.tol), "ipopt.hessian_approximation": _hessian(config.hessian, n_c),
             # IPOPT's trial points may make the model blow up; it backs off by itself, so no warnings.
             "show_eval_warnings": False}
+    if config.max_wall_time is not None:
+        opts["ipopt.max_wall_time"] = float(config.max_wall_time)
     solver = ca.nlpsol("refit", "ipopt", {"x": w, "f": obj, "g": g}, opts)
     w0 = np.concatenate([x_init[starts].ravel(), p0])  # vec(X) is column-major: nodes one after another
     fg = ca.Function("fg", [w], [obj, g, ca.gradient(obj, w), ca.jacobian(g, w)])
@@ -490,6 +525,28 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
     stats = solver.stats()
     w_opt = np.asarray(sol["x"]).ravel()
     return w_opt[n_sec * J:], stats, float(sol["f"]), start
+
+
+def _solve_gauss_newton(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
+    """Levenberg-Marquardt on the exact Gauss-Newton model; returns p, stats, objective, start, max defect."""
+    h = np.diff(t)
+    N = int(max(1, min(t.size - 1, round(config.shooting_interval / np.median(h)))))
+    problem = LibraryShooting(step, x_meas, U, h, N, Gblk, ridge=config.ridge,
+                              fixed_initial_state=not config.free_initial_state)
+    starts = np.arange(problem.J) * N
+    start = "coef0"
+    try:
+        problem.continuity_weight = 1e2
+        ok = np.isfinite(problem.linearise(problem.pack(x_init[starts], p0))[0])
+    except ValueError:
+        ok = False
+    if not ok:
+        # coef0 blows up inside a shooting interval; zero coefficients (dA/dt = 0) never do.
+        x_init, p0, start = x_meas, np.zeros_like(p0), "zero"
+    sol = solve_library_gauss_newton(problem, x_init[starts], p0, max_iter=int(config.max_iter), tol=float(config.tol),
+                                     continuity_weight=float(config.continuity_weight), first_weight=1e2)
+    stats = {"success": sol.converged, "return_status": sol.message, "iter_count": sol.iterations}
+    return sol.p, stats, sol.objective, start, sol.max_defect
 
 
 def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = None) -> RefitResult:
@@ -535,7 +592,11 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     sim0 = simulate_coefficients(t, A, U, coef0 * support, bound_factor=config.bound_factor,
                                  negative_tolerance=config.negative_tolerance)
     x_init = sim0.A_sim / a if not sim0.stopped else x_meas
-    p_opt, stats, objective, start = _solve(t, x_meas, x_init, U, step, Gblk, p0, config)
+    defect = 0.0
+    if config.solver == "ipopt":
+        p_opt, stats, objective, start = _solve(t, x_meas, x_init, U, step, Gblk, p0, config)
+    else:
+        p_opt, stats, objective, start, defect = _solve_gauss_newton(t, x_meas, x_init, U, step, Gblk, p0, config)
     if start == "coef0" and not sim0.stopped:
         start = "coef0-trajectory"
     coef = np.zeros(support.shape)
@@ -551,7 +612,8 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     return RefitResult(coef=coef, support=support.copy(), success=bool(stats.get("success", False)),
                        status=str(stats.get("return_status", "unknown")), iterations=int(stats.get("iter_count", -1)),
                        objective=objective, simulation=sim, nmse=sim.nmse, support_size=support.sum(axis=1),
-                       rank=rank, cond=cond, wall_time=wall, start=start)
+                       rank=rank, cond=cond, wall_time=wall, start=start, solver=config.solver,
+                       max_defect=float(defect))
 
 
 # ---------------------------------------------------------------------------- events
