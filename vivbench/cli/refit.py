@@ -79,7 +79,7 @@ def run(args) -> int:
               "no true-model comparison", file=sys.stderr)
     config = RefitConfig(shooting_interval=args.shooting_interval, substeps=args.substeps, max_iter=args.max_iter,
                          tol=args.tol, ridge=args.ridge, hessian=args.hessian,
-                         free_initial_state=args.free_initial_state, max_wall_time=args.max_wall_time)
+                         free_initial_state=args.free_initial_state, max_wall_time=args.max_wall_time, solver=args.solver)
     support = _own_section_mask(args.terms, result["feature"].values) if args.terms else args.support
     try:
         ev = refit_event(result, t0=args.t0, t1=args.t1, support=support, truth_coef=truth, config=config)
@@ -97,13 +97,13 @@ def run(args) -> int:
     summary = {k: _json_value(v) for k, v in ev.summary().items()}
     with atomic_path(out / "summary.json") as tmp:
         Path(tmp).write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
-    print(f"refit {event_id} [{ev.t0:g}, {ev.t1:g}] s on the {ev.support_kind} support: IPOPT {ev.fit.status} "
-          f"after {ev.fit.iterations} iterations; wrote {out}")
+    print(f"refit {event_id} [{ev.t0:g}, {ev.t1:g}] s on the {ev.support_kind} support: {ev.fit.solver} "
+          f"{ev.fit.status} after {ev.fit.iterations} iterations; wrote {out}")
     return 0
 
 
 def register(sub) -> None:
-    s = sub.add_parser("refit", help="output-error refit of coefficients on a support (CasADi, IPOPT)")
+    s = sub.add_parser("refit", help="output-error refit of coefficients on a support (CasADi, Gauss-Newton)")
     s.add_argument("result", help="identification result <event_id>.identify.nc")
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--event", default=None,
@@ -119,8 +119,13 @@ def register(sub) -> None:
                         "e.g. 'U^2, A, A U, A^2 U, A^3 U'")
     s.add_argument("--shooting-interval", type=float, default=20.0, help="shooting interval, s (default 20)")
     s.add_argument("--substeps", type=int, default=1, help="RK4 steps per grid step (default 1)")
-    s.add_argument("--max-iter", type=int, default=200, help="IPOPT iteration limit (default 200)")
-    s.add_argument("--tol", type=float, default=1e-10, help="IPOPT tolerance (default 1e-10)")
+    s.add_argument("--max-iter", type=int, default=200,
+                   help="IPOPT iterations, or Gauss-Newton linearisations, at most (default 200)")
+    s.add_argument("--solver", default="gauss-newton", choices=("gauss-newton", "ipopt"),
+                   help="gauss-newton (default): Levenberg-Marquardt on the exact Gauss-Newton matrix; ipopt: the "
+                        "constrained NLP (slow and does not converge on large supports; kept for comparison)")
+    s.add_argument("--tol", type=float, default=None,
+                   help="IPOPT tolerance (default 1e-10), or the Gauss-Newton relative cost decrease (default 1e-6)")
     s.add_argument("--ridge", type=float, default=0.0, help="ridge weight on the scaled coefficients (default 0)")
     s.add_argument("--hessian", default="auto", choices=("auto", "exact", "limited-memory"),
                    help="IPOPT Hessian (auto: exact up to 24 supported terms, limited-memory above)")

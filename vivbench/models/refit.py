@@ -96,11 +96,12 @@ class RefitConfig:
     substeps : int
         RK4 steps per grid step inside the intervals.
     max_iter : int
-        Iteration limit: IPOPT iterations, or Gauss-Newton linearisations per
-        continuation stage of the continuity weight.
-    tol : float
-        Convergence tolerance: IPOPT's (on the scaled problem), or for
-        Gauss-Newton the relative decrease of the cost below which a stage stops.
+        Iteration limit: IPOPT iterations, or Gauss-Newton linearisations
+        (all continuation stages of the continuity weight together).
+    tol : float or None
+        Convergence tolerance: IPOPT's (on the scaled problem; default 1e-10),
+        or for Gauss-Newton the relative decrease of the cost below which a
+        stage stops (default 1e-6).
     ridge : float
         Weight of the squared norm of the scaled coefficients in the objective
         (0: none). Scaled coefficients are O(1), so 1e-6..1e-3 is "small".
@@ -144,7 +145,7 @@ class RefitConfig:
     shooting_interval: float = 20.0
     substeps: int = 1
     max_iter: int = 200
-    tol: float = 1e-10
+    tol: float | None = None
     ridge: float = 0.0
     rank_rtol: float = 1e-10
     hessian: str = "auto"
@@ -163,7 +164,7 @@ class RefitConfig:
             raise InputError(f"substeps must be an integer >= 1; got {self.substeps!r}")
         if not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
             raise InputError(f"max_iter must be an integer >= 1; got {self.max_iter!r}")
-        if not (np.isfinite(self.tol) and self.tol > 0):
+        if self.tol is not None and not (np.isfinite(self.tol) and self.tol > 0):
             raise InputError(f"tol must be > 0; got {self.tol}")
         if not (np.isfinite(self.ridge) and self.ridge >= 0):
             raise InputError(f"ridge must be >= 0; got {self.ridge}")
@@ -372,6 +373,12 @@ def _whitening(theta, support, a, rate, rank_rtol):
     return G, rank, cond
 
 
+def _project_start(theta_m, G_m, coef_m):
+    """Scaled coefficients p whose dA/dt on the measured samples is closest to ``theta_m @ coef_m``."""
+    B = theta_m @ G_m  # orthogonal columns of equal norm (see _whitening)
+    return np.linalg.lstsq(B, theta_m @ coef_m, rcond=None)[0]
+
+
 def _build_rhs(support, a):
     """CasADi Function f(x (S), u (S), c) -> dx/dt (S) in scaled state x = A / a, S sections.
 
@@ -502,7 +509,7 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
     g = ca.vec(end_states[:, :J - 1] - X[:, 1:]) if J > 1 else ca.MX(0, 1)
     w = ca.vertcat(ca.vec(X), p)
     opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.max_iter": int(config.max_iter),
-            "ipopt.tol": float(config.tol), "ipopt.hessian_approximation": _hessian(config.hessian, n_c),
+            "ipopt.tol": float(1e-10 if config.tol is None else config.tol), "ipopt.hessian_approximation": _hessian(config.hessian, n_c),
             # IPOPT's trial points may make the model blow up; it backs off by itself, so no warnings.
             "show_eval_warnings": False}
     if config.max_wall_time is not None:
@@ -543,7 +550,8 @@ def _solve_gauss_newton(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfi
     if not ok:
         # coef0 blows up inside a shooting interval; zero coefficients (dA/dt = 0) never do.
         x_init, p0, start = x_meas, np.zeros_like(p0), "zero"
-    sol = solve_library_gauss_newton(problem, x_init[starts], p0, max_iter=int(config.max_iter), tol=float(config.tol),
+    sol = solve_library_gauss_newton(problem, x_init[starts], p0, max_iter=int(config.max_iter),
+                                     tol=float(1e-6 if config.tol is None else config.tol),
                                      continuity_weight=float(config.continuity_weight), first_weight=1e2)
     stats = {"success": sol.converged, "return_status": sol.message, "iter_count": sol.iterations}
     return sol.p, stats, sol.objective, start, sol.max_defect
@@ -584,8 +592,11 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     step = _build_step(rhs, n_c, int(config.substeps))
     Gblk = _block_diag(G)
     n_p = Gblk.shape[1]
-    # Starting point: least-squares projection of coef0 onto the fitted directions.
-    p0 = np.concatenate([np.linalg.lstsq(G[m], coef0[m, support[m]], rcond=None)[0]
+    # Starting point: coef0's dA/dt on the measured (A, U) projected onto the fitted directions.
+    # (Projecting the coefficients themselves is wrong on an ill-conditioned support: coef0's
+    # components along the dropped directions can be huge, and leaving them out changed dA/dt of
+    # an equation-error fit on E013 of the default campaign by 1e4 m/s, so the start blew up.)
+    p0 = np.concatenate([_project_start(theta[:, support[m]], G[m], coef0[m, support[m]])
                          for m in range(support.shape[0]) if G[m].size]) if n_p else np.zeros(0)
     # Nodes start on coef0's own trajectory when it stays bounded (a feasible start,
     # so IPOPT cannot end worse than coef0 by drifting to another local minimum).
@@ -684,12 +695,18 @@ class EventRefit:
         return out
 
     def summary(self) -> dict:
-        """Flat dict of headline numbers. A simulation that blew up has NMSE None and its stop time."""
+        """Flat dict of headline numbers. A simulation that blew up has NMSE None and its stop time.
+
+        ``ipopt_status``, ``ipopt_success`` and ``ipopt_iterations`` keep their
+        names for existing readers but hold the status of the solver named by
+        ``solver``.
+        """
         f = self.fit
         s = {"event_id": self.event_id, "t0_s": self.t0, "t1_s": self.t1, "support": self.support_kind,
              "ipopt_status": f.status, "ipopt_success": f.success, "ipopt_iterations": f.iterations,
              "objective": f.objective, "wall_time_s": f.wall_time, "refit_start": f.start,
-             "coefficients_identifiable": f.identifiable}
+             "coefficients_identifiable": f.identifiable, "solver": f.solver,
+             "max_continuity_defect": f.max_defect}
         n_sec = self.support.shape[0]
         for m in range(n_sec):
             s[f"support_size_S{m + 1}"] = int(f.support_size[m])

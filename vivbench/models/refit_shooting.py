@@ -237,7 +237,7 @@ class LibraryGaussNewtonResult:
 
 
 def solve_library_gauss_newton(problem: LibraryShooting, X0: np.ndarray, p0: np.ndarray, *, max_iter: int = 100,
-                               tol: float = 1e-10, continuity_weight: float = 1e6, first_weight: float = 1e2,
+                               tol: float = 1e-6, continuity_weight: float = 1e6, first_weight: float = 1e2,
                                callback=None) -> LibraryGaussNewtonResult:
     """Levenberg-Marquardt on the exact Gauss-Newton model, with continuation on the continuity weight.
 
@@ -249,7 +249,7 @@ def solve_library_gauss_newton(problem: LibraryShooting, X0: np.ndarray, p0: np.
         when the initial state is fixed).
     p0 : ndarray, shape (n_p,)
     max_iter : int
-        Linearisations per continuation stage at most.
+        Linearisations at most, all continuation stages together.
     tol : float
         Stop a stage when an accepted step lowers Phi by less than ``tol`` times Phi.
     continuity_weight : float
@@ -277,10 +277,12 @@ def solve_library_gauss_newton(problem: LibraryShooting, X0: np.ndarray, p0: np.
     history: list = []
     total, converged, message = 0, False, "no iteration"
     lin = None
-    for weight in weights[::-1]:
+    for stage, weight in enumerate(weights[::-1]):
         problem.continuity_weight = weight
+        # the budget is shared: early stages get an equal part, the last stage what is left
+        budget = max_iter - total if stage == len(weights) - 1 else max(1, max_iter // len(weights))
         z, lin, it, converged, message = levenberg_marquardt(
-            problem.linearise, problem.cost, z, lower, max_iter=max_iter, tol=tol, history=history,
+            problem.linearise, problem.cost, z, lower, max_iter=max(1, budget), tol=tol, history=history,
             callback=callback, offset=total,
             start_error="the refit's start gives a non-finite cost (a simulation blows up inside an interval)")
         total += it
