@@ -88,6 +88,8 @@ def _figure(path, rows, sims, title) -> None:
         nmse = r["nmse_mean"] if r["nmse_mean"] is not None else np.nan
         vals = [r["refit_wall_s"] / 60.0, r["peak_rss_gb"], nmse * 100.0]
         a2.bar(x + (i - 0.5) * width, vals, width, color=colours[r["solver"]], label=r["solver"])
+        if r["nmse_mean"] is None:
+            a2.text(2 + (i - 0.5) * width, 0.0, "blew up", rotation=90, ha="center", va="bottom", fontsize=8)
     a2.set_xticks(x, ["refit wall (min)", "peak RSS (GB)", "mean NMSE (%)"])
     a2.set_ylabel("min, GB or %")
     a2.set_title(" vs ".join(names), fontsize=9, loc="left")

@@ -205,6 +205,7 @@ def test_cli_refits_an_event_outside_the_library(small_results, tmp_path, capsys
                  "--t0", str(t0), "--t1", str(t0 + 20.0), "--max-iter", "5"]) == 0
     err = capsys.readouterr().err
     assert "no /truth/coef" in err and "no true-model comparison" in err, err
+    assert "deprecated" in err and "vivbench greybox" in err, "the deprecation must point to greybox"
     summary = json.loads((out / "summary.json").read_text())
     assert summary.get("nmse_truth_mean") is None and summary["nmse_refit_mean"] is not None
     assert main(["refit", str(results[0]), "--out", str(out), "--event", str(event), "--support", "truth"]) == 2

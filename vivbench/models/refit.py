@@ -7,41 +7,47 @@ coefficients Xi such that the solution of dA/dt = Theta(A, U) Xi^T, driven by
 the measured wind U(t), matches the measured A(t) in least squares over every
 grid sample. It is a reference independent of numerical differentiation.
 
-Method (multiple shooting, IPOPT through CasADi):
+Method (multiple shooting through CasADi; Gauss-Newton by default):
 
 - The segment's grid is cut into shooting intervals of ``shooting_interval``
   seconds. The state at the start of every interval is a decision variable;
   inside an interval the model is integrated by classical RK4 with
   ``substeps`` steps per grid step, U linear between the grid samples (U is
-  an input, not a state). Continuity constraints tie the end of each interval
-  to the next start.
-- The objective is the mean over all grid samples and sections of the squared
+  an input, not a state). Continuity ties the end of each interval to the
+  next start.
+- The objective is the sum over all grid samples and sections of the squared
   difference between the simulated and the measured A, each section divided
   by the RMS of its measured A, plus ``ridge`` times the squared norm of the
   scaled coefficients.
-- The graph is vectorised: one CasADi Function for a grid step, ``mapaccum``
-  over the steps of an interval (expanded to scalar SX code) and ``map`` over
-  the intervals (a shorter last interval gets its own map). No Python code
-  runs per sample.
-- Start: the given coefficients with the node states on their simulated
-  trajectory from the first measured A when it stays bounded (a feasible
-  start: from the measured A at the nodes IPOPT was seen to end in a worse
-  local minimum), else on the measured A; zero coefficients when the given
-  ones blow up inside a shooting interval (a non-finite objective or
-  derivative at the start would stop IPOPT at once).
-- Hessian: exact (CasADi AD) for small supports; for more than 24 supported
-  terms IPOPT's L-BFGS approximation, because the exact Hessian of the
-  expanded intervals grows to gigabytes (measured > 4 GB for 40 terms per
-  equation over 100 s). L-BFGS converges slowly on the ill-conditioned large
-  supports: check ``status`` and ``iterations``.
+- Solver ``"gauss-newton"`` (default, :mod:`vivbench.models.refit_shooting`):
+  Levenberg-Marquardt on the exact Gauss-Newton matrix of the residuals
+  (data rows, continuity defects weighted by ``continuity_weight`` relative to
+  one sample, ridge rows), the residual Jacobian built from CasADi Jacobians
+  of the vectorised RK4 step; the step control is shared with the grey-box
+  refit (:mod:`vivbench.models.gauss_newton`). Continuity holds as a heavy
+  penalty, not exactly: ``RefitResult.max_defect`` reports the largest
+  defect. On large supports it runs in seconds to minutes where IPOPT did
+  not converge in 5 minutes (``benchmarks/bench_refit.py``).
+- Solver ``"ipopt"``: the NLP with exact continuity constraints, one CasADi
+  Function per grid step, ``mapaccum`` over an interval (expanded to SX) and
+  ``map`` over the intervals. Hessian exact (CasADi AD) for at most 24
+  supported terms, IPOPT's L-BFGS above (the exact Hessian of the expanded
+  intervals grows to gigabytes). Kept for comparison: it converges on small
+  supports only.
+- Start: the given coefficients (their dA/dt on the measured samples
+  projected onto the fitted directions) with the node states on their
+  simulated trajectory from the first measured A when it stays bounded (a
+  feasible start: from the measured A at the nodes IPOPT was seen to end in a
+  worse local minimum), else on the measured A; zero coefficients when the
+  given ones blow up inside a shooting interval.
 
-Scaling. IPOPT sees scaled variables only: state x_m = A_m / a_m (a_m the RMS
+Scaling. The solvers see scaled variables only: state x_m = A_m / a_m (a_m the RMS
 of the measured A_m), and, per equation, coefficients p_m in a whitened basis
 of the supported columns. The supported columns, evaluated on the measured
 (A, U), are scaled to unit RMS (matrix D) and decomposed B = W S V^T; the
 physical coefficients are xi_m = D^-1 V_r S_r^-1 p_m c_m, so that each p_m
 direction moves dx_m/dt by the same RMS amount c_m / a_m (c_m sets it to the
-RMS rate of change of x_m). This keeps IPOPT well conditioned even though the
+RMS rate of change of x_m). This keeps the problem well conditioned even though the
 raw monomials U^j over a narrow band of U are nearly collinear (condition
 numbers of 1e6 and more). Directions with singular values below
 ``rank_rtol`` times the largest are dropped: they do not change dA/dt on the

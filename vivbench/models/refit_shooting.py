@@ -160,8 +160,9 @@ class LibraryShooting:
         """Phi at the free variables z (inf when a trajectory is not finite)."""
         X, p = self.unpack(z)
         traj, _ = self.trajectories(X, p)
-        r, d = self.residuals(X, p, traj)
-        val = float(np.sum(r**2) + np.sum(d**2) + self.ridge * (p @ p))
+        with np.errstate(over="ignore", invalid="ignore"):  # a trial step may blow up: cost inf, step rejected
+            r, d = self.residuals(X, p, traj)
+            val = float(np.sum(r**2) + np.sum(d**2) + self.ridge * (p @ p))
         return val if np.isfinite(val) else np.inf
 
     def linearise(self, z: np.ndarray):
