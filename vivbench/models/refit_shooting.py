@@ -281,9 +281,9 @@ def solve_library_gauss_newton(problem: LibraryShooting, X0: np.ndarray, p0: np.
     for stage, weight in enumerate(weights[::-1]):
         problem.continuity_weight = weight
         # the budget is shared: early stages get an equal part, the last stage what is left
-        budget = max_iter - total if stage == len(weights) - 1 else max(1, max_iter // len(weights))
+        budget = max_iter - total if stage == len(weights) - 1 else max_iter // len(weights)
         z, lin, it, converged, message = levenberg_marquardt(
-            problem.linearise, problem.cost, z, lower, max_iter=max(1, budget), tol=tol, history=history,
+            problem.linearise, problem.cost, z, lower, max_iter=max(0, budget), tol=tol, history=history,
             callback=callback, offset=total,
             start_error="the refit's start gives a non-finite cost (a simulation blows up inside an interval)")
         total += it
