@@ -205,11 +205,25 @@ def test_cli_refits_an_event_outside_the_library(small_results, tmp_path, capsys
                  "--t0", str(t0), "--t1", str(t0 + 20.0), "--max-iter", "5"]) == 0
     err = capsys.readouterr().err
     assert "no /truth/coef" in err and "no true-model comparison" in err, err
+    assert "deprecated" not in err, "a --terms support is not deprecated"
     summary = json.loads((out / "summary.json").read_text())
     assert summary.get("nmse_truth_mean") is None and summary["nmse_refit_mean"] is not None
     assert main(["refit", str(results[0]), "--out", str(out), "--event", str(event), "--support", "truth"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("vivbench refit: ") and "no /truth/coef for --support truth" in err and "\n" not in err, err
+
+
+def test_cli_identified_support_points_to_greybox(identified, tmp_path, capsys):
+    """The refit on an identified support is deprecated (issue 14): it runs, and says to use greybox."""
+    ds = identified["ds"]
+    t0 = float(ds["window_start"].values[0])
+    capsys.readouterr()
+    assert main(["refit", str(identified["result"]), "--out", str(tmp_path / "r"), "--t0", str(t0), "--t1",
+                 str(t0 + 10.0), "--max-iter", "2"]) == 0
+    err = capsys.readouterr().err
+    assert "deprecated" in err and "vivbench greybox" in err, err
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert summary["solver"] == "gauss-newton" and summary["ipopt_iterations"] <= 2
 
 
 def test_own_section_terms_build_the_mask():

@@ -170,7 +170,7 @@ def run(args) -> int:
     rf = _read_json(out / "refit" / "summary.json")
     if rf:
         print(f"refit:    {rf.get('event_id')} [{rf.get('t0_s', float('nan')):.0f}, {rf.get('t1_s', float('nan')):.0f}] s on "
-              f"'{REFIT_TERMS}' per section: IPOPT {rf.get('ipopt_status')}; mean NMSE refit {_g(rf.get('nmse_refit_mean'))}, "
+              f"'{REFIT_TERMS}' per section: {rf.get('solver', 'ipopt')} {rf.get('ipopt_status')}; mean NMSE refit {_g(rf.get('nmse_refit_mean'))}, "
               f"equation-error fit {_g(rf.get('nmse_lsq_mean'))}, true model {_g(rf.get('nmse_truth_mean'))}")
     gb = _read_json(out / "greybox" / "summary.json")
     if gb:

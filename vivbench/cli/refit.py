@@ -63,9 +63,17 @@ def _own_section_mask(spec: str, features) -> np.ndarray:
     return mask
 
 
+DEPRECATION = ("the refit on an identified support is deprecated (issue 14): on a realistic VIV segment "
+               "(69 terms per equation, rank deficient) neither Gauss-Newton nor IPOPT gives a model that simulates "
+               "the segment (README, benchmarks/bench_refit.py); for reference coefficients use "
+               "`vivbench greybox RESULTS_DIR --out DIR`. True or small supports (--support truth, --terms) are "
+               "refitted by Gauss-Newton.")
+
+
 def run(args) -> int:
     from vivbench.models.refit import RefitConfig, refit_event
     from vivbench.io.netcdf import atomic_path
+
 
     result = _load_result(args.result)
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))
@@ -79,7 +87,7 @@ def run(args) -> int:
               "no true-model comparison", file=sys.stderr)
     config = RefitConfig(shooting_interval=args.shooting_interval, substeps=args.substeps, max_iter=args.max_iter,
                          tol=args.tol, ridge=args.ridge, hessian=args.hessian,
-                         free_initial_state=args.free_initial_state)
+                         free_initial_state=args.free_initial_state, max_wall_time=args.max_wall_time, solver=args.solver)
     support = _own_section_mask(args.terms, result["feature"].values) if args.terms else args.support
     try:
         ev = refit_event(result, t0=args.t0, t1=args.t1, support=support, truth_coef=truth, config=config)
@@ -97,13 +105,16 @@ def run(args) -> int:
     summary = {k: _json_value(v) for k, v in ev.summary().items()}
     with atomic_path(out / "summary.json") as tmp:
         Path(tmp).write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
-    print(f"refit {event_id} [{ev.t0:g}, {ev.t1:g}] s on the {ev.support_kind} support: IPOPT {ev.fit.status} "
-          f"after {ev.fit.iterations} iterations; wrote {out}")
+    print(f"refit {event_id} [{ev.t0:g}, {ev.t1:g}] s on the {ev.support_kind} support: {ev.fit.solver} "
+          f"{ev.fit.status} after {ev.fit.iterations} iterations; wrote {out}")
+    if ev.support_kind in ("identified", "window"):
+        # after the work, so that bad input still fails with one line
+        print(f"vivbench refit: {DEPRECATION}", file=sys.stderr)
     return 0
 
 
 def register(sub) -> None:
-    s = sub.add_parser("refit", help="output-error refit of coefficients on a support (CasADi, IPOPT)")
+    s = sub.add_parser("refit", help="output-error refit of library coefficients on a support (CasADi, Gauss-Newton; identified supports deprecated: use greybox)")
     s.add_argument("result", help="identification result <event_id>.identify.nc")
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--event", default=None,
@@ -119,11 +130,17 @@ def register(sub) -> None:
                         "e.g. 'U^2, A, A U, A^2 U, A^3 U'")
     s.add_argument("--shooting-interval", type=float, default=20.0, help="shooting interval, s (default 20)")
     s.add_argument("--substeps", type=int, default=1, help="RK4 steps per grid step (default 1)")
-    s.add_argument("--max-iter", type=int, default=200, help="IPOPT iteration limit (default 200)")
-    s.add_argument("--tol", type=float, default=1e-10, help="IPOPT tolerance (default 1e-10)")
+    s.add_argument("--max-iter", type=int, default=200,
+                   help="IPOPT iterations, or Gauss-Newton linearisations, at most (default 200)")
+    s.add_argument("--solver", default="gauss-newton", choices=("gauss-newton", "ipopt"),
+                   help="gauss-newton (default): Levenberg-Marquardt on the exact Gauss-Newton matrix; ipopt: the "
+                        "constrained NLP (slow and does not converge on large supports; kept for comparison)")
+    s.add_argument("--tol", type=float, default=None,
+                   help="IPOPT tolerance (default 1e-10), or the Gauss-Newton relative cost decrease (default 1e-6)")
     s.add_argument("--ridge", type=float, default=0.0, help="ridge weight on the scaled coefficients (default 0)")
     s.add_argument("--hessian", default="auto", choices=("auto", "exact", "limited-memory"),
                    help="IPOPT Hessian (auto: exact up to 24 supported terms, limited-memory above)")
     s.add_argument("--free-initial-state", action="store_true",
                    help="fit the initial state too (default: fixed to the first measured A, as in the scoring)")
+    s.add_argument("--max-wall-time", type=float, default=None, help="solver wall-clock limit, s (default none)")
     s.set_defaults(func=run)

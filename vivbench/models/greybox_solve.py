@@ -14,7 +14,7 @@ residual Jacobian J from the CasADi step Jacobians
 (:mod:`vivbench.models.greybox_shooting`) and solves the Gauss-Newton
 system (J^T J + R + mu diag) dx = -(J^T r + R theta) densely (a few thousand
 unknowns); a step is kept only when Phi falls (Levenberg-Marquardt control of
-mu). Lower bounds (non-negative limiting terms and locked force) are kept by
+mu, :mod:`vivbench.models.gauss_newton`, shared with the library refit). Lower bounds (non-negative limiting terms and locked force) are kept by
 projection, with the variables pinned at a bound that the step would push
 out frozen for that step.
 
@@ -34,6 +34,7 @@ from typing import Callable
 import numpy as np
 import scipy.linalg as sla
 
+from vivbench.models.gauss_newton import levenberg_marquardt
 from vivbench.models.greybox_shooting import ShootingGrid, StepFunctions, propagate
 
 __all__ = ["ShootingProblem", "GaussNewtonResult", "solve_gauss_newton", "block_ids"]
@@ -232,77 +233,22 @@ def _levenberg_marquardt(problem, theta, s, max_iter, tol, history, callback, of
     """Levenberg-Marquardt iterations at the problem's current continuity weight."""
     P = problem.P
     R = problem.penalty
-    mu = 1e-3
-    converged, message = False, "iteration limit"
-    it = 0
-    lin = problem.linearise(theta, s)
-    if not np.isfinite(lin[0]):
-        raise ValueError("the grey-box start gives a non-finite cost (a simulation blows up inside an interval)")
-    for it in range(1, max_iter + 1):
-        cost, H, grad, _, _ = lin
-        history.append(cost)
-        x = np.concatenate([theta, s])
-        Hp = H.copy()
+
+    def linearise(x):
+        lin = problem.linearise(x[:P], x[P:])
+        Hp = lin[1].copy()
         Hp[:P, :P] += R
-        gp = grad.copy()
-        gp[:P] += R @ theta
-        lower = np.concatenate([problem.lower, np.full(s.size, -np.inf)])
-        pinned = (x <= lower) & (gp > 0)  # at the bound and pushed outwards
-        diag_all = np.diag(Hp)
-        floor = 1e-12 * max(float(diag_all.max()), 1e-300)
-        accepted = False
-        for _ in range(25):
-            dx = _bounded_step(Hp, gp, x, lower, pinned, mu * diag_all + floor)
-            if dx is None:
-                mu *= 10.0
-                continue
-            xn = np.maximum(x + dx, lower)
-            new_cost = problem.cost(xn[:P], xn[P:])
-            if new_cost < cost:
-                accepted = True
-                theta, s = xn[:P], xn[P:]
-                mu = max(mu / 3.0, 1e-9)
-                break
-            mu *= 4.0
-        if not accepted:
-            converged, message = True, "no step lowers the cost (local minimum within rounding)"
-            break
-        if callback is not None:
-            callback(offset + it, new_cost, mu)
-        lin = problem.linearise(theta, s)
-        if cost - new_cost < tol * cost:
-            converged, message = True, f"relative decrease below {tol:g}"
-            break
-    return theta, s, lin, it, converged, message
+        gp = lin[2].copy()
+        gp[:P] += R @ x[:P]
+        return lin[0], Hp, gp, lin
 
-
-def _bounded_step(H, g, x, lower, pinned, damping, max_rounds: int = 6):
-    """Damped Gauss-Newton step that stops at the lower bounds (a few rounds of an active set).
-
-    Variables that the step carries below their bound are moved to it and
-    fixed, and the rest is solved again with that move, so the projected step
-    stays a minimiser of the quadratic model on the remaining variables.
-    None when the damped matrix is not positive definite.
-    """
-    fixed = pinned.copy()
-    dx = np.zeros_like(x)
-    for _ in range(max_rounds):  # usually one or two rounds
-        free = ~fixed
-        dx_fixed = np.where(fixed, np.where(pinned, 0.0, lower - x), 0.0)
-        dx_fixed = np.where(np.isfinite(dx_fixed), dx_fixed, 0.0)
-        rhs = -g[free] - H[np.ix_(free, fixed)] @ dx_fixed[fixed]
-        A = H[np.ix_(free, free)] + np.diag(damping[free])
-        try:
-            sol = sla.cho_solve(sla.cho_factor(A, lower=False, check_finite=False), rhs, check_finite=False)
-        except (np.linalg.LinAlgError, ValueError):
-            return None
-        dx = dx_fixed.copy()
-        dx[free] = sol
-        out = free & (x + dx < lower)
-        if not out.any():
-            break
-        fixed |= out
-    return dx
+    x0 = np.concatenate([theta, s])
+    lower = np.concatenate([problem.lower, np.full(s.size, -np.inf)])
+    x, lin, it, converged, message = levenberg_marquardt(
+        linearise, lambda z: problem.cost(z[:P], z[P:]), x0, lower, max_iter=max_iter, tol=tol, history=history,
+        callback=callback, offset=offset,
+        start_error="the grey-box start gives a non-finite cost (a simulation blows up inside an interval)")
+    return x[:P], x[P:], lin[3], it, converged, message
 
 
 def _sandwich(problem: ShootingProblem, H, gloc, arow, d, block: np.ndarray) -> np.ndarray:

@@ -7,41 +7,51 @@ coefficients Xi such that the solution of dA/dt = Theta(A, U) Xi^T, driven by
 the measured wind U(t), matches the measured A(t) in least squares over every
 grid sample. It is a reference independent of numerical differentiation.
 
-Method (multiple shooting, IPOPT through CasADi):
+Method (multiple shooting through CasADi; Gauss-Newton by default):
 
 - The segment's grid is cut into shooting intervals of ``shooting_interval``
   seconds. The state at the start of every interval is a decision variable;
   inside an interval the model is integrated by classical RK4 with
   ``substeps`` steps per grid step, U linear between the grid samples (U is
-  an input, not a state). Continuity constraints tie the end of each interval
-  to the next start.
-- The objective is the mean over all grid samples and sections of the squared
+  an input, not a state). Continuity ties the end of each interval to the
+  next start.
+- The objective is the sum over all grid samples and sections of the squared
   difference between the simulated and the measured A, each section divided
   by the RMS of its measured A, plus ``ridge`` times the squared norm of the
   scaled coefficients.
-- The graph is vectorised: one CasADi Function for a grid step, ``mapaccum``
-  over the steps of an interval (expanded to scalar SX code) and ``map`` over
-  the intervals (a shorter last interval gets its own map). No Python code
-  runs per sample.
-- Start: the given coefficients with the node states on their simulated
-  trajectory from the first measured A when it stays bounded (a feasible
-  start: from the measured A at the nodes IPOPT was seen to end in a worse
-  local minimum), else on the measured A; zero coefficients when the given
-  ones blow up inside a shooting interval (a non-finite objective or
-  derivative at the start would stop IPOPT at once).
-- Hessian: exact (CasADi AD) for small supports; for more than 24 supported
-  terms IPOPT's L-BFGS approximation, because the exact Hessian of the
-  expanded intervals grows to gigabytes (measured > 4 GB for 40 terms per
-  equation over 100 s). L-BFGS converges slowly on the ill-conditioned large
-  supports: check ``status`` and ``iterations``.
+- Solver ``"gauss-newton"`` (default, :mod:`vivbench.models.refit_shooting`):
+  Levenberg-Marquardt on the exact Gauss-Newton matrix of the residuals
+  (data rows, continuity defects weighted by ``continuity_weight`` relative to
+  one sample, ridge rows), the residual Jacobian built from CasADi Jacobians
+  of the vectorised RK4 step; the step control is shared with the grey-box
+  refit (:mod:`vivbench.models.gauss_newton`). Continuity holds as a heavy
+  penalty, not exactly: ``RefitResult.max_defect`` reports the largest
+  defect. Measured (``benchmarks/bench_refit.py``, README): on the true
+  40-term support of an in-library event (800 s) NMSE 1e-5 in 94 s and
+  0.34 GB, where IPOPT stopped at 5 minutes and 2.7 GB with NMSE 4.6. On
+  the identified (rank-deficient) support of a realistic VIV segment no
+  solver gives a model that simulates the segment: use the grey-box refit
+  (:mod:`vivbench.models.greybox`) for reference coefficients there.
+- Solver ``"ipopt"``: the NLP with exact continuity constraints, one CasADi
+  Function per grid step, ``mapaccum`` over an interval (expanded to SX) and
+  ``map`` over the intervals. Hessian exact (CasADi AD) for at most 24
+  supported terms, IPOPT's L-BFGS above (the exact Hessian of the expanded
+  intervals grows to gigabytes). Kept for comparison: it converges on small
+  supports only.
+- Start: the given coefficients (their dA/dt on the measured samples
+  projected onto the fitted directions) with the node states on their
+  simulated trajectory from the first measured A when it stays bounded (a
+  feasible start: from the measured A at the nodes IPOPT was seen to end in a
+  worse local minimum), else on the measured A; zero coefficients when the
+  given ones blow up inside a shooting interval.
 
-Scaling. IPOPT sees scaled variables only: state x_m = A_m / a_m (a_m the RMS
+Scaling. The solvers see scaled variables only: state x_m = A_m / a_m (a_m the RMS
 of the measured A_m), and, per equation, coefficients p_m in a whitened basis
 of the supported columns. The supported columns, evaluated on the measured
 (A, U), are scaled to unit RMS (matrix D) and decomposed B = W S V^T; the
 physical coefficients are xi_m = D^-1 V_r S_r^-1 p_m c_m, so that each p_m
 direction moves dx_m/dt by the same RMS amount c_m / a_m (c_m sets it to the
-RMS rate of change of x_m). This keeps IPOPT well conditioned even though the
+RMS rate of change of x_m). This keeps the problem well conditioned even though the
 raw monomials U^j over a narrow band of U are nearly collinear (condition
 numbers of 1e6 and more). Directions with singular values below
 ``rank_rtol`` times the largest are dropped: they do not change dA/dt on the
@@ -67,6 +77,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from vivbench.models.refit_shooting import LibraryShooting, solve_library_gauss_newton
 from vivbench.models.simulate import Simulation, simulate_identified, window_in_force
 from vivbench.core.terms import evaluate_library, feature_exponents, feature_names, section_exponents
 from vivbench.core.errors import InputError
@@ -79,6 +90,7 @@ _HESSIANS = ("auto", "exact", "limited-memory")
 #: it, CasADi's exact Hessian of the expanded intervals costs gigabytes.
 _EXACT_HESSIAN_MAX_TERMS = 24
 _SUPPORTS = ("identified", "window", "truth")
+_SOLVERS = ("gauss-newton", "ipopt")
 #: Library terms per section (A^i U^j, i <= 3, j <= 5, not both 0): S sections give 23 S columns.
 _TERMS_PER_SECTION = section_exponents().shape[0]
 
@@ -94,9 +106,12 @@ class RefitConfig:
     substeps : int
         RK4 steps per grid step inside the intervals.
     max_iter : int
-        IPOPT iteration limit.
-    tol : float
-        IPOPT convergence tolerance (on the scaled problem).
+        Iteration limit: IPOPT iterations, or Gauss-Newton linearisations
+        (all continuation stages of the continuity weight together).
+    tol : float or None
+        Convergence tolerance: IPOPT's (on the scaled problem; default 1e-10),
+        or for Gauss-Newton the relative decrease of the cost below which a
+        stage stops (default 1e-6).
     ridge : float
         Weight of the squared norm of the scaled coefficients in the objective
         (0: none). Scaled coefficients are O(1), so 1e-6..1e-3 is "small".
@@ -122,12 +137,25 @@ class RefitConfig:
         state in 7 of 8).
     bound_factor, negative_tolerance : float
         Blow-up bounds of the evaluation simulations (see vivbench.models.simulate).
+    max_wall_time : float or None, s
+        Wall-clock limit of IPOPT (None: none; the Gauss-Newton solver is
+        bounded by ``max_iter``).
+    solver : {"gauss-newton", "ipopt"}
+        ``"gauss-newton"`` (default): Levenberg-Marquardt on the exact
+        Gauss-Newton matrix (:mod:`vivbench.models.refit_shooting`), the
+        continuity conditions as a heavily weighted penalty. ``"ipopt"``: the
+        NLP with exact continuity constraints; kept for comparison (see
+        ``benchmarks/bench_refit.py``), it does not converge on large supports.
+    continuity_weight : float
+        Gauss-Newton only: final weight of a squared continuity defect
+        relative to one grid sample's squared residual (reached by 100-fold
+        continuation from 100).
     """
 
     shooting_interval: float = 20.0
     substeps: int = 1
     max_iter: int = 200
-    tol: float = 1e-10
+    tol: float | None = None
     ridge: float = 0.0
     rank_rtol: float = 1e-10
     hessian: str = "auto"
@@ -135,6 +163,9 @@ class RefitConfig:
     free_initial_state: bool = False
     bound_factor: float = 10.0
     negative_tolerance: float = 0.05
+    max_wall_time: float | None = None
+    solver: str = "gauss-newton"
+    continuity_weight: float = 1e6
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.shooting_interval) and self.shooting_interval > 0):
@@ -143,7 +174,7 @@ class RefitConfig:
             raise InputError(f"substeps must be an integer >= 1; got {self.substeps!r}")
         if not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
             raise InputError(f"max_iter must be an integer >= 1; got {self.max_iter!r}")
-        if not (np.isfinite(self.tol) and self.tol > 0):
+        if self.tol is not None and not (np.isfinite(self.tol) and self.tol > 0):
             raise InputError(f"tol must be > 0; got {self.tol}")
         if not (np.isfinite(self.ridge) and self.ridge >= 0):
             raise InputError(f"ridge must be >= 0; got {self.ridge}")
@@ -151,6 +182,12 @@ class RefitConfig:
             raise InputError(f"rank_rtol must be in [0, 1); got {self.rank_rtol}")
         if self.hessian not in _HESSIANS:
             raise InputError(f"hessian must be one of {_HESSIANS}; got {self.hessian!r}")
+        if self.solver not in _SOLVERS:
+            raise InputError(f"solver must be one of {_SOLVERS}; got {self.solver!r}")
+        if not (np.isfinite(self.continuity_weight) and self.continuity_weight >= 1e2):
+            raise InputError(f"continuity_weight must be a finite number >= 100; got {self.continuity_weight}")
+        if self.max_wall_time is not None and not (np.isfinite(self.max_wall_time) and self.max_wall_time > 0):
+            raise InputError(f"max_wall_time must be a positive number of seconds or None; got {self.max_wall_time}")
         if not (self.bound_factor > 1 and self.negative_tolerance >= 0):
             raise InputError(f"need bound_factor > 1 and negative_tolerance >= 0; got {self.bound_factor}, "
                              f"{self.negative_tolerance}")
@@ -166,11 +203,11 @@ class RefitResult:
         Refit coefficients in physical units (zeros off the support), S sections.
     support : ndarray of bool, shape (S, 23 S)
     success : bool
-        IPOPT reported success.
+        The solver reported success (IPOPT) or convergence (Gauss-Newton).
     status : str
-        IPOPT return status.
+        IPOPT return status, or the Gauss-Newton stopping message.
     iterations : int
-        IPOPT iterations.
+        IPOPT iterations, or Gauss-Newton linearisations (all stages).
     objective : float
         Final objective (scaled, see module docstring).
     simulation : Simulation
@@ -190,6 +227,11 @@ class RefitResult:
         (when that stays bounded), ``coef0`` with the nodes on the measured
         A, or zero coefficients when ``coef0`` made the model blow up inside
         a shooting interval (non-finite objective or derivatives).
+    solver : {"gauss-newton", "ipopt"}
+    max_defect : float
+        Largest continuity defect at the solution (scaled state, -): 0 up to
+        IPOPT's tolerance for IPOPT, small but nonzero for the Gauss-Newton
+        penalty.
     """
 
     coef: np.ndarray
@@ -205,6 +247,8 @@ class RefitResult:
     cond: np.ndarray
     wall_time: float
     start: str = "coef0"
+    solver: str = "ipopt"
+    max_defect: float = 0.0
 
     @property
     def identifiable(self) -> bool:
@@ -339,6 +383,12 @@ def _whitening(theta, support, a, rate, rank_rtol):
     return G, rank, cond
 
 
+def _project_start(theta_m, G_m, coef_m):
+    """Scaled coefficients p whose dA/dt on the measured samples is closest to ``theta_m @ coef_m``."""
+    B = theta_m @ G_m  # orthogonal columns of equal norm (see _whitening)
+    return np.linalg.lstsq(B, theta_m @ coef_m, rcond=None)[0]
+
+
 def _build_rhs(support, a):
     """CasADi Function f(x (S), u (S), c) -> dx/dt (S) in scaled state x = A / a, S sections.
 
@@ -469,9 +519,11 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
     g = ca.vec(end_states[:, :J - 1] - X[:, 1:]) if J > 1 else ca.MX(0, 1)
     w = ca.vertcat(ca.vec(X), p)
     opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.max_iter": int(config.max_iter),
-            "ipopt.tol": float(config.tol), "ipopt.hessian_approximation": _hessian(config.hessian, n_c),
+            "ipopt.tol": float(1e-10 if config.tol is None else config.tol), "ipopt.hessian_approximation": _hessian(config.hessian, n_c),
             # IPOPT's trial points may make the model blow up; it backs off by itself, so no warnings.
             "show_eval_warnings": False}
+    if config.max_wall_time is not None:
+        opts["ipopt.max_wall_time"] = float(config.max_wall_time)
     solver = ca.nlpsol("refit", "ipopt", {"x": w, "f": obj, "g": g}, opts)
     w0 = np.concatenate([x_init[starts].ravel(), p0])  # vec(X) is column-major: nodes one after another
     fg = ca.Function("fg", [w], [obj, g, ca.gradient(obj, w), ca.jacobian(g, w)])
@@ -490,6 +542,29 @@ def _solve(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
     stats = solver.stats()
     w_opt = np.asarray(sol["x"]).ravel()
     return w_opt[n_sec * J:], stats, float(sol["f"]), start
+
+
+def _solve_gauss_newton(t, x_meas, x_init, U, step, Gblk, p0, config: RefitConfig):
+    """Levenberg-Marquardt on the exact Gauss-Newton model; returns p, stats, objective, start, max defect."""
+    h = np.diff(t)
+    N = int(max(1, min(t.size - 1, round(config.shooting_interval / np.median(h)))))
+    problem = LibraryShooting(step, x_meas, U, h, N, Gblk, ridge=config.ridge,
+                              fixed_initial_state=not config.free_initial_state)
+    starts = np.arange(problem.J) * N
+    start = "coef0"
+    try:
+        problem.continuity_weight = 1e2
+        ok = np.isfinite(problem.linearise(problem.pack(x_init[starts], p0))[0])
+    except ValueError:
+        ok = False
+    if not ok:
+        # coef0 blows up inside a shooting interval; zero coefficients (dA/dt = 0) never do.
+        x_init, p0, start = x_meas, np.zeros_like(p0), "zero"
+    sol = solve_library_gauss_newton(problem, x_init[starts], p0, max_iter=int(config.max_iter),
+                                     tol=float(1e-6 if config.tol is None else config.tol),
+                                     continuity_weight=float(config.continuity_weight), first_weight=1e2)
+    stats = {"success": sol.converged, "return_status": sol.message, "iter_count": sol.iterations}
+    return sol.p, stats, sol.objective, start, sol.max_defect
 
 
 def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = None) -> RefitResult:
@@ -527,15 +602,22 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     step = _build_step(rhs, n_c, int(config.substeps))
     Gblk = _block_diag(G)
     n_p = Gblk.shape[1]
-    # Starting point: least-squares projection of coef0 onto the fitted directions.
-    p0 = np.concatenate([np.linalg.lstsq(G[m], coef0[m, support[m]], rcond=None)[0]
+    # Starting point: coef0's dA/dt on the measured (A, U) projected onto the fitted directions.
+    # (Projecting the coefficients themselves is wrong on an ill-conditioned support: coef0's
+    # components along the dropped directions can be huge, and leaving them out changed dA/dt of
+    # an equation-error fit on E013 of the default campaign by 1e4 m/s, so the start blew up.)
+    p0 = np.concatenate([_project_start(theta[:, support[m]], G[m], coef0[m, support[m]])
                          for m in range(support.shape[0]) if G[m].size]) if n_p else np.zeros(0)
     # Nodes start on coef0's own trajectory when it stays bounded (a feasible start,
     # so IPOPT cannot end worse than coef0 by drifting to another local minimum).
     sim0 = simulate_coefficients(t, A, U, coef0 * support, bound_factor=config.bound_factor,
                                  negative_tolerance=config.negative_tolerance)
     x_init = sim0.A_sim / a if not sim0.stopped else x_meas
-    p_opt, stats, objective, start = _solve(t, x_meas, x_init, U, step, Gblk, p0, config)
+    defect = 0.0
+    if config.solver == "ipopt":
+        p_opt, stats, objective, start = _solve(t, x_meas, x_init, U, step, Gblk, p0, config)
+    else:
+        p_opt, stats, objective, start, defect = _solve_gauss_newton(t, x_meas, x_init, U, step, Gblk, p0, config)
     if start == "coef0" and not sim0.stopped:
         start = "coef0-trajectory"
     coef = np.zeros(support.shape)
@@ -551,7 +633,8 @@ def refit_coefficients(t, A, U, support, coef0, config: RefitConfig | None = Non
     return RefitResult(coef=coef, support=support.copy(), success=bool(stats.get("success", False)),
                        status=str(stats.get("return_status", "unknown")), iterations=int(stats.get("iter_count", -1)),
                        objective=objective, simulation=sim, nmse=sim.nmse, support_size=support.sum(axis=1),
-                       rank=rank, cond=cond, wall_time=wall, start=start)
+                       rank=rank, cond=cond, wall_time=wall, start=start, solver=config.solver,
+                       max_defect=float(defect))
 
 
 # ---------------------------------------------------------------------------- events
@@ -622,12 +705,18 @@ class EventRefit:
         return out
 
     def summary(self) -> dict:
-        """Flat dict of headline numbers. A simulation that blew up has NMSE None and its stop time."""
+        """Flat dict of headline numbers. A simulation that blew up has NMSE None and its stop time.
+
+        ``ipopt_status``, ``ipopt_success`` and ``ipopt_iterations`` keep their
+        names for existing readers but hold the status of the solver named by
+        ``solver``.
+        """
         f = self.fit
         s = {"event_id": self.event_id, "t0_s": self.t0, "t1_s": self.t1, "support": self.support_kind,
              "ipopt_status": f.status, "ipopt_success": f.success, "ipopt_iterations": f.iterations,
              "objective": f.objective, "wall_time_s": f.wall_time, "refit_start": f.start,
-             "coefficients_identifiable": f.identifiable}
+             "coefficients_identifiable": f.identifiable, "solver": f.solver,
+             "max_continuity_defect": f.max_defect}
         n_sec = self.support.shape[0]
         for m in range(n_sec):
             s[f"support_size_S{m + 1}"] = int(f.support_size[m])
