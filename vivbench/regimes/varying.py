@@ -103,9 +103,15 @@ def window_grams(model: VaryingCoefficientSINDy, record: Record, window_start, w
     n_pos = np.empty((W, S))
     powers = np.arange(4)
 
+    bounds = np.stack([il, ih], axis=1).ravel()
+    empty = ih <= il
+
     def windowed(per_segment):
-        c = np.concatenate([np.zeros((1,) + per_segment.shape[1:]), np.cumsum(per_segment, axis=0)])
-        return c[ih] - c[il]
+        # Each window adds its own few segments (no difference of running sums: a quiet window's
+        # A^6-weighted Gram would drown in the rounding of the record's total).
+        padded = np.concatenate([per_segment, np.zeros((1,) + per_segment.shape[1:])])
+        sums = np.add.reduceat(padded, bounds, axis=0)[::2]
+        return np.where(empty.reshape((W,) + (1,) * (per_segment.ndim - 1)), 0.0, sums)
 
     for k in range(S):  # a few sections
         a_k = A[:, k]
