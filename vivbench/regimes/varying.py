@@ -86,7 +86,7 @@ def window_grams(model: VaryingCoefficientSINDy, record: Record, window_start, w
     """
     t, A = record.t, np.asarray(record.A, dtype=float)
     cols, vals = model.basis_rows(record)
-    n, S, Q = vals.shape
+    n, S, _ = vals.shape
     P = model.stacked_coefficients().shape[-2]
     lo = np.searchsorted(t, np.asarray(window_start, dtype=float), side="left")
     hi = np.searchsorted(t, np.asarray(window_end, dtype=float), side="left")
