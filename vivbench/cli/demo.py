@@ -234,8 +234,8 @@ def register(sub) -> None:
                         "identification's model class)")
     s.add_argument("--model", choices=("pooled", "varying"), default="pooled",
                    help="campaign model of the pool step (vivbench pool --model; default pooled: the varying model "
-                        "is more accurate on realistic bridges but its pool step takes about 4x the CPU time and "
-                        "would push the demo past its 3 min budget, README)")
+                        "is more accurate on realistic bridges but its pool step takes about 1.7x the CPU time, "
+                        "and the demo is at its 3 min budget already, README)")
     s.add_argument("--baseline", choices=("none", "in_library"), default="none",
                    help="also run the chain on an in_library campaign of the same seed and durations (the truth "
                         f"inside the model class: the inverse crime) into OUT/{BASELINE_DIR}, and show both side by "

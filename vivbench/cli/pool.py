@@ -75,7 +75,7 @@ def register(sub) -> None:
     s.add_argument("--model", choices=MODELS, default="pooled",
                    help="campaign model: pooled (PooledSINDy, sparse regression on the 69-term library; default; "
                         "'sindy' is the same) or varying (VaryingCoefficientSINDy, penalised spline curves in U with "
-                        "the wind's yaw: more accurate on realistic bridges, about 4x the CPU time, README)")
+                        "the wind's yaw: more accurate on realistic bridges, about 1.7x the CPU time, README)")
     s.add_argument("--campaign", default=None,
                    help="directory of the results' event files, only for results identified before the result "
                         "stored the wind's yaw: their yaw is then measured from the events' anemometers")

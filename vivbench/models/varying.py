@@ -811,6 +811,72 @@ class VaryingCoefficientSINDy(ModelBase):
         """Order contributions of every bootstrap replicate, shape (n_bootstrap, n_samples, S, 4), m/s."""
         return self.replicate_order_contributions(record)
 
+    def stacked_coefficients(self, coef: np.ndarray | None = None, coef_yaw: np.ndarray | None = None) -> np.ndarray:
+        """Spline and yaw coefficients as one vector per equation and order, the layout of :meth:`basis_rows`.
+
+        Parameters
+        ----------
+        coef : ndarray, shape (..., S, M_max, 4), optional (default ``coef_`` and ``coef_yaw_``)
+        coef_yaw : ndarray, shape (..., S, M_max, 4, J), optional (default zeros when ``coef`` is given)
+
+        Returns
+        -------
+        ndarray, shape (..., S, (J + 1) M_max, 4)
+            Entry j M_max + m holds the coefficient of B_m(U) (sin^2 psi)^j
+            (j = 0: ``coef``; j >= 1: ``coef_yaw[..., j - 1]``).
+        """
+        self._check_fitted()
+        if coef is None:
+            coef, coef_yaw = self.coef_, self.coef_yaw_
+        coef = np.asarray(coef, dtype=float)
+        J = self.yaw_degree_
+        if coef_yaw is None:
+            coef_yaw = np.zeros(coef.shape + (J,))
+        blocks = [coef] + [np.asarray(coef_yaw, dtype=float)[..., j] for j in range(J)]
+        return np.concatenate(blocks, axis=-2)
+
+    def basis_rows(self, record: Record) -> tuple[np.ndarray, np.ndarray]:
+        """The non-zero entries of each sample's design row, for evaluating many coefficient sets at once.
+
+        The curves at sample n are a_ki = sum_q ``vals[n, k, q]`` theta[k, ``cols[n, k, q]``, i]
+        with theta from :meth:`stacked_coefficients`, the same values as
+        :meth:`coefficient_values` at the record's wind and yaw (cubic B-splines
+        have DEGREE + 1 basis functions non-zero at any wind).
+
+        Parameters
+        ----------
+        record : Record (its wind taken as given, like :meth:`order_contributions`)
+
+        Returns
+        -------
+        cols : ndarray of int, shape (n, S, (DEGREE + 1) (J + 1))
+        vals : ndarray, shape (n, S, (DEGREE + 1) (J + 1)), NaN where the curves are undefined (no wind or yaw)
+        """
+        record = self._check_record(record)
+        U = self._wind(self._inputs(record)[0])
+        J = self.yaw_degree_
+        z = self._zeta(self._record_yaw(record), U.shape[0]) if J else None
+        n, S, Mmax = U.shape[0], self.n_sections_, self.coef_.shape[1]
+        cols = np.empty((n, S, (DEGREE + 1) * (J + 1)), dtype=np.intp)
+        vals = np.empty(cols.shape)
+        a = np.arange(DEGREE + 1)
+        for k in range(S):  # a few sections
+            M = int(self.n_basis_[k])
+            knots = self.knots_[k, :M + DEGREE + 1]
+            B = bspline_basis(U[:, k], knots)
+            x = np.clip(np.nan_to_num(U[:, k], nan=knots[DEGREE]), knots[DEGREE], knots[-DEGREE - 1])
+            first = np.clip(np.searchsorted(knots, x, side="right") - 1 - DEGREE, 0, M - DEGREE - 1)
+            idx = first[:, None] + a
+            picked = np.take_along_axis(B, idx, axis=1)
+            # Local support: the row has no weight outside the picked functions (a wrong interval is a bug).
+            miss = np.abs(np.nansum(B, axis=1) - np.nansum(picked, axis=1))
+            if np.any(miss > 1e-12):
+                raise RuntimeError("B-spline row has non-zero entries outside its knot interval")
+            zp = np.ones((n, 1)) if z is None else z[:, k, None] ** np.arange(J + 1)
+            cols[:, k] = (idx[:, None, :] + Mmax * np.arange(J + 1)[:, None]).reshape(n, -1)
+            vals[:, k] = (zp[:, :, None] * picked[:, None, :]).reshape(n, -1)
+        return cols, vals
+
     def predict(self, record: Record) -> np.ndarray:
         """dA/dt of the model, shape (n_samples, n_sections), m/s."""
         return self.order_contributions(record).sum(axis=-1)

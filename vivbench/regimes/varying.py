@@ -24,7 +24,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
 from vivbench.models.varying import VaryingCoefficientSINDy
 
-__all__ = ["varying_window_verdicts", "window_order_stats"]
+__all__ = ["gram_order_stats", "varying_window_verdicts", "window_grams", "window_order_stats"]
 
 
 def window_order_stats(r: np.ndarray, A: np.ndarray, t: np.ndarray, window_start, window_end):
@@ -62,6 +62,106 @@ def window_order_stats(r: np.ndarray, A: np.ndarray, t: np.ndarray, window_start
     return R, c1, nv
 
 
+def window_grams(model: VaryingCoefficientSINDy, record: Record, window_start, window_end) -> dict:
+    """Per-window sufficient statistics of the order contributions, linear in the model's coefficients.
+
+    Order i contributes r_i = A^i phi^T theta_i at a sample (phi: the sample's
+    design row, :meth:`VaryingCoefficientSINDy.basis_rows`), so over a window
+    the mean of r_i^2 is theta_i^T G_i theta_i / n_valid and the mean of
+    r_1 / A is m^T theta_1 / n_positive, for any coefficients theta.
+
+    Parameters
+    ----------
+    model : VaryingCoefficientSINDy (fitted)
+    record : Record
+    window_start, window_end : array_like, shape (W,), s (a window holds start <= t < end)
+
+    Returns
+    -------
+    dict
+        ``gram`` (W, S, 4, P, P) m^(2i) summed A^(2i) phi phi^T over the valid samples,
+        ``mean1`` (W, S, P) summed phi over the valid samples with A > 0,
+        ``n_valid`` (W, S), ``n_positive`` (W, S); P = (J + 1) M_max. A sample
+        is valid where A and every order's curve are finite (as in :func:`window_order_stats`).
+    """
+    t, A = record.t, np.asarray(record.A, dtype=float)
+    cols, vals = model.basis_rows(record)
+    n, S, _ = vals.shape
+    P = model.stacked_coefficients().shape[-2]
+    lo = np.searchsorted(t, np.asarray(window_start, dtype=float), side="left")
+    hi = np.searchsorted(t, np.asarray(window_end, dtype=float), side="left")
+    # Sums over the disjoint segments between window edges, then each window from cumulative segment sums.
+    edges = np.unique(np.concatenate([lo, hi, [0]]))
+    seg = np.searchsorted(edges, np.arange(n), side="right") - 1
+    inside = np.arange(n) < edges[-1]
+    G_seg = edges.size - 1
+    il, ih = np.searchsorted(edges, lo), np.searchsorted(edges, hi)
+    W = lo.size
+    gram = np.empty((W, S, 4, P, P))
+    mean1 = np.empty((W, S, P))
+    n_valid = np.empty((W, S))
+    n_pos = np.empty((W, S))
+    powers = np.arange(4)
+
+    bounds = np.stack([il, ih], axis=1).ravel()
+    empty = ih <= il
+
+    def windowed(per_segment):
+        # Each window adds its own few segments (no difference of running sums: a quiet window's
+        # A^6-weighted Gram would drown in the rounding of the record's total).
+        padded = np.concatenate([per_segment, np.zeros((1,) + per_segment.shape[1:])])
+        sums = np.add.reduceat(padded, bounds, axis=0)[::2]
+        return np.where(empty.reshape((W,) + (1,) * (per_segment.ndim - 1)), 0.0, sums)
+
+    for k in range(S):  # a few sections
+        a_k = A[:, k]
+        ok = np.isfinite(vals[:, k]).all(axis=1) & np.isfinite(a_k) & inside
+        okA = ok & (a_k > 0)
+        s, c, v, a = seg[ok], cols[ok, k], vals[ok, k], a_k[ok]
+        w2 = a[:, None] ** (2 * powers)  # (m, 4)
+        key = (((s[:, None, None, None] * 4 + powers[:, None, None]) * P + c[:, None, :, None]) * P
+               + c[:, None, None, :])  # (m, 4, Q, Q)
+        wt = w2[:, :, None, None] * v[:, None, :, None] * v[:, None, None, :]
+        g = np.bincount(key.ravel(), wt.ravel(), minlength=G_seg * 4 * P * P).reshape(G_seg, 4, P, P)
+        gram[:, k] = windowed(g)
+        aA = a_k[okA]
+        # r_1 / A as the direct evaluation forms it: (phi^T theta) A (1 / A)
+        wA = cols[okA, k], vals[okA, k] * (aA * (1.0 / aA))[:, None]
+        m1 = np.bincount((seg[okA][:, None] * P + wA[0]).ravel(), wA[1].ravel(), minlength=G_seg * P)
+        mean1[:, k] = windowed(m1.reshape(G_seg, P))
+        n_valid[:, k] = windowed(np.bincount(s, minlength=G_seg).astype(float))
+        n_pos[:, k] = windowed(np.bincount(seg[okA], minlength=G_seg).astype(float))
+    return {"gram": gram, "mean1": mean1, "n_valid": n_valid, "n_positive": n_pos}
+
+
+def gram_order_stats(stats: dict, theta: np.ndarray):
+    """Window RMS of the order contributions and mean of r_1 / A for coefficient sets ``theta``.
+
+    Parameters
+    ----------
+    stats : dict from :func:`window_grams`
+    theta : ndarray, shape (R, S, P, 4) (:meth:`VaryingCoefficientSINDy.stacked_coefficients`)
+
+    Returns
+    -------
+    R : ndarray, shape (R, W, S, 4), m/s (NaN without a valid sample);
+    c1 : ndarray, shape (R, W, S), 1/s (NaN without a valid sample with A > 0)
+    """
+    G, m1 = stats["gram"], stats["mean1"]
+    W, S, _, P, _ = G.shape
+    nR = theta.shape[0]
+    quad = np.empty((nR, W, S, 4))
+    for k in range(S):
+        for i in range(4):  # one matrix product per equation and order, all windows and sets at once
+            th = theta[:, k, :, i]  # (R, P)
+            X = (G[:, k, i].reshape(W * P, P) @ th.T).reshape(W, P, nR)
+            quad[:, :, k, i] = np.einsum("wpr,rp->rw", X, th)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        R = np.sqrt(np.maximum(quad, 0.0) / stats["n_valid"][None, :, :, None])
+        c1 = np.einsum("wkp,rkp->rwk", m1, theta[..., 1]) / stats["n_positive"][None]
+    return R, c1
+
+
 def varying_window_verdicts(model: VaryingCoefficientSINDy, record: Record, window_start, window_end,
                             chunk: int = 25) -> dict:
     """Regimes of a fitted :class:`VaryingCoefficientSINDy` over a record's windows, and their identifiability.
@@ -72,7 +172,8 @@ def varying_window_verdicts(model: VaryingCoefficientSINDy, record: Record, wind
     record : Record
     window_start, window_end : array_like, shape (W,), s
     chunk : int
-        Replicates evaluated together (memory: chunk x n_samples x S x 4 floats).
+        Replicates evaluated together by the direct evaluation, used only when
+        some coefficients are not finite (memory: chunk x n_samples x S x 4 floats).
 
     Returns
     -------
@@ -80,7 +181,49 @@ def varying_window_verdicts(model: VaryingCoefficientSINDy, record: Record, wind
         ``regime`` (W, S) int8 (0: no valid sample), ``identifiable`` (W, S) bool,
         ``agreement`` (W, S) share of replicates with the same regime (NaN
         without replicates), ``order_rms`` (W, S, 4) m/s.
+
+    Notes
+    -----
+    The window statistics of every coefficient set (point estimate,
+    replicates, order subsets) come from per-window Gram matrices computed
+    once per record (:func:`window_grams`); they equal the direct evaluation
+    of the order contributions at every sample up to rounding.
     """
+    theta_sets = [model.stacked_coefficients()[None],
+                  model.stacked_coefficients(model.coef_bootstrap_, model.coef_yaw_bootstrap_),
+                  model.stacked_coefficients(model.subset_coef_, model.subset_coef_yaw_)]
+    used = np.zeros(theta_sets[0].shape[-3:-1], dtype=bool)  # (S, P): the entries the design rows reach
+    Mmax = model.coef_.shape[1]
+    for k, M in enumerate(np.asarray(model.n_basis_, dtype=int)):
+        used[k] = (np.arange(used.shape[1]) % Mmax) < M
+    if not all(np.isfinite(th[..., used, :]).all() for th in theta_sets):
+        return _direct_verdicts(model, record, window_start, window_end, chunk)
+    stats = window_grams(model, record, window_start, window_end)
+    R, c1 = gram_order_stats(stats, theta_sets[0])
+    R, c1 = R[0], c1[0]
+    nv = stats["n_valid"]
+    point = np.where(nv > 0, regime_rule(np.nan_to_num(R), c1, model.tau), 0).astype(np.int8)
+    B = model.coef_bootstrap_.shape[0]
+    if B == 0:
+        return {"regime": point, "identifiable": np.zeros(point.shape, dtype=bool),
+                "agreement": np.full(point.shape, np.nan), "order_rms": R}
+    Rb, c1b = gram_order_stats(stats, theta_sets[1])
+    agree = (regime_rule(np.nan_to_num(Rb), c1b, model.tau) == point[None]).sum(axis=0) / B
+    Rs, c1s = gram_order_stats(stats, theta_sets[2])
+    return _verdict(model, point, agree, R, regime_rule(np.nan_to_num(Rs), c1s, model.tau))
+
+
+def _verdict(model, point, agree, R, sub) -> dict:
+    """Combine the bootstrap agreement and the model set's regimes ``sub`` (n_subsets, W, S) into the verdict."""
+    # Every plausible model of the confidence set of order subsets must give the same regime.
+    plaus = model.subset_plausible_[:, None, :]
+    set_agree = np.all((sub == point[None]) | ~plaus, axis=0)
+    return {"regime": point, "identifiable": (agree >= model.agreement) & (point > 0) & set_agree,
+            "agreement": agree, "order_rms": R, "model_set_agree": set_agree}
+
+
+def _direct_verdicts(model, record, window_start, window_end, chunk) -> dict:
+    """:func:`varying_window_verdicts` by evaluating every coefficient set at every sample (slow, NaN-safe)."""
     t, A = record.t, record.A
     R, c1, nv = window_order_stats(model.order_contributions(record), A, t, window_start, window_end)
     point = np.where(nv > 0, regime_rule(np.nan_to_num(R), c1, model.tau), 0).astype(np.int8)
@@ -93,11 +236,5 @@ def varying_window_verdicts(model: VaryingCoefficientSINDy, record: Record, wind
         r = model.replicate_order_contributions(record, c0, c0 + chunk)
         Rb, c1b, _ = window_order_stats(r, A, t, window_start, window_end)
         same += (regime_rule(np.nan_to_num(Rb), c1b, model.tau) == point[None]).sum(axis=0)
-    agree = same / B
-    # Every plausible model of the confidence set of order subsets must give the same regime.
     Rs, c1s, _ = window_order_stats(model.subset_order_contributions(record), A, t, window_start, window_end)
-    sub = regime_rule(np.nan_to_num(Rs), c1s, model.tau)  # (n_subsets, W, S)
-    plaus = model.subset_plausible_[:, None, :]
-    set_agree = np.all((sub == point[None]) | ~plaus, axis=0)
-    return {"regime": point, "identifiable": (agree >= model.agreement) & (point > 0) & set_agree,
-            "agreement": agree, "order_rms": R, "model_set_agree": set_agree}
+    return _verdict(model, point, same / B, R, regime_rule(np.nan_to_num(Rs), c1s, model.tau))
