@@ -267,14 +267,16 @@ class VaryingCoefficientSINDy(ModelBase):
         of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
         prediction error is not significantly above the best subset's (a
         one-sided paired test over events); the window verdict needs them all
-        to give the window's regime. Default 0.9, chosen on the seed-0
-        realistic campaign (``benchmarks/bench_misspecification.py``): at 0.95
-        the model without order 0 stays in the set there (its test statistic
-        lies between the 0.9 and 0.95 quantiles) and no window of regimes 3
-        or 4 is ever flagged: coverage 0.289 (flagged accuracy 0.9996), at
-        0.9 0.553 (0.9956); held out on seed 1 and on a second bridge the
-        level changed nothing (coverage 0.468 and 0.454, accuracy 0.999), on
-        a forced-only bridge no window got a self-excited regime.
+        to give the window's regime. Default 0.95. On the seed-0 realistic
+        campaign (``benchmarks/bench_misspecification.py``) the model without
+        order 0 stays in the set at 0.95 (its test statistic lies between the
+        0.9 and 0.95 quantiles), so no window of regimes 3 or 4 is flagged
+        there: coverage 0.289 (flagged accuracy 0.9996), against 0.553
+        (0.9956) at 0.9. The 0.9 level was held out on the leaderboard's
+        8-event ``other_bridge`` scenario and broke the verdict's promise
+        there: 79 % of the flagged windows right (coverage 0.49), against 100 %
+        (coverage 0.17) at 0.95; so 0.95 stays the default, and a smaller
+        level is for large campaigns only, at the user's risk.
 
     Attributes
     ----------
@@ -322,7 +324,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
                  n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
-                 wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.9,
+                 wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
                  wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None):
         self.n_basis = n_basis
