@@ -18,7 +18,31 @@ from typing import Callable
 import numpy as np
 import scipy.linalg as sla
 
-__all__ = ["levenberg_marquardt"]
+__all__ = ["continuation_weights", "levenberg_marquardt"]
+
+
+def continuation_weights(final: float, first: float) -> list[float]:
+    """Continuity weights of a continuation, ascending: ``final`` / 100^k down to ``first``, then back up.
+
+    Started at full weight, the defects of node states taken from a noisy
+    measurement dominate and the iterations crawl, so the weight grows
+    100-fold per stage up to ``final``.
+
+    Parameters
+    ----------
+    final : float
+        The last stage's weight.
+    first : float
+        No stage's weight lies below it (``final`` alone when ``final / 100 < first``).
+
+    Returns
+    -------
+    list of float
+    """
+    weights = [float(final)]
+    while weights[-1] / 100.0 >= first:
+        weights.append(weights[-1] / 100.0)
+    return weights[::-1]
 
 
 def levenberg_marquardt(linearise: Callable, cost: Callable, x: np.ndarray, lower: np.ndarray, *, max_iter: int,

@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 import scipy.linalg as sla
 
-from vivbench.models.gauss_newton import levenberg_marquardt
+from vivbench.models.gauss_newton import continuation_weights, levenberg_marquardt
 from vivbench.models.greybox_shooting import ShootingGrid, StepFunctions, propagate
 
 __all__ = ["ShootingProblem", "GaussNewtonResult", "solve_gauss_newton", "block_ids"]
@@ -181,7 +181,8 @@ def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndar
     theta0 : ndarray, shape (P,)
     s0 : ndarray, shape (I,)
     max_iter : int
-        Jacobian evaluations at most.
+        Jacobian evaluations at most in each continuation stage (the stages
+        together may take up to their number times as many).
     tol : float
         Stop when an accepted step lowers the cost by less than ``tol`` times the cost.
     block_s : float, s
@@ -204,15 +205,12 @@ def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndar
     GaussNewtonResult
     """
     t_start = time.perf_counter()
-    target = problem.continuity_weight
-    weights = [target]
-    while weights[-1] / 100.0 >= first_weight:
-        weights.append(weights[-1] / 100.0)
+    weights = continuation_weights(problem.continuity_weight, first_weight)
     theta = np.maximum(np.asarray(theta0, dtype=float), problem.lower)
     s = np.asarray(s0, dtype=float).copy()
     history = []
     total = 0
-    for weight in weights[::-1]:
+    for weight in weights:
         problem.set_continuity_weight(weight)
         theta, s, lin, it, converged, message = _levenberg_marquardt(problem, theta, s, max_iter, tol, history,
                                                                      callback, total)

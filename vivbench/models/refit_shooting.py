@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vivbench.models.gauss_newton import levenberg_marquardt
+from vivbench.models.gauss_newton import continuation_weights, levenberg_marquardt
 
 __all__ = ["LibraryShooting", "LibraryGaussNewtonResult", "solve_library_gauss_newton"]
 
@@ -270,15 +270,13 @@ def solve_library_gauss_newton(problem: LibraryShooting, X0: np.ndarray, p0: np.
         When Phi is not finite at the start (a trajectory blows up inside an interval).
     """
     t_start = time.perf_counter()
-    weights = [float(continuity_weight)]
-    while weights[-1] / 100.0 >= first_weight:
-        weights.append(weights[-1] / 100.0)
+    weights = continuation_weights(continuity_weight, first_weight)
     z = problem.pack(X0, p0)
     lower = np.full(z.size, -np.inf)
     history: list = []
     total, converged, message = 0, False, "no iteration"
     lin = None
-    for stage, weight in enumerate(weights[::-1]):
+    for stage, weight in enumerate(weights):
         problem.continuity_weight = weight
         # the budget is shared: early stages get an equal part, the last stage what is left
         budget = max_iter - total if stage == len(weights) - 1 else max_iter // len(weights)
