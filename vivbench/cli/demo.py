@@ -62,7 +62,7 @@ BASELINE_DIR = "baseline_in_library"
 
 
 def _chain(out: Path, *, mode: str, events: int, seed: int, minutes: str, workers: int, failures: list[str],
-           refit: bool = True, model: str = "pooled") -> bool:
+           refit: bool = True, model: str = "varying") -> bool:
     """Generate, identify, pool, cluster, forecast, (refit) and validate one campaign into ``out``.
 
     Returns False when nothing could be identified (the later steps then have nothing to work on).
@@ -80,7 +80,7 @@ def _chain(out: Path, *, mode: str, events: int, seed: int, minutes: str, worker
     if not list(identify.glob("*.identify.nc")):
         print(f"vivbench demo: no event was identified in {identify}; nothing else to do", file=sys.stderr)
         return False
-    _step(["pool", str(identify)] + ([] if model == "pooled" else ["--model", model]), None, failures)
+    _step(["pool", str(identify), "--model", model], None, failures)
     _step(["cluster", str(identify), "--out", str(out / "cluster"), "--campaign", str(campaign)], out / "cluster", failures)
     try:
         plateau = clearest_plateau(campaign)
@@ -232,10 +232,8 @@ def register(sub) -> None:
     s.add_argument("--mode", choices=("realistic", "in_library"), default="realistic",
                    help="generator mode of the main campaign (DESIGN 2.8; default realistic: the truth outside the "
                         "identification's model class)")
-    s.add_argument("--model", choices=("pooled", "varying"), default="pooled",
-                   help="campaign model of the pool step (vivbench pool --model; default pooled: the varying model "
-                        "is more accurate on realistic bridges but its pool step takes about 1.7x the CPU time, "
-                        "and the demo is at its 3 min budget already, README)")
+    s.add_argument("--model", choices=("pooled", "varying"), default="varying",
+                   help="campaign model of the pool step (vivbench pool --model; default varying, as pool's)")
     s.add_argument("--baseline", choices=("none", "in_library"), default="none",
                    help="also run the chain on an in_library campaign of the same seed and durations (the truth "
                         f"inside the model class: the inverse crime) into OUT/{BASELINE_DIR}, and show both side by "

@@ -72,10 +72,11 @@ def register(sub) -> None:
     s = sub.add_parser("pool", help="fit one model to a whole campaign's results and label every window with it")
     s.add_argument("results", help="directory of <event_id>.identify.nc")
     s.add_argument("--out", default=None, help="output directory (default: the results directory)")
-    s.add_argument("--model", choices=MODELS, default="pooled",
-                   help="campaign model: pooled (PooledSINDy, sparse regression on the 69-term library; default; "
-                        "'sindy' is the same) or varying (VaryingCoefficientSINDy, penalised spline curves in U with "
-                        "the wind's yaw: more accurate on realistic bridges, about 1.7x the CPU time, README)")
+    s.add_argument("--model", choices=MODELS, default="varying",
+                   help="campaign model: varying (VaryingCoefficientSINDy, penalised spline curves in U with the "
+                        "wind's yaw; default: it follows a lock-in bell that no polynomial in U does, README) or "
+                        "pooled (PooledSINDy, sparse regression on the 69-term library, the paper's class; 'sindy' "
+                        "is the same)")
     s.add_argument("--campaign", default=None,
                    help="directory of the results' event files, only for results identified before the result "
                         "stored the wind's yaw: their yaw is then measured from the events' anemometers")
