@@ -38,7 +38,8 @@ with the same penalty (p = 4 M (J + 1)). After the fit the same statistics
 give the models of every subset of the orders 0, 2, 3 (order 1 always kept)
 and their leave-one-event-out prediction errors: the confidence set of
 ``model_set_level`` used by the window verdicts
-(:func:`vivbench.regimes.varying_window_verdicts`).
+(:func:`vivbench.regimes.varying_window_verdicts`), by default from a
+signed-rank test over events (``model_set_test``).
 
 What this model does not fix: errors in the measured U (a point anemometer
 against the tributary-averaged wind the deck feels) smear the bell along U
@@ -274,17 +275,42 @@ class VaryingCoefficientSINDy(ModelBase):
         Level of the confidence set of order subsets: the models without some
         of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
         prediction error is not significantly above the best subset's (a
-        one-sided paired test over events); the window verdict needs them all
-        to give the window's regime. Default 0.95. On the seed-0 realistic
-        campaign (``benchmarks/bench_misspecification.py``) the model without
-        order 0 stays in the set at 0.95 (its test statistic lies between the
-        0.9 and 0.95 quantiles), so no window of regimes 3 or 4 is flagged
-        there: coverage 0.289 (flagged accuracy 0.9996), against 0.553
-        (0.9956) at 0.9. The 0.9 level was held out on the leaderboard's
-        8-event ``other_bridge`` scenario and broke the verdict's promise
-        there: 79 % of the flagged windows right (coverage 0.49), against 100 %
-        (coverage 0.17) at 0.95; so 0.95 stays the default, and a smaller
-        level is for large campaigns only, at the user's risk.
+        one-sided paired test over events, ``model_set_test``); the window
+        verdict needs them all to give the window's regime. Default 0.95. With
+        the former z-test on the seed-0 realistic campaign
+        (``benchmarks/bench_misspecification.py``) the models without order 0
+        and without order 2 stayed in the set at 0.95 (test statistics 1.38 and
+        1.28), so no window of regimes 3 or 4 was flagged there: coverage 0.289
+        (flagged accuracy 0.9996), against 0.553 (0.9956) at 0.9. The 0.9 level
+        was held out on the leaderboard's 8-event ``other_bridge`` scenario and
+        broke the verdict's promise there: 79 % of the flagged windows right
+        (coverage 0.49), against 100 % (coverage 0.17) at 0.95; so 0.95 stays
+        the default, and a smaller level is for large campaigns only, at the
+        user's risk.
+    model_set_test : {"signed_rank", "z"}
+        The paired test of the model set: Wilcoxon's one-sided signed-rank test
+        of the per-event differences of held-out loss (default), or the
+        z-approximation to their mean (before). Per-event losses are heavy
+        tailed (a long, energetic event's loss is many times a quiet one's),
+        and one such event inflates the mean's standard error: on the seed-0
+        realistic campaign the model without order 0 predicts 30 of 31
+        held-out events worse than the best subset, yet the z-test kept it
+        (p = 0.084); the signed-rank test rejects it (p < 1e-6). Measured there
+        (tuning): coverage 0.289 -> 0.536 at flagged accuracy 0.9968; held out,
+        seed 1 and the second bridge unchanged (0.468 and 0.449 at 0.999);
+        further figures in the README of the branch's report.
+    eiv_weights : bool
+        Refit at the chosen basis and penalty by weighted least squares with
+        effective-variance weights (errors-in-variables of the mean wind): a
+        sample's residual variance is s0 + kappa (df/dU)^2 se_U^2, with df/dU
+        the first fit's slope in the wind, se_U the spread of the sections'
+        (smoothed) anemometers about their mean over sqrt(S) (which matches
+        the RMS error of the mean wind on the seed-0 realistic campaign: 0.147
+        against 0.143 m/s) and (s0, kappa) fitted to the squared residuals.
+        Needs ``wind_input="mean"`` and two or more sections (else no
+        weights). Default False: on the seed-0 realistic campaign it lowered
+        the median dA/dt error only from 0.111 to 0.109 (fitted
+        ``wind_error_share_`` reported). :meth:`event_statistics` stays unweighted.
 
     Attributes
     ----------
@@ -293,6 +319,9 @@ class VaryingCoefficientSINDy(ModelBase):
     wind_smoothing_cv_ : ndarray, shape (n_candidates,)
         Cross-validated error of each candidate smoothing (summed over the
         equations' per-sample errors of the standardised target).
+    wind_error_share_ : ndarray, shape (S,)
+        With ``eiv_weights``, the share of the first fit's residual variance
+        attributed to the mean wind's error (0 without; not saved).
     coef_ : ndarray, shape (S, M_max, 4)
         Physical spline coefficients: a_ki(U) = sum_m coef_[k, m, i] B_km(U), in
         m^(1-i)/s (zero beyond section k's ``n_basis_[k]``).
