@@ -698,7 +698,7 @@ class VaryingCoefficientSINDy(ModelBase):
         if J:
             ok &= np.isfinite(Z[:, k])
         idx = np.flatnonzero(ok)
-        _err, M, lam_rel, knots, G, b, _yy, P = sk["best"]
+        _err, _M, lam_rel, knots, G, b, _yy, P = sk["best"]
         Gs, bs = G.sum(axis=0), b.sum(axis=0)
         c = _solve(Gs, bs, P, np.array([lam_rel * _penalty_scale(Gs, P)]), np.ones(Gs.shape[0], dtype=bool))[0]
         zk = None if not J else Z[:, k] / sk["yaw_ref"]
