@@ -39,7 +39,11 @@ truth's (A, U) is evaluated as it is (the deck's own wind; fits on the truth
 use no smoothing), ``--only TEXT`` fits only the models whose
 name contains TEXT, ``--no-truth-fits`` skips the fits on the truth, ``--n-basis 6,8,...``
 sets the varying models' candidate numbers of B-splines, ``--model-set-level L`` their
-``model_set_level``. The
+``model_set_level``, ``--no-eiv-weights`` their ``eiv_weights=False``. ``--substitute U,A,dA,U+A+dA`` adds, for the varying models, fits on
+the measured records with some inputs replaced by the truth's (interpolated to the
+measured grid, the measured gaps kept): which errors-in-variables cost most
+(a replaced U is the deck's own wind and is fitted without smoothing; the
+verdicts then use the replaced record too). The
 verdict columns also count ``n_flag_self_excited_wrong`` (flagged regime 2-4
 where the truth is regime 1) in the JSON.
 Nothing is asserted; the table is printed and written to ``benchmarks/out/misspecification.json``.
@@ -111,10 +115,32 @@ def load_campaign(camp: Path, results: Path, yaw: bool = True):
     return [ev["measured"] for ev in events], events
 
 
-def score(model, events, verdicts: str | None = None) -> dict:
-    """dA/dt error and regime accuracy on the truth's (A, U); verdicts on the measured record when asked."""
+SUBSTITUTABLE = ("U", "A", "dA")
+
+
+def substitute(ev: dict, what: tuple[str, ...]) -> Record:
+    """The event's measured record with the inputs ``what`` (of ``SUBSTITUTABLE``) replaced by the truth's.
+
+    The truth (its own grid) is interpolated linearly onto the measured grid;
+    samples missing in the measured record stay missing.
+    """
+    rec, trec = ev["measured"], ev["truth_rec"]
+    new = {}
+    for name in what:
+        src = getattr(trec, name)
+        x = np.stack([np.interp(rec.t, trec.t, src[:, k], left=np.nan, right=np.nan) for k in range(src.shape[1])],
+                     axis=1)
+        new[name] = np.where(np.isfinite(getattr(rec, name)), x, np.nan)
+    return dataclasses.replace(rec, **new)
+
+
+def score(model, events, verdicts: str | None = None, records=None) -> dict:
+    """dA/dt error and regime accuracy on the truth's (A, U); verdicts on the measured record when asked.
+
+    ``records`` (one per event) replaces the measured records of the verdicts (e.g. :func:`substitute`'s).
+    """
     errs, hits, n_reg, flagged, flag_ok, n_win, flag_self = [], 0, 0, 0, 0, 0, 0
-    for ev in events:
+    for e, ev in enumerate(events):
         trec, ws, we = ev["truth_rec"], ev["ws"], ev["we"]
         t, true = trec.t, trec.dA
         pred = model.predict(trec)
@@ -132,7 +158,7 @@ def score(model, events, verdicts: str | None = None) -> dict:
         hits += int(((reg == tr) & valid).sum())
         n_reg += int(valid.sum())
         if verdicts is not None:
-            rec = ev["measured"]
+            rec = ev["measured"] if records is None else records[e]
             if verdicts == "varying":
                 v = varying_window_verdicts(model, model.measured_wind(rec), ws, we)
             else:
@@ -155,7 +181,8 @@ def score(model, events, verdicts: str | None = None) -> dict:
 
 def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
         only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float | None = None,
-        n_basis: tuple[int, ...] | None = None, model_set_level: float | None = None) -> dict:
+        n_basis: tuple[int, ...] | None = None, model_set_level: float | None = None,
+        substitutions: tuple[tuple[str, ...], ...] = (), eiv_weights: bool = True) -> dict:
     t0 = time.perf_counter()
     if wind_smoothing_s == "cv":  # chosen per campaign by the model's cross-validation over events
         vary = {"wind_smoothing_grid": WIND_SMOOTHING_GRID}
@@ -165,6 +192,8 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         vary["n_basis"] = tuple(n_basis)
     if model_set_level is not None:
         vary["model_set_level"] = float(model_set_level)
+    if not eiv_weights:
+        vary["eiv_weights"] = False
     measured, events = load_campaign(camp, results)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
@@ -187,7 +216,8 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
             t1 = time.perf_counter()
             model = make()
             if kind == "varying" and data == "truth":
-                model.set_params(wind_smoothing_s=0.0, wind_smoothing_grid=None)  # the deck's own wind: nothing to correct
+                # the deck's own wind: nothing to correct
+                model.set_params(wind_smoothing_s=0.0, wind_smoothing_grid=None)
             model = model.fit(recs)
             fit_s = time.perf_counter() - t1
             want = None if data == "truth" or (kind == "pooled" and not pooled_verdicts) else kind
@@ -200,20 +230,34 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
                 row["orders"] = model.orders_.astype(int).tolist()
                 row["wind_smoothing_s"] = model.fitted_wind_smoothing()
                 row["wind_smoothing_cv"] = np.round(model.wind_smoothing_cv_, 5).tolist()
+                row["wind_error_share"] = np.round(getattr(model, "wind_error_share_", np.zeros(0)), 3).tolist()
             rows[f"{name} fitted on {data}"] = row
             print(f"  {name:<32} on {data:<8} {json.dumps(row)}", flush=True)
+        for what in substitutions if kind == "varying" else ():
+            recs = [substitute(ev, what) for ev in events]
+            t1 = time.perf_counter()
+            model = make()
+            if "U" in what:
+                model.set_params(wind_smoothing_s=0.0, wind_smoothing_grid=None)  # the deck's own wind
+            model = model.fit(recs)
+            row = score(model, events, verdicts="varying", records=recs)
+            row["fit_s"] = time.perf_counter() - t1
+            row["wind_smoothing_s"] = model.fitted_wind_smoothing()
+            label = "measured, true " + "+".join(what)
+            rows[f"{name} fitted on {label}"] = row
+            print(f"  {name:<32} on {label:<8} {json.dumps(row)}", flush=True)
     return rows
 
 
 def print_table(title: str, rows: dict) -> None:
     print(f"\n{title}")
-    head = f"{'model':<48} {'dA err med':>10} {'p90':>6} {'regime acc':>10} {'coverage':>8} {'flag acc':>8} {'fit s':>6}"
+    head = f"{'model':<62} {'dA err med':>10} {'p90':>6} {'regime acc':>10} {'coverage':>8} {'flag acc':>8} {'fit s':>6}"
     print(head)
     print("-" * len(head))
     for name, r in rows.items():
         cov = f"{r['coverage']:8.3f}" if "coverage" in r else f"{'-':>8}"
         acc = f"{r['flag_acc']:8.3f}" if "flag_acc" in r else f"{'-':>8}"
-        print(f"{name:<48} {r['dA_err_median']:10.3f} {r['dA_err_p90']:6.2f} {r['regime_acc']:10.3f} {cov} {acc} "
+        print(f"{name:<62} {r['dA_err_median']:10.3f} {r['dA_err_p90']:6.2f} {r['regime_acc']:10.3f} {cov} {acc} "
               f"{r['fit_s']:6.1f}")
 
 
@@ -230,18 +274,30 @@ def main(argv=None) -> dict:
                         help="comma-separated candidate numbers of B-splines of the varying models (default: the model's)")
     parser.add_argument("--model-set-level", type=float, default=None,
                         help="the varying models' model_set_level (default: the model's)")
+    parser.add_argument("--no-eiv-weights", action="store_true",
+                        help="the varying models' eiv_weights=False (default: the model's, True: effective-variance "
+                             "weights against the wind error)")
+    parser.add_argument("--substitute", default="",
+                        help="comma-separated truth substitutions for the varying models, each a '+'-joined "
+                             "subset of U, A, dA (e.g. 'U,A,dA'): fits on the measured records with those inputs "
+                             "replaced by the truth's")
     parser.add_argument("--only", default=None, help="fit only the models whose name contains this text")
     parser.add_argument("--json", type=Path, default=OUT / "misspecification.json", help="where the rows are written")
     parser.add_argument("--no-truth-fits", action="store_true", help="skip the fits on the truth's own (A, U, dA)")
     args = parser.parse_args(argv)
     if len(args.campaign) != len(args.results):
         parser.error("give one --results per --campaign")
+    subs = tuple(tuple(x.split("+")) for x in args.substitute.split(",") if x)
+    for what in subs:
+        if not set(what) <= set(SUBSTITUTABLE):
+            parser.error(f"--substitute: each variant is a '+'-joined subset of {', '.join(SUBSTITUTABLE)}; "
+                         f"got {'+'.join(what)!r}")
     out = {}
     for camp, res in zip(args.campaign, args.results):
         out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders, args.only, not args.no_truth_fits,
                              args.wind_smoothing,
                              None if args.n_basis is None else tuple(int(x) for x in args.n_basis.split(",")),
-                             args.model_set_level)
+                             args.model_set_level, subs, not args.no_eiv_weights)
     for camp, rows in out.items():
         print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
     args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -179,3 +179,60 @@ def test_wind_smoothing_chosen_by_cross_validation(tmp_path):
     np.testing.assert_array_equal(loaded.wind_smoothing_cv_, measured.wind_smoothing_cv_)
     with pytest.raises(InputError, match="wind_smoothing_grid"):
         VaryingCoefficientSINDy(wind_smoothing_grid=(-1.0,)).fit(_records(2))
+
+
+def test_signed_rank_model_set_is_not_outweighed_by_one_event():
+    from vivbench.models.varying import _confidence_set
+
+    rng = np.random.default_rng(0)
+    base = 1.0 + rng.random(31)
+    worse = base + 0.1 + 0.05 * rng.random(31)  # worse on every event but one ...
+    worse[0] = base[0] - 3.0  # ... which is long and energetic: its gain nearly offsets the 30 small losses
+    tie = base + 0.1 * rng.standard_normal(31)
+    loss = np.stack([base, worse, tie])
+    assert 0 < worse.sum() - base.sum() < 1.0 and tie.sum() > base.sum()  # base is the best in total
+    z = _confidence_set(loss, 0.95, "z")
+    ranks = _confidence_set(loss, 0.95, "signed_rank")
+    assert z.tolist() == [True, True, True]  # the outlier inflates the paired mean's standard error
+    assert ranks.tolist() == [True, False, True]
+    # Four events cannot reject at 0.95 (the smallest one-sided signed-rank p is 1/16): all stay.
+    assert _confidence_set(loss[:, 1:5], 0.95, "signed_rank").all()
+
+
+def test_model_set_test_parameter(tmp_path):
+    with pytest.raises(InputError, match="model_set_test"):
+        VaryingCoefficientSINDy(model_set_test="t").fit(_records(2))
+    m = VaryingCoefficientSINDy(n_basis=(8,), n_bootstrap=0, wind_smoothing_s=0.0, model_set_test="z").fit(_records(4))
+    loaded = VaryingCoefficientSINDy.load(m.save(tmp_path / "z.nc"))
+    assert loaded.model_set_test == "z" and loaded.get_params() == m.get_params()
+
+
+def _anemometers(records, sd: float = 0.5, seed: int = 0, tau_s: float = 20.0):
+    """Records whose sections' anemometers each add their own slow turbulence (m/s) to the felt wind."""
+    from scipy.ndimage import gaussian_filter1d
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for r in records:
+        w = gaussian_filter1d(rng.standard_normal(r.U.shape), tau_s / float(r.t[1] - r.t[0]), axis=0)
+        out.append(Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U + sd * w / w.std(axis=0), dA=r.dA))
+    return out
+
+
+def test_eiv_weights():
+    params = {"n_basis": (11,), "n_bootstrap": 0, "wind_smoothing_s": 0.0}
+    recs = _records(6, S=3)
+    # Equal anemometers: no wind error is estimable, the weights are all one and the fit is unchanged.
+    plain = VaryingCoefficientSINDy(**params, eiv_weights=False).fit(recs)
+    weighted = VaryingCoefficientSINDy(**params, eiv_weights=True).fit(recs)
+    assert np.all(weighted.wind_error_share_ < 1e-12)  # the anemometers agree up to rounding
+    np.testing.assert_allclose(weighted.coef_, plain.coef_, rtol=1e-6, atol=1e-12)  # reason: weights 1 up to rounding
+    # Independent anemometers: the wind error carries a share of the residual variance, and the
+    # refit keeps the chosen basis and penalty.
+    noisy = _anemometers(recs)
+    w = VaryingCoefficientSINDy(**params, eiv_weights=True).fit(noisy)
+    assert np.all(w.wind_error_share_ > 0.1), w.wind_error_share_
+    assert np.all(w.wind_error_share_ <= 1.0)
+    p = VaryingCoefficientSINDy(**params, eiv_weights=False).fit(noisy)
+    np.testing.assert_array_equal(w.penalty_, p.penalty_)
+    assert not np.allclose(w.coef_, p.coef_)

@@ -38,7 +38,8 @@ with the same penalty (p = 4 M (J + 1)). After the fit the same statistics
 give the models of every subset of the orders 0, 2, 3 (order 1 always kept)
 and their leave-one-event-out prediction errors: the confidence set of
 ``model_set_level`` used by the window verdicts
-(:func:`vivbench.regimes.varying_window_verdicts`).
+(:func:`vivbench.regimes.varying_window_verdicts`), by default from a
+signed-rank test over events (``model_set_test``).
 
 What this model does not fix: errors in the measured U (a point anemometer
 against the tributary-averaged wind the deck feels) smear the bell along U
@@ -141,16 +142,22 @@ def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np
 
 
 def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
-                 knots: np.ndarray, a_ref: float, z: np.ndarray | None = None, n_yaw: int = 0):
+                 knots: np.ndarray, a_ref: float, z: np.ndarray | None = None, n_yaw: int = 0,
+                 weight: np.ndarray | None = None):
     """Per-block sufficient statistics of the design :func:`_design`.
 
     Returns X_b^T X_b (n_blocks, p, p), X_b^T y_b (n_blocks, p), y_b^T y_b and
     the sample counts (n_blocks,). The design is built one block at a time
     (a few hundred per campaign), so memory stays at one block's rows.
+    With ``weight`` (n,) the statistics are those of the weighted least squares
+    (rows and target times sqrt(weight)).
     """
     order = np.argsort(block, kind="stable")
     bounds = np.searchsorted(block[order], np.arange(n_blocks + 1))
     Us, As, ys = U[order], A[order], y[order]
+    sw = None if weight is None else np.sqrt(weight[order])
+    if sw is not None:
+        ys = ys * sw
     zs = None if z is None else z[order]
     p = 4 * (n_yaw + 1) * (knots.size - DEGREE - 1)
     G = np.empty((n_blocks, p, p))
@@ -158,6 +165,8 @@ def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray,
     for j in range(n_blocks):
         sl = slice(bounds[j], bounds[j + 1])
         xb = _design(Us[sl], As[sl], knots, a_ref, None if zs is None else zs[sl], n_yaw)
+        if sw is not None:
+            xb *= sw[sl, None]
         G[j] = xb.T @ xb
         b[j] = xb.T @ ys[sl]
     cy = np.concatenate([[0.0], np.cumsum(ys**2)])
@@ -266,17 +275,53 @@ class VaryingCoefficientSINDy(ModelBase):
         Level of the confidence set of order subsets: the models without some
         of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
         prediction error is not significantly above the best subset's (a
-        one-sided paired test over events); the window verdict needs them all
-        to give the window's regime. Default 0.95. On the seed-0 realistic
-        campaign (``benchmarks/bench_misspecification.py``) the model without
-        order 0 stays in the set at 0.95 (its test statistic lies between the
-        0.9 and 0.95 quantiles), so no window of regimes 3 or 4 is flagged
-        there: coverage 0.289 (flagged accuracy 0.9996), against 0.553
-        (0.9956) at 0.9. The 0.9 level was held out on the leaderboard's
-        8-event ``other_bridge`` scenario and broke the verdict's promise
-        there: 79 % of the flagged windows right (coverage 0.49), against 100 %
-        (coverage 0.17) at 0.95; so 0.95 stays the default, and a smaller
-        level is for large campaigns only, at the user's risk.
+        one-sided paired test over events, ``model_set_test``); the window
+        verdict needs them all to give the window's regime. Default 0.95. With
+        the former z-test on the seed-0 realistic campaign
+        (``benchmarks/bench_misspecification.py``) the models without order 0
+        and without order 2 stayed in the set at 0.95 (test statistics 1.38 and
+        1.28), so no window of regimes 3 or 4 was flagged there: coverage 0.289
+        (flagged accuracy 0.9996), against 0.553 (0.9956) at 0.9. The 0.9 level
+        was held out on the leaderboard's 8-event ``other_bridge`` scenario and
+        broke the verdict's promise there: 79 % of the flagged windows right
+        (coverage 0.49), against 100 % (coverage 0.17) at 0.95; so 0.95 stays
+        the default, and a smaller level is for large campaigns only, at the
+        user's risk.
+    model_set_test : {"signed_rank", "z"}
+        The paired test of the model set: Wilcoxon's one-sided signed-rank test
+        of the per-event differences of held-out loss (default), or the
+        z-approximation to their mean (before). Per-event losses are heavy
+        tailed (a long, energetic event's loss is many times a quiet one's),
+        and one such event inflates the mean's standard error: on the seed-0
+        realistic campaign the model without order 0 predicts 30 of 31
+        held-out events worse than the best subset, yet the z-test kept it
+        (p = 0.084); the signed-rank test rejects it (p < 1e-6). Measured there
+        (tuning): coverage 0.289 -> 0.536 at flagged accuracy 0.9968; held out,
+        seed 1 and the second bridge unchanged (0.468 and 0.449 at 0.999);
+        on ``vivbench leaderboard --methods varying`` every scenario keeps
+        flagged accuracy >= 0.996, forced_only flags nothing and the 8-event
+        other_bridge is unchanged (coverage 0.174, all right); in_library
+        0.280 -> 0.313. A test with fewer than 5 events rejects nothing at
+        0.95 (the smallest one-sided p is 2^-n).
+    eiv_weights : bool
+        Refit at the chosen basis and penalty by weighted least squares with
+        effective-variance weights (errors-in-variables of the mean wind): a
+        sample's residual variance is s0 + kappa (df/dU)^2 se_U^2, with df/dU
+        the first fit's slope in the wind, se_U the spread of the sections'
+        (smoothed) anemometers about their mean over sqrt(S) (which matches
+        the RMS error of the mean wind on the seed-0 realistic campaign: 0.147
+        against 0.143 m/s) and (s0, kappa) fitted to the squared residuals.
+        Needs ``wind_input="mean"`` and two or more sections (else no
+        weights). Default True, measured with
+        ``benchmarks/bench_misspecification.py`` (against ``--no-eiv-weights``) (median dA/dt
+        error on the truth's (A, U); coverage at flagged accuracy; signed-rank
+        model set): seed 0 (tuning) 0.111 -> 0.109, coverage 0.536 -> 0.570
+        (0.996); held out seed 1 0.152 -> 0.137, 0.468 -> 0.475 (0.998); the
+        second bridge 0.152 -> 0.146, 0.449 -> 0.458 (0.999); and on every
+        scenario of ``vivbench leaderboard`` a lower dA/dt error, the same or
+        higher coverage, flagged accuracy >= 0.996, none flagged on
+        forced_only. Costs a second weighted pass at the chosen basis only.
+        :meth:`event_statistics` stays unweighted.
 
     Attributes
     ----------
@@ -285,6 +330,9 @@ class VaryingCoefficientSINDy(ModelBase):
     wind_smoothing_cv_ : ndarray, shape (n_candidates,)
         Cross-validated error of each candidate smoothing (summed over the
         equations' per-sample errors of the standardised target).
+    wind_error_share_ : ndarray, shape (S,)
+        With ``eiv_weights``, the share of the first fit's residual variance
+        attributed to the mean wind's error (0 without; not saved).
     coef_ : ndarray, shape (S, M_max, 4)
         Physical spline coefficients: a_ki(U) = sum_m coef_[k, m, i] B_km(U), in
         m^(1-i)/s (zero beyond section k's ``n_basis_[k]``).
@@ -326,7 +374,8 @@ class VaryingCoefficientSINDy(ModelBase):
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
                  wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
                  wind_smoothing_s: float = 30.0,
-                 wind_smoothing_grid: Sequence[float] | None = None):
+                 wind_smoothing_grid: Sequence[float] | None = None, eiv_weights: bool = True,
+                 model_set_test: str = "signed_rank"):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -341,6 +390,8 @@ class VaryingCoefficientSINDy(ModelBase):
         self.model_set_level = model_set_level
         self.wind_smoothing_s = wind_smoothing_s
         self.wind_smoothing_grid = wind_smoothing_grid
+        self.eiv_weights = eiv_weights
+        self.model_set_test = model_set_test
 
     def _wind(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
@@ -408,6 +459,7 @@ class VaryingCoefficientSINDy(ModelBase):
         grid = params["wind_smoothing_grid"]
         params["wind_smoothing_grid"] = None if grid is None else [float(x) for x in grid]
         params["model_set_level"] = float(params["model_set_level"])
+        params["eiv_weights"] = bool(params["eiv_weights"])
         return json.dumps(params, sort_keys=True)
 
     def _validate(self) -> None:
@@ -439,6 +491,8 @@ class VaryingCoefficientSINDy(ModelBase):
             if g.ndim != 1 or g.size == 0 or np.any(~np.isfinite(g)) or np.any(g < 0):
                 raise InputError("wind_smoothing_grid must be None (use wind_smoothing_s) or a non-empty sequence "
                                  f"of seconds >= 0; got {self.wind_smoothing_grid!r}")
+        if self.model_set_test not in ("z", "signed_rank"):
+            raise InputError(f"model_set_test must be 'z' or 'signed_rank'; got {self.model_set_test!r}")
         if self.wind_input not in ("section", "mean"):
             raise InputError(f"wind_input must be 'section' or 'mean'; got {self.wind_input!r}")
 
@@ -474,6 +528,16 @@ class VaryingCoefficientSINDy(ModelBase):
                 chosen = (self.wind_smoothing_cv_[g], float(sigma), prep, sel)
             del prep, sel
         _total, self.wind_smoothing_s_, prep, sel = chosen
+        self.wind_error_share_ = np.zeros(prep["S"])
+        if self.eiv_weights and prep["U_se"] is not None:
+            # Effective variance: refit at the chosen basis and penalty with each sample weighted by the
+            # inverse of its residual variance, the wind error's share propagated through the first fit's slope.
+            weights = []
+            for k in range(prep["S"]):
+                w, self.wind_error_share_[k] = self._eiv_weight(prep, k, sel[k])
+                weights.append(w)
+            sel = [dict(self._select_basis(prep, k, weight=weights[k], fixed=sel[k]["best"][1:3]),
+                        cv_error=sel[k]["cv_error"]) for k in range(prep["S"])]
         records = prep["records"]
         S, J, K, n_ev, rng = prep["S"], prep["J"], prep["K"], prep["n_ev"], prep["rng"]
         n_basis = np.array(self.n_basis, dtype=int)
@@ -564,7 +628,7 @@ class VaryingCoefficientSINDy(ModelBase):
                 self.subset_coef_yaw_[a, k, :M] = ca[..., 1:]
             self.subset_loeo_[:, k] = np.nansum(loeo, axis=1) * ys**2
             self.subset_loeo_event_[:, k] = loeo * ys**2
-            self.subset_plausible_[:, k] = _confidence_set(loeo[:, has], self.model_set_level)
+            self.subset_plausible_[:, k] = _confidence_set(loeo[:, has], self.model_set_level, self.model_set_test)
         self.n_samples_ = n_samples
         self.n_blocks_ = n_blocks_used
         self.n_sections_ = S
@@ -605,16 +669,73 @@ class VaryingCoefficientSINDy(ModelBase):
                 "A": np.concatenate([r.A for r in records]),
                 "U": self._wind(np.concatenate([self._inputs(r)[0] for r in records])),
                 "dA": np.concatenate([r.dA for r in records]),
-                "Z": np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None}
+                "Z": np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None,
+                "U_se": self._wind_standard_error(np.concatenate([self._inputs(r)[0] for r in records]))}
 
-    def _select_basis(self, prep: dict, k: int) -> dict:
+    def _wind_standard_error(self, U: np.ndarray) -> np.ndarray | None:
+        """Standard error of the mean wind over the sections' anemometers, shape (n,), m/s (None: not estimable).
+
+        The spread of the S (smoothed) anemometers about their mean over sqrt(S):
+        the mean's error if each anemometer's slow turbulence, which the deck
+        does not feel, is independent of the others' (on the seed-0 realistic
+        campaign this gives 0.147 m/s against a true RMS error of 0.143 m/s).
+        Only for ``wind_input="mean"`` with two or more sections.
+        """
+        if self.wind_input != "mean" or U.shape[1] < 2:
+            return None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # rows with fewer than two winds: NaN
+            se = np.nanstd(U, axis=1, ddof=1) / np.sqrt(np.isfinite(U).sum(axis=1))
+        return np.where(np.isfinite(se), se, np.nanmedian(se))
+
+    def _eiv_weight(self, prep: dict, k: int, sk: dict, step: float = 0.05, chunk: int = 50_000):
+        """Effective-variance weights of section ``k``'s samples and the wind error's share of the residual variance.
+
+        Var(residual) = s0^2 + (d f / d U)^2 se_U^2, with f the first fit's
+        (standardised) dA/dt, its slope in U by central differences of ``step``
+        m/s, se_U from :meth:`_wind_standard_error`, and s0^2 the rest of the
+        mean squared residual (floored at a tenth of it). Weights are the
+        inverse variances over their mean; shape (n_all,) (NaN where unused).
+        """
+        A, U, dA, Z, J = prep["A"], prep["U"], prep["dA"], prep["Z"], prep["J"]
+        ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
+        if J:
+            ok &= np.isfinite(Z[:, k])
+        idx = np.flatnonzero(ok)
+        _err, _M, lam_rel, knots, G, b, _yy, P = sk["best"]
+        Gs, bs = G.sum(axis=0), b.sum(axis=0)
+        c = _solve(Gs, bs, P, np.array([lam_rel * _penalty_scale(Gs, P)]), np.ones(Gs.shape[0], dtype=bool))[0]
+        zk = None if not J else Z[:, k] / sk["yaw_ref"]
+        res = np.empty(idx.size)
+        slope = np.empty(idx.size)
+        for a in range(0, idx.size, chunk):  # the full design would not fit in memory
+            i = idx[a:a + chunk]
+            z = None if zk is None else zk[i]
+            f = [_design(U[i, k] + d, A[i, k], knots, sk["aref"], z, J) @ c for d in (0.0, step, -step)]
+            res[a:a + chunk] = dA[i, k] / sk["ys"] - f[0]
+            slope[a:a + chunk] = (f[1] - f[2]) / (2.0 * step)
+        v_wind = (slope * prep["U_se"][idx]) ** 2
+        # The variance function E[res^2] = s0 + kappa v_wind by least squares on the squared residuals:
+        # kappa calibrates se_U (the sections' felt winds differ too, so the spread over-states the error).
+        ms = float(np.mean(res**2))
+        X = np.column_stack([np.ones(idx.size), v_wind])
+        s0, kappa = np.linalg.lstsq(X, res**2, rcond=None)[0]
+        kappa = max(float(kappa), 0.0)
+        s0 = max(float(s0), 0.01 * ms)
+        v = s0 + kappa * v_wind
+        out = np.full(U.shape[0], np.nan)
+        out[idx] = (1.0 / v) / np.mean(1.0 / v)
+        return out, float(kappa * np.mean(v_wind) / np.mean(v))
+
+    def _select_basis(self, prep: dict, k: int, weight: np.ndarray | None = None, fixed=None) -> dict:
         """Section ``k``'s scales, blocks and its (M, lambda) chosen by the cross-validated error over events.
 
         ``best`` is (CV error per sample, M, relative penalty, knots, G, b, yy, P) at the choice.
+        ``weight`` (n_all,): sample weights of a weighted fit; ``fixed`` (M, relative penalty): no choice.
         """
         A, U, dA, Z, J, K = prep["A"], prep["U"], prep["dA"], prep["Z"], prep["J"], prep["K"]
-        n_basis = np.array(self.n_basis, dtype=int)
-        pen = np.asarray(self.penalties, dtype=float)
+        n_basis = np.array(self.n_basis if fixed is None else [fixed[0]], dtype=int)
+        pen = np.asarray(self.penalties if fixed is None else [fixed[1]], dtype=float)
         ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
         if J:
             ok &= np.isfinite(Z[:, k])
@@ -643,7 +764,8 @@ class VaryingCoefficientSINDy(ModelBase):
         cv_error = np.full((n_basis.size, pen.size), np.nan)
         for a, M in enumerate(n_basis):
             knots = uniform_knots(lo, hi, int(M))
-            G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref, zk, J)
+            G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref, zk, J,
+                                          None if weight is None else weight[ok])
             P = np.kron(np.eye(4 * (J + 1)), difference_penalty(int(M)))
             err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(4 * (J + 1) * M, dtype=bool)) / n
             cv_error[a] = err
@@ -1062,6 +1184,8 @@ class VaryingCoefficientSINDy(ModelBase):
         # Files written before the model smoothed its own wind: it was smoothed (or not) before the fit.
         params.setdefault("wind_smoothing_s", 0.0)
         params.setdefault("wind_smoothing_grid", None)  # files written before the smoothing was cross-validated
+        params.setdefault("eiv_weights", False)  # files written before the effective-variance weights
+        params.setdefault("model_set_test", "z")  # files written before the signed-rank test
         if params["wind_smoothing_grid"] is not None:
             params["wind_smoothing_grid"] = tuple(params["wind_smoothing_grid"])
         model = cls(**params)
@@ -1123,18 +1247,29 @@ def penalised_rss(G: np.ndarray, b: np.ndarray, yy: np.ndarray, P: np.ndarray, p
     return np.einsum("...p,...pq,...q->...", c, Gk, c) - 2.0 * np.einsum("...p,...p->...", c, bk) + yy
 
 
-def _confidence_set(loss: np.ndarray, level: float) -> np.ndarray:
+def _confidence_set(loss: np.ndarray, level: float, test: str = "z") -> np.ndarray:
     """Models whose per-event held-out loss is not significantly above the best's, shape (n_models,) bool.
 
-    ``loss`` (n_models, n_events): a one-sided paired test of the mean
-    difference to the model with the smallest total, at ``level``, the events
-    as the independent units (z-approximation).
+    ``loss`` (n_models, n_events): a one-sided paired test of each model's
+    per-event loss against the model with the smallest total, at ``level``,
+    the events as the independent units. ``test``: ``"z"``, the mean
+    difference (z-approximation); ``"signed_rank"``, Wilcoxon's signed-rank
+    test of the differences (their ranks, not their sizes: one long,
+    energetic event cannot outweigh all the others).
     """
-    from scipy.stats import norm
+    from scipy.stats import norm, wilcoxon
 
     best = int(np.argmin(loss.sum(axis=1)))
     diff = loss - loss[best]
     n = loss.shape[1]
+    if test == "signed_rank":
+        keep = np.ones(loss.shape[0], dtype=bool)
+        for a in range(loss.shape[0]):
+            d = diff[a]
+            if a == best or n < 2 or not np.any(d != 0):
+                continue
+            keep[a] = wilcoxon(d, alternative="greater", zero_method="wilcox").pvalue > 1.0 - level
+        return keep
     se = diff.std(axis=1, ddof=1) / np.sqrt(max(n, 1)) if n > 1 else np.zeros(loss.shape[0])
     z = norm.ppf(level)
     return diff.mean(axis=1) <= z * se + 1e-12 * np.abs(loss[best]).mean()

@@ -10,7 +10,8 @@ contributions over the window's data. It counts as identifiable when
 2. every plausible model of the confidence set of order subsets
    (``model.subset_plausible_``: models without some of the orders 0, 2, 3
    whose leave-one-event-out prediction error is not significantly above the
-   best subset's) gives it the same regime. The bootstrap measures variance
+   best subset's by the model's ``model_set_test``, a signed-rank test over
+   events by default) gives it the same regime. The bootstrap measures variance
    only; a systematic misfit (a forced-only bridge whose forced plateaus the
    model bends with A^2 and A^3 terms) passes it, but then the model without
    those orders predicts the held-out events about as well and disagrees.
