@@ -71,14 +71,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.stats import chi2, false_discovery_control, norm
+from scipy.stats import t as student_t
 
 from vivbench.core.record import Record
 from vivbench.models.varying import penalised_rss
 
-__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "MISFIT_FLOOR", "MISFIT_MADS", "STRATUM_SIZE", "event_residual_checks",
-           "change_point_scan", "model_change_scan", "statistics_change_scan", "stratified_permutations",
-           "wind_strata"]
+__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS", "STRATUM_SIZE",
+           "change_point_scan", "change_relative_flags", "event_residual_checks", "model_change_scan",
+           "offset_flags", "statistics_change_scan", "stratified_permutations", "wind_strata"]
 
 #: Block length of the offsets' robust standard errors, s.
 CHANGE_BLOCK_S = 120.0
@@ -92,6 +93,8 @@ MISFIT_FLOOR = 2.0
 MISFIT_MS_FLOOR = 0.1
 #: Events per stratum of the stratified null of the model change scan.
 STRATUM_SIZE = 4
+#: False-discovery rate of the per-event "not predicted" flags (Benjamini-Hochberg over the events tested).
+FLAG_FDR = 0.05
 
 
 def event_residual_checks(model, records: Sequence[Record], *, block_s: float = CHANGE_BLOCK_S) -> dict:
@@ -302,19 +305,8 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
         raise ValueError(f"null must be 'stratified' or 'permutation'; got {null!r}")
     if int(stratum_size) < 2:
         raise ValueError(f"stratum_size must be an integer >= 2; got {stratum_size!r}")
-    stats = [dict(st) for st in stats]  # weighted below: the caller's arrays stay as they are
+    stats = _equal_event_weights(stats)
     E = int(stats[0]["n"].size)
-    # Every event weighs alike: its statistics over its own mean square of dA/dt, so that one event
-    # with large dynamics (a high plateau extrapolated in A) cannot dominate the scan; but at least
-    # MISFIT_MS_FLOOR of the median event's, so that an event with almost no dynamics is not judged
-    # on the relative error of near-zero values.
-    for st in stats:
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ms = np.where(st["n"] > 0, st["yy"] / np.maximum(st["n"], 1), np.nan)
-            floor = MISFIT_MS_FLOOR * np.nanmedian(ms) if np.isfinite(ms).any() else 0.0
-            w = np.where(st["n"] > 0, 1.0 / np.maximum(ms, floor), 0.0)
-            w = np.where(np.isfinite(w), w, 0.0)
-        st["G"], st["b"], st["yy"] = st["G"] * w[:, None, None], st["b"] * w[:, None], st["yy"] * w
     out = {"split_gain": np.full(E, np.nan), "change_index": -1, "p_value": float("nan"), "detected": False}
     # Leave-one-event-out misfit of every event (all equations pooled).
     loo, cnt = np.zeros(E), np.zeros(E)
@@ -352,6 +344,26 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
                            for i in range(0, perms.shape[0], chunk)]) if n_permutations else np.zeros(0)
     p = float((1 + np.sum(null >= gain[best])) / (1 + null.size))
     out.update(change_index=int(use[splits[best]]), p_value=p, detected=bool(p < level))
+    return out
+
+
+def _equal_event_weights(stats: list[dict]) -> list[dict]:
+    """Copies of the per-event statistics with every event weighted alike (the caller's arrays stay as they are).
+
+    Every event's statistics over its own mean square of dA/dt, so that one
+    event with large dynamics (a high plateau extrapolated in A) cannot
+    dominate; but at least ``MISFIT_MS_FLOOR`` of the median event's, so that
+    an event with almost no dynamics is not judged on the relative error of
+    near-zero values.
+    """
+    out = []
+    for st in stats:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ms = np.where(st["n"] > 0, st["yy"] / np.maximum(st["n"], 1), np.nan)
+            floor = MISFIT_MS_FLOOR * np.nanmedian(ms) if np.isfinite(ms).any() else 0.0
+            w = np.where(st["n"] > 0, 1.0 / np.maximum(ms, floor), 0.0)
+            w = np.where(np.isfinite(w), w, 0.0)
+        out.append({**st, "G": st["G"] * w[:, None, None], "b": st["b"] * w[:, None], "yy": st["yy"] * w})
     return out
 
 
@@ -395,15 +407,124 @@ def stratified_permutations(strata: np.ndarray, n: int, rng: np.random.Generator
     return out
 
 
-def _held_out_error(G, b, yy, st) -> np.ndarray:
-    """Each event's squared error under the model fitted to all other events (standardised), shape (E,)."""
+def _held_out_error(G, b, yy, st, train=None) -> np.ndarray:
+    """Each event's squared error under the model fitted to the ``train`` events other than itself, shape (E,).
+
+    ``train`` (E,) bool, default all events (leave-one-event-out); standardised units.
+    """
     idx = np.flatnonzero(st["keep"])
-    tG, tb = G.sum(axis=0), b.sum(axis=0)
-    Gk = (tG[None] - G)[:, idx[:, None], idx]
-    bk = (tb[None] - b)[:, idx]
+    train = np.ones(G.shape[0], dtype=bool) if train is None else np.asarray(train, dtype=bool)
+    tG, tb = G[train].sum(axis=0), b[train].sum(axis=0)
+    Gk = (tG[None] - G * train[:, None, None])[:, idx[:, None], idx]
+    bk = (tb[None] - b * train[:, None])[:, idx]
     Pk = st["P"][idx[:, None], idx]
     scale = np.trace(Gk, axis1=-2, axis2=-1) / max(np.trace(st["P"]), 1e-300)
     ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / idx.size)[:, None, None] * np.eye(idx.size)
     c = np.linalg.solve(Gk + (st["penalty"] * scale)[:, None, None] * Pk + ridge, bk[..., None])[..., 0]
     Ge, be = G[:, idx[:, None], idx], b[:, idx]
     return np.einsum("ep,epq,eq->e", c, Ge, c) - 2.0 * np.einsum("ep,ep->e", c, be) + yy
+
+
+def _benjamini_hochberg(p: np.ndarray, fdr: float) -> np.ndarray:
+    """Rejections of the Benjamini-Hochberg step-up rule at ``fdr`` over the finite p-values, shape of p, bool."""
+    p = np.asarray(p, dtype=float)
+    out = np.zeros(p.shape, dtype=bool)
+    ok = np.flatnonzero(np.isfinite(p))
+    if ok.size:
+        out[ok] = false_discovery_control(p[ok], method="bh") <= fdr
+    return out
+
+
+def offset_flags(delta, se, *, fdr: float = FLAG_FDR) -> dict:
+    """Events whose linear offset departs from the other events' by more than the events' own spread.
+
+    A change-agnostic "not predicted" flag: each event's offset delta_e
+    (:func:`event_residual_checks`) is compared with a random-effects model
+    of the *other* events' offsets (DerSimonian-Laird between-event variance
+    tau^2, so the usual spread of a misspecified model's offsets is part of
+    the null, calibrated on the events themselves):
+    z_e = (delta_e - mu_-e) / sqrt(se_e^2 + tau_-e^2 + var(mu_-e)), two-sided
+    normal p-values, Benjamini-Hochberg over the events at ``fdr``.
+
+    Parameters
+    ----------
+    delta, se : array_like, shape (E,), 1/s
+    fdr : float, false-discovery rate of the flags
+
+    Returns
+    -------
+    dict
+        ``z`` (E,), ``p`` (E,) (NaN where an event or too few others, fewer than 3, have no finite
+        offset and standard error), ``flag`` (E,) bool.
+    """
+    delta, se = np.asarray(delta, dtype=float), np.asarray(se, dtype=float)
+    E = delta.size
+    ok = np.isfinite(delta) & np.isfinite(se) & (se > 0)
+    z = np.full(E, np.nan)
+    for e in np.flatnonzero(ok):  # one random-effects fit per event (events, not samples)
+        o = ok.copy()
+        o[e] = False
+        if o.sum() < 3:
+            continue
+        w = 1.0 / se[o] ** 2
+        mu_fe = np.sum(w * delta[o]) / w.sum()
+        q = np.sum(w * (delta[o] - mu_fe) ** 2)
+        tau2 = max(0.0, (q - (o.sum() - 1)) / (w.sum() - np.sum(w**2) / w.sum()))
+        wr = 1.0 / (se[o] ** 2 + tau2)
+        mu = np.sum(wr * delta[o]) / wr.sum()
+        z[e] = (delta[e] - mu) / np.sqrt(se[e] ** 2 + tau2 + 1.0 / wr.sum())
+    p = 2.0 * norm.sf(np.abs(z))
+    return {"z": z, "p": p, "flag": _benjamini_hochberg(p, fdr)}
+
+
+def change_relative_flags(stats: list[dict], change_index: int, *, fdr: float = FLAG_FDR) -> dict:
+    """Events from a located change on that the model of the events before it does not predict.
+
+    The model is refitted to the events before ``change_index`` (at the
+    fitted basis and penalty, every event weighted alike as in the scan);
+    every event's mean squared error under it is taken (held out: the events
+    before the change leave themselves out) over the median of the events
+    before the change. The null is calibrated on the events before the
+    change: their log misfits are taken as a normal sample, and an event
+    after the change gets the one-sided p-value of its log misfit under the
+    Student-t prediction interval of that sample; Benjamini-Hochberg over the
+    events from the change on, at ``fdr``. So a flag says "this event is
+    predicted worse by the before-model than the before-events predict each
+    other", and the flags are defined only relative to the located change.
+
+    Parameters
+    ----------
+    stats : list of dict, per equation (``VaryingCoefficientSINDy.event_statistics``), events in time order
+    change_index : int, the first event after the change (e.g. ``model_change_scan``'s ``change_index``)
+    fdr : float
+
+    Returns
+    -------
+    dict
+        ``misfit_before`` (E,) mean squared error under the before-model over the median before-event's,
+        ``p`` (E,) (NaN before the change, and everywhere with fewer than 3 events before it),
+        ``flag`` (E,) bool.
+    """
+    E = int(stats[0]["n"].size)
+    k = int(change_index)
+    out = {"misfit_before": np.full(E, np.nan), "p": np.full(E, np.nan), "flag": np.zeros(E, dtype=bool)}
+    if not 3 <= k < E:
+        return out
+    train = np.arange(E) < k
+    err, cnt = np.zeros(E), np.zeros(E)
+    for st in _equal_event_weights(stats):
+        err += _held_out_error(st["G"], st["b"], st["yy"], st, train)
+        cnt += st["n"]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mse = np.where(cnt > 0, err / cnt, np.nan)
+        ratio = mse / np.nanmedian(mse[train])
+        logm = np.log(ratio)
+    ref = logm[train & np.isfinite(logm)]
+    out["misfit_before"] = ratio
+    if ref.size < 3:
+        return out
+    scale = ref.std(ddof=1) * np.sqrt(1.0 + 1.0 / ref.size)
+    after = ~train & np.isfinite(logm)
+    out["p"][after] = student_t.sf((logm[after] - ref.mean()) / max(scale, 1e-12), ref.size - 1)
+    out["flag"] = _benjamini_hochberg(out["p"], fdr)
+    return out
