@@ -187,8 +187,8 @@ def pool_results(result_files: Sequence, model=None, *,
         scan (``event_misfit``, ``event_misfit_flag``,
         ``event_model_split_gain``; attributes ``model_change_event``,
         ``model_change_p_value``, ``model_change_detected``) and the flags
-        relative to the located change (``event_misfit_before``,
-        ``event_change_p``, ``event_change_flag``, attribute
+        relative to the located change (``event_after_change``,
+        ``event_offset_held_out``, ``event_change_p``, ``event_change_flag``, attribute
         ``change_flagged_events``; :func:`vivbench.analysis.changes.change_relative_flags`).
         With a ``PooledSINDy`` also the coordinates ``feature`` and
         ``bootstrap`` and ``coef`` (equation, feature) in physical units (dA/dt
@@ -328,17 +328,22 @@ def pool_results(result_files: Sequence, model=None, *,
         stats = model.event_statistics(records)
         model_scan = statistics_change_scan(stats, seed=model.seed)
         # Flags relative to the located change, only when the scan reports one.
-        rel = change_relative_flags(stats, model_scan["change_index"] if model_scan["detected"] else -1)
+        ci = model_scan["change_index"] if model_scan["detected"] else -1
+        rel = change_relative_flags(stats, ci, checks["linear_offset_se"], model.a_ref_, model.y_scale_)
         data.update({
-            "event_misfit_before": (("event",), rel["misfit_before"],
-                                    {"units": "1", "long_name": "mean squared dA/dt residual under the model of the "
-                                     "events before the located change over the median before-event's (NaN: no change)"}),
+            "event_after_change": (("event",), (np.arange(len(records)) >= ci if ci >= 0
+                                                else np.zeros(len(records), dtype=bool)).astype(np.int8),
+                                   {"long_name": "1: from the change the model change scan located on (its "
+                                    "permutation p below its level: the campaign-level false-alarm control)"}),
+            "event_offset_held_out": (("event",), rel["offset_held_out"],
+                                      {"units": "s-1", "long_name": "linear offset of the event's residual under the "
+                                       "model of the other events (NaN: no change located)"}),
             "event_change_p": (("event",), rel["p"],
-                               {"units": "1", "long_name": "p-value of event_misfit_before against the before-events' "
-                                "own held-out misfits (events from the located change on)"}),
+                               {"units": "1", "long_name": "p-value of event_offset_held_out against a random-effects "
+                                "model of the before-events' (events from the located change on)"}),
             "event_change_flag": (("event",), rel["flag"].astype(np.int8),
-                                  {"long_name": "1: not predicted by the model of the events before the located "
-                                   "change (Benjamini-Hochberg over the events after it at FLAG_FDR)"}),
+                                  {"long_name": "1: after the located change and its held-out offset departs from the "
+                                   "before-events' (Benjamini-Hochberg over the events after it at FLAG_FDR)"}),
         })
     if model_scan is not None:
         data.update({

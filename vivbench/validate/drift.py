@@ -5,7 +5,7 @@ step of damping or mass and the retrofit of the deck aerodynamics (from a
 given event on) and the daily damping drift. A step or a retrofit makes the
 events from it on *changed* relative to the campaign's first event; the daily
 drift runs on continuously and is not a change of any one event, so it is not
-scored. The flags of ``vivbench pool`` (``event_change_flag``,
+scored. The flags of ``vivbench pool`` (``event_after_change``, ``event_change_flag``,
 ``event_offset_flag``, ``event_misfit_flag``) are then counted as hits on
 changed events and false alarms on unchanged ones, and the located change
 (``model_change_event``, ``change_event``) is compared with the first changed
@@ -22,7 +22,8 @@ __all__ = ["FLAG_VARIABLES", "event_structural_state", "score_change_flags"]
 
 #: The pooled result's per-event flags that are scored, with their meaning.
 FLAG_VARIABLES = {
-    "event_change_flag": "not predicted by the model of the events before the located change",
+    "event_after_change": "from the change the model change scan located (campaign-level test)",
+    "event_change_flag": "after the located change, held-out offset departs from the before-events' (per event)",
     "event_offset_flag": "linear offset departs from the other events' (change-agnostic)",
     "event_misfit_flag": "held-out misfit is a robust outlier (change-agnostic)",
 }
