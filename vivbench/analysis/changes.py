@@ -64,6 +64,31 @@ Cochran's Q does not fire on a model that merely fits some events worse than
 others by the usual spread. An event whose winds lie outside the other events'
 range is predicted by extrapolation and can be flagged without any change.
 The ordered scan then runs over the unflagged events only.
+
+The scan's cost: the statistics before every split of every ordering are one
+matrix product of a 0/1 membership matrix with the events' statistics, the
+whole-campaign fit is solved once, and the penalised systems are solved by
+Cholesky (campaign A, 31 events, 99 orderings: 16-20 s CPU before, 4.6 s
+after, p-values and split gains unchanged to 1e-11).
+
+Per-event "not predicted" flags, each with its false-alarm control:
+
+- ``event_after_change`` (``vivbench pool``): the events from the change the
+  scan located, when its permutation p is below ``CHANGE_LEVEL``: a
+  campaign-level control (the scan's), not a per-event one.
+- :func:`change_relative_flags`: per event after the located change, its
+  held-out linear offset against a random-effects model of the offsets of
+  the events before it; Benjamini-Hochberg at ``FLAG_FDR``.
+- :func:`offset_flags`: change-agnostic, each event's offset against a
+  random-effects model of all other events'; Benjamini-Hochberg at
+  ``FLAG_FDR``.
+
+Measured (20-event drift campaign, retrofit of
+Y1 x 0.6 and C_L x 0.7 from E010 with a +-30 % daily damping drift): the
+per-event offsets move by less than the events' own spread (|z| < 2 except
+two events of wind outside the lock-in range), so neither per-event test
+flags the events after the change; only the located change does (11 of 11,
+none before). A per-event flag is not possible at this change size.
 """
 
 from __future__ import annotations
@@ -73,7 +98,6 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.linalg.lapack import dposv
 from scipy.stats import chi2, false_discovery_control, norm
-from scipy.stats import t as student_t
 
 from vivbench.core.record import Record
 
