@@ -31,7 +31,9 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
     assert not list(res.glob("*.tmp*"))
     pooled = read_pooled(res / POOLED_NAME)
     assert pooled_model_name(pooled) == "VaryingCoefficientSINDy" and "coef" not in pooled
-    assert {"n_basis", "penalty", "edf", "curves", "event_linear_offset", "event_residual_ratio"} <= set(pooled.data_vars)
+    assert {"n_basis", "penalty", "edf", "curves", "event_linear_offset", "event_residual_ratio", "event_offset_flag",
+            "event_after_change", "event_change_flag", "event_change_p"} <= set(pooled.data_vars)
+    assert "offset_flagged_events" in pooled.attrs and "change_flagged_events" in pooled.attrs
     assert pooled.sizes["event"] == 2 and pooled["curves"].dims == ("equation", "order", "wind")
     model = load_campaign_model(res)
     assert isinstance(model, VaryingCoefficientSINDy) and campaign_model_file(res) == res / MODEL_NAME
@@ -43,6 +45,9 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
     assert np.array_equal(regimes, pooled["regime"].values[sel])
     v = validate_campaign(camp.files[0].parent, res)
     assert v["pooled"]["model_file"] == str(res / MODEL_NAME)
+    # Two events without recorded slow changes: every flag scored, none may be a hit.
+    ch = v["pooled"]["changes"]
+    assert ch["changed_events"] == [] and all(sc["hits"] == 0 for sc in ch["flags"].values())
     t0 = float(start[start.size // 2])
     assert main(["forecast", str(sorted(res.glob("*.identify.nc"))[0]), "--out", str(tmp_path / "fc"),
                  "--t0", str(t0), "--horizon", "100", "--d", "0"]) == 0

@@ -178,8 +178,18 @@ def pool_results(result_files: Sequence, model=None, *,
         U); per event the residual checks of :mod:`vivbench.analysis.changes`
         (``event_residual_ratio``, ``event_residual_rel_rms``,
         ``event_linear_offset``, ``event_linear_offset_se``,
-        ``event_change_stat``) and the attributes ``change_event``,
-        ``change_p_value``, ``change_detected``, ``change_heterogeneity_p``.
+        ``event_change_stat``), the change-agnostic "not predicted" flags
+        ``event_offset_z`` and ``event_offset_flag``
+        (:func:`vivbench.analysis.changes.offset_flags`) and the attributes
+        ``change_event``, ``change_p_value``, ``change_detected``,
+        ``change_heterogeneity_p``, ``offset_flagged_events`` (JSON list),
+        ``flag_fdr``. With a ``VaryingCoefficientSINDy`` also the model change
+        scan (``event_misfit``, ``event_misfit_flag``,
+        ``event_model_split_gain``; attributes ``model_change_event``,
+        ``model_change_p_value``, ``model_change_detected``) and the flags
+        relative to the located change (``event_after_change``,
+        ``event_offset_held_out``, ``event_change_p``, ``event_change_flag``, attribute
+        ``change_flagged_events``; :func:`vivbench.analysis.changes.change_relative_flags`).
         With a ``PooledSINDy`` also the coordinates ``feature`` and
         ``bootstrap`` and ``coef`` (equation, feature) in physical units (dA/dt
         in m/s), ``coef_bootstrap``, ``n_terms``, ``threshold``, ``rss``,
@@ -191,7 +201,8 @@ def pool_results(result_files: Sequence, model=None, *,
         ``campaign.model.nc``). Written by :func:`write_pooled` as
         ``campaign.pooled.nc``.
     """
-    from vivbench.analysis.changes import change_point_scan, event_residual_checks, model_change_scan
+    from vivbench.analysis.changes import (FLAG_FDR, change_point_scan, change_relative_flags, event_residual_checks,
+                                           offset_flags, statistics_change_scan)
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes.varying import varying_window_verdicts
 
@@ -302,8 +313,38 @@ def pool_results(result_files: Sequence, model=None, *,
                               {"units": "m2 s-2", "long_name": "between-group sum of squares of event_linear_offset "
                                "for a change just before this event"}),
     })
+    offsets = offset_flags(checks["linear_offset"], checks["linear_offset_se"])
+    data.update({
+        "event_offset_z": (("event",), offsets["z"],
+                           {"units": "1", "long_name": "event_linear_offset against a random-effects model of the "
+                            "other events' offsets (z-score, the events' own spread in the null)"}),
+        "event_offset_flag": (("event",), offsets["flag"].astype(np.int8),
+                              {"long_name": "1: not predicted, the event's linear offset departs from the other "
+                               "events' (Benjamini-Hochberg over the events at FLAG_FDR)"}),
+    })
     event_ids = [str(a["event_id"]) for _p, _d, a, _e in results]
-    model_scan = model_change_scan(model, records, seed=model.seed) if varying else None
+    model_scan = None
+    if varying:
+        stats = model.event_statistics(records)
+        model_scan = statistics_change_scan(stats, seed=model.seed)
+        # Flags relative to the located change, only when the scan reports one.
+        ci = model_scan["change_index"] if model_scan["detected"] else -1
+        rel = change_relative_flags(stats, ci, checks["linear_offset_se"], model.a_ref_, model.y_scale_)
+        data.update({
+            "event_after_change": (("event",), (np.arange(len(records)) >= ci if ci >= 0
+                                                else np.zeros(len(records), dtype=bool)).astype(np.int8),
+                                   {"long_name": "1: from the change the model change scan located on (its "
+                                    "permutation p below its level: the campaign-level false-alarm control)"}),
+            "event_offset_held_out": (("event",), rel["offset_held_out"],
+                                      {"units": "s-1", "long_name": "linear offset of the event's residual under the "
+                                       "model of the other events (NaN: no change located)"}),
+            "event_change_p": (("event",), rel["p"],
+                               {"units": "1", "long_name": "p-value of event_offset_held_out against a random-effects "
+                                "model of the before-events' (events from the located change on)"}),
+            "event_change_flag": (("event",), rel["flag"].astype(np.int8),
+                                  {"long_name": "1: after the located change and its held-out offset departs from the "
+                                   "before-events' (Benjamini-Hochberg over the events after it at FLAG_FDR)"}),
+        })
     if model_scan is not None:
         data.update({
             "event_misfit": (("event",), model_scan["misfit"],
@@ -352,7 +393,11 @@ def pool_results(result_files: Sequence, model=None, *,
         ci = model_scan["change_index"]
         attrs.update({"model_change_event": "" if ci < 0 else event_ids[ci],
                       "model_change_p_value": model_scan["p_value"],
-                      "model_change_detected": int(model_scan["detected"])})
+                      "model_change_detected": int(model_scan["detected"]),
+                      "change_flagged_events": json.dumps([event_ids[i] for i in np.flatnonzero(
+                          data["event_change_flag"][1])])})
+    attrs["offset_flagged_events"] = json.dumps([event_ids[i] for i in np.flatnonzero(offsets["flag"])])
+    attrs["flag_fdr"] = FLAG_FDR
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -64,6 +65,10 @@ def run(args) -> int:
         print(f"vivbench pool: the events' residuals change with time (permutation p = {ds.attrs['change_p_value']:.3f}, "
               f"most likely from {ds.attrs['change_event']} on): the campaign model averages over a change the "
               "wind does not carry", file=sys.stderr)
+    for key, what in (("change_flagged_events", "after the change whose own offset departs from the events' before it"),
+                      ("offset_flagged_events", "whose linear offset departs from the other events'")):
+        if flagged := json.loads(ds.attrs.get(key, "[]")):
+            print(f"vivbench pool: events {what}: {', '.join(flagged)}", file=sys.stderr)
     print(f"wrote {model_out}: the fitted campaign model (vivbench.analysis.load_campaign_model)")
     return 0
 

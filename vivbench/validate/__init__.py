@@ -71,6 +71,7 @@ from vivbench.validate.metrics import (
 )
 from vivbench.validate.plateau import Plateau, clearest_plateau, measured_plateau, truth_plateau
 from vivbench.validate.pooled import pooled_recovery
+from vivbench.validate.drift import FLAG_VARIABLES, event_structural_state, score_change_flags
 from vivbench.validate.recovery import (
     campaign_recovery,
     model_window_rhs_errors,
@@ -127,6 +128,7 @@ __all__ = [
     "merge_support_scores",
     "order_support",
     "pooled_recovery",
+    "FLAG_VARIABLES", "event_structural_state", "score_change_flags",
     "pooled_support",
     "read_cluster_labels",
     "read_forecast_tables",

@@ -41,6 +41,7 @@ from vivbench.validate.recovery import (
     window_rhs_errors_true_AU,
 )
 from vivbench.core.errors import InputError
+from vivbench.validate.drift import event_structural_state, score_change_flags
 
 __all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables", "event_truth_curves",
            "NO_TRUE_SUPPORT"]
@@ -258,7 +259,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     regimes, truths, flags, errs, actives, per_event = [], [], [], [], [], []
     errs_true, actives_true, truth_U, truth_A, truth_excited, truth_curves = [], [], [], [], [], []
     sup_all, sup_ok = [], []
-    skipped, truth_by_key = {}, {}
+    skipped, truth_by_key, change_states = {}, {}, {}
     # The campaign model of ``vivbench pool``, scored beside the window models when present: the
     # model object (campaign.model.nc, or rebuilt from the pooled result's coef for older outputs)
     # through the protocol, the windows' identifiability verdicts from the pooled result.
@@ -280,6 +281,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
             skipped[str(ep)] = "no /truth group (field data): nothing to validate against"
             continue
         truth = tree["truth"].ds
+        change_states[event_id] = event_structural_state(truth)
         res = read_result(rp)
         start, end = res["window_start"].values, res["window_end"].values
         reg = res["regime"].values.astype(int)
@@ -350,7 +352,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
                       "file": str(pooled_path), "model_file": str(model_path),
                       "model": type(model).__name__,
                       "n_terms": [int(k) for k in getattr(model, "n_terms_", getattr(model, "n_basis_", []))],
-                      "curves": _pooled_curve_errors(pooled, model, truth_curves, truth_U, truth_A, truth_excited)}
+                      "curves": _pooled_curve_errors(pooled, model, truth_curves, truth_U, truth_A, truth_excited),
+                      "changes": score_change_flags(pooled, change_states)}
     if not regimes:
         raise InputError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
                          "validation needs synthetic events")
@@ -481,6 +484,12 @@ def _summary(v: dict) -> dict:
         prt = v["pooled"]["rhs_true_AU"]
         out.update(pooled_median_rhs_error_true_AU=prt["all"]["median"],
                    pooled_median_rhs_error_true_AU_active=prt["active"]["median"])
+        ch = v["pooled"].get("changes")
+        if ch is not None:
+            for key, sc in ch["flags"].items():
+                name = key.removeprefix("event_")
+                out.update({f"pooled_{name}_hits": sc["hits"], f"pooled_{name}_false_alarms": sc["false_alarms"]})
+            out["pooled_changed_events"] = len(ch["changed_events"])
         c = v["pooled"]["curves"]
         if c.get("scored"):
             out.update(pooled_curve_error_linear=c["reference"]["linear"], pooled_curve_error_total=c["reference"]["total"])
