@@ -289,7 +289,7 @@ def test_penalty_chosen_by_gcv_and_posterior_bands(fitted):
     model, records = fitted
     info = model.fit_info_
     sel = info["penalty_selection"]
-    assert "GCV" in info["penalty_criterion"] and "posterior" in info["band"]
+    assert "GCV" in info["penalty_criterion"] and "sandwich plus" in info["band"]
     assert [s["penalty"] for s in sel] == sorted(model.penalty_grid)
     # the least GCV wins
     assert model.penalty_ == sel[int(np.argmin([s["gcv"] for s in sel]))]["penalty"] == info["penalty"]
@@ -299,13 +299,13 @@ def test_penalty_chosen_by_gcv_and_posterior_bands(fitted):
     bi = info["band_info"]
     chosen = next(s for s in sel if s["penalty"] == model.penalty_)
     assert chosen["rss"] == bi["rss"] and chosen["edf"] == bi["edf"]
-    # posterior covariance: sigma^2 = RSS / (n - edf), kappa >= 1, symmetric positive semi-definite
+    # the default bands (sandwich + bias): sigma^2 = RSS / (n - edf), kappa >= 1, symmetric positive semi-definite
     assert bi["sigma2"] == pytest.approx(bi["rss"] / (bi["n_data"] - bi["edf"]), rel=1e-12) and bi["kappa"] >= 1.0
     np.testing.assert_allclose(model.cov_, model.cov_.T, rtol=0, atol=1e-12 * np.abs(model.cov_).max())
     assert np.linalg.eigvalsh(model.cov_).min() > -1e-9 * np.abs(model.cov_).max()
     covs = model.covariances_
-    np.testing.assert_array_equal(covs["posterior"], model.cov_)
-    assert not np.array_equal(covs["sandwich"], model.cov_)
+    np.testing.assert_array_equal(covs["sandwich_bias"], model.cov_)
+    assert not np.array_equal(covs["sandwich"], covs["posterior"])
     # the bias term is positive semi-definite: sandwich + bias is at least the sandwich in every direction
     extra = covs["sandwich_bias"] - covs["sandwich"]
     assert np.linalg.eigvalsh(0.5 * (extra + extra.T)).min() > -1e-9 * np.abs(extra).max()

@@ -211,7 +211,7 @@ def register(sub) -> None:
                    help="penalties whose fits (continued from the one at --penalty) are scored by GCV with the "
                         "effective sample size of the correlated residuals; the best is kept (default 0.1,0.3,1; "
                         "'none': keep --penalty)")
-    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias"), default="posterior",
+    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias"), default="sandwich_bias",
                    help="covariance of the bands: Bayesian posterior sigma^2 kappa (J'J + R)^-1, smoothing bias "
                         "included (default), the block sandwich (variance only), or the sandwich plus the "
                         "prior-averaged squared bias")
