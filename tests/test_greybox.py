@@ -152,7 +152,8 @@ def test_recovers_drawn_yaw_coefficient_from_noise_free_envelopes(params, yaw_co
     _check_recovery(params, model, records)
     # and the same records stripped of their yaw: factor 1, said so, and a worse fit
     blind = GreyBoxRefit(bridge=BRIDGE, warm_start=start, n_basis=12, shooting_interval=50.0, penalty=1e-3,
-                         penalty_grid=None, n_starts=1).fit([Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U) for r in records])
+                         penalty_grid=None, n_starts=1).fit([Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U)
+                                                             for r in records])
     assert not blind.yaw_used_ and blind.yaw_coef_ == 0.0
     assert "no record carries a measured yaw" in blind.fit_info_["yaw"]
     assert blind.fit_info_["cost"] > model.fit_info_["cost"]

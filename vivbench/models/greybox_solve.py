@@ -370,8 +370,8 @@ def _posterior(problem: ShootingProblem, Hinv_rows, theta, s, Q, block):
     kappa = batch_means_kappa(e, block)
     cov = sigma2 * kappa * 0.5 * (Vt + Vt.T)
     bias = sigma2 * kappa * (Vt @ problem.penalty @ Vt.T)
-    return cov, 0.5 * (bias + bias.T), {"sigma2": sigma2, "kappa": kappa, "edf": edf, "n_data": n_data, "n_constraints": n_con,
-                 "rss": rss}
+    info = {"sigma2": sigma2, "kappa": kappa, "edf": edf, "n_data": n_data, "n_constraints": n_con, "rss": rss}
+    return cov, 0.5 * (bias + bias.T), info
 
 
 def gcv_score(band_info: dict, kappa: float) -> dict:
