@@ -5,7 +5,8 @@ Run: ``.venv/bin/python benchmarks/bench_greybox.py --results demo/identify --ca
 from the first event's generator configuration (a benchmark may; the fit never
 does), the warm start is the campaign model beside the results. The fit is
 the default one: yaw factor (when the results carry the yaw) and the
-multi-start (screening of every start, then the final solve). Reported:
+multi-start (screening of every start, then the final solve) and the
+penalty chosen by GCV from a grid (a fit continued at each value). Reported:
 wall and CPU time of ``GreyBoxRefit.fit`` alone (reading the results and
 the window verdicts excluded), Gauss-Newton iterations, the process's peak
 resident memory (imports included) and the cost after every accepted step
@@ -51,6 +52,10 @@ def main(argv=None) -> dict:
     p.add_argument("--starts", type=int, default=4, help="starts of the multi-start (default 4)")
     p.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=30.0,
                    help="Gaussian smoothing of the wind, s (default 30, as vivbench greybox)")
+    p.add_argument("--no-warm-start", dest="no_warm_start", action="store_true",
+                   help="no campaign-model warm start (the equation-error starts alone)")
+    p.add_argument("--penalty-grid", dest="penalty_grid", default="0.1,0.3,1",
+                   help="penalties scored by GCV (default as vivbench greybox; 'none': the fixed 0.3)")
     args = p.parse_args(argv)
     from vivbench.analysis.greybox import campaign_warm_start
     from vivbench.analysis.pool import curve_wind_grid, records_from_results
@@ -60,11 +65,12 @@ def main(argv=None) -> dict:
     files = list_results(args.results)
     records = records_from_results(files, wind_smoothing_s=args.wind_smoothing)
     wind = curve_wind_grid(np.concatenate([r.U.ravel() for r in records]))
-    warm, source = campaign_warm_start(Path(args.results), wind)
+    warm, source = (None, "none") if args.no_warm_start else campaign_warm_start(Path(args.results), wind)
+    grid = None if args.penalty_grid.lower() == "none" else tuple(float(x) for x in args.penalty_grid.split(","))
     bridge = _bridge(Path(args.campaign))
     history = []
     t0, c0 = time.perf_counter(), time.process_time()
-    model = GreyBoxRefit(bridge=bridge, warm_start=warm, n_starts=args.starts)
+    model = GreyBoxRefit(bridge=bridge, warm_start=warm, n_starts=args.starts, penalty_grid=grid)
     model.fit(records, callback=lambda it, cost, mu: history.append((time.perf_counter() - t0, cost)))
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2  # Linux: kB
@@ -73,12 +79,12 @@ def main(argv=None) -> dict:
            "fit_wall_s": wall, "fit_cpu_s": cpu, "iterations": info["iterations"], "converged": info["converged"],
            "peak_rss_gb": peak_gb, "warm_start": source, "max_continuity_defect": info["max_defect"],
            "start": info["start"], "n_starts": len(info["starts"]) or 1, "yaw_coef": model.yaw_coef_,
-           "yaw": info["yaw"]}
+           "yaw": info["yaw"], "penalty": info["penalty"], "penalty_criterion": info["penalty_criterion"]}
     print(f"grey-box refit of {len(records)} events ({info['n_intervals']} shooting intervals, {info['n_samples']} "
           f"grid samples): {wall:.1f} s wall, {cpu:.1f} s CPU, {info['iterations']} Gauss-Newton iterations "
           f"({'converged' if info['converged'] else 'not converged'}), peak RSS {peak_gb:.2f} GB "
           f"(targets: 60 s, 2 GB); {out['n_starts']} starts, the winner: {info['start']}; yaw coefficient "
-          f"{model.yaw_coef_:.3g} ({info['yaw']})")
+          f"{model.yaw_coef_:.3g} ({info['yaw']}); penalty {info['penalty']:g} ({info['penalty_criterion']})")
     if args.figure:
         import matplotlib
 

@@ -127,7 +127,7 @@ def test_recovers_drawn_curves_from_noise_free_envelopes(params):
     # noise-free data in the model class need little smoothing (the default penalty is set for field-like noise)
     # one start: the multi-start has its own test
     model = GreyBoxRefit(bridge=BRIDGE, warm_start=start, n_basis=14, shooting_interval=50.0, penalty=1e-3,
-                         n_starts=1).fit(records)
+                         penalty_grid=None, n_starts=1).fit(records)
     assert model.fit_info_["converged"], model.fit_info_
     _check_recovery(params, model, records)
 
@@ -141,7 +141,7 @@ def test_recovers_drawn_yaw_coefficient_from_noise_free_envelopes(params, yaw_co
     records = _records(params, duration=1000.0, yaw=yaws)
     start = _true_curves(params, np.arange(2.5, 13.01, 0.1), scale=(0.8, 1.2, 0.8, 1.2))
     model = GreyBoxRefit(bridge=BRIDGE, warm_start=start, n_basis=12, shooting_interval=50.0, penalty=1e-3,
-                         n_starts=1).fit(records)
+                         penalty_grid=None, n_starts=1).fit(records)
     assert model.yaw_used_ and "measured yaw" in model.fit_info_["yaw"]
     # the yaw factor of the largest measured yaw: within 2 % of the truth (c itself is weakly determined where
     # sin^2(yaw) is small: at 20 degrees it scales the factor's departure from 1 by 0.12)
@@ -152,7 +152,8 @@ def test_recovers_drawn_yaw_coefficient_from_noise_free_envelopes(params, yaw_co
     _check_recovery(params, model, records)
     # and the same records stripped of their yaw: factor 1, said so, and a worse fit
     blind = GreyBoxRefit(bridge=BRIDGE, warm_start=start, n_basis=12, shooting_interval=50.0, penalty=1e-3,
-                         n_starts=1).fit([Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U) for r in records])
+                         penalty_grid=None, n_starts=1).fit([Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U)
+                                                             for r in records])
     assert not blind.yaw_used_ and blind.yaw_coef_ == 0.0
     assert "no record carries a measured yaw" in blind.fit_info_["yaw"]
     assert blind.fit_info_["cost"] > model.fit_info_["cost"]
@@ -162,14 +163,15 @@ def test_multi_start_is_deterministic_and_keeps_the_lowest_screened_cost():
     params = {"peak": 18.0, "center": 6.8, "width": 1.1, "baseline": -4.0, "e1": 25.0, "e2": 400.0, "cl": 0.03}
     records = _records(params, n_events=2, duration=800.0)
     start = _true_curves(params, np.arange(2.5, 13.01, 0.1), scale=(0.8, 1.2, 0.8, 1.2))
-    kw = {"bridge": BRIDGE, "warm_start": start, "n_basis": 8, "screen_iter": 3}
+    kw = {"bridge": BRIDGE, "warm_start": start, "n_basis": 8, "screen_iter": 3, "penalty_grid": None}
     one = GreyBoxRefit(n_starts=1, **kw).fit(records)
     multi = GreyBoxRefit(n_starts=3, seed=5, **kw).fit(records)
     again = GreyBoxRefit(n_starts=3, seed=5, **kw).fit(records)
     np.testing.assert_array_equal(multi.coef_, again.coef_)
     starts = multi.fit_info_["starts"]
-    assert [s["start"].split(" (")[0] for s in starts] == ["warm start from curves", "equation error",
-                                                          "perturbed start 1"]
+    assert [s["start"].split(" (")[0].split(" with")[0] for s in starts] == ["warm start from curves",
+                                                                            "equation error", "equation error"]
+    assert "constant e1" in starts[1]["start"] and "product form" in starts[2]["start"]
     costs = [s["screened_cost"] for s in starts]
     assert multi.fit_info_["start"] == starts[int(np.argmin(costs))]["start"]
     # one objective whichever start is used: the penalty is fixed at the first start
@@ -182,7 +184,7 @@ def test_multi_start_is_deterministic_and_keeps_the_lowest_screened_cost():
 @given(params=params_strategy)
 def test_recovers_drawn_curves_without_warm_start(params):
     records = _records(params, n_events=4)
-    model = GreyBoxRefit(bridge=BRIDGE, n_basis=14, penalty=1e-3).fit(records)
+    model = GreyBoxRefit(bridge=BRIDGE, n_basis=14, penalty=1e-3, penalty_grid=None).fit(records)
     # looser: the equation-error start (finite differences of the envelopes) leaves the iterations, stopped at a
     # relative cost decrease of 1e-3, farther from the optimum (seen: a_k1 errors 0.051 and 0.107, NMSE 1.5e-3 on
     # one event); the warm-started path above is held to 5 %
@@ -271,3 +273,57 @@ def test_cli_greybox_on_a_small_campaign(small_results, tmp_path, capsys):
     code = main(["greybox", str(results_dir), "--out", str(tmp_path / "x"), "--depth", "3.5", "--damping-ratio", "0.003"])
     err = capsys.readouterr().err
     assert code == 2 and "mass" in err and err.count("\n") == 1
+
+
+def test_batch_means_kappa_is_one_for_white_and_the_block_length_for_block_constant_residuals():
+    from vivbench.models.greybox_solve import batch_means_kappa
+
+    rng = np.random.default_rng(3)
+    block = np.repeat(np.arange(200), 5)  # 200 blocks of 5 intervals of 20 samples: 100 samples a block
+    white = rng.standard_normal((1000, 20))
+    assert batch_means_kappa(white, block) == pytest.approx(1.0, abs=0.3)
+    const = np.repeat(rng.standard_normal(200), 5)[:, None] * np.ones((1000, 20))
+    assert batch_means_kappa(const, block) == pytest.approx(100.0, rel=1e-12)
+
+
+def test_penalty_chosen_by_gcv_and_posterior_bands(fitted):
+    model, records = fitted
+    info = model.fit_info_
+    sel = info["penalty_selection"]
+    assert "GCV" in info["penalty_criterion"] and "sandwich plus" in info["band"]
+    assert [s["penalty"] for s in sel] == sorted(model.penalty_grid)
+    # the least GCV wins
+    assert model.penalty_ == sel[int(np.argmin([s["gcv"] for s in sel]))]["penalty"] == info["penalty"]
+    # more penalty, fewer degrees of freedom and more residual
+    edf, rss = np.array([s["edf"] for s in sel]), np.array([s["rss"] for s in sel])
+    assert np.all(np.diff(edf) < 0) and np.all(np.diff(rss) > 0)
+    bi = info["band_info"]
+    chosen = next(s for s in sel if s["penalty"] == model.penalty_)
+    assert chosen["rss"] == bi["rss"] and chosen["edf"] == bi["edf"]
+    # the default bands (sandwich + bias): sigma^2 = RSS / (n - edf), kappa >= 1, symmetric positive semi-definite
+    assert bi["sigma2"] == pytest.approx(bi["rss"] / (bi["n_data"] - bi["edf"]), rel=1e-12) and bi["kappa"] >= 1.0
+    np.testing.assert_allclose(model.cov_, model.cov_.T, rtol=0, atol=1e-12 * np.abs(model.cov_).max())
+    assert np.linalg.eigvalsh(model.cov_).min() > -1e-9 * np.abs(model.cov_).max()
+    covs = model.covariances_
+    np.testing.assert_array_equal(covs["sandwich_bias"], model.cov_)
+    assert not np.array_equal(covs["sandwich"], covs["posterior"])
+    # the bias term is positive semi-definite: sandwich + bias is at least the sandwich in every direction
+    extra = covs["sandwich_bias"] - covs["sandwich"]
+    assert np.linalg.eigvalsh(0.5 * (extra + extra.T)).min() > -1e-9 * np.abs(extra).max()
+    back = GreyBoxRefit.from_dataset(model.to_dataset())
+    for name, cov in covs.items():
+        np.testing.assert_array_equal(back.covariances_[name], cov)
+
+
+def test_fit_without_warm_start_starts_from_constant_limiting_terms():
+    params = {"peak": 18.0, "center": 6.8, "width": 1.1, "baseline": -4.0, "e1": 25.0, "e2": 400.0, "cl": 0.03}
+    records = _records(params, n_events=2, duration=800.0)
+    model = GreyBoxRefit(bridge=BRIDGE, n_basis=8, n_starts=2, screen_iter=3, penalty=1e-3,
+                         penalty_grid=None).fit(records)
+    names = [s["start"] for s in model.fit_info_["starts"]]
+    assert "constant e1" in names[0] and "product form" in names[1]
+    # the constant-e start sets the penalty's scale and is finite as it stands (no Y1 shrinking)
+    assert "scaled by" not in names[0]
+    assert model.fit_info_["converged"], model.fit_info_
+    sims = [np.nanmean(model.simulate(r).nmse) for r in records]
+    assert max(sims) < 1e-2, sims

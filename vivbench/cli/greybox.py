@@ -73,7 +73,8 @@ def run(args) -> int:
     bridge = bridge_from_args(args, files)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, dt=args.dt,
+    grid = None if args.penalty_grid.strip().lower() == "none" else _numbers(args.penalty_grid, "penalty-grid")
+    estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, penalty_grid=grid, band=args.band, dt=args.dt,
                              shooting_interval=args.interval, max_iter=args.max_iter, yaw_factor=not args.no_yaw,
                              n_starts=args.starts, seed=args.seed, block_s=args.block)
     t0 = time.perf_counter()
@@ -112,6 +113,9 @@ def run(args) -> int:
                "total_seconds": seconds, "iterations": info["iterations"], "converged": info["converged"],
                "max_continuity_defect": info["max_defect"], "n_intervals": info["n_intervals"],
                "start": info["start"], "starts": info.get("starts", []), "yaw": info.get("yaw"),
+               "penalty": info.get("penalty"), "penalty_criterion": info.get("penalty_criterion"),
+               "penalty_selection": info.get("penalty_selection"), "band": info.get("band"),
+               "band_info": info.get("band_info"),
                "yaw_coef": model.yaw_coef_, "yaw_coef_lower": float(model.yaw_curve()["yaw_coef_lower"]),
                "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean())}
@@ -162,6 +166,10 @@ def run(args) -> int:
           f"({'converged' if info['converged'] else 'NOT converged: ' + info['message']}), median simulation NMSE "
           f"{summary['nmse_median']:.3g}, regime coverage {summary['regime_coverage']:.3f}")
     yc = model.yaw_curve()
+    bi = info.get("band_info") or {}
+    print(f"penalty {info.get('penalty', model.penalty):g} ({info.get('penalty_criterion', 'given')}); bands: "
+          f"{info.get('band', '')}, sigma^2 {bi.get('sigma2', float('nan')):.3g}, kappa "
+          f"{bi.get('kappa', float('nan')):.3g}, edf {bi.get('edf', float('nan')):.1f}")
     print(f"start: {info['start']}; {info.get('yaw', '')}" + (
         f"; c = {model.yaw_coef_:.3g} [{float(yc['yaw_coef_lower']):.3g}, {float(yc['yaw_coef_upper']):.3g}]"
         if model.yaw_used_ else ""))
@@ -197,7 +205,16 @@ def register(sub) -> None:
                    help="L_k of the sections' strips, m (default: equal)")
     s.add_argument("--n-basis", dest="n_basis", type=int, default=16, help="B-splines per function (default 16)")
     s.add_argument("--penalty", type=float, default=0.3,
-                   help="relative roughness penalty (default 0.3, chosen on the default campaign)")
+                   help="relative roughness penalty of the first fit (default 0.3); the final one with "
+                        "--penalty-grid none")
+    s.add_argument("--penalty-grid", dest="penalty_grid", default="0.1,0.3,1",
+                   help="penalties whose fits (continued from the one at --penalty) are scored by GCV with the "
+                        "effective sample size of the correlated residuals; the best is kept (default 0.1,0.3,1; "
+                        "'none': keep --penalty)")
+    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias"), default="sandwich_bias",
+                   help="covariance of the bands: Bayesian posterior sigma^2 kappa (J'J + R)^-1, smoothing bias "
+                        "included (default), the block sandwich (variance only), or the sandwich plus the "
+                        "prior-averaged squared bias")
     s.add_argument("--dt", type=float, default=1.0, help="step of the fit grid, s (default 1)")
     s.add_argument("--interval", type=float, default=60.0, help="shooting interval, s (default 60)")
     s.add_argument("--max-iter", dest="max_iter", type=int, default=30,

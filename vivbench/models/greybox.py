@@ -50,9 +50,10 @@ events' yaw angles. The curves (DESIGN 3.5) and the physical functions are
 reported at yaw 0 (w = 1), as the truth's are.
 
 Starts (multi-start against wrong local minima). The candidates are the
-campaign model's curves (``warm_start``), an equation-error fit of the same
-model in product form (Y1, Y1 e1, Y1 e2, C_L as splines: linear least
-squares on finite differences of Q) and ``n_starts - 2`` copies of the first
+campaign model's curves (``warm_start``), an equation-error fit with e1 and
+e2 constant (picked from a grid; Y1 and C_L splines by linear least squares
+on finite differences of Q), an equation-error fit of the same model in
+product form (Y1, Y1 e1, Y1 e2, C_L as splines) and copies of the first
 with every function scaled by a seeded log-normal factor and a random yaw
 coefficient. The roughness penalty is scaled once, at the first start,
 before any start is iterated, so all starts minimise one objective; each
@@ -61,11 +62,35 @@ weight, and the one with the lowest penalised cost there is iterated to
 convergence. The draws come from ``seed``: the same data and seed give the
 same fit.
 
-Uncertainty: block sandwich covariance of the spline coefficients (see
-:mod:`vivbench.models.greybox_solve`); bands by the delta method at
-``level``. They cover the estimator's variance, not the smoothing bias of the
-penalty nor the model's own limits (e.g. a truth whose yaw dependence is not
-of the form 1 - c sin^2 psi).
+Penalty (``penalty_grid``): the fit at ``penalty`` is continued at every
+other value of the grid, and the fit with the least generalised
+cross-validation score, GCV = n_eff RSS / (n_eff - edf)^2, is kept: edf the
+trace of the influence matrix of the fit's Gauss-Newton linearisation, n_eff
+= n / kappa the effective sample size of the correlated residuals (kappa of
+the fit at ``penalty``, below; :func:`vivbench.models.greybox_solve.gcv_score`).
+The scores and the chosen value are in ``fit_info_["penalty_selection"]``
+and ``fit_info_["penalty"]``.
+
+Uncertainty (``band``), covariances of the spline coefficients
+(:mod:`vivbench.models.greybox_solve`), bands by the delta method at ``level``:
+
+- "sandwich_bias" (default): the block sandwich (the estimator's variance,
+  residuals correlated within an event) plus the prior-averaged squared
+  smoothing bias sigma^2 kappa H^-1 R H^-1 (H = J^T J + R; the bias of the
+  penalised estimator is -H^-1 R theta). With independent residuals it is
+  the Bayesian posterior covariance below.
+- "posterior": the Bayesian posterior covariance of the penalised spline,
+  sigma^2 kappa H^-1 (Wahba 1983, Nychka 1988), residual variance sigma^2 =
+  RSS / (n - edf), kappa the batch-means variance inflation of the residuals
+  (block ``block_s``). Measured on campaign A (penalty 0.3) its bands are
+  half as wide as the sandwich's and cover the truth's a_k1 at 62 % of the
+  lock-in winds (the sandwich: 100 %): the residuals' slow correlation acts
+  on the spline directions more strongly than on their plain sum, which is
+  all kappa sees.
+- "sandwich": the block sandwich alone, the estimator's variance only.
+
+None covers the model's own limits (e.g. a truth whose yaw dependence is
+not of the form 1 - c sin^2 psi).
 """
 
 from __future__ import annotations
@@ -85,7 +110,11 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.greybox_shooting import rk4_step_function, shooting_grid
-from vivbench.models.greybox_solve import ShootingProblem, solve_gauss_newton
+from vivbench.models.greybox_solve import (
+    ShootingProblem,
+    gcv_score,
+    solve_gauss_newton,
+)
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots
@@ -94,6 +123,15 @@ __all__ = ["BridgeProperties", "GreyBoxRefit", "FUNCTIONS", "curves_to_functions
 
 #: The unknown functions, in the order of the coefficient rows.
 FUNCTIONS = ("Y1", "e1", "e2", "C_L")
+
+#: What each ``band`` choice holds (stated in the fit's output).
+_BAND_NOTES = {
+    "posterior": "Bayesian posterior covariance sigma^2 kappa (J'J + R)^-1 (Wahba; Nychka 1988): variance and "
+                 "smoothing bias averaged over the function, residual correlation by kappa",
+    "sandwich": "block sandwich covariance: the estimator's variance only (no smoothing bias)",
+    "sandwich_bias": "block sandwich plus the prior-averaged squared smoothing bias sigma^2 kappa H^-1 R H^-1 "
+                     "(H = J'J + R): variance robust to the residual correlation, and smoothing bias",
+}
 
 #: Continuity weight of the first continuation stage (and of the screening of the starts).
 _FIRST_WEIGHT = 1e2
@@ -250,8 +288,17 @@ class GreyBoxRefit(ModelBase):
     penalty : float
         Roughness penalty of each function relative to its share of the
         Gauss-Newton matrix at the first start (trace ratio), a dimensionless
-        weight (0.3 chosen on the default campaign A against 1: a_k1 error
-        0.081 against 0.107, with 30 s wind smoothing).
+        weight: the value of the first fit, and the final one when
+        ``penalty_grid`` is None (0.3 was picked by hand on campaign A; GCV
+        picked it from (0.1, 0.3, 1) on A, on bridge B and on bridge C).
+    penalty_grid : tuple of float or None
+        Penalties (same scale) whose fits are scored by GCV with the
+        effective sample size (module docstring); None: ``penalty`` is kept.
+    band : {"posterior", "sandwich", "sandwich_bias"}
+        Covariance of the bands: the Bayesian posterior covariance (bias
+        included on average across the function), the block sandwich
+        (variance only) or the sandwich plus the prior-averaged squared bias
+        (module docstring).
     dt : float, s
         Step of the fit grid (a multiple of the records' step; the envelope is slow).
     shooting_interval : float, s
@@ -261,7 +308,8 @@ class GreyBoxRefit(ModelBase):
     tol : float
         Relative decrease of the cost below which the iterations stop.
     block_s : float, s
-        Block length of the sandwich covariance: residuals are taken as
+        Block length of the sandwich covariance and of the posterior's
+        batch-means variance inflation: residuals are taken as
         correlated within a block of one event and independent between
         blocks. The default (a day) makes every event one block, which
         accounts for the slow model error that runs through an event (on
@@ -302,7 +350,11 @@ class GreyBoxRefit(ModelBase):
         Whether the yaw factor was fitted.
     cov_ : ndarray, shape (P, P)
         Covariance of the row-major flattening of ``coef_`` followed, when
-        ``yaw_used_``, by ``yaw_coef_`` (P = 4 n_basis + 1).
+        ``yaw_used_``, by ``yaw_coef_`` (P = 4 n_basis + 1): the ``band`` one.
+    covariances_ : dict of ndarray, shape (P, P)
+        All three covariances by ``band`` name (for comparison).
+    penalty_ : float
+        The penalty of the final fit (chosen by GCV when ``penalty_grid`` is given).
     knots_ : ndarray, reduced velocity
     phi_, beta_ : ndarray, shape (S,)
     wind_range_ : (float, float), m/s, the fitted data's range of wind
@@ -316,13 +368,17 @@ class GreyBoxRefit(ModelBase):
     _fitted_attribute = "coef_"
 
     def __init__(self, *, bridge: BridgeProperties | None = None, n_basis: int = 16, penalty: float = 0.3,
-                 dt: float = 1.0, shooting_interval: float = 60.0, max_iter: int = 30, tol: float = 1e-3,
+                 penalty_grid: tuple | None = (0.1, 0.3, 1.0),
+                 band: str = "sandwich_bias", dt: float = 1.0, shooting_interval: float = 60.0, max_iter: int = 30,
+                 tol: float = 1e-3,
                  block_s: float = 86400.0, level: float = 0.95, continuity_weight: float = 1e6, warm_start=None,
                  yaw_factor: bool = True, n_starts: int = 4, screen_iter: int = 6, start_spread: float = 0.4,
                  seed: int = 0):
         self.bridge = bridge
         self.n_basis = n_basis
         self.penalty = penalty
+        self.penalty_grid = penalty_grid
+        self.band = band
         self.dt = dt
         self.shooting_interval = shooting_interval
         self.max_iter = max_iter
@@ -347,6 +403,14 @@ class GreyBoxRefit(ModelBase):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a finite positive number; got {v!r}")
+        if self.penalty_grid is not None:
+            grid = self.penalty_grid
+            if (isinstance(grid, (str, bytes)) or not hasattr(grid, "__len__") or len(grid) == 0
+                    or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in grid)):
+                raise InputError(f"penalty_grid must be None or a non-empty list of finite positive numbers; "
+                                 f"got {grid!r}")
+        if self.band not in ("posterior", "sandwich", "sandwich_bias"):
+            raise InputError(f"band must be 'posterior', 'sandwich' or 'sandwich_bias'; got {self.band!r}")
         if self.shooting_interval < self.dt:
             raise InputError(f"shooting_interval ({self.shooting_interval}) must be at least dt ({self.dt})")
         if not (isinstance(self.max_iter, (int, np.integer)) and self.max_iter >= 1):
@@ -521,9 +585,28 @@ class GreyBoxRefit(ModelBase):
         probe.set_continuity_weight(self.continuity_weight)
         res = solve_gauss_newton(probe, theta0, s0, max_iter=self.max_iter, tol=self.tol, first_weight=_FIRST_WEIGHT,
                                  block_s=self.block_s, callback=callback)
+        penalty, selection = float(self.penalty), []
+        if self.penalty_grid is not None:
+            base, kappa, fits = R.copy(), res.band_info["kappa"], {}
+            for v in sorted({float(x) for x in self.penalty_grid}):
+                if v == penalty:
+                    fits[v] = res
+                else:  # continued from the fit at the given penalty, at the full continuity weight
+                    probe.penalty = base * (v / penalty)
+                    fits[v] = solve_gauss_newton(probe, res.theta, res.s, max_iter=self.max_iter, tol=self.tol,
+                                                 first_weight=self.continuity_weight, block_s=self.block_s,
+                                                 callback=callback)
+                selection.append({"penalty": v, "iterations": fits[v].iterations,
+                                  **gcv_score(fits[v].band_info, kappa)})
+            best = min(selection, key=lambda x: (x["gcv"], x["penalty"]))["penalty"]
+            res = fits[best]
+            R = base * (best / penalty)
+            penalty = best
         self.coef_ = res.theta[:4 * M].reshape(4, M)
         self.yaw_coef_ = float(res.theta[4 * M]) if use_yaw else 0.0
-        self.cov_ = res.cov
+        self.covariances_ = res.covariances
+        self.cov_ = res.covariances[self.band]
+        self.penalty_ = penalty
         self.penalty_matrix_ = R
         if use_yaw:
             n_with = len({int(e) for e in grid.event[grid.has_yaw]})
@@ -539,14 +622,21 @@ class GreyBoxRefit(ModelBase):
                           "seconds": time.perf_counter() - t_fit, "final_solve_seconds": res.seconds,
                           "n_intervals": grid.n_intervals, "n_samples": int(grid.weight.sum()),
                           "n_records": len(records), "start": start, "yaw": yaw_note,
-                          "starts": [{"start": n, "screened_cost": float(c)} for c, n, _, _ in screened]}
+                          "starts": [{"start": n, "screened_cost": float(c)} for c, n, _, _ in screened],
+                          "penalty": penalty, "penalty_selection": selection,
+                          "penalty_criterion": ("GCV of the fits on the grid, edf of the Gauss-Newton "
+                                                "linearisation, effective sample size n / kappa"
+                                                if self.penalty_grid is not None else "given"),
+                          "band": _BAND_NOTES[self.band],
+                          "band_info": res.band_info}
         return self
 
     def _starts(self, grid, B, a, zw, Qm, phi, beta, P, s2):
         """The named starts of the multi-start.
 
         The starts, in order: the warm start (if given), the equation-error
-        start, then perturbed copies of the first (seeded), ``n_starts`` in all;
+        start with constant e1, e2, the product-form equation-error start,
+        then perturbed copies of the first (seeded), ``n_starts`` in all;
         their yaw coefficient is 0 except in the perturbed ones.
         """
         M = self.n_basis
@@ -572,6 +662,11 @@ class GreyBoxRefit(ModelBase):
             ref = int(np.argmax(np.abs(phi)))
             p = cur[ref] * phi[ref] ** (np.arange(4) - 1)[:, None]  # a_ki = phi_k^(1-i) p_i
             starts.append(("warm start from curves", from_p(np.stack([np.interp(wind, w, pi) for pi in p]))))
+        ce, (e1c, e2c) = self._constant_e_start(grid, B, a, zw, Qm, P)
+        # the constant-e start before the product form: without a warm start it sets the penalty's scale and is
+        # the one perturbed (the product form's division by Y1 near its zeros can blow e1, e2 up by orders of
+        # magnitude: e2 ~ 2e6 on campaign A)
+        starts.append((f"equation error with constant e1 = {e1c:g}, e2 = {e2c:g} (grid)", ce))
         starts.append(("equation error (product form)", eq))
         base = starts[0][1]
         rng = np.random.default_rng(self.seed)
@@ -586,6 +681,63 @@ class GreyBoxRefit(ModelBase):
                            f"{', '.join(f'{x:.2f}' for x in factor)}"
                            + (f", yaw coefficient {c[0]:.3g})" if c.size else ")"), theta))
         return starts[:self.n_starts]
+
+    def _constant_e_start(self, grid, B, a, zw, Qm, P):
+        """Start from an equation-error fit with e1, e2 constant, picked from a grid, and Y1, C_L splines.
+
+        With e1 and e2 fixed the amplitude equation is linear in the splines
+        of C_L and Y1: dQ/dt + zeta w Q = sum_k a_0k C_L + sum_k Y1 (a_1k Q +
+        a_2k e1 Q^2 + a_3k e2 Q^3). Every pair (e1, e2) of a small logarithmic
+        grid is solved by penalised linear least squares on finite
+        differences of Q (each event's rows divided by its amplitude scale),
+        and the pair with the least residual kept; C_L is clipped at 0. The
+        constant, non-negative limiting terms keep the start's simulation
+        bounded where the product form's e = (Y1 e) / Y1 explodes near a zero of Y1.
+
+        Returns
+        -------
+        theta : ndarray, shape (P,)
+        (e1, e2) : the chosen constants
+        """
+        M = self.n_basis
+        Bg, ag = B[:, 0::2], a[:, 0::2]
+        dQ = np.gradient(Qm, grid.h, axis=1)
+        powers = Qm[..., None] ** np.arange(4)
+        X = np.einsum("ijsm,ijsf,ijf->ijfm", Bg, ag, powers)  # (I, n+1, 4, M) by order
+        ok = grid.weight > 0
+        ev, inv = np.unique(grid.event, return_inverse=True)
+        num, den = np.zeros(ev.size), np.zeros(ev.size)
+        np.add.at(num, inv, np.sum(np.where(ok, Qm, 0.0) ** 2, axis=1))
+        np.add.at(den, inv, ok.sum(axis=1))
+        w = np.broadcast_to((1.0 / np.sqrt(np.maximum(num / np.maximum(den, 1), 1e-300)))[inv][:, None],
+                            ok.shape)[ok]
+        Xf = X[ok].reshape(-1, 4 * M) * w[:, None]
+        y = (dQ[ok] + zw * Qm[ok]) * w
+        G, b, yy = Xf.T @ Xf, Xf.T @ y, float(y @ y)
+        K = difference_penalty(M)
+        e1_grid = np.array([0.0, 3.0, 10.0, 30.0, 100.0])
+        e2_grid = np.logspace(1.0, 4.0, 13)
+        best = (np.inf, None, None)
+        for e1 in e1_grid:
+            for e2 in e2_grid:
+                T = np.zeros((4 * M, 2 * M))
+                T[:M, :M] = np.eye(M)  # C_L
+                T[M:2 * M, M:] = np.eye(M)  # Y1 a_1
+                T[2 * M:3 * M, M:] = e1 * np.eye(M)
+                T[3 * M:, M:] = e2 * np.eye(M)
+                Gt, bt = T.T @ G @ T, T.T @ b
+                sc = np.sqrt(np.maximum(np.diag(Gt), 1e-300))
+                Gs = Gt / np.outer(sc, sc)
+                pen = np.kron(np.eye(2), K)
+                c = np.linalg.solve(Gs + 1e-3 * np.trace(Gs) / np.trace(pen) * pen + 1e-10 * np.eye(2 * M),
+                                    bt / sc) / sc
+                rss = yy - 2.0 * c @ bt + c @ Gt @ c
+                if rss < best[0]:
+                    best = (rss, (float(e1), float(e2)), c)
+        _, (e1, e2), c = best
+        theta = np.concatenate([c[M:], np.full(M, e1), np.full(M, e2), np.clip(c[:M], 0.0, None),
+                                np.zeros(P - 4 * M)])
+        return theta, (e1, e2)
 
     def _equation_error(self, grid, B, a, zw, Qm, wind, phi, beta) -> np.ndarray:
         """p_i(U) on ``wind`` from linear least squares of dQ/dt in the product form."""
@@ -854,7 +1006,13 @@ class GreyBoxRefit(ModelBase):
         ds = xr.Dataset(
             {"coef": (("function", "basis"), self.coef_, {"units": "1", "long_name": "B-spline coefficients"}),
              "coef_cov": (("parameter", "parameter_"), self.cov_,
-                          {"units": "1", "long_name": "sandwich covariance of coef (row-major flattening)"}),
+                          {"units": "1", "long_name": f"{self.band} covariance of coef (row-major flattening)"}),
+             "coef_cov_sandwich": (("parameter", "parameter_"), self.covariances_.get("sandwich", self.cov_),
+                              {"units": "1", "long_name": "block sandwich covariance of coef"}),
+             "coef_cov_posterior": (("parameter", "parameter_"), self.covariances_.get("posterior", self.cov_),
+                              {"units": "1", "long_name": "Bayesian posterior covariance of coef"}),
+             "coef_cov_sandwich_bias": (("parameter", "parameter_"), self.covariances_.get("sandwich_bias", self.cov_),
+                              {"units": "1", "long_name": "sandwich plus prior-averaged bias covariance of coef"}),
              "knots": (("knot",), self.knots_, {"units": "1", "long_name": "knots in reduced velocity U/(f D)"}),
              "mode_shape": (("section",), self.phi_, {"units": "1"}),
              "participation": (("section",), self.beta_, {"units": "1"})},
@@ -892,6 +1050,9 @@ class GreyBoxRefit(ModelBase):
         model = cls(bridge=bridge, **json.loads(ds.attrs["params_json"]))
         model.coef_ = np.asarray(ds["coef"].values, dtype=float)
         model.cov_ = np.asarray(ds["coef_cov"].values, dtype=float)
+        # files written before the posterior bands hold the sandwich only
+        model.covariances_ = {n: np.asarray(ds[f"coef_cov_{n}"].values, dtype=float)
+                              for n in ("sandwich", "posterior", "sandwich_bias") if f"coef_cov_{n}" in ds}
         model.knots_ = np.asarray(ds["knots"].values, dtype=float)
         model.phi_ = np.asarray(ds["mode_shape"].values, dtype=float)
         model.beta_ = np.asarray(ds["participation"].values, dtype=float)

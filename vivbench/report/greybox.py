@@ -189,6 +189,9 @@ _COMPARED = (
     ("band coverage of the truth's a_k1 over lock-in", "truth_linear_band_coverage", "truth_campaign_linear_band_coverage", "1"),
     ("Y1 error over lock-in", "truth_y1_error", None, "<= 0.10"),
     ("band coverage of the truth's Y1 over lock-in", "truth_y1_band_coverage", None, "1"),
+    ("band coverage of a_k1, posterior bands", "truth_posterior_linear_band_coverage", None, "1"),
+    ("band coverage of a_k1, sandwich bands (variance only)", "truth_sandwich_linear_band_coverage", None, "1"),
+    ("band coverage of a_k1, sandwich + bias bands", "truth_sandwich_bias_linear_band_coverage", None, "1"),
     ("median simulation NMSE per event", "nmse_median", None, "<= 0.01"),
     ("share of flagged windows with the true regime", "truth_regime_precision_identifiable", None, ">= 0.95"),
     ("regime coverage (windows flagged identifiable)", "regime_coverage", None, "-"),
@@ -209,7 +212,9 @@ def greybox_section(directory, out_dir, written: list, max_rows: int = 40) -> li
     cmd = summary.get("command", f"vivbench greybox ... --out {directory}")
     out += ["The averaged Simiu-Scanlan amplitude equation (DESIGN 2.3) with B-spline functions Y1, e1, e2, C_L of "
             "the reduced velocity, fitted by output error to the envelopes of all events at once (CasADi multiple "
-            "shooting, Gauss-Newton). Bands: block-sandwich covariance, delta method.", ""]
+            "shooting, Gauss-Newton). Bands (delta method): "
+            f"{summary.get('band') or 'block-sandwich covariance (files written before the band choice)'}. "
+            f"Penalty {_fmt(summary.get('penalty'))}: {summary.get('penalty_criterion') or 'given'}.", ""]
     if any(key in summary for _, key, _, _ in _COMPARED[:5]):
         out += ["Against the truth (issue 14 targets beside the measured numbers; the campaign model of "
                 "`vivbench pool` scored the same way):", "", "| quantity | grey-box | campaign model | target |",

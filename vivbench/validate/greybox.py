@@ -18,6 +18,7 @@ The dynamics on the true (A, U) are evaluated at the records' measured yaw
 
 from __future__ import annotations
 
+import copy
 import json
 from collections.abc import Sequence
 
@@ -200,5 +201,18 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         summary.update(campaign_curve_error_linear=out["campaign_curves"]["linear"],
                        campaign_curve_error_total=out["campaign_curves"]["total"],
                        campaign_linear_band_coverage=out["campaign_curves"]["linear_band_coverage"])
+    if out["curves"] is not None and getattr(model, "covariances_", None) and g.any():
+        # the same fit's bands with each covariance, to set them side by side
+        half = 0.5 * (cur["curves_upper"].values[k, 1, g] - cur["curves_lower"].values[k, 1, g])
+        for name, cov in model.covariances_.items():
+            alt = copy.copy(model)
+            alt.cov_ = cov
+            cs, ps = alt.curves(wind), alt.physical_curves(wind)
+            half_s = 0.5 * (cs["curves_upper"].values[k, 1, g] - cs["curves_lower"].values[k, 1, g])
+            summary[f"{name}_linear_band_coverage"] = _coverage(cs["curves_lower"].values[k, 1, g],
+                                                                cs["curves_upper"].values[k, 1, g], a_true[g])
+            summary[f"{name}_y1_band_coverage"] = (_coverage(ps["Y1_lower"].values[g], ps["Y1_upper"].values[g],
+                                                             y1_true[g]) if y1_true is not None else float("nan"))
+            summary[f"{name}_band_halfwidth_ratio"] = float(np.median(half_s / np.maximum(half, 1e-300)))
     out["summary"] = summary
     return out
