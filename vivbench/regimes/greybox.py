@@ -34,7 +34,7 @@ from vivbench.core.regime import DEFAULT_TAU, regime_rule
 from vivbench.models.greybox import GreyBoxRefit
 from vivbench.regimes.varying import window_order_stats
 
-__all__ = ["greybox_window_verdicts", "greybox_draws"]
+__all__ = ["greybox_draws", "greybox_window_verdicts"]
 
 
 def greybox_draws(model: GreyBoxRefit, n_draws: int, seed: int = 0, *, with_yaw: bool = False,
