@@ -33,9 +33,11 @@ pool``), must give the window the same regime (its point estimate, on the same
 data) for the window to count as identifiable: where two estimators of the
 same curves disagree on the regime, at least one carries a model error the
 bands miss. Measured with benchmarks/bench_greybox_verdict_bounds.py (share of
-flagged windows with the true regime, coverage): bridge C varying warm start
-0.952, 0.711 (clip, no reference: 0.851, 0.864); see the module's callers for A
-and B. C was the diagnosis campaign, so its figure is not held out.
+flagged windows with the true regime, coverage), clip without reference ->
+reflect with reference: campaign A 0.994, 0.687 -> 0.995, 0.654; bridge B
+0.983, 0.662 -> 0.990, 0.579; bridge C (varying warm start) 0.851, 0.864 ->
+0.952, 0.711, (pooled warm start, pooled reference) 0.874, 0.840 -> 0.978,
+0.535. C was the diagnosis campaign, so its figures are not held out.
 """
 
 from __future__ import annotations
