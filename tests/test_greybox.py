@@ -261,6 +261,7 @@ def test_cli_greybox_on_a_small_campaign(small_results, tmp_path, capsys):
     assert model.bridge.frequency == pytest.approx(0.327, rel=0.02)  # from the results, as identify found it
     summary = __import__("json").loads((out / "summary.json").read_text())
     assert summary["n_events"] == 2 and "truth_curve_error_linear" in summary
+    assert summary["verdict_bounds"] == "reflect" and isinstance(summary["verdict_reference"], str)
     # the report's grey-box section shows the comparison table and the figures
     from vivbench.report.greybox import greybox_section
 
@@ -327,3 +328,56 @@ def test_fit_without_warm_start_starts_from_constant_limiting_terms():
     assert model.fit_info_["converged"], model.fit_info_
     sims = [np.nanmean(model.simulate(r).nmse) for r in records]
     assert max(sims) < 1e-2, sims
+
+
+def test_verdict_draws_reflect_at_bounds_instead_of_piling_on_them():
+    """A bounded curve fitted at its bound with a wide band: reflected draws spread, clipped ones sit on 0.
+
+    Clipping put half the e2 draws at exactly 0 (no cubic term), a vote for regime 3 made by the clip
+    (bridge C's wrong flags); reflection keeps the draws feasible without that mass on the bound.
+    """
+    from types import SimpleNamespace
+
+    from vivbench.regimes.greybox import greybox_draws
+
+    M = 3
+    coef = np.array([[1.0] * M, [30.0] * M, [0.0] * M, [0.01] * M])
+    cov = np.diag(np.concatenate([np.full(M, 0.01), np.full(M, 4.0), np.full(M, 100.0**2), np.full(M, 1e-6)]))
+    fitted = SimpleNamespace(coef_=coef, cov_=cov, yaw_used_=False, yaw_coef_=0.0)
+    clip = greybox_draws(fitted, 2000, seed=3, bounds="clip")
+    refl, yaw = greybox_draws(fitted, 2000, seed=3, with_yaw=True)
+    assert np.all(refl[:, 1:] >= 0.0) and np.all(yaw == 0.0)
+    assert np.mean(clip[:, 2] == 0.0) > 0.4  # the Gaussian's lower half on the bound
+    assert np.mean(refl[:, 2] == 0.0) == 0.0
+    # half-normal with sd 100: median 67.4; the unbounded Y1 row is untouched
+    assert abs(np.median(refl[:, 2]) - 67.4) < 8.0
+    np.testing.assert_array_equal(refl[:, 0], clip[:, 0])
+    with pytest.raises(InputError, match="reflect"):
+        greybox_draws(fitted, 10, bounds="fold")
+
+
+def test_verdict_reference_must_give_the_same_regime(fitted):
+    """A window is identifiable only where the reference model's point regime equals the grey-box one."""
+    from vivbench.regimes.greybox import greybox_window_verdicts
+
+    model, records = fitted
+    rec = records[0]
+    start = np.arange(rec.t[0], rec.t[-1] - 100.0, 100.0)
+    end = start + 100.0
+    alone = greybox_window_verdicts(model, rec, start, end, n_draws=20)
+    same = greybox_window_verdicts(model, rec, start, end, n_draws=20, reference=model)
+    assert alone["identifiable"].any()
+    np.testing.assert_array_equal(same["identifiable"], alone["identifiable"])
+    np.testing.assert_array_equal(same["reference_regime"], alone["regime"])
+
+    class CubicOnly:
+        """Dynamics of the cubic order alone: regime 4 in every window."""
+
+        def order_contributions(self, record):
+            r = np.zeros(record.A.shape + (4,))
+            r[..., 3] = record.A**3
+            return r
+
+    other = greybox_window_verdicts(model, rec, start, end, n_draws=20, reference=CubicOnly())
+    assert np.all(other["reference_regime"][alone["regime"] > 0] == 4)
+    np.testing.assert_array_equal(other["identifiable"], alone["identifiable"] & (alone["regime"] == 4))

@@ -83,7 +83,8 @@ def campaign_warm_start(results_dir, wind: np.ndarray):
 
 def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: GreyBoxRefit | None = None,
                     warm_start: str | xr.Dataset | None = "auto", tau: float = 0.2, agreement: float = 0.95,
-                    n_draws: int = 100, callback=None, wind_smoothing_s: float = 30.0) -> GreyBoxOutcome:
+                    n_draws: int = 100, callback=None, wind_smoothing_s: float = 30.0,
+                    verdict_reference: str | None = "auto") -> GreyBoxOutcome:
     """Fit the grey-box model to identification results; regimes, verdicts and simulations per event.
 
     Parameters
@@ -104,6 +105,10 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
         length, the anemometer is one point. The default 30 s was chosen on
         the default campaign A (a_k1 error 0.151 without, 0.107 with 30 s,
         0.120 with 60 s; penalty 1).
+    verdict_reference : "auto" or None
+        "auto": a window is identifiable only if the campaign model beside the
+        first result (when there is one) gives it the same regime
+        (``reference`` of :func:`greybox_window_verdicts`); None: the draws alone.
 
     Returns
     -------
@@ -124,11 +129,22 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
     model = GreyBoxRefit() if model is None else model
     model.set_params(bridge=bridge, warm_start=warm_start)
     model.fit(records, callback=callback)
+    if verdict_reference not in ("auto", None):
+        raise InputError(f"verdict_reference must be 'auto' or None; got {verdict_reference!r}")
+    reference, reference_name = None, "none"
+    cm_path = campaign_model_file(files[0].parent) if verdict_reference == "auto" else None
+    if cm_path is not None:
+        try:
+            reference = load_campaign_model(cm_path)
+            reference_name = f"{cm_path.name} ({type(reference).__name__})"
+        except (InputError, ValueError):
+            reference = None
     parts, events = [], []
     for path, rec in zip(files, records):
         ds = read_result(path, ["window_start", "window_end"])
         start, end = ds["window_start"].values, ds["window_end"].values
-        v = greybox_window_verdicts(model, rec, start, end, tau=tau, agreement=agreement, n_draws=n_draws)
+        v = greybox_window_verdicts(model, rec, start, end, tau=tau, agreement=agreement, n_draws=n_draws,
+                                    reference=reference)
         parts.append(xr.Dataset(
             {"regime": (("window_all", "equation"), v["regime"]),
              "identifiable": (("window_all", "equation"), v["identifiable"]),
@@ -144,5 +160,6 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
         events.append(row)
     windows = xr.concat(parts, dim="window_all") if parts else xr.Dataset()
     windows = windows.assign_coords(equation=[f"S{k + 1}" for k in range(model.n_sections_)], order=np.arange(4))
-    windows.attrs.update(tau=tau, agreement=agreement, n_draws=n_draws)
+    windows.attrs.update(tau=tau, agreement=agreement, n_draws=n_draws, verdict_bounds="reflect",
+                         verdict_reference=reference_name)
     return GreyBoxOutcome(model=model, windows=windows, events=events, warm_start=source, records=records)

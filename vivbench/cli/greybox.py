@@ -118,7 +118,8 @@ def run(args) -> int:
                "band_info": info.get("band_info"),
                "yaw_coef": model.yaw_coef_, "yaw_coef_lower": float(model.yaw_curve()["yaw_coef_lower"]),
                "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
-               "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean())}
+               "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean()),
+               "verdict_bounds": w.attrs.get("verdict_bounds"), "verdict_reference": w.attrs.get("verdict_reference")}
     campaign_curves = None
     truth_curves = truth_functions = truth_yaw = None
     from vivbench.analysis.pool import campaign_model_file, load_campaign_model
