@@ -77,3 +77,19 @@ def test_wind_strata_group_events_of_similar_wind():
     strata = wind_strata(model.event_statistics(recs), size=3)
     # ranks by mean wind: 6.0, 6.2, 6.5 | 9.0, 9.2, 11.5 | 12.0, 12.2 (2 left over: their own stratum)
     assert strata.tolist() == [0, 2, 0, 1, 1, 0, 2, 1]
+
+
+def test_standardised_statistic_locates_the_step_and_rejects_unknown_names():
+    import pytest
+
+    from vivbench.analysis.changes import model_change_scan
+    from vivbench.models import VaryingCoefficientSINDy
+
+    recs = _step_records(change_at=5)
+    model = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,)).fit(recs)
+    scan = model_change_scan(model, recs, n_permutations=49, statistic="standardised")
+    assert scan["change_index"] == 5 and scan["detected"]
+    # The observed gains are not rescaled in the output; only the test statistic is.
+    assert scan["split_gain"][5] == np.nanmax(scan["split_gain"])
+    with pytest.raises(ValueError, match="statistic must be"):
+        model_change_scan(model, recs, n_permutations=9, statistic="median")

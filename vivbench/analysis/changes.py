@@ -320,7 +320,7 @@ def _split_gain(reduced: list[dict], order: np.ndarray, splits: np.ndarray) -> n
 
 def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, n_permutations: int = 99,
                       seed: int = 0, level: float = CHANGE_LEVEL, chunk: int = 8, null: str = "stratified",
-                      stratum_size: int = STRATUM_SIZE) -> dict:
+                      stratum_size: int = STRATUM_SIZE, statistic: str = "max") -> dict:
     """The most likely single change of the campaign model over the event sequence, and per-event misfit flags.
 
     Parameters
@@ -346,6 +346,13 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
         module docstring).
     stratum_size : int
         Events per stratum (the last stratum takes the remainder).
+    statistic : {"max", "standardised"}
+        ``"max"`` (default): the largest split gain over splits.
+        ``"standardised"``: the largest over splits of the gain standardised
+        by the null orderings' mean and standard deviation at that split
+        (every split judged on its own null scale; same orderings and cost).
+        Measured in the module docstring: neither removes the false alarm on
+        the 20-event campaign without change.
 
     Returns
     -------
@@ -360,12 +367,12 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
     """
     return statistics_change_scan(model.event_statistics(records), min_events=min_events,
                                   n_permutations=n_permutations, seed=seed, level=level, chunk=chunk, null=null,
-                                  stratum_size=stratum_size)
+                                  stratum_size=stratum_size, statistic=statistic)
 
 
 def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutations: int = 99, seed: int = 0,
                            level: float = CHANGE_LEVEL, chunk: int = 8, null: str = "stratified",
-                           stratum_size: int = STRATUM_SIZE) -> dict:
+                           stratum_size: int = STRATUM_SIZE, statistic: str = "max") -> dict:
     """:func:`model_change_scan` on per-event statistics (``VaryingCoefficientSINDy.event_statistics``).
 
     Parameters
@@ -373,7 +380,7 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
     stats : list of dict, one per equation
         ``G`` (E, p, p), ``b`` (E, p), ``yy`` (E,), ``n`` (E,), ``P``, ``penalty``, ``keep``
         (the events in time order; a subset of events is a slice of every array).
-    min_events, n_permutations, seed, level, chunk, null, stratum_size
+    min_events, n_permutations, seed, level, chunk, null, stratum_size, statistic
         As :func:`model_change_scan`.
 
     Returns
@@ -383,6 +390,8 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
     """
     if null not in ("stratified", "permutation"):
         raise ValueError(f"null must be 'stratified' or 'permutation'; got {null!r}")
+    if statistic not in ("max", "standardised"):
+        raise ValueError(f"statistic must be 'max' or 'standardised'; got {statistic!r}")
     if int(stratum_size) < 2:
         raise ValueError(f"stratum_size must be an integer >= 2; got {stratum_size!r}")
     stats = _equal_event_weights(stats)
@@ -421,9 +430,18 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
         perms = stratified_permutations(strata, int(n_permutations), rng)
     else:
         perms = np.argsort(rng.random((int(n_permutations), n_use)), axis=1)
-    null = np.concatenate([_split_gain(reduced, perms[i:i + chunk], splits).max(axis=1)
-                           for i in range(0, perms.shape[0], chunk)]) if n_permutations else np.zeros(0)
-    p = float((1 + np.sum(null >= gain[best])) / (1 + null.size))
+    null_gain = (np.concatenate([_split_gain(reduced, perms[i:i + chunk], splits)
+                                 for i in range(0, perms.shape[0], chunk)]) if n_permutations
+                 else np.zeros((0, splits.size)))
+    observed = gain
+    if statistic == "standardised" and null_gain.shape[0] > 1:
+        # Every split on its own null scale: splits of unequal coverage have unequal null gains.
+        mu, sd = null_gain.mean(axis=0), null_gain.std(axis=0)
+        sd = np.maximum(sd, 1e-12 * max(float(np.abs(mu).max()), 1e-300))
+        observed, null_gain = (gain - mu) / sd, (null_gain - mu) / sd
+        best = int(np.argmax(observed))
+    null = null_gain.max(axis=1)
+    p = float((1 + np.sum(null >= observed[best])) / (1 + null.size))
     out.update(change_index=int(use[splits[best]]), p_value=p, detected=bool(p < level))
     return out
 
