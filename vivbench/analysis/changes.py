@@ -320,7 +320,8 @@ def _split_gain(reduced: list[dict], order: np.ndarray, splits: np.ndarray) -> n
 
 def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, n_permutations: int = 99,
                       seed: int = 0, level: float = CHANGE_LEVEL, chunk: int = 8, null: str = "stratified",
-                      stratum_size: int = STRATUM_SIZE, statistic: str = "max") -> dict:
+                      stratum_size: int = STRATUM_SIZE, statistic: str = "max",
+                      yaw_terms: bool = True) -> dict:
     """The most likely single change of the campaign model over the event sequence, and per-event misfit flags.
 
     Parameters
@@ -353,6 +354,13 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
         (every split judged on its own null scale; same orderings and cost).
         Measured in the module docstring: neither removes the false alarm on
         the 20-event campaign without change.
+    yaw_terms : bool
+        True (default): the split refits use every column of the model,
+        its yaw terms included. False: the split refits (observed and null)
+        use only the yaw-free columns (j = 0), at the model's basis and
+        penalty: the scan then asks whether the function of (A, U) changes,
+        not its yaw terms, which each side's few events determine poorly.
+        The misfit flags always use the whole model.
 
     Returns
     -------
@@ -367,12 +375,13 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
     """
     return statistics_change_scan(model.event_statistics(records), min_events=min_events,
                                   n_permutations=n_permutations, seed=seed, level=level, chunk=chunk, null=null,
-                                  stratum_size=stratum_size, statistic=statistic)
+                                  stratum_size=stratum_size, statistic=statistic, yaw_terms=yaw_terms)
 
 
 def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutations: int = 99, seed: int = 0,
                            level: float = CHANGE_LEVEL, chunk: int = 8, null: str = "stratified",
-                           stratum_size: int = STRATUM_SIZE, statistic: str = "max") -> dict:
+                           stratum_size: int = STRATUM_SIZE, statistic: str = "max",
+                           yaw_terms: bool = True) -> dict:
     """:func:`model_change_scan` on per-event statistics (``VaryingCoefficientSINDy.event_statistics``).
 
     Parameters
@@ -380,7 +389,7 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
     stats : list of dict, one per equation
         ``G`` (E, p, p), ``b`` (E, p), ``yy`` (E,), ``n`` (E,), ``P``, ``penalty``, ``keep``
         (the events in time order; a subset of events is a slice of every array).
-    min_events, n_permutations, seed, level, chunk, null, stratum_size, statistic
+    min_events, n_permutations, seed, level, chunk, null, stratum_size, statistic, yaw_terms
         As :func:`model_change_scan`.
 
     Returns
@@ -414,6 +423,8 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
     # otherwise pull the split towards itself.
     use = np.flatnonzero(~out["misfit_flag"] & np.isfinite(misfit))
     stats = [{**st, "G": st["G"][use], "b": st["b"][use], "yy": st["yy"][use]} for st in stats]
+    if not yaw_terms:
+        stats = [{**st, "keep": st["keep"] & _yaw_free_columns(st)} for st in stats]
     n_use = use.size
     splits = np.arange(max(int(min_events), 1), n_use - max(int(min_events), 1) + 1)
     if splits.size == 0:
@@ -444,6 +455,18 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
     p = float((1 + np.sum(null >= observed[best])) / (1 + null.size))
     out.update(change_index=int(use[splits[best]]), p_value=p, detected=bool(p < level))
     return out
+
+
+def _yaw_free_columns(st: dict) -> np.ndarray:
+    """Columns of the design without a yaw factor (j = 0), shape (p,) bool.
+
+    The columns are ordered (i, j, m): amplitude power i (4), yaw power j (J + 1), basis m (``n_basis``).
+    """
+    M, p = int(st["n_basis"]), st["G"].shape[-1]
+    J1 = p // (4 * M)
+    if 4 * M * J1 != p:
+        raise ValueError(f"statistics of {p} columns are not 4 x (J + 1) x {M} (n_basis)")
+    return (np.arange(p) // M) % J1 == 0
 
 
 def _equal_event_weights(stats: list[dict]) -> list[dict]:
