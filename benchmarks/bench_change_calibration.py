@@ -48,6 +48,14 @@ drift E010 20      0.02 at E010, 2/15 (all     0.02 at E010, 1/15 (located)
 
 False alarms at 0.05: 4/75 subsets and 1/5 whole campaigns (free), 5/75 and 1/5
 (stratified). Power on 12-event subsets of the drift campaign is low (2/15, 1/15).
+
+Options of the scan (10 subsets, 99 stratified orderings; ``--null stratified --statistic
+max,standardised --yaw-terms 1,0``, cases nodrift, C (/tmp/gbband-c-camp), drift, step
+(/tmp/vdrift-step-camp, change 7), S1, B, A with the yaw-carrying results): whole-campaign p
+in the table of :mod:`vivbench.analysis.changes`; subsets with p < 0.05 without change
+(nodrift, C, S1, B, A): max 1, 3, 0, 0, 0; max without yaw terms 1, 1, 1, 0, 0; standardised
+1, 2, 0, 0, 0; both 1, 1, 1, 0, 0. Power on subsets: step 8/10 (7/10 with both), drift 1/10,
+1/10, 3/10, 2/10; every detection at the true change.
 """
 
 from __future__ import annotations
