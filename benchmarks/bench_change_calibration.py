@@ -4,7 +4,8 @@ Run::
 
     .venv/bin/python benchmarks/bench_change_calibration.py \\
         --case A:/tmp/campA:/tmp/realism2-a-id --case drift:/tmp/realism-drift/campaign:/tmp/realism-drift/identify:10 \\
-        [--subsets 20 --subset-size 12 --permutations 99 --null permutation]
+        [--subsets 20 --subset-size 12 --permutations 99 --null permutation \\
+         --statistic max,standardised --yaw-terms 1,0]
 
 Each ``--case NAME:CAMPAIGN:RESULTS[:CHANGE]`` is a campaign and its identification
 results; ``CHANGE`` (1-based event number) is the first event after a true change
@@ -47,6 +48,14 @@ drift E010 20      0.02 at E010, 2/15 (all     0.02 at E010, 1/15 (located)
 
 False alarms at 0.05: 4/75 subsets and 1/5 whole campaigns (free), 5/75 and 1/5
 (stratified). Power on 12-event subsets of the drift campaign is low (2/15, 1/15).
+
+Options of the scan (10 subsets, 99 stratified orderings; ``--null stratified --statistic
+max,standardised --yaw-terms 1,0``, cases nodrift, C (/tmp/gbband-c-camp), drift, step
+(/tmp/vdrift-step-camp, change 7), S1, B, A with the yaw-carrying results): whole-campaign p
+in the table of :mod:`vivbench.analysis.changes`; subsets with p < 0.05 without change
+(nodrift, C, S1, B, A): max 1, 3, 0, 0, 0; max without yaw terms 1, 1, 1, 0, 0; standardised
+1, 2, 0, 0, 0; both 1, 1, 1, 0, 0. Power on subsets: step 8/10 (7/10 with both), drift 1/10,
+1/10, 3/10, 2/10; every detection at the true change.
 """
 
 from __future__ import annotations
@@ -74,9 +83,11 @@ def _subset_stats(stats: list[dict], idx: np.ndarray) -> list[dict]:
     return [{**st, "G": st["G"][idx], "b": st["b"][idx], "yy": st["yy"][idx], "n": st["n"][idx]} for st in stats]
 
 
-def _scan_rows(stats, ids, change, *, n_subsets, size, n_permutations, min_events, null, seed) -> dict:
+def _scan_rows(stats, ids, change, *, n_subsets, size, n_permutations, min_events, null, seed, statistic="max",
+               yaw_terms=True) -> dict:
     E = len(ids)
-    full = statistics_change_scan(stats, n_permutations=n_permutations, seed=seed, min_events=min_events, null=null)
+    opts = {"null": null, "statistic": statistic, "yaw_terms": yaw_terms}
+    full = statistics_change_scan(stats, n_permutations=n_permutations, seed=seed, min_events=min_events, **opts)
     out = {"full": {"p_value": full["p_value"], "detected": bool(full["detected"]),
                     "change_event": ids[full["change_index"]] if full["change_index"] >= 0 else None,
                     "misfit_flagged": [ids[i] for i in np.flatnonzero(full["misfit_flag"])]}}
@@ -90,7 +101,7 @@ def _scan_rows(stats, ids, change, *, n_subsets, size, n_permutations, min_event
         if change is not None and not (min_events <= before <= size - min_events):
             continue
         sc = statistics_change_scan(_subset_stats(stats, idx), n_permutations=n_permutations, seed=len(rows),
-                                    min_events=min_events, null=null)
+                                    min_events=min_events, **opts)
         # located: the split found is within one subset event of the true one (``before`` events before it)
         located = None if change is None or sc["change_index"] < 0 else bool(abs(sc["change_index"] - before) <= 1)
         rows.append({"events": [ids[i] for i in idx], "p_value": sc["p_value"], "detected": bool(sc["detected"]),
@@ -106,8 +117,14 @@ def _scan_rows(stats, ids, change, *, n_subsets, size, n_permutations, min_event
     return out
 
 
+def _variants(nulls, statistics, yaw_terms) -> list[str]:
+    """Keys ``null|statistic|yaw`` (or ``noyaw``) of every combination of the scan's options."""
+    return [f"{n}|{s}|{'yaw' if y else 'noyaw'}" for n in nulls for s in statistics for y in yaw_terms]
+
+
 def run_case(name: str, camp: Path, results: Path, change: int | None, *, n_subsets: int, size: int,
-             n_permutations: int, nulls: list[str], min_events: int = 3) -> dict:
+             n_permutations: int, nulls: list[str], min_events: int = 3, statistics=("max",),
+             yaw_terms=(True,)) -> dict:
     t0 = time.perf_counter()
     files = sorted(results.glob("*.identify.nc"))
     recs = records_from_results(files, derivative=CAMPAIGN_DERIVATIVE, campaign=camp)
@@ -115,9 +132,11 @@ def run_case(name: str, camp: Path, results: Path, change: int | None, *, n_subs
     stats = model.event_statistics([model.measured_wind(r) for r in recs])
     ids = [r.event_id for r in recs]
     out = {"events": len(ids), "fit_s": time.perf_counter() - t0}
-    for null in nulls:
-        out[null] = _scan_rows(stats, ids, change, n_subsets=n_subsets, size=size, n_permutations=n_permutations,
-                               min_events=min_events, null=null, seed=model.seed)
+    for key in _variants(nulls, statistics, yaw_terms):
+        null, statistic, yaw = key.split("|")
+        out[key] = _scan_rows(stats, ids, change, n_subsets=n_subsets, size=size, n_permutations=n_permutations,
+                              min_events=min_events, null=null, seed=model.seed, statistic=statistic,
+                              yaw_terms=yaw == "yaw")
     out["total_s"] = time.perf_counter() - t0
     return out
 
@@ -129,6 +148,8 @@ def main(argv=None) -> dict:
     parser.add_argument("--subset-size", type=int, default=12)
     parser.add_argument("--permutations", type=int, default=99)
     parser.add_argument("--null", default="permutation,stratified", help="comma-separated nulls of the scan")
+    parser.add_argument("--statistic", default="max", help="comma-separated statistics (max, standardised)")
+    parser.add_argument("--yaw-terms", default="1", help="comma-separated 1/0: split refits with/without yaw terms")
     parser.add_argument("--json", type=Path, default=OUT / "change_calibration.json")
     args = parser.parse_args(argv)
     out = {}
@@ -138,17 +159,19 @@ def main(argv=None) -> dict:
             parser.error(f"--case {case!r}: give NAME:CAMPAIGN:RESULTS[:CHANGE_EVENT]")
         change = int(parts[3]) if len(parts) == 4 else None
         res = run_case(parts[0], Path(parts[1]), Path(parts[2]), change, n_subsets=args.subsets,
-                       size=args.subset_size, n_permutations=args.permutations, nulls=args.null.split(","))
+                       size=args.subset_size, n_permutations=args.permutations, nulls=args.null.split(","),
+                       statistics=args.statistic.split(","), yaw_terms=[y == "1" for y in args.yaw_terms.split(",")])
         out[parts[0]] = res
-        for null in args.null.split(","):
+        keys = _variants(args.null.split(","), args.statistic.split(","), [y == "1" for y in args.yaw_terms.split(",")])
+        for null in keys:
             summary = {k: v for k, v in res[null].items() if k != "subsets"}
             print(f"{parts[0]} {null}: {json.dumps(summary)}", flush=True)
-    print(f"\n{'case':<10} {'null':<12} {'events':>6} {'full p':>7} {'full event':>10} {'flagged':>16} {'subsets':>7} "
+    print(f"\n{'case':<10} {'null|stat|yaw':<30} {'events':>6} {'full p':>7} {'full event':>10} {'flagged':>16} {'subsets':>7} "
           f"{'p<0.05':>7} {'located':>7}")
     for name, res in out.items():
-        for null in args.null.split(","):
+        for null in keys:
             r = res[null]
-            print(f"{name:<10} {null:<12} {res['events']:6d} {r['full']['p_value']:7.3f} "
+            print(f"{name:<10} {null:<30} {res['events']:6d} {r['full']['p_value']:7.3f} "
                   f"{r['full']['change_event']!s:>10} {','.join(r['full']['misfit_flagged']) or '-':>16} "
                   f"{r['n_subsets']:7d} {r['rate_p_lt_level']:7.3f} {r.get('located_share_of_detected', float('nan')):7.3f}")
     args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -77,3 +77,40 @@ def test_wind_strata_group_events_of_similar_wind():
     strata = wind_strata(model.event_statistics(recs), size=3)
     # ranks by mean wind: 6.0, 6.2, 6.5 | 9.0, 9.2, 11.5 | 12.0, 12.2 (2 left over: their own stratum)
     assert strata.tolist() == [0, 2, 0, 1, 1, 0, 2, 1]
+
+
+def test_standardised_statistic_locates_the_step_and_rejects_unknown_names():
+    import pytest
+
+    from vivbench.analysis.changes import model_change_scan
+    from vivbench.models import VaryingCoefficientSINDy
+
+    recs = _step_records(change_at=5)
+    model = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,)).fit(recs)
+    scan = model_change_scan(model, recs, n_permutations=49, statistic="standardised")
+    assert scan["change_index"] == 5 and scan["detected"]
+    # The observed gains are not rescaled in the output; only the test statistic is.
+    assert scan["split_gain"][5] == np.nanmax(scan["split_gain"])
+    with pytest.raises(ValueError, match="statistic must be"):
+        model_change_scan(model, recs, n_permutations=9, statistic="median")
+
+
+def test_scan_without_yaw_terms_equals_the_scan_of_the_yaw_free_columns():
+    from vivbench.analysis.changes import statistics_change_scan
+
+    rng = np.random.default_rng(3)
+    E, n, M, J1 = 10, 60, 3, 2  # columns ordered (amplitude power i: 4, yaw power j: J1, basis m: M)
+    p = 4 * J1 * M
+    X = rng.standard_normal((E, n, p))
+    y = X[..., :M].sum(axis=2) + rng.standard_normal((E, n)) * (1.0 + (np.arange(E) >= 5))[:, None]
+    full = [{"G": np.einsum("eni,enj->eij", X, X), "b": np.einsum("eni,en->ei", X, y), "yy": (y * y).sum(axis=1),
+             "n": np.full(E, n), "P": np.eye(p), "penalty": 0.0, "keep": np.ones(p, dtype=bool), "n_basis": M}]
+    cols = np.flatnonzero((np.arange(p) // M) % J1 == 0)
+    sliced = [{**full[0], "G": full[0]["G"][:, cols[:, None], cols], "b": full[0]["b"][:, cols], "P": np.eye(cols.size),
+               "keep": np.ones(cols.size, dtype=bool)}]
+    a = statistics_change_scan(full, n_permutations=19, null="permutation", yaw_terms=False)
+    b = statistics_change_scan(sliced, n_permutations=19, null="permutation")
+    c = statistics_change_scan(full, n_permutations=19, null="permutation")
+    np.testing.assert_allclose(a["split_gain"], b["split_gain"], rtol=1e-9)
+    assert a["p_value"] == b["p_value"]
+    assert not np.allclose(a["split_gain"], c["split_gain"], equal_nan=True)  # the yaw columns did count
