@@ -5,23 +5,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from tests.helpers import assert_close
-
-
-def _damping_step_records(n=12, step_at=None, shift=-0.02, seed=0):
-    """dA/dt = a1(U) A - 2 A^3 + noise; from event ``step_at`` on a1 is lower by ``shift`` (more damped), 1/s."""
-    from vivbench.core import Record
-
-    rng = np.random.default_rng(seed)
-    out = []
-    for e in range(n):
-        t = np.arange(0.0, 900.0, 1.0)
-        U = 6.0 + 6.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (500 + 60 * e) + e)
-        A = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 300 + e))
-        a1 = -0.01 + 0.05 * np.exp(-0.5 * ((U - 9.0) / 1.5) ** 2) + (shift if step_at is not None and e >= step_at else 0.0)
-        dA = a1 * A - 2.0 * A**3 + 2e-4 * rng.standard_normal(t.size)
-        out.append(Record(event_id=f"E{e + 1:03d}", t=t, A=A[:, None], U=U[:, None], dA=dA[:, None]))
-    return out
+from tests.helpers import assert_close, change_records
 
 
 def _fit(records):
@@ -35,7 +19,7 @@ def test_scan_gains_equal_separate_refits_before_and_after_every_split():
     from vivbench.analysis.changes import MISFIT_MS_FLOOR, statistics_change_scan
     from vivbench.models.varying import penalised_rss
 
-    recs = _damping_step_records(n=10, step_at=5, shift=-0.01)
+    recs = change_records(n=10, change_at=5, shift=-0.01)
     stats = _fit(recs).event_statistics(recs)
     scan = statistics_change_scan(stats, n_permutations=9)
     assert not scan["misfit_flag"].any()  # so every event takes part in the scan below
@@ -75,7 +59,7 @@ def test_offset_flags_hold_their_false_alarm_rate_and_catch_an_outlier():
 def test_change_relative_flags_catch_the_events_after_a_damping_step_and_only_them():
     from vivbench.analysis.changes import change_relative_flags, event_residual_checks
 
-    recs = _damping_step_records(n=12, step_at=6)
+    recs = change_records(n=12, change_at=6, shift=-0.02)
     model = _fit(recs)
     se = event_residual_checks(model, recs)["linear_offset_se"]
     out = change_relative_flags(model.event_statistics(recs), 6, se, model.a_ref_, model.y_scale_)
@@ -85,7 +69,7 @@ def test_change_relative_flags_catch_the_events_after_a_damping_step_and_only_th
     # ones, in 1/s; by less than the step (-0.02), because the curves absorb part of it where one side's winds
     # dominate (measured -0.0075).
     assert np.median(out["offset_held_out"][6:]) - np.median(out["offset_held_out"][:6]) < -0.005
-    quiet = _damping_step_records(n=12, step_at=None)
+    quiet = change_records(n=12)
     model = _fit(quiet)
     se = event_residual_checks(model, quiet)["linear_offset_se"]
     out = change_relative_flags(model.event_statistics(quiet), 6, se, model.a_ref_, model.y_scale_)
