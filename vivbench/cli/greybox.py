@@ -213,9 +213,9 @@ def register(sub) -> None:
                         "effective sample size of the correlated residuals; the best is kept (default 0.1,0.3,1; "
                         "'none': keep --penalty)")
     s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias"), default="sandwich_bias",
-                   help="covariance of the bands: Bayesian posterior sigma^2 kappa (J'J + R)^-1, smoothing bias "
-                        "included (default), the block sandwich (variance only), or the sandwich plus the "
-                        "prior-averaged squared bias")
+                   help="covariance of the bands: the Bayesian posterior sigma^2 kappa (J'J + R)^-1, the block "
+                        "sandwich (variance only), or the sandwich plus the prior-averaged squared smoothing bias "
+                        "(default; the posterior was half the sandwich's width on campaign A, README)")
     s.add_argument("--dt", type=float, default=1.0, help="step of the fit grid, s (default 1)")
     s.add_argument("--interval", type=float, default=60.0, help="shooting interval, s (default 60)")
     s.add_argument("--max-iter", dest="max_iter", type=int, default=30,
