@@ -664,13 +664,14 @@ class VaryingCoefficientSINDy(ModelBase):
         K = min(int(self.n_folds), n_ev)
         fold_of_event = np.empty(n_ev, dtype=np.int64)
         fold_of_event[rng.permutation(n_ev)] = np.arange(n_ev) % K
+        U_raw = np.concatenate([self._inputs(r)[0] for r in records])
         return {"records": records, "S": S, "J": J, "K": K, "n_ev": n_ev, "rng": rng, "event": event,
                 "block_all": block_all, "fold_of_event": fold_of_event,
                 "A": np.concatenate([r.A for r in records]),
-                "U": self._wind(np.concatenate([self._inputs(r)[0] for r in records])),
+                "U": self._wind(U_raw),
                 "dA": np.concatenate([r.dA for r in records]),
                 "Z": np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None,
-                "U_se": self._wind_standard_error(np.concatenate([self._inputs(r)[0] for r in records]))}
+                "U_se": self._wind_standard_error(U_raw)}
 
     def _wind_standard_error(self, U: np.ndarray) -> np.ndarray | None:
         """Standard error of the mean wind over the sections' anemometers, shape (n,), m/s (None: not estimable).
@@ -694,7 +695,7 @@ class VaryingCoefficientSINDy(ModelBase):
         Var(residual) = s0^2 + (d f / d U)^2 se_U^2, with f the first fit's
         (standardised) dA/dt, its slope in U by central differences of ``step``
         m/s, se_U from :meth:`_wind_standard_error`, and s0^2 the rest of the
-        mean squared residual (floored at a tenth of it). Weights are the
+        mean squared residual (floored at a hundredth of it). Weights are the
         inverse variances over their mean; shape (n_all,) (NaN where unused).
         """
         A, U, dA, Z, J = prep["A"], prep["U"], prep["dA"], prep["Z"], prep["J"]
