@@ -381,3 +381,36 @@ def test_verdict_reference_must_give_the_same_regime(fitted):
     other = greybox_window_verdicts(model, rec, start, end, n_draws=20, reference=CubicOnly())
     assert np.all(other["reference_regime"][alone["regime"] > 0] == 4)
     np.testing.assert_array_equal(other["identifiable"], alone["identifiable"] & (alone["regime"] == 4))
+
+
+def test_verdict_reference_sees_its_own_record(fitted):
+    """The reference model is evaluated on ``reference_record`` (its wind as at its fit), the grey-box on ``record``."""
+    import dataclasses
+
+    from vivbench.core import Record
+    from vivbench.regimes.greybox import greybox_window_verdicts
+
+    model, records = fitted
+    rec = records[0]
+    start = np.arange(rec.t[0], rec.t[-1] - 100.0, 100.0)
+    end = start + 100.0
+
+    class Spy:
+        """Records the wind it is given; dynamics of the linear order alone."""
+
+        def order_contributions(self, record):
+            self.U = record.U
+            r = np.zeros(record.A.shape + (4,))
+            r[..., 1] = record.A
+            return r
+
+    other = dataclasses.replace(rec, U=rec.U + 1.0)
+    spy = Spy()
+    step = float(np.median(np.diff(rec.t)))  # every sample: no striding
+    out = greybox_window_verdicts(model, rec, start, end, n_draws=5, sample_step=step, reference=spy,
+                                  reference_record=other)
+    np.testing.assert_array_equal(spy.U, other.U)
+    assert out["reference_regime"].shape == out["regime"].shape
+    short = Record(event_id=rec.event_id, t=rec.t[:-1], A=rec.A[:-1], U=rec.U[:-1])
+    with pytest.raises(ValueError, match="samples"):
+        greybox_window_verdicts(model, rec, start, end, n_draws=5, reference=spy, reference_record=short)

@@ -18,10 +18,14 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from vivbench.analysis.pool import campaign_model_file, curve_wind_grid, load_campaign_model, records_from_results
+from vivbench.analysis.pool import (campaign_model_file, curve_wind_grid, load_campaign_model, pooled_wind_smoothing,
+                                    records_from_results)
 from vivbench.core.errors import InputError
+from vivbench.io.campaign_model import POOLED_NAME, read_pooled
 from vivbench.io.result import read_result
 from vivbench.models.greybox import BridgeProperties, GreyBoxRefit
+from vivbench.models.model_input import measured_input
+from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regimes.greybox import greybox_window_verdicts
 
 __all__ = ["GreyBoxOutcome", "greybox_results", "results_frequency", "campaign_warm_start"]
@@ -117,7 +121,9 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
     files = [Path(p) for p in result_files]
     if not files:
         raise InputError("no identification results to fit the grey-box model on")
-    records = records_from_results(files, wind_smoothing_s=wind_smoothing_s)
+    # Read once: the grey-box fit smooths the measured wind its own way, the reference model as at its fit.
+    raw = records_from_results(files)
+    records = [smooth_wind(r, wind_smoothing_s) for r in raw]
     wind = curve_wind_grid(np.concatenate([r.U.ravel() for r in records]))
     source = "given curves"
     if isinstance(warm_start, str):
@@ -136,15 +142,18 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
     if cm_path is not None:
         try:
             reference = load_campaign_model(cm_path)
+            pooled_path = cm_path.parent / POOLED_NAME
+            ref_smoothing = pooled_wind_smoothing(read_pooled(pooled_path) if pooled_path.is_file() else None)
             reference_name = f"{cm_path.name} ({type(reference).__name__})"
         except (InputError, ValueError):
             reference = None
     parts, events = [], []
-    for path, rec in zip(files, records):
+    for path, rec, rec_raw in zip(files, records, raw):
         ds = read_result(path, ["window_start", "window_end"])
         start, end = ds["window_start"].values, ds["window_end"].values
         v = greybox_window_verdicts(model, rec, start, end, tau=tau, agreement=agreement, n_draws=n_draws,
-                                    reference=reference)
+                                    reference=reference, reference_record=None if reference is None else
+                                    measured_input(reference, rec_raw, wind_smoothing_s=ref_smoothing))
         parts.append(xr.Dataset(
             {"regime": (("window_all", "equation"), v["regime"]),
              "identifiable": (("window_all", "equation"), v["identifiable"]),

@@ -88,7 +88,7 @@ def greybox_draws(model: GreyBoxRefit, n_draws: int, seed: int = 0, *, with_yaw:
 def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, window_end, *,
                             tau: float = DEFAULT_TAU, agreement: float = 0.95, n_draws: int = 100, seed: int = 0,
                             chunk: int = 25, sample_step: float = 1.0, bounds: str = "reflect",
-                            reference=None) -> dict:
+                            reference=None, reference_record: Record | None = None) -> dict:
     """Regimes of a fitted grey-box model over a record's windows, and their identifiability.
 
     Parameters
@@ -116,6 +116,10 @@ def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, w
         A second campaign-level model of the same records (the campaign
         model); a window is identifiable only if its point regime equals the
         grey-box one (see the module docstring). None: the draws alone.
+    reference_record : Record or None
+        The same samples as the reference model saw them at fit
+        (:func:`vivbench.models.measured_input`: its own wind smoothing, not
+        the grey-box fit's); None: ``record``.
 
     Returns
     -------
@@ -128,9 +132,15 @@ def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, w
     stride = 1
     if record.t.size > 1:
         stride = max(1, int(round(sample_step / float(np.median(np.diff(record.t))))))
+    n_samples = record.t.size
     t, A, U = record.t[::stride], record.A[::stride], record.U[::stride]
     yaw = None if record.yaw is None else record.yaw[::stride]
     record = Record(event_id=record.event_id, t=t, A=A, U=U, yaw=yaw)
+    if reference_record is not None:
+        if reference_record.t.shape != (n_samples,):
+            raise ValueError(f"reference_record has {reference_record.t.size} samples, the record {n_samples}")
+        ref_yaw = None if reference_record.yaw is None else reference_record.yaw[::stride]
+        reference_record = Record(event_id=record.event_id, t=t, A=A, U=reference_record.U[::stride], yaw=ref_yaw)
     R, c1, nv = window_order_stats(model.order_contributions(record), A, t, window_start, window_end)
     point = np.where(nv > 0, regime_rule(np.nan_to_num(R), c1, tau), 0).astype(np.int8)
     draws, yaw_draws = greybox_draws(model, n_draws, seed, with_yaw=True, bounds=bounds)
@@ -147,7 +157,8 @@ def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, w
     identifiable = (agree >= agreement) & (point > 0)
     ref = np.zeros_like(point)
     if reference is not None:
-        Rr, c1r, nvr = window_order_stats(reference.order_contributions(record), A, t, window_start, window_end)
+        ref_in = record if reference_record is None else reference_record
+        Rr, c1r, nvr = window_order_stats(reference.order_contributions(ref_in), A, t, window_start, window_end)
         ref = np.where(nvr > 0, regime_rule(np.nan_to_num(Rr), c1r, tau), 0).astype(np.int8)
         identifiable &= ref == point
     return {"regime": point, "identifiable": identifiable, "agreement": agree,
