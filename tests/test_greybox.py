@@ -288,7 +288,7 @@ def test_batch_means_kappa_is_one_for_white_and_the_block_length_for_block_const
 
 
 def test_penalty_chosen_by_gcv_and_posterior_bands(fitted):
-    model, records = fitted
+    model, _records = fitted
     info = model.fit_info_
     sel = info["penalty_selection"]
     assert "GCV" in info["penalty_criterion"] and "sandwich plus" in info["band"]
