@@ -188,9 +188,9 @@ def test_cli_writes_files_and_rejects_bad_input(identified, tmp_path, capsys):
     bad = tmp_path / "bad.identify.nc"
     bad.write_text("not a netcdf file")
     capsys.readouterr()
-    assert main(["refit", str(bad), "--out", str(out)]) == 2
+    assert main(["refit", str(bad), "--out", str(out), "--terms", "A"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("vivbench refit: ") and str(bad) in err and "\n" not in err, err
+    assert err.startswith("vivbench refit: ") and str(bad) in err and "netcdf" in err.lower() and "\n" not in err, err
 
 
 def test_cli_refits_an_event_outside_the_library(small_results, tmp_path, capsys):
@@ -219,11 +219,22 @@ def test_cli_identified_support_points_to_greybox(identified, tmp_path, capsys):
     t0 = float(ds["window_start"].values[0])
     capsys.readouterr()
     assert main(["refit", str(identified["result"]), "--out", str(tmp_path / "r"), "--t0", str(t0), "--t1",
-                 str(t0 + 10.0), "--max-iter", "2"]) == 0
+                 str(t0 + 10.0), "--max-iter", "2", "--support", "identified"]) == 0
     err = capsys.readouterr().err
     assert "deprecated" in err and "vivbench greybox" in err, err
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     assert summary["solver"] == "gauss-newton" and summary["ipopt_iterations"] <= 2
+
+
+def test_cli_needs_a_support(identified, tmp_path, capsys):
+    """The deprecated identified support is no longer the default: no support is a one-line error, nothing written."""
+    capsys.readouterr()
+    assert main(["refit", str(identified["result"]), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vivbench refit: ") and "--terms" in err and "\n" not in err.rstrip("\n"), err
+    assert not (tmp_path / "r").exists()
+    assert main(["refit", str(identified["result"]), "--out", str(tmp_path / "r"), "--support", "truth",
+                 "--terms", "A"]) == 2
 
 
 def test_own_section_terms_build_the_mask():

@@ -75,6 +75,13 @@ def run(args) -> int:
     from vivbench.io.netcdf import atomic_path
 
 
+    if args.support is None and not args.terms:
+        # no default: the identified support, the old default, is deprecated (issue 14)
+        raise InputError(f"{args.result}: say which support to refit: --terms 'U^2, A, A U' (a small generic support), "
+                         "--support truth (needs --event) or --support window|identified (deprecated: use "
+                         "`vivbench greybox` for reference coefficients)")
+    if args.support is not None and args.terms:
+        raise InputError(f"{args.result}: give --support or --terms, not both")
     result = _load_result(args.result)
     event_id = str(result.attrs.get("event_id", Path(args.result).name.split(".")[0]))
     truth = _truth_coef(args.event, event_id) if args.event else None
@@ -122,9 +129,10 @@ def register(sub) -> None:
                         "e.g. of the realistic generator mode, is refitted without the true-model comparison)")
     s.add_argument("--t0", type=float, default=None, help="segment start, s (default: start of the grid)")
     s.add_argument("--t1", type=float, default=None, help="segment end, s (default: end of the grid)")
-    s.add_argument("--support", default="identified", choices=("identified", "window", "truth"),
-                   help="identified: union over the windows in force in the segment; window: the window in force "
-                        "at t0; truth: the exact coefficients' nonzeros (needs --event)")
+    s.add_argument("--support", default=None, choices=("identified", "window", "truth"),
+                   help="no default: give this or --terms. identified (deprecated): union over the windows in force "
+                        "in the segment; window (deprecated): the window in force at t0; truth: the exact "
+                        "coefficients' nonzeros (needs --event)")
     s.add_argument("--terms", default=None,
                    help="instead of --support: section-generic monomials, each equation using its own section's, "
                         "e.g. 'U^2, A, A U, A^2 U, A^3 U'")
