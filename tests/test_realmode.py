@@ -219,7 +219,7 @@ def test_sweep_realism_values_are_checked(change, message):
 def test_two_point_sweep_over_a_realism_switch_runs(tmp_path):
     from vivbench.validate import run_sweep
 
-    cfg = sweep_config_from_dict({"seed": 2, "n_events": 1, "duration": [300.0, 300.0],
+    cfg = sweep_config_from_dict({"seed": 2, "n_events": 1, "duration": [300.0, 300.0], "campaign_model": "pooled",
                                   "grid": {"aero_realistic": [0, 1]}})
     result = run_sweep(cfg, tmp_path / "s", workers=1)
     assert not result.failures, result.failures

@@ -29,8 +29,9 @@ from vivbench.validate import sweep as sweep_module
 ROOT = Path(__file__).resolve().parents[1]
 
 # Two campaigns of one 200 s event (two windows each): the smallest sweep that
-# still has a grid axis and a range.
+# still has a grid axis and a range (one event: the pooled campaign model, the varying one needs two).
 TINY = {
+    "campaign_model": "pooled",
     "seed": 5,
     "n_campaigns": 1,
     "n_events": 1,
@@ -126,11 +127,34 @@ def test_parameters_reach_the_generator():
     ({"generator": {"sensors": {"nois": 1}}}, "[generator]: unknown keys ['nois'] in [sensors]"),
     ({"grid": {"noise_density": ["loud"]}}, "[grid] noise_density value must be a number"),
     ({"stride": 3}, "unknown keys ['stride']"),
+    ({"campaign_model": "sindy"}, "campaign_model must be one of varying, pooled; got 'sindy'"),
+    ({"campaign_model": "varying"}, 'campaign_model "varying" needs n_events >= 2'),
 ])
 def test_config_errors_say_what_is_wrong(change, message):
     with pytest.raises(ValueError) as info:
         sweep_config_from_dict({**TINY, **change})
     assert message in str(info.value)
+
+
+def test_campaign_model_is_part_of_the_sweep(tiny_config):
+    """The campaign model behind the pooled_* columns is the pool default unless named, and names a different sweep."""
+    assert tiny_config.campaign_model == "pooled" and tiny_config.to_dict()["campaign_model"] == "pooled"
+    varying = sweep_config_from_dict({**{k: v for k, v in TINY.items() if k != "campaign_model"}, "n_events": 2})
+    assert varying.campaign_model == "varying" and varying.fingerprint() != tiny_config.fingerprint()
+    assert {t.campaign_model for t in sweep_tasks(varying)} == {"varying"}
+
+
+def test_varying_campaign_model_scores_a_campaign(tmp_path):
+    """The default campaign model (varying) is fitted and scored on a two-event campaign: finite pooled_* columns."""
+    cfg = sweep_config_from_dict({**{k: v for k, v in TINY.items() if k not in ("campaign_model", "grid")},
+                                  "n_events": 2})
+    result = run_sweep(cfg, tmp_path / "v", workers=1, keep_files=True)
+    assert not result.failures, result.failures
+    header, row = (line.split(",") for line in result.table.read_text().splitlines())
+    row = dict(zip(header, row))
+    assert np.isfinite(float(row["pooled_rhs_error_true_AU_median_active"])), row
+    assert 0.0 <= float(row["pooled_coverage"]) <= 1.0
+    assert any(p.name == "campaign.model.nc" for p in (tmp_path / "v" / "files").rglob("*.nc"))
 
 
 def test_example_grid_loads_and_bad_file_is_named(tmp_path):
@@ -151,7 +175,8 @@ def test_dask_cluster_and_this_process_agree(tiny_config, reference, dask_addres
     ref_out, ref = reference
     table = ref.table.read_bytes()
     files = _files(ref_out)
-    assert len(files) == 6  # one event, its result and the campaign model per campaign
+    # one event, its result, the pooled result and the campaign model's file per campaign
+    assert len(files) == 8 and sum(name.endswith("campaign.model.nc") for name in files) == 2
     result = run_sweep(tiny_config, tmp_path / "dask", keep_files=True, scheduler=dask_address)
     assert result.table.read_bytes() == table, "dask: table differs from the single-process run"
     assert _files(tmp_path / "dask") == files, "dask: event or identification files differ"
@@ -294,7 +319,7 @@ def test_other_configuration_in_the_same_directory_is_refused(reference):
 def test_killed_cli_sweep_resumes_to_the_same_table(tmp_path):
     """SIGKILL the CLI once the first campaign is journalled; the rerun finishes the same table."""
     grid = tmp_path / "grid.toml"
-    grid.write_text('seed = 5\nn_campaigns = 3\nn_events = 1\nduration = [200.0, 200.0]\n'
+    grid.write_text('seed = 5\nn_campaigns = 3\nn_events = 1\nduration = [200.0, 200.0]\ncampaign_model = "pooled"\n'
                     '[grid]\nnoise_density = [30.0]\n')
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     cmd = [sys.executable, "-m", "vivbench.cli", "sweep", "--grid", str(grid), "--workers", "1"]

@@ -112,6 +112,8 @@ def test_bad_parameters():
         VaryingCoefficientSINDy(n_basis=(3,)).fit(_records(2))
     with pytest.raises(InputError):
         VaryingCoefficientSINDy(wind_input="gust").fit(_records(2))
+    with pytest.raises(InputError, match="needs at least 2 events"):  # one event: no cross-validation over events
+        VaryingCoefficientSINDy().fit(_records(1))
 
 
 def test_basis_partition_of_unity():

@@ -16,7 +16,6 @@ def run(args) -> int:
     from vivbench.models.campaign import PooledSINDy
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.io.result import list_results
-    from vivbench.io.netcdf import write_netcdf_atomic
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_pooled
 
@@ -45,10 +44,7 @@ def run(args) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     out = write_pooled(ds, out_dir)
     # The fitted model itself, for forecast, validate and the report (the model protocol's load).
-    if args.model == "varying":
-        model_out = write_netcdf_atomic(model.to_dataset(), out_dir / MODEL_NAME)
-    else:
-        model_out = model.save(out_dir / MODEL_NAME)
+    model_out = model.save(out_dir / MODEL_NAME)
     if ds.attrs.get("note"):
         print(f"vivbench pool: {ds.attrs['note']}", file=sys.stderr)
     if args.model == "varying":

@@ -64,6 +64,7 @@ from scipy.interpolate import BSpline
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
+from vivbench.io.netcdf import write_netcdf_atomic
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.preprocess.wind_smoothing import smooth_wind
@@ -513,8 +514,10 @@ class VaryingCoefficientSINDy(ModelBase):
         """
         self._validate()
         raw = [as_record(r, k) for k, r in enumerate(records)]
-        if not raw:
-            raise InputError("no records to fit")
+        if len(raw) < 2:
+            # M, lambda and the wind smoothing are chosen by cross-validation over events
+            raise InputError(f"the varying-coefficient model needs at least 2 events (its basis and penalty are "
+                             f"chosen by cross-validation over events); got {len(raw)}")
         grid = self._smoothing_candidates()
         # The wind smoothing is chosen like M and lambda, by the cross-validated error over events
         # (the target dA/dt and the folds do not depend on it, so the errors are comparable).
@@ -1168,9 +1171,8 @@ class VaryingCoefficientSINDy(ModelBase):
                           attrs=attrs)
 
     def save(self, path):
-        """Write the fitted model as NetCDF; returns the path."""
-        self.to_dataset().to_netcdf(path)
-        return path
+        """Write the fitted model as NetCDF, atomically (temp file then rename); returns the path."""
+        return write_netcdf_atomic(self.to_dataset(), path)
 
     @classmethod
     def load(cls, path) -> "VaryingCoefficientSINDy":

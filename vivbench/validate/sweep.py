@@ -91,6 +91,9 @@ METRIC_COLUMNS = (
     "truth_share_regime3",
     "truth_share_regime4",
 )
+#: Campaign models a sweep can score (``SweepConfig.campaign_model``).
+CAMPAIGN_MODELS = ("varying", "pooled")
+
 _ID_COLUMNS = ("task_id", "point", "replicate", "campaign_seed", "n_events")
 COLUMNS = (*_ID_COLUMNS, *PARAMETERS, *METRIC_COLUMNS, "error")
 
@@ -131,6 +134,9 @@ class SweepConfig:
     ranges : parameter -> (low, high); each campaign draws a value uniformly from its own stream
     generator : base generator configuration that the grid and ranges modify
     identify : identification settings
+    campaign_model : "varying" (default, :class:`~vivbench.models.VaryingCoefficientSINDy`, the default of
+        ``vivbench pool``) or "pooled" (:class:`~vivbench.models.PooledSINDy`, the paper's class): the campaign
+        model behind the ``pooled_*`` columns, fitted with the campaign's seed
     """
 
     seed: int = 0
@@ -142,8 +148,11 @@ class SweepConfig:
     ranges: tuple[tuple[str, tuple[float, float]], ...] = ()
     generator: GeneratorConfig = field(default_factory=GeneratorConfig)
     identify: IdentifyConfig = field(default_factory=IdentifyConfig)
+    campaign_model: str = "varying"
 
     def __post_init__(self) -> None:
+        if self.campaign_model not in CAMPAIGN_MODELS:
+            raise InputError(f"campaign_model must be one of {', '.join(CAMPAIGN_MODELS)}; got {self.campaign_model!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise InputError(f"seed must be a non-negative integer; got {self.seed!r}")
         if self.seeds is not None:
@@ -166,6 +175,9 @@ class SweepConfig:
             raise InputError(f"n_events (events per campaign) must be an integer; got {self.n_events!r}")
         # The campaign's own checks give the messages for the ranges of n_events and duration.
         CampaignConfig(n_events=self.n_events, seed=0, duration=self.duration)
+        if self.campaign_model == "varying" and self.n_events < 2:
+            raise InputError(f'campaign_model "varying" needs n_events >= 2 (it cross-validates over events); got '
+                             f'{self.n_events}: give more events or campaign_model = "pooled"')
         object.__setattr__(self, "duration", tuple(float(x) for x in self.duration))
         for name in ("generator", "identify"):
             expected = GeneratorConfig if name == "generator" else IdentifyConfig
@@ -252,6 +264,7 @@ class SweepConfig:
             "ranges": [[name, list(values)] for name, values in self.ranges],
             "generator": config_to_dict(self.generator),
             "identify": json.loads(self.identify.to_json()),
+            "campaign_model": self.campaign_model,
         }
 
     def fingerprint(self) -> str:
@@ -259,7 +272,8 @@ class SweepConfig:
         return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()
 
 
-_TOP_KEYS = ("seed", "n_campaigns", "seeds", "n_events", "duration", "grid", "ranges", "generator", "identify")
+_TOP_KEYS = ("seed", "n_campaigns", "seeds", "n_events", "duration", "grid", "ranges", "generator", "identify",
+             "campaign_model")
 _IDENTIFY_KEYS = ("window", "step", "alpha", "scaling", "tau", "aicc_margin", "fit_tolerance", "thresholds",
                   "derivative", "preprocess", "spike_mad", "min_snr", "optimizer", "seed")
 
@@ -328,6 +342,7 @@ def load_sweep_config(path: str | Path) -> SweepConfig:
         n_campaigns = 2               # campaigns per grid point (or seeds = [3, 7])
         n_events = 2                  # events per campaign
         duration = [240.0, 240.0]     # event duration (min, max), s
+        campaign_model = "varying"    # the pooled_* columns' model: varying (default) or pooled
         [grid]                        # every combination is a grid point
         noise_density = [30.0, 300.0]
         aero_realistic = [0, 1]       # realism switches (0/1, grid only): aero_realistic, felt_wind_tributary
@@ -359,6 +374,7 @@ class SweepTask:
     params : value of every sweep parameter in this campaign (name, value), registry order
     campaign : CampaignConfig (its generator has the parameters applied)
     identify : IdentifyConfig
+    campaign_model : "varying" or "pooled" (:class:`SweepConfig`)
     work_root : directory for the temporary campaign (None: the system's temporary directory)
     keep_dir : when set, the campaign and its results are written here and kept
     """
@@ -370,6 +386,7 @@ class SweepTask:
     params: tuple[tuple[str, float], ...]
     campaign: CampaignConfig
     identify: IdentifyConfig
+    campaign_model: str = "varying"
     work_root: str | None = None
     keep_dir: str | None = None
 
@@ -407,7 +424,8 @@ def sweep_tasks(config: SweepConfig) -> list[SweepTask]:
             seed = _campaign_seed(config, r)
             campaign = CampaignConfig(n_events=config.n_events, seed=seed, duration=config.duration, generator=gen)
             tasks.append(SweepTask(task_id=p * config.n_campaigns + r, point=p, replicate=r, campaign_seed=seed,
-                                   params=params, campaign=campaign, identify=config.identify))
+                                   params=params, campaign=campaign, identify=config.identify,
+                                   campaign_model=config.campaign_model))
     return tasks
 
 
@@ -465,11 +483,17 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         metrics = _flatten_scores(campaign_recovery(events, results))
         # The campaign model on the same windows (its verdict needs enough data: see PooledSINDy.min_blocks).
         from vivbench.models.campaign import PooledSINDy
+        from vivbench.models.varying import VaryingCoefficientSINDy
         from vivbench.analysis.pool import pool_results
         from vivbench.io.campaign_model import write_pooled
         from vivbench.validate.pooled import pooled_recovery
 
-        pooled = write_pooled(pool_results(results, PooledSINDy(seed=task.campaign_seed)), root / "identify")
+        from vivbench.io.campaign_model import MODEL_NAME
+
+        model = (VaryingCoefficientSINDy if task.campaign_model == "varying" else PooledSINDy)(seed=task.campaign_seed)
+        pooled = write_pooled(pool_results(results, model), root / "identify")
+        # the verdicts of a varying model are evaluated by the model itself, which validate loads from its file
+        model.save(root / "identify" / MODEL_NAME)
         ps = pooled_recovery(events, pooled, results)
         metrics.update({f"pooled_{k}": float(ps[k]) for k in ("coverage", "accuracy_all", "accuracy_identifiable",
                                                                "rhs_median_rel_error_active",
