@@ -444,7 +444,7 @@ def test_event_bootstrap_is_seeded_converged_and_stored(tmp_path):
     params = {"peak": 18.0, "center": 6.8, "width": 1.1, "baseline": -4.0, "e1": 25.0, "e2": 400.0, "cl": 0.03}
     records = _slow_error_records(params, seed=0)
     start = _true_curves(params, np.arange(2.5, 13.01, 0.1), scale=(0.8, 1.2, 0.8, 1.2))
-    kw = dict(bridge=BRIDGE, warm_start=start, n_basis=8, n_starts=1, penalty=0.01, penalty_grid=None)
+    kw = {"bridge": BRIDGE, "warm_start": start, "n_basis": 8, "n_starts": 1, "penalty": 0.01, "penalty_grid": None}
     model = GreyBoxRefit(**kw, n_boot=12).fit(records)
     covs = model.covariances_
     np.testing.assert_allclose(covs["bootstrap_bias"] - covs["bootstrap"], covs["sandwich_bias"] - covs["sandwich"],
