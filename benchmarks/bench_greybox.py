@@ -60,8 +60,6 @@ def main(argv=None) -> dict:
                    help="event bootstrap replicates after the fit (default 0, as vivbench greybox); timed with it")
     p.add_argument("--boot-iter", dest="boot_iter", type=int, default=10,
                    help="iterations of a bootstrap replicate per continuation stage (default 10)")
-    p.add_argument("--limiting-penalty", dest="limiting_penalty", type=float, default=1.0,
-                   help="factor on the roughness penalty of e1 and e2 (default 1)")
     args = p.parse_args(argv)
     from vivbench.analysis.greybox import campaign_warm_start
     from vivbench.analysis.pool import curve_wind_grid, records_from_results
@@ -77,7 +75,7 @@ def main(argv=None) -> dict:
     history = []
     t0, c0 = time.perf_counter(), time.process_time()
     model = GreyBoxRefit(bridge=bridge, warm_start=warm, n_starts=args.starts, penalty_grid=grid, n_boot=args.boot,
-                         boot_iter=args.boot_iter, limiting_penalty=args.limiting_penalty)
+                         boot_iter=args.boot_iter)
     model.fit(records, callback=lambda it, cost, mu: history.append((time.perf_counter() - t0, cost)))
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2  # Linux: kB

@@ -77,7 +77,7 @@ def run(args) -> int:
     estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, penalty_grid=grid, band=args.band, dt=args.dt,
                              shooting_interval=args.interval, max_iter=args.max_iter, yaw_factor=not args.no_yaw,
                              n_starts=args.starts, seed=args.seed, block_s=args.block, n_boot=args.boot,
-                             boot_iter=args.boot_iter, limiting_penalty=args.limiting_penalty)
+                             boot_iter=args.boot_iter)
     t0 = time.perf_counter()
 
     def progress(it, cost, mu):
@@ -224,8 +224,6 @@ def register(sub) -> None:
                         "seeded by --seed; default 0: none; each costs about --boot-iter + 1 Jacobians)")
     s.add_argument("--boot-iter", dest="boot_iter", type=int, default=10, metavar="K",
                    help="Gauss-Newton iterations of a bootstrap replicate from the fit's optimum per continuation stage (default 10)")
-    s.add_argument("--limiting-penalty", dest="limiting_penalty", type=float, default=1.0, metavar="F",
-                   help="factor on the roughness penalty of e1 and e2 relative to Y1's and C_L's (default 1)")
     s.add_argument("--dt", type=float, default=1.0, help="step of the fit grid, s (default 1)")
     s.add_argument("--interval", type=float, default=60.0, help="shooting interval, s (default 60)")
     s.add_argument("--max-iter", dest="max_iter", type=int, default=30,

@@ -348,10 +348,6 @@ class GreyBoxRefit(ModelBase):
         in a perturbed start.
     seed : int
         Seed of the perturbed starts and of the bootstrap's event draws (the fit is deterministic).
-    limiting_penalty : float
-        Factor on the roughness penalty of e1 and e2 (relative to Y1's and
-        C_L's): larger values hold the limiting terms closer to linear in
-        reduced velocity (see the module docstring's bridge C diagnosis).
     n_boot : int
         Replicates of the event bootstrap (:mod:`vivbench.models.greybox_bootstrap`)
         run after the fit; 0: none. The "bootstrap" bands need at least 20.
@@ -399,7 +395,7 @@ class GreyBoxRefit(ModelBase):
                  tol: float = 1e-3,
                  block_s: float = 86400.0, level: float = 0.95, continuity_weight: float = 1e6, warm_start=None,
                  yaw_factor: bool = True, n_starts: int = 4, screen_iter: int = 6, start_spread: float = 0.4,
-                 seed: int = 0, n_boot: int = 0, boot_iter: int = 10, limiting_penalty: float = 1.0):
+                 seed: int = 0, n_boot: int = 0, boot_iter: int = 10):
         self.bridge = bridge
         self.n_basis = n_basis
         self.penalty = penalty
@@ -420,7 +416,6 @@ class GreyBoxRefit(ModelBase):
         self.seed = seed
         self.n_boot = n_boot
         self.boot_iter = boot_iter
-        self.limiting_penalty = limiting_penalty
 
     def _validate(self) -> None:
         if not isinstance(self.bridge, BridgeProperties):
@@ -428,7 +423,7 @@ class GreyBoxRefit(ModelBase):
                              "damping_ratio=...)")
         if not (isinstance(self.n_basis, (int, np.integer)) and 5 <= self.n_basis <= 60):
             raise InputError(f"n_basis must be an integer in 5..60; got {self.n_basis!r}")
-        for name in ("penalty", "dt", "shooting_interval", "tol", "block_s", "continuity_weight", "limiting_penalty"):
+        for name in ("penalty", "dt", "shooting_interval", "tol", "block_s", "continuity_weight"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a finite positive number; got {v!r}")
@@ -598,8 +593,7 @@ class GreyBoxRefit(ModelBase):
         R = np.zeros((P, P))
         for f in range(4):  # each function's penalty relative to its own block of J^T J
             sl = slice(f * M, (f + 1) * M)
-            extra = self.limiting_penalty if f in (1, 2) else 1.0
-            R[sl, sl] = extra * self.penalty * max(np.trace(H[sl, sl]), 1e-300) / np.trace(K) * K
+            R[sl, sl] = self.penalty * max(np.trace(H[sl, sl]), 1e-300) / np.trace(K) * K
         probe.penalty = R
         screened = []
         if len(safe) > 1:
