@@ -221,9 +221,11 @@ def register(sub) -> None:
                         "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias")
     s.add_argument("--boot", type=int, default=0, metavar="N",
                    help="event bootstrap replicates after the fit (refits on events drawn with replacement, "
-                        "seeded by --seed; default 0: none; each costs about --boot-iter + 1 Jacobians)")
+                        "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians: on bridge C "
+                        "30 replicates took 460 s, so not within the 60 s budget)")
     s.add_argument("--boot-iter", dest="boot_iter", type=int, default=10, metavar="K",
-                   help="Gauss-Newton iterations of a bootstrap replicate from the fit's optimum per continuation stage (default 10)")
+                   help="Gauss-Newton iterations of a bootstrap replicate from the fit's optimum in each of its "
+                        "two continuation stages (default 10)")
     s.add_argument("--dt", type=float, default=1.0, help="step of the fit grid, s (default 1)")
     s.add_argument("--interval", type=float, default=60.0, help="shooting interval, s (default 60)")
     s.add_argument("--max-iter", dest="max_iter", type=int, default=30,
