@@ -116,7 +116,8 @@ def run(args) -> int:
                "start": info["start"], "starts": info.get("starts", []), "yaw": info.get("yaw"),
                "penalty": info.get("penalty"), "penalty_criterion": info.get("penalty_criterion"),
                "penalty_selection": info.get("penalty_selection"), "band": info.get("band"),
-               "band_info": info.get("band_info"), "bootstrap": info.get("bootstrap"),
+               "band_info": info.get("band_info"),
+               "bootstrap": info.get("bootstrap"),
                "yaw_coef": model.yaw_coef_, "yaw_coef_lower": float(model.yaw_curve()["yaw_coef_lower"]),
                "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean()),
@@ -221,8 +222,8 @@ def register(sub) -> None:
                         "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias")
     s.add_argument("--boot", type=int, default=0, metavar="N",
                    help="event bootstrap replicates after the fit (refits on events drawn with replacement, "
-                        "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians: on bridge C "
-                        "30 replicates took 460 s, so not within the 60 s budget)")
+                        "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians: "
+                        "on bridge C 30 replicates took 460 s, so not within the 60 s budget)")
     s.add_argument("--boot-iter", dest="boot_iter", type=int, default=10, metavar="K",
                    help="Gauss-Newton iterations of a bootstrap replicate from the fit's optimum in each of its "
                         "two continuation stages (default 10)")

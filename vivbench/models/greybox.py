@@ -93,8 +93,8 @@ Uncertainty (``band``), covariances of the spline coefficients
   alone or plus the bias term above. Measured with 30 replicates, 10
   iterations a stage (95 % bands of a_k1 over the lock-in winds, against the
   sandwich plus bias): bridge C 66 % (68 %), 460 s for the replicates on top
-  of the 45 s fit; it is an option, not the default: it covers no better and
-  costs far more than the 60 s budget.
+  of the 47 s fit (a loaded machine); it is an option, not the default: it
+  covers no better and costs far more than the 60 s budget.
 
 None covers the model's own limits (e.g. a truth whose yaw dependence is
 not of the form 1 - c sin^2 psi), nor a bias of the estimate itself.

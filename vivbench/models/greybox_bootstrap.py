@@ -15,7 +15,12 @@ continuity weight relaxed to ``first_weight``, then ``n_iter`` more at the
 problem's own weight (a continuation as in the fit itself: at the full
 weight 1e6 the defects are so far from linear that the steps stay short;
 measured on bridge C, one replicate: 30 iterations at 1e6 reached the cost
-467.1, 5 + 5 from 1e4 reached 464.5). The covariance
+467.1, 5 + 5 from 1e4 reached 464.5). The replicates stay in the full fit's
+basin: the same replicate continued from the weight 1e2 (88 iterations, a
+minute) reached 427 with a_k1 moved by 0.10 of its RMS, where 10 + 10 from
+1e4 moved it by 0.03; this is a bootstrap of the local minimum, and the
+cheaper for it (the full restart would cost the fit's time per replicate).
+The covariance
 of the replicates' coefficients is the bootstrap covariance; it holds the
 estimator's variance over events (including the curvature of the model in
 theta that the sandwich linearises away), not the smoothing bias of the
