@@ -96,8 +96,8 @@ Uncertainty (``band``), covariances of the spline coefficients
   A 70 / 80 / 98 %, B 75 / 83 / 85 %, C 66 / 66 / 68 %; the replicates took
   513 s (A), 553 s (B), 460 s (C) on top of the fit (a loaded machine). The
   bootstrap's bands are narrower than the sandwich's (half-width 0.5, 0.7,
-  0.8 of it): the uncentred event scores of the sandwich also hold the
-  penalty's gradient. It is an option, not the default: it covers no
+  0.8 of it; a likely reason, not measured: the sandwich's event scores
+  are not centred and so also hold the penalty's gradient). It is an option, not the default: it covers no
   better on B and C and costs ten times the 60 s budget.
 
 None covers the model's own limits (e.g. a truth whose yaw dependence is
