@@ -56,6 +56,10 @@ def main(argv=None) -> dict:
                    help="no campaign-model warm start (the equation-error starts alone)")
     p.add_argument("--penalty-grid", dest="penalty_grid", default="0.1,0.3,1",
                    help="penalties scored by GCV (default as vivbench greybox; 'none': the fixed 0.3)")
+    p.add_argument("--boot", type=int, default=0,
+                   help="event bootstrap replicates after the fit (default 0, as vivbench greybox); timed with it")
+    p.add_argument("--boot-iter", dest="boot_iter", type=int, default=10,
+                   help="iterations of a bootstrap replicate per continuation stage (default 10)")
     args = p.parse_args(argv)
     from vivbench.analysis.greybox import campaign_warm_start
     from vivbench.analysis.pool import curve_wind_grid, records_from_results
@@ -70,7 +74,8 @@ def main(argv=None) -> dict:
     bridge = _bridge(Path(args.campaign))
     history = []
     t0, c0 = time.perf_counter(), time.process_time()
-    model = GreyBoxRefit(bridge=bridge, warm_start=warm, n_starts=args.starts, penalty_grid=grid)
+    model = GreyBoxRefit(bridge=bridge, warm_start=warm, n_starts=args.starts, penalty_grid=grid, n_boot=args.boot,
+                         boot_iter=args.boot_iter)
     model.fit(records, callback=lambda it, cost, mu: history.append((time.perf_counter() - t0, cost)))
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2  # Linux: kB
@@ -79,12 +84,18 @@ def main(argv=None) -> dict:
            "fit_wall_s": wall, "fit_cpu_s": cpu, "iterations": info["iterations"], "converged": info["converged"],
            "peak_rss_gb": peak_gb, "warm_start": source, "max_continuity_defect": info["max_defect"],
            "start": info["start"], "n_starts": len(info["starts"]) or 1, "yaw_coef": model.yaw_coef_,
-           "yaw": info["yaw"], "penalty": info["penalty"], "penalty_criterion": info["penalty_criterion"]}
+           "yaw": info["yaw"], "penalty": info["penalty"], "penalty_criterion": info["penalty_criterion"],
+           "bootstrap": info.get("bootstrap")}
     print(f"grey-box refit of {len(records)} events ({info['n_intervals']} shooting intervals, {info['n_samples']} "
           f"grid samples): {wall:.1f} s wall, {cpu:.1f} s CPU, {info['iterations']} Gauss-Newton iterations "
           f"({'converged' if info['converged'] else 'not converged'}), peak RSS {peak_gb:.2f} GB "
           f"(targets: 60 s, 2 GB); {out['n_starts']} starts, the winner: {info['start']}; yaw coefficient "
           f"{model.yaw_coef_:.3g} ({info['yaw']}); penalty {info['penalty']:g} ({info['penalty_criterion']})")
+    if info.get("bootstrap"):
+        b = info["bootstrap"]
+        print(f"event bootstrap: {b['n_boot']} replicates of {b['n_events']} events in {b['seconds']:.1f} s (included "
+              f"above), median {b['iterations_median']:g} iterations, last step's relative decrease median "
+              f"{b['last_step_median']:.2g}, max {b['last_step_max']:.2g}")
     if args.figure:
         import matplotlib
 

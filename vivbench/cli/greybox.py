@@ -76,7 +76,8 @@ def run(args) -> int:
     grid = None if args.penalty_grid.strip().lower() == "none" else _numbers(args.penalty_grid, "penalty-grid")
     estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, penalty_grid=grid, band=args.band, dt=args.dt,
                              shooting_interval=args.interval, max_iter=args.max_iter, yaw_factor=not args.no_yaw,
-                             n_starts=args.starts, seed=args.seed, block_s=args.block)
+                             n_starts=args.starts, seed=args.seed, block_s=args.block, n_boot=args.boot,
+                             boot_iter=args.boot_iter)
     t0 = time.perf_counter()
 
     def progress(it, cost, mu):
@@ -116,6 +117,7 @@ def run(args) -> int:
                "penalty": info.get("penalty"), "penalty_criterion": info.get("penalty_criterion"),
                "penalty_selection": info.get("penalty_selection"), "band": info.get("band"),
                "band_info": info.get("band_info"),
+               "bootstrap": info.get("bootstrap"),
                "yaw_coef": model.yaw_coef_, "yaw_coef_lower": float(model.yaw_curve()["yaw_coef_lower"]),
                "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean()),
@@ -212,10 +214,19 @@ def register(sub) -> None:
                    help="penalties whose fits (continued from the one at --penalty) are scored by GCV with the "
                         "effective sample size of the correlated residuals; the best is kept (default 0.1,0.3,1; "
                         "'none': keep --penalty)")
-    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias"), default="sandwich_bias",
+    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias", "bootstrap", "bootstrap_bias"),
+                   default="sandwich_bias",
                    help="covariance of the bands: the Bayesian posterior sigma^2 kappa (J'J + R)^-1, the block "
-                        "sandwich (variance only), or the sandwich plus the prior-averaged squared smoothing bias "
-                        "(default; the posterior was half the sandwich's width on campaign A, README)")
+                        "sandwich (variance only), the sandwich plus the prior-averaged squared smoothing bias "
+                        "(default; the posterior was half the sandwich's width on campaign A, README), or the event "
+                        "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias")
+    s.add_argument("--boot", type=int, default=0, metavar="N",
+                   help="event bootstrap replicates after the fit (refits on events drawn with replacement, "
+                        "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians: "
+                        "on bridge C 30 replicates took 460 s, so not within the 60 s budget)")
+    s.add_argument("--boot-iter", dest="boot_iter", type=int, default=10, metavar="K",
+                   help="Gauss-Newton iterations of a bootstrap replicate from the fit's optimum in each of its "
+                        "two continuation stages (default 10)")
     s.add_argument("--dt", type=float, default=1.0, help="step of the fit grid, s (default 1)")
     s.add_argument("--interval", type=float, default=60.0, help="shooting interval, s (default 60)")
     s.add_argument("--max-iter", dest="max_iter", type=int, default=30,

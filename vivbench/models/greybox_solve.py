@@ -102,16 +102,32 @@ class ShootingProblem:
 
     def __post_init__(self):
         self.funcs = StepFunctions(self.grid.n_intervals, self.grid.n_steps, self.grid.h)
-        grid = self.grid
-        self.sw = grid.weight / self.scale[:, None]  # (I, n+1)
+        self.interval_weight = np.ones(self.grid.n_intervals)
+        self.sw = self.grid.weight / self.scale[:, None]  # (I, n+1)
         self.set_continuity_weight(self.continuity_weight)
-        self.has_next = grid.next >= 0
+        self.has_next = self.grid.next >= 0
         self.P = self.penalty.shape[0]
 
     def set_continuity_weight(self, weight: float) -> None:
         """Weight of a continuity defect relative to one grid sample (all sections)."""
         self.continuity_weight = float(weight)
-        self.cw = np.sqrt(self.continuity_weight * float(np.sum(self.amp**2))) / self.scale
+        self.cw = (np.sqrt(self.continuity_weight * float(np.sum(self.amp**2))) / self.scale
+                   * np.sqrt(self.interval_weight))
+
+    def set_interval_weights(self, weight: np.ndarray) -> None:
+        """Multiplicity of every interval's squared residuals and defect (1: the data as they are).
+
+        An event bootstrap (:mod:`vivbench.models.greybox_bootstrap`) gives
+        every interval of an event the number of times the event was drawn;
+        an interval of weight 0 drops out (its node state is then free and
+        decoupled from theta).
+        """
+        weight = np.asarray(weight, dtype=float)
+        if weight.shape != (self.grid.n_intervals,) or np.any(~(weight >= 0)):
+            raise ValueError("interval weights must be one non-negative number per shooting interval")
+        self.interval_weight = weight
+        self.sw = self.grid.weight / self.scale[:, None] * np.sqrt(weight)[:, None]
+        self.set_continuity_weight(self.continuity_weight)
 
     def residuals(self, Q: np.ndarray, s: np.ndarray):
         """Data residuals (I, n+1, S) and continuity defects (I,) (0 where no next interval)."""
