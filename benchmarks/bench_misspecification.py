@@ -205,6 +205,10 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         # The wind's yaw as a second covariate (chosen on the seed-0 campaign, benchmarks/bench_floor.py).
         ("VaryingCoefficientSINDy(mean U, yaw)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1, **vary), "varying"),
+        # Every section's wind and yaw in every equation, summed over the sections like the truth's forces.
+        ("VaryingCoefficientSINDy(additive U, yaw)",
+         lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="additive", yaw_degree=1, **vary),
+         "varying"),
         ("VaryingCoefficientSINDy(own U)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="section", yaw_degree=0, **vary),
          "varying"),

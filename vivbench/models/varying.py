@@ -131,14 +131,20 @@ def difference_penalty(n_basis: int, order: int = 2) -> np.ndarray:
 
 def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,
             n_yaw: int = 0) -> np.ndarray:
-    """Columns B_m(U) (A / a_ref)^i z^j, ordered (i, j, m); shape (n, 4 (n_yaw + 1) M).
+    """Columns B_m(U_s) (A / a_ref)^i z_s^j, ordered (i, j, s, m); shape (n, 4 (n_yaw + 1) n_in M).
 
-    ``z`` is the scaled yaw covariate (sin^2 psi over its reference), used for j = 1..n_yaw.
+    ``U`` is shape (n,) (one wind, n_in = 1) or (n, n_in) (one column per
+    section whose wind enters additively, ``wind_input="additive"``); ``z``,
+    the scaled yaw covariate (sin^2 psi over its reference) of the same shape,
+    is used for j = 1..n_yaw.
     """
-    B = bspline_basis(U, knots)
+    U2 = np.asarray(U, dtype=float).reshape(np.shape(U)[0], -1)
+    n, n_in = U2.shape
+    B = np.stack([bspline_basis(U2[:, s], knots) for s in range(n_in)], axis=1)  # (n, n_in, M)
     Apow = (A / a_ref)[:, None] ** np.arange(4)
-    Zpow = (np.ones_like(U) if z is None else z)[:, None] ** np.arange(n_yaw + 1)
-    return (Apow[:, :, None, None] * Zpow[:, None, :, None] * B[:, None, None, :]).reshape(U.size, -1)
+    Z2 = np.ones_like(U2) if z is None else np.asarray(z, dtype=float).reshape(n, -1)
+    Zpow = Z2[:, None, :] ** np.arange(n_yaw + 1)[None, :, None]  # (n, J + 1, n_in)
+    return (Apow[:, :, None, None, None] * Zpow[:, None, :, :, None] * B[:, None, None, :, :]).reshape(n, -1)
 
 
 def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
@@ -159,7 +165,8 @@ def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray,
     if sw is not None:
         ys = ys * sw
     zs = None if z is None else z[order]
-    p = 4 * (n_yaw + 1) * (knots.size - DEGREE - 1)
+    n_in = 1 if np.ndim(U) == 1 else U.shape[1]
+    p = 4 * (n_yaw + 1) * n_in * (knots.size - DEGREE - 1)
     G = np.empty((n_blocks, p, p))
     b = np.empty((n_blocks, p))
     for j in range(n_blocks):
@@ -403,6 +410,10 @@ class VaryingCoefficientSINDy(ModelBase):
             return np.repeat(m, U.shape[1], axis=1)
         return U
 
+    def _n_inputs(self, n_sections: int) -> int:
+        """Winds that enter each equation: every section's with ``wind_input="additive"``, else one."""
+        return int(n_sections) if self.wind_input == "additive" else 1
+
     @staticmethod
     def _inputs(record: Record) -> tuple[np.ndarray, np.ndarray | None]:
         """The record's U and yaw (None without); records reach here smoothed (:meth:`_check_record`)."""
@@ -493,8 +504,8 @@ class VaryingCoefficientSINDy(ModelBase):
                                  f"of seconds >= 0; got {self.wind_smoothing_grid!r}")
         if self.model_set_test not in ("z", "signed_rank"):
             raise InputError(f"model_set_test must be 'z' or 'signed_rank'; got {self.model_set_test!r}")
-        if self.wind_input not in ("section", "mean"):
-            raise InputError(f"wind_input must be 'section' or 'mean'; got {self.wind_input!r}")
+        if self.wind_input not in ("section", "mean", "additive"):
+            raise InputError(f"wind_input must be 'section', 'mean' or 'additive'; got {self.wind_input!r}")
 
     # -- fitting -------------------------------------------------------------------------------------
 
@@ -542,10 +553,12 @@ class VaryingCoefficientSINDy(ModelBase):
         S, J, K, n_ev, rng = prep["S"], prep["J"], prep["K"], prep["n_ev"], prep["rng"]
         n_basis = np.array(self.n_basis, dtype=int)
         pen = np.asarray(self.penalties, dtype=float)
+        n_in = self._n_inputs(S)
         Mmax = int(n_basis.max())
+        Lmax = n_in * Mmax  # coefficients per curve: each wind input's M B-splines, one after another
         self.yaw_degree_ = J
 
-        self.coef_ = np.zeros((S, Mmax, 4))
+        self.coef_ = np.zeros((S, Lmax, 4))
         self.knots_ = np.full((S, Mmax + DEGREE + 1), np.nan)
         self.n_basis_ = np.zeros(S, dtype=int)
         self.penalty_ = np.zeros(S)
@@ -557,12 +570,12 @@ class VaryingCoefficientSINDy(ModelBase):
         self.a_ref_ = np.ones(S)
         self.rss_ = np.zeros(S)
         n_boot = int(self.n_bootstrap)
-        self.coef_bootstrap_ = np.zeros((n_boot, S, Mmax, 4))
-        self.coef_yaw_ = np.zeros((S, Mmax, 4, J))
-        self.coef_yaw_bootstrap_ = np.zeros((n_boot, S, Mmax, 4, J))
+        self.coef_bootstrap_ = np.zeros((n_boot, S, Lmax, 4))
+        self.coef_yaw_ = np.zeros((S, Lmax, 4, J))
+        self.coef_yaw_bootstrap_ = np.zeros((n_boot, S, Lmax, 4, J))
         n_sub = ORDER_SUBSETS.shape[0]
-        self.subset_coef_ = np.zeros((n_sub, S, Mmax, 4))
-        self.subset_coef_yaw_ = np.zeros((n_sub, S, Mmax, 4, J))
+        self.subset_coef_ = np.zeros((n_sub, S, Lmax, 4))
+        self.subset_coef_yaw_ = np.zeros((n_sub, S, Lmax, 4, J))
         self.subset_loeo_ = np.full((n_sub, S), np.nan)
         self.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
         self.subset_loeo_event_ = np.full((n_sub, S, len(records)), np.nan)  # not saved: for studies of the level
@@ -582,8 +595,8 @@ class VaryingCoefficientSINDy(ModelBase):
             _err, M, lam_rel, knots, G, b, yy, P = sk["best"]
             keep_orders = np.ones(4, dtype=bool)
             if self.select_orders:
-                keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, (J + 1) * M, _err * n)
-            keep = np.repeat(keep_orders, (J + 1) * M)
+                keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, (J + 1) * n_in * M, _err * n)
+            keep = np.repeat(keep_orders, (J + 1) * n_in * M)
             Gs, bs = G.sum(axis=0), b.sum(axis=0)
             lam = np.array([lam_rel * _penalty_scale(Gs, P)])
             c = _solve(Gs, bs, P, lam, keep)[0]
@@ -594,9 +607,10 @@ class VaryingCoefficientSINDy(ModelBase):
             self.edf_[k] = float(np.trace(H))
             to_phys = ys / aref ** np.arange(4)  # (4,)
             zscale = self.yaw_ref_[k] ** -np.arange(J + 1.0)  # (J + 1,): coefficients of (sin^2 psi)^j
-            cp = c.reshape(4, J + 1, M).transpose(2, 0, 1) * to_phys[:, None] * zscale  # (M, 4, J + 1)
-            self.coef_[k, :M] = cp[..., 0]
-            self.coef_yaw_[k, :M] = cp[..., 1:]
+            L = n_in * M
+            cp = c.reshape(4, J + 1, L).transpose(2, 0, 1) * to_phys[:, None] * zscale  # (L, 4, J + 1)
+            self.coef_[k, :L] = cp[..., 0]
+            self.coef_yaw_[k, :L] = cp[..., 1:]
             self.knots_[k, :M + DEGREE + 1] = knots
             self.n_basis_[k], self.penalty_[k], self.orders_[k] = M, lam_rel, keep_orders
             self.wind_range_[k] = lo, hi
@@ -607,9 +621,9 @@ class VaryingCoefficientSINDy(ModelBase):
                 Gr = np.einsum("rb,bpq->rpq", mult, G)
                 br = mult @ b
                 cr = _solve(Gr, br, P, lam, keep)[:, 0]
-                crp = cr.reshape(n_boot, 4, J + 1, M).transpose(0, 3, 1, 2) * to_phys[:, None] * zscale
-                self.coef_bootstrap_[:, k, :M] = crp[..., 0]
-                self.coef_yaw_bootstrap_[:, k, :M] = crp[..., 1:]
+                crp = cr.reshape(n_boot, 4, J + 1, L).transpose(0, 3, 1, 2) * to_phys[:, None] * zscale
+                self.coef_bootstrap_[:, k, :L] = crp[..., 0]
+                self.coef_yaw_bootstrap_[:, k, :L] = crp[..., 1:]
             # The confidence set of order subsets (leave-one-event-out prediction, module docstring).
             ev_b = np.zeros((n_ev, G.shape[1], G.shape[1]))
             np.add.at(ev_b, ev_of_block, G)
@@ -619,13 +633,13 @@ class VaryingCoefficientSINDy(ModelBase):
             has = np.bincount(ev_of_block, minlength=n_ev) > 0
             loeo = np.full((n_sub, n_ev), np.nan)
             for a, orders in enumerate(ORDER_SUBSETS):
-                keep_a = np.repeat(orders, (J + 1) * M)
+                keep_a = np.repeat(orders, (J + 1) * L)
                 held = _solve(Gs[None] - ev_b[has], bs[None] - eb[has], P, lam, keep_a)  # (n_has, 1, p)
                 loeo[a, has] = _quad_error(held, ev_b[has], eb[has], ey[has])[:, 0]
-                ca = _solve(Gs, bs, P, lam, keep_a)[0].reshape(4, J + 1, M).transpose(2, 0, 1)
+                ca = _solve(Gs, bs, P, lam, keep_a)[0].reshape(4, J + 1, L).transpose(2, 0, 1)
                 ca = ca * to_phys[:, None] * zscale
-                self.subset_coef_[a, k, :M] = ca[..., 0]
-                self.subset_coef_yaw_[a, k, :M] = ca[..., 1:]
+                self.subset_coef_[a, k, :L] = ca[..., 0]
+                self.subset_coef_yaw_[a, k, :L] = ca[..., 1:]
             self.subset_loeo_[:, k] = np.nansum(loeo, axis=1) * ys**2
             self.subset_loeo_event_[:, k] = loeo * ys**2
             self.subset_plausible_[:, k] = _confidence_set(loeo[:, has], self.model_set_level, self.model_set_test)
@@ -674,19 +688,23 @@ class VaryingCoefficientSINDy(ModelBase):
                 "U_se": self._wind_standard_error(U_raw)}
 
     def _wind_standard_error(self, U: np.ndarray) -> np.ndarray | None:
-        """Standard error of the mean wind over the sections' anemometers, shape (n,), m/s (None: not estimable).
+        """Standard error of each equation's wind input, shape (n,), m/s (None: not estimable).
 
         The spread of the S (smoothed) anemometers about their mean over sqrt(S):
         the mean's error if each anemometer's slow turbulence, which the deck
         does not feel, is independent of the others' (on the seed-0 realistic
         campaign this gives 0.147 m/s against a true RMS error of 0.143 m/s).
-        Only for ``wind_input="mean"`` with two or more sections.
+        With ``wind_input="additive"`` each section's own anemometer is an
+        input, whose error is the spread itself (not over sqrt(S)).
+        Only for ``wind_input`` "mean" or "additive" with two or more sections.
         """
-        if self.wind_input != "mean" or U.shape[1] < 2:
+        if self.wind_input == "section" or U.shape[1] < 2:
             return None
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # rows with fewer than two winds: NaN
-            se = np.nanstd(U, axis=1, ddof=1) / np.sqrt(np.isfinite(U).sum(axis=1))
+            se = np.nanstd(U, axis=1, ddof=1)
+            if self.wind_input == "mean":
+                se = se / np.sqrt(np.isfinite(U).sum(axis=1))
         return np.where(np.isfinite(se), se, np.nanmedian(se))
 
     def _eiv_weight(self, prep: dict, k: int, sk: dict, step: float = 0.05, chunk: int = 50_000):
@@ -699,23 +717,30 @@ class VaryingCoefficientSINDy(ModelBase):
         inverse variances over their mean; shape (n_all,) (NaN where unused).
         """
         A, U, dA, Z, J = prep["A"], prep["U"], prep["dA"], prep["Z"], prep["J"]
-        ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
-        if J:
-            ok &= np.isfinite(Z[:, k])
+        ok = self._valid(A, U, dA, Z, k)
         idx = np.flatnonzero(ok)
         _err, _M, lam_rel, knots, G, b, _yy, P = sk["best"]
         Gs, bs = G.sum(axis=0), b.sum(axis=0)
         c = _solve(Gs, bs, P, np.array([lam_rel * _penalty_scale(Gs, P)]), np.ones(Gs.shape[0], dtype=bool))[0]
-        zk = None if not J else Z[:, k] / sk["yaw_ref"]
+        Uk, Zk = self._equation_inputs(U, Z, k)
+        zk = None if not J else Zk / sk["yaw_ref"]
+        n_in = 1 if Uk.ndim == 1 else Uk.shape[1]
         res = np.empty(idx.size)
-        slope = np.empty(idx.size)
+        slope2 = np.zeros(idx.size)  # sum over the wind inputs of the squared slopes
         for a in range(0, idx.size, chunk):  # the full design would not fit in memory
             i = idx[a:a + chunk]
             z = None if zk is None else zk[i]
-            f = [_design(U[i, k] + d, A[i, k], knots, sk["aref"], z, J) @ c for d in (0.0, step, -step)]
-            res[a:a + chunk] = dA[i, k] / sk["ys"] - f[0]
-            slope[a:a + chunk] = (f[1] - f[2]) / (2.0 * step)
-        v_wind = (slope * prep["U_se"][idx]) ** 2
+            f0 = _design(Uk[i], A[i, k], knots, sk["aref"], z, J) @ c
+            res[a:a + chunk] = dA[i, k] / sk["ys"] - f0
+            for s_ in range(n_in):
+                shift = np.zeros(n_in)
+                shift[s_] = step
+                u = Uk[i]
+                up, dn = (u + shift, u - shift) if Uk.ndim == 2 else (u + step, u - step)
+                fp = _design(up, A[i, k], knots, sk["aref"], z, J) @ c
+                fm = _design(dn, A[i, k], knots, sk["aref"], z, J) @ c
+                slope2[a:a + chunk] += ((fp - fm) / (2.0 * step)) ** 2
+        v_wind = slope2 * prep["U_se"][idx] ** 2
         # The variance function E[res^2] = s0 + kappa v_wind by least squares on the squared residuals:
         # kappa calibrates se_U (the sections' felt winds differ too, so the spread over-states the error).
         ms = float(np.mean(res**2))
@@ -728,6 +753,22 @@ class VaryingCoefficientSINDy(ModelBase):
         out[idx] = (1.0 / v) / np.mean(1.0 / v)
         return out, float(kappa * np.mean(v_wind) / np.mean(v))
 
+    def _equation_inputs(self, U: np.ndarray, Z: np.ndarray | None, k: int):
+        """Equation ``k``'s wind and yaw covariate: (n,) columns, or (n, S) every section's when additive."""
+        if self.wind_input == "additive":
+            return U, Z
+        return U[:, k], None if Z is None else Z[:, k]
+
+    def _valid(self, A: np.ndarray, U: np.ndarray, dA: np.ndarray | None, Z: np.ndarray | None, k: int) -> np.ndarray:
+        """Samples where equation ``k`` is defined: finite A_k (dA_k), and every wind (and yaw) it uses, shape (n,)."""
+        Uk, Zk = self._equation_inputs(U, Z, k)
+        ok = np.isfinite(A[:, k]) & np.isfinite(Uk).reshape(Uk.shape[0], -1).all(axis=1)
+        if dA is not None:
+            ok &= np.isfinite(dA[:, k])
+        if Zk is not None:
+            ok &= np.isfinite(Zk).reshape(Zk.shape[0], -1).all(axis=1)
+        return ok
+
     def _select_basis(self, prep: dict, k: int, weight: np.ndarray | None = None, fixed=None) -> dict:
         """Section ``k``'s scales, blocks and its (M, lambda) chosen by the cross-validated error over events.
 
@@ -737,18 +778,18 @@ class VaryingCoefficientSINDy(ModelBase):
         A, U, dA, Z, J, K = prep["A"], prep["U"], prep["dA"], prep["Z"], prep["J"], prep["K"]
         n_basis = np.array(self.n_basis if fixed is None else [fixed[0]], dtype=int)
         pen = np.asarray(self.penalties if fixed is None else [fixed[1]], dtype=float)
-        ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
-        if J:
-            ok &= np.isfinite(Z[:, k])
+        ok = self._valid(A, U, dA, Z if J else None, k)
         n = int(ok.sum())
-        p_max = 4 * (J + 1) * int(n_basis.max())
+        n_in = self._n_inputs(prep["S"])
+        p_max = 4 * (J + 1) * n_in * int(n_basis.max())
         if n < p_max + 2:
             raise InputError(f"section {k + 1}: {n} valid samples are too few for {p_max} spline coefficients")
-        Ak, Uk, yk = A[ok, k], U[ok, k], dA[ok, k]
+        Uall, Zall = self._equation_inputs(U, Z, k)
+        Ak, Uk, yk = A[ok, k], Uall[ok], dA[ok, k]
         zk, yaw_fallback, yaw_ref = None, 0.0, 1.0
         if J:
             # sin^2 psi over its RMS keeps the yaw columns on the scale of the others.
-            zraw = Z[ok, k]
+            zraw = Zall[ok]
             yaw_fallback = float(np.median(zraw))
             yaw_ref = float(np.sqrt(np.mean(zraw**2))) or 1.0
             zk = zraw / yaw_ref
@@ -767,8 +808,9 @@ class VaryingCoefficientSINDy(ModelBase):
             knots = uniform_knots(lo, hi, int(M))
             G, b, yy, _cnt = _block_stats(Uk, Ak, y, blk, nb, knots, aref, zk, J,
                                           None if weight is None else weight[ok])
-            P = np.kron(np.eye(4 * (J + 1)), difference_penalty(int(M)))
-            err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(4 * (J + 1) * M, dtype=bool)) / n
+            # Block-diagonal: the same roughness penalty on every order's, yaw power's and wind input's curve.
+            P = np.kron(np.eye(4 * (J + 1) * n_in), difference_penalty(int(M)))
+            err = self._cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool)) / n
             cv_error[a] = err
             j = int(np.argmin(err))
             if best is None or err[j] < best[0]:
@@ -794,8 +836,10 @@ class VaryingCoefficientSINDy(ModelBase):
             ``G`` (E, p, p) and ``b`` (E, p): X_e^T X_e and X_e^T y_e of the
             standardised design and target; ``yy`` (E,); ``n`` (E,) samples;
             ``P`` (p, p) the penalty; ``penalty`` the relative penalty;
-            ``keep`` (p,) bool, the kept orders' columns; ``n_basis`` M (the
-            first M columns are the constant term's B-splines).
+            ``keep`` (p,) bool, the kept orders' columns; ``n_basis`` M and
+            ``n_inputs`` the wind inputs (S with ``wind_input="additive"``, else
+            1): columns ordered (order, yaw power, input, B-spline), so the first
+            ``n_inputs`` x M are the constant term's B-splines.
         """
         self._check_fitted()
         records = [self._check_record(as_record(r, k)) for k, r in enumerate(records)]
@@ -807,18 +851,19 @@ class VaryingCoefficientSINDy(ModelBase):
         Z = np.concatenate([self._zeta(r, r.n_samples) for r in records]) if J else None
         event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
         E = len(records)
+        n_in = self._n_inputs(self.n_sections_)
         for k in range(self.n_sections_):
             M = int(self.n_basis_[k])
             knots = self.knots_[k, :M + DEGREE + 1]
-            ok = np.isfinite(A[:, k]) & np.isfinite(U[:, k]) & np.isfinite(dA[:, k])
-            if J:
-                ok &= np.isfinite(Z[:, k])
-            zk = None if not J else Z[ok, k] / self.yaw_ref_[k]
-            G, b, yy, cnt = _block_stats(U[ok, k], A[ok, k], dA[ok, k] / self.y_scale_[k], event[ok], E, knots,
+            ok = self._valid(A, U, dA, Z if J else None, k)
+            Uk, Zk = self._equation_inputs(U, Z, k)
+            zk = None if not J else Zk[ok] / self.yaw_ref_[k]
+            G, b, yy, cnt = _block_stats(Uk[ok], A[ok, k], dA[ok, k] / self.y_scale_[k], event[ok], E, knots,
                                          self.a_ref_[k], zk, J)
-            out.append({"G": G, "b": b, "yy": yy, "n": cnt, "P": np.kron(np.eye(4 * (J + 1)), difference_penalty(M)),
-                        "penalty": float(self.penalty_[k]), "keep": np.repeat(self.orders_[k], (J + 1) * M),
-                        "n_basis": M})
+            out.append({"G": G, "b": b, "yy": yy, "n": cnt,
+                        "P": np.kron(np.eye(4 * (J + 1) * n_in), difference_penalty(M)),
+                        "penalty": float(self.penalty_[k]), "keep": np.repeat(self.orders_[k], (J + 1) * n_in * M),
+                        "n_basis": M, "n_inputs": n_in})
         return out
 
     @staticmethod
@@ -889,14 +934,18 @@ class VaryingCoefficientSINDy(ModelBase):
         z = None
         if J and yaw is not None and coef_yaw is not None:
             z = self._zeta(np.asarray(yaw, dtype=float), U.shape[0])
-        out = np.empty(coef.shape[:-3] + (U.shape[0], self.n_sections_, 4))
+        out = np.zeros(coef.shape[:-3] + (U.shape[0], self.n_sections_, 4))
+        n_in = self._n_inputs(self.n_sections_)
         for k in range(self.n_sections_):  # a few sections
             M = int(self.n_basis_[k])
-            B = bspline_basis(U[:, k], self.knots_[k, :M + DEGREE + 1])
-            out[..., k, :] = np.einsum("nm,...mi->...ni", B, coef[..., k, :M, :])
-            if z is not None:
-                Bz = B[:, :, None] * z[:, k, None, None] ** np.arange(1, J + 1)  # (n, M, J)
-                out[..., k, :] += np.einsum("nmj,...mij->...ni", Bz, np.asarray(coef_yaw)[..., k, :M, :, :])
+            for s_ in range(n_in):  # additive: the sum over the sections' winds (and yaws)
+                u = s_ if n_in > 1 else k
+                B = bspline_basis(U[:, u], self.knots_[k, :M + DEGREE + 1])
+                cols = slice(s_ * M, (s_ + 1) * M)
+                out[..., k, :] += np.einsum("nm,...mi->...ni", B, coef[..., k, cols, :])
+                if z is not None:
+                    Bz = B[:, :, None] * z[:, u, None, None] ** np.arange(1, J + 1)  # (n, M, J)
+                    out[..., k, :] += np.einsum("nmj,...mij->...ni", Bz, np.asarray(coef_yaw)[..., k, cols, :, :])
         return out
 
     def _record_yaw(self, record: Record) -> np.ndarray | None:
@@ -946,9 +995,10 @@ class VaryingCoefficientSINDy(ModelBase):
 
         Returns
         -------
-        ndarray, shape (..., S, (J + 1) M_max, 4)
-            Entry j M_max + m holds the coefficient of B_m(U) (sin^2 psi)^j
-            (j = 0: ``coef``; j >= 1: ``coef_yaw[..., j - 1]``).
+        ndarray, shape (..., S, (J + 1) L, 4), L = ``coef_.shape[1]``
+            Entry j L + s M_k + m holds the coefficient of B_m(U_s) (sin^2 psi_s)^j
+            (j = 0: ``coef``; j >= 1: ``coef_yaw[..., j - 1]``; s = 0 except
+            with ``wind_input="additive"``, where s runs over the sections).
         """
         self._check_fitted()
         if coef is None:
@@ -974,33 +1024,37 @@ class VaryingCoefficientSINDy(ModelBase):
 
         Returns
         -------
-        cols : ndarray of int, shape (n, S, (DEGREE + 1) (J + 1))
-        vals : ndarray, shape (n, S, (DEGREE + 1) (J + 1)), NaN where the curves are undefined (no wind or yaw)
+        cols : ndarray of int, shape (n, S, (DEGREE + 1) (J + 1) n_in)
+            (n_in: S with ``wind_input="additive"``, else 1)
+        vals : ndarray, shape (n, S, (DEGREE + 1) (J + 1) n_in), NaN where the curves are undefined (no wind or yaw)
         """
         record = self._check_record(record)
         U = self._wind(self._inputs(record)[0])
         J = self.yaw_degree_
         z = self._zeta(self._record_yaw(record), U.shape[0]) if J else None
-        n, S, Mmax = U.shape[0], self.n_sections_, self.coef_.shape[1]
-        cols = np.empty((n, S, (DEGREE + 1) * (J + 1)), dtype=np.intp)
+        n, S, Lmax = U.shape[0], self.n_sections_, self.coef_.shape[1]
+        n_in = self._n_inputs(S)
+        cols = np.empty((n, S, J + 1, n_in, DEGREE + 1), dtype=np.intp)
         vals = np.empty(cols.shape)
         a = np.arange(DEGREE + 1)
         for k in range(S):  # a few sections
             M = int(self.n_basis_[k])
             knots = self.knots_[k, :M + DEGREE + 1]
-            B = bspline_basis(U[:, k], knots)
-            x = np.clip(np.nan_to_num(U[:, k], nan=knots[DEGREE]), knots[DEGREE], knots[-DEGREE - 1])
-            first = np.clip(np.searchsorted(knots, x, side="right") - 1 - DEGREE, 0, M - DEGREE - 1)
-            idx = first[:, None] + a
-            picked = np.take_along_axis(B, idx, axis=1)
-            # Local support: the row has no weight outside the picked functions (a wrong interval is a bug).
-            miss = np.abs(np.nansum(B, axis=1) - np.nansum(picked, axis=1))
-            if np.any(miss > 1e-12):
-                raise RuntimeError("B-spline row has non-zero entries outside its knot interval")
-            zp = np.ones((n, 1)) if z is None else z[:, k, None] ** np.arange(J + 1)
-            cols[:, k] = (idx[:, None, :] + Mmax * np.arange(J + 1)[:, None]).reshape(n, -1)
-            vals[:, k] = (zp[:, :, None] * picked[:, None, :]).reshape(n, -1)
-        return cols, vals
+            for s_ in range(n_in):  # additive: each section's wind has its own M columns
+                u = s_ if n_in > 1 else k
+                B = bspline_basis(U[:, u], knots)
+                x = np.clip(np.nan_to_num(U[:, u], nan=knots[DEGREE]), knots[DEGREE], knots[-DEGREE - 1])
+                first = np.clip(np.searchsorted(knots, x, side="right") - 1 - DEGREE, 0, M - DEGREE - 1)
+                idx = first[:, None] + a
+                picked = np.take_along_axis(B, idx, axis=1)
+                # Local support: the row has no weight outside the picked functions (a wrong interval is a bug).
+                miss = np.abs(np.nansum(B, axis=1) - np.nansum(picked, axis=1))
+                if np.any(miss > 1e-12):
+                    raise RuntimeError("B-spline row has non-zero entries outside its knot interval")
+                zp = np.ones((n, 1)) if z is None else z[:, u, None] ** np.arange(J + 1)
+                cols[:, k, :, s_] = idx[:, None, :] + s_ * M + Lmax * np.arange(J + 1)[:, None]
+                vals[:, k, :, s_] = zp[:, :, None] * picked[:, None, :]
+        return cols.reshape(n, S, -1), vals.reshape(n, S, -1)
 
     def predict(self, record: Record) -> np.ndarray:
         """dA/dt of the model, shape (n_samples, n_sections), m/s."""
@@ -1124,7 +1178,8 @@ class VaryingCoefficientSINDy(ModelBase):
             for i in range(4):
                 if not self.orders_[k, i]:
                     continue
-                name = f"a{k + 1}{i}(U{k + 1})" + ("" if i == 0 else f" A{k + 1}" + ("" if i == 1 else f"^{i}"))
+                wind = (f"U1..U{self.n_sections_}" if self.wind_input == "additive" else f"U{k + 1}")
+                name = f"a{k + 1}{i}({wind})" + ("" if i == 0 else f" A{k + 1}" + ("" if i == 1 else f"^{i}"))
                 terms.append(name)
             line = f"dA{k + 1}/dt = " + (" + ".join(terms) if terms else "0")
             ranges = "; ".join(f"a{k + 1}{i} in [{vals[:, k, i].min():.{precision}g}, {vals[:, k, i].max():.{precision}g}]"
