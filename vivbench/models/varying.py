@@ -27,9 +27,25 @@ Everything is computed from per-block sufficient statistics (X_b^T X_b, X_b^T y_
 y_b^T y_b): the folds, the penalty grid and the block bootstrap of the bands
 are small p x p solves (p = 4 M without yaw), with no loop over samples.
 
-Only own-section terms are used: in the averaged truth the mode shape makes
+Only own-section amplitudes are used: in the averaged truth the mode shape makes
 the other sections' amplitudes proportional to A_k, so their terms are
 collinear with A_k's.
+
+The wind of the curves (``wind_input``): the truth (DESIGN 2.3) sums the
+aerodynamic forces of every section j, each a function of that section's own
+felt wind U_j and yaw psi_j, so with a wind that differs along the span
+dA_k/dt = sum_i sum_j a_kij(U_j, psi_j) A_k^i, which no curve of one wind
+(the mean over the sections, ``"mean"``, or the section's own, ``"section"``)
+can represent when the curves are not linear (a lock-in bell).
+``"additive"`` fits that sum: every column above repeated for each section's
+wind and yaw (p = 4 M (J + 1) S, the same penalty on every section's curve;
+the sections' winds are strongly correlated, and the penalty keeps the split
+between them smooth, only their sum being identifiable). The curve of DESIGN
+3.5 at wind U is then the model at the uniform wind U_j = U, i.e. the sum over
+the sections. Measured winds add each point anemometer's own slow turbulence
+to each input (no longer averaged over the sections), which
+``departure_weight`` (each section's departure from the mean wind, shrunk
+before the fit, a regression calibration) counters.
 
 With the wind's yaw (``yaw_degree`` > 0; by default whenever the records carry it) its yaw psi (its angle to the span's normal,
 which the realistic aerodynamics fall off with and U does not carry) is a
@@ -242,9 +258,10 @@ class VaryingCoefficientSINDy(ModelBase):
         Regime threshold of DESIGN 2.5.
     seed : int
         Seed of the fold assignment and of the bootstrap.
-    wind_input : {"mean", "section"}
+    wind_input : {"mean", "section", "additive"}
         The wind of equation k's curves: the mean of U over the sections
-        (default), or the section's own U_k. The truth sums every section's
+        (default), the section's own U_k, or every section's U_j (and yaw),
+        a curve of each summed (module docstring). The truth sums every section's
         aerodynamic force, so with a wind that differs along the span the mean
         is the better variable: chosen on one realistic campaign (seed 0:
         median dA/dt error 0.195 against 0.453 with each section's own wind)
@@ -299,6 +316,17 @@ class VaryingCoefficientSINDy(ModelBase):
         (coverage 0.49), against 100 % (coverage 0.17) at 0.95; so 0.95 stays
         the default, and a smaller level is for large campaigns only, at the
         user's risk.
+    departure_weight : float, [0, 1]
+        Each section's measured wind (and yaw) is replaced by the mean over
+        the sections plus this weight times its departure from that mean
+        (:func:`shrink_departures`), at fit and in :meth:`measured_wind`: the
+        point anemometers differ from each other more than the felt winds do.
+        Default 1 (unchanged); only matters with ``wind_input="additive"``.
+        Ignored when ``departure_weight_grid`` is given.
+    departure_weight_grid : sequence of float, or None
+        Candidate departure weights, chosen per campaign (``departure_weight_``)
+        by the same cross-validated error as the wind smoothing (jointly with
+        it); e.g. ``DEPARTURE_WEIGHT_GRID``. None (default): ``departure_weight``.
     model_set_test : {"signed_rank", "z"}
         The paired test of the model set: Wilcoxon's one-sided signed-rank test
         of the per-event differences of held-out loss (default), or the
@@ -345,9 +373,15 @@ class VaryingCoefficientSINDy(ModelBase):
     wind_error_share_ : ndarray, shape (S,)
         With ``eiv_weights``, the share of the first fit's residual variance
         attributed to the mean wind's error (0 without; not saved).
-    coef_ : ndarray, shape (S, M_max, 4)
+    coef_ : ndarray, shape (S, n_in M_max, 4)
         Physical spline coefficients: a_ki(U) = sum_m coef_[k, m, i] B_km(U), in
-        m^(1-i)/s (zero beyond section k's ``n_basis_[k]``).
+        m^(1-i)/s (zero beyond section k's ``n_basis_[k]``). With
+        ``wind_input="additive"`` (n_in = S, else 1) entry s M_k + m holds the
+        coefficient of B_km(U_s): a_ki = sum_s sum_m coef_[k, s M_k + m, i] B_km(U_s).
+    departure_weight_ : float
+        The departure weight of the fit (``departure_weight`` or the CV's choice).
+    departure_cv_ : ndarray, shape (n_smoothings, n_departure_weights)
+        Cross-validated error of each candidate pair (not saved).
     coef_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4)
     knots_ : ndarray, shape (S, M_max + 4), m/s (NaN-padded)
     n_basis_ : ndarray of int, shape (S,); penalty_ : ndarray, shape (S,) (relative)
