@@ -31,7 +31,11 @@ Models: PooledSINDy (STLSQ + AICc on A^i U^j, j <= 5) and VaryingCoefficientSIND
 with the mean wind's yaw as a second covariate in the "mean U, yaw" row (the
 measured records carry the results' ``yaw``, or for older results the yaw
 measured from the event's anemometers; the truth's record gets the latter on
-its own grid). ``--wind-smoothing S`` is the varying models' ``wind_smoothing_s``
+its own grid). The "additive U, yaw" rows sum a curve of every section's
+wind and yaw in each equation (``wind_input="additive"``), with
+``ADDITIVE_SETTINGS`` (chosen on the seed-0 campaign) or the model's own CV
+("own CV"); ``--departure-weight W|cv`` sets their ``departure_weight``
+(``cv``: from ``DEPARTURE_WEIGHT_GRID``). ``--wind-smoothing S`` is the varying models' ``wind_smoothing_s``
 (default: the model's, 30 s; ``cv``: chosen per campaign from ``WIND_SMOOTHING_GRID``
 by the model's cross-validation over events): the fit on the measured records smooths their U
 and yaw, the verdicts use ``model.measured_wind`` of the measured record, the
@@ -69,7 +73,7 @@ import dataclasses  # noqa: E402
 from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
 from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
-from vivbench.models.varying import DEPARTURE_WEIGHT_GRID, WIND_SMOOTHING_GRID  # noqa: E402
+from vivbench.models.varying import ADDITIVE_SETTINGS, DEPARTURE_WEIGHT_GRID, WIND_SMOOTHING_GRID  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
                               varying_window_verdicts)
 
@@ -210,8 +214,13 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         # The wind's yaw as a second covariate (chosen on the seed-0 campaign, benchmarks/bench_floor.py).
         ("VaryingCoefficientSINDy(mean U, yaw)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1, **vary), "varying"),
-        # Every section's wind and yaw in every equation, summed over the sections like the truth's forces.
+        # Every section's wind and yaw in every equation, summed over the sections like the truth's forces,
+        # with its settings chosen on the seed-0 campaign (ADDITIVE_SETTINGS; the options override them) ...
         ("VaryingCoefficientSINDy(additive U, yaw)",
+         lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="additive", yaw_degree=1,
+                                         **{**ADDITIVE_SETTINGS, **vary}), "varying"),
+        # ... and with the model's own cross-validated basis and penalty.
+        ("VaryingCoefficientSINDy(additive U, yaw, own CV)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="additive", yaw_degree=1, **vary),
          "varying"),
         ("VaryingCoefficientSINDy(own U)",
