@@ -372,8 +372,9 @@ class VaryingCoefficientSINDy(ModelBase):
         (smoothed) anemometers about their mean over sqrt(S) (which matches
         the RMS error of the mean wind on the seed-0 realistic campaign: 0.147
         against 0.143 m/s) and (s0, kappa) fitted to the squared residuals.
-        Needs ``wind_input="mean"`` and two or more sections (else no
-        weights). Default True, measured with
+        Needs ``wind_input`` "mean" or "additive" (there the variance sums
+        every section's wind's, each with the anemometers' spread as its
+        error) and two or more sections (else no weights). Default True, measured with
         ``benchmarks/bench_misspecification.py`` (against ``--no-eiv-weights``) (median dA/dt
         error on the truth's (A, U); coverage at flagged accuracy; signed-rank
         model set): seed 0 (tuning) 0.111 -> 0.109, coverage 0.536 -> 0.570
@@ -799,7 +800,8 @@ class VaryingCoefficientSINDy(ModelBase):
 
         Var(residual) = s0^2 + (d f / d U)^2 se_U^2, with f the first fit's
         (standardised) dA/dt, its slope in U by central differences of ``step``
-        m/s, se_U from :meth:`_wind_standard_error`, and s0^2 the rest of the
+        m/s (with ``wind_input="additive"`` the sum over the sections' winds of
+        (d f / d U_s)^2 se_U^2), se_U from :meth:`_wind_standard_error`, and s0^2 the rest of the
         mean squared residual (floored at a hundredth of it). Weights are the
         inverse variances over their mean; shape (n_all,) (NaN where unused).
         """
@@ -819,13 +821,11 @@ class VaryingCoefficientSINDy(ModelBase):
             z = None if zk is None else zk[i]
             f0 = _design(Uk[i], A[i, k], knots, sk["aref"], z, J) @ c
             res[a:a + chunk] = dA[i, k] / sk["ys"] - f0
+            # Each wind input's error independent of the others': Var = sum_s (df/dU_s)^2 se_U^2.
             for s_ in range(n_in):
-                shift = np.zeros(n_in)
-                shift[s_] = step
-                u = Uk[i]
-                up, dn = (u + shift, u - shift) if Uk.ndim == 2 else (u + step, u - step)
-                fp = _design(up, A[i, k], knots, sk["aref"], z, J) @ c
-                fm = _design(dn, A[i, k], knots, sk["aref"], z, J) @ c
+                shift = step if Uk.ndim == 1 else step * (np.arange(n_in) == s_)
+                fp = _design(Uk[i] + shift, A[i, k], knots, sk["aref"], z, J) @ c
+                fm = _design(Uk[i] - shift, A[i, k], knots, sk["aref"], z, J) @ c
                 slope2[a:a + chunk] += ((fp - fm) / (2.0 * step)) ** 2
         v_wind = slope2 * prep["U_se"][idx] ** 2
         # The variance function E[res^2] = s0 + kappa v_wind by least squares on the squared residuals:
