@@ -520,12 +520,13 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
 def _yaw_free_columns(st: dict) -> np.ndarray:
     """Columns of the design without a yaw factor (j = 0), shape (p,) bool.
 
-    The columns are ordered (i, j, m): amplitude power i (4), yaw power j (J + 1), basis m (``n_basis``).
+    The columns are ordered (i, j, s, m): amplitude power i (4), yaw power j (J + 1), wind input s
+    (``n_inputs``, 1 unless the model sums every section's wind), basis m (``n_basis``).
     """
-    M, p = int(st["n_basis"]), st["G"].shape[-1]
+    M, p = int(st["n_basis"]) * int(st.get("n_inputs", 1)), st["G"].shape[-1]
     J1 = p // (4 * M)
     if 4 * M * J1 != p:
-        raise ValueError(f"statistics of {p} columns are not 4 x (J + 1) x {M} (n_basis)")
+        raise ValueError(f"statistics of {p} columns are not 4 x (J + 1) x {M} (n_inputs x n_basis)")
     return (np.arange(p) // M) % J1 == 0
 
 
@@ -565,9 +566,10 @@ def wind_strata(stats: list[dict], size: int = STRATUM_SIZE) -> np.ndarray:
     """
     st = stats[0]
     M = int(st["n_basis"])
-    occ = np.clip(st["G"][:, :M, :M].sum(axis=2), 0.0, None)  # (E, M)
+    L = M * int(st.get("n_inputs", 1))  # with several wind inputs: every section's wind, averaged
+    occ = np.clip(st["G"][:, :L, :L].sum(axis=2), 0.0, None)  # (E, L)
     with np.errstate(invalid="ignore", divide="ignore"):
-        centre = (occ * np.arange(M)).sum(axis=1) / occ.sum(axis=1)
+        centre = (occ * (np.arange(L) % M)).sum(axis=1) / occ.sum(axis=1)
     rank = np.empty(centre.size, dtype=np.int64)
     rank[np.argsort(np.nan_to_num(centre, nan=-1.0), kind="stable")] = np.arange(centre.size)
     n_full = max(int(np.round(centre.size / size)), 1)
@@ -728,9 +730,11 @@ def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_sca
         idx = np.flatnonzero(st["keep"])
         c = _subset_coefficients(wst["G"], wst["b"], wst)  # (E, q), each event held out
         Ge, be = st["G"][:, idx[:, None], idx], st["b"][:, idx]
-        # Columns summing to A / a_ref: order 1, yaw power 0, all M B-splines (layout (i, j, m)).
+        # Columns summing to A / a_ref: order 1, yaw power 0, all M B-splines (layout (i, j, s, m)); with
+        # n_inputs wind inputs they sum to n_inputs A / a_ref.
+        n_in = int(st.get("n_inputs", 1))
         lin = np.zeros(st["G"].shape[1])
-        lin[st["G"].shape[1] // 4:st["G"].shape[1] // 4 + int(st["n_basis"])] = 1.0
+        lin[st["G"].shape[1] // 4:st["G"].shape[1] // 4 + n_in * int(st["n_basis"])] = 1.0 / n_in
         s_ = lin[idx]
         num += (be - np.einsum("epq,eq->ep", Ge, c)) @ s_ * ar * ys  # sum of A e, m^2/s
         den += np.einsum("p,epq,q->e", s_, Ge, s_) * ar**2  # sum of A^2, m^2

@@ -14,7 +14,7 @@ MODELS = ("varying", "pooled", "sindy")
 
 def run(args) -> int:
     from vivbench.models.campaign import PooledSINDy
-    from vivbench.models.varying import VaryingCoefficientSINDy
+    from vivbench.models.varying import ADDITIVE_SETTINGS, VaryingCoefficientSINDy
     from vivbench.io.result import list_results
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_pooled
@@ -27,8 +27,11 @@ def run(args) -> int:
         raise InputError(f"--model must be one of {', '.join(MODELS)}; got {args.model!r}")
     if args.model == "varying":
         # The model's own defaults (yaw when the results store it, 30 s wind smoothing) unless overridden.
-        extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing))
+        extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing),
+                                   ("wind_input", args.wind_input))
                  if v is not None}
+        if args.wind_input == "additive":  # its settings chosen on the tuning campaign, unless overridden
+            extra = {**ADDITIVE_SETTINGS, **extra}
         model = VaryingCoefficientSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement,
                                         tau=args.tau, seed=args.seed, **extra)
     else:
@@ -84,6 +87,10 @@ def register(sub) -> None:
     s.add_argument("--yaw-degree", type=int, default=None, choices=(0, 1, 2),
                    help="with --model varying: powers of sin^2(yaw) in the curves (default: 1 when the results "
                         "store the yaw, else 0)")
+    s.add_argument("--wind-input", default=None, choices=("mean", "section", "additive"),
+                   help="with --model varying: the wind of the curves: the mean over the sections (default), each "
+                        "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
+                        "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
                         "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "
