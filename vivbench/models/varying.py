@@ -634,12 +634,14 @@ class VaryingCoefficientSINDy(ModelBase):
         if self.eiv_weights and prep["U_se"] is not None:
             # Effective variance: refit at the chosen basis and penalty with each sample weighted by the
             # inverse of its residual variance, the wind error's share propagated through the first fit's slope.
-            weights = []
             for k in range(prep["S"]):
                 w, self.wind_error_share_[k] = self._eiv_weight(prep, k, sel[k])
-                weights.append(w)
-            sel = [dict(self._select_basis(prep, k, weight=weights[k], fixed=sel[k]["best"][1:3]),
-                        cv_error=sel[k]["cv_error"]) for k in range(prep["S"])]
+                # one section at a time: the first fit's block statistics (blocks x p x p, hundreds of MB
+                # with every section's wind) are dropped before the weighted ones are built
+                first, sel[k] = sel[k], None
+                sel[k] = dict(self._select_basis(prep, k, weight=w, fixed=first["best"][1:3]),
+                              cv_error=first["cv_error"])
+                del first
         records = prep["records"]
         S, J, K, n_ev, rng = prep["S"], prep["J"], prep["K"], prep["n_ev"], prep["rng"]
         n_basis = np.array(self.n_basis, dtype=int)
