@@ -55,8 +55,9 @@ def run_case(results: Path, change: int | None) -> str:
     scan = statistics_change_scan(stats, seed=model.seed)
     t2 = time.perf_counter()
     k = scan["change_index"]
-    rel = change_relative_flags(stats, k, checks["linear_offset_se"], model.a_ref_, model.y_scale_)
-    off = offset_flags(checks["linear_offset"], checks["linear_offset_se"])
+    rel = change_relative_flags(stats, k, checks["linear_offset_se"], model.a_ref_, model.y_scale_,
+                                n_pieces=checks["n_pieces"])
+    off = offset_flags(checks["linear_offset"], checks["linear_offset_se"], n_pieces=checks["n_pieces"])
     after = np.arange(ids.size) >= k if scan["detected"] else np.zeros(ids.size, dtype=bool)
 
     def show(flag):

@@ -56,6 +56,25 @@ def test_offset_flags_hold_their_false_alarm_rate_and_catch_an_outlier():
     assert not nan["flag"].any() and np.all(np.isnan(nan["p"]))
 
 
+def test_offset_flags_with_few_pieces_use_student_t():
+    """Standard errors from a few pieces each (short events) make normal z over-flag; the t p-values hold the rate."""
+    from vivbench.analysis.changes import offset_flags
+
+    rng = np.random.default_rng(5)
+    pieces = rng.integers(3, 6, 30)  # 6-10 min events of 120 s pieces
+    flags = {"normal": 0, "t": 0}
+    for _ in range(60):
+        se_true = 10.0 ** rng.uniform(-3.5, -3, 30)
+        se = se_true * np.sqrt(rng.chisquare(pieces - 1) / (pieces - 1))  # each estimated from its pieces
+        delta = 2e-4 * rng.standard_normal(30) + se_true * rng.standard_normal(30)
+        flags["normal"] += bool(offset_flags(delta, se)["flag"].any())
+        flags["t"] += bool(offset_flags(delta, se, n_pieces=pieces)["flag"].any())
+    # Benjamini-Hochberg at 5 % under the global null: about 3 of 60 campaigns with any flag.
+    assert flags["t"] <= 9 < flags["normal"], flags
+    big = np.r_[8e-3, np.zeros(29)] + 2e-4 * rng.standard_normal(30)  # a clear outlier is still caught
+    assert offset_flags(big, np.full(30, 2e-4), n_pieces=np.full(30, 10))["flag"][0]
+
+
 def test_change_relative_flags_catch_the_events_after_a_damping_step_and_only_them():
     from vivbench.analysis.changes import change_relative_flags, event_residual_checks
 

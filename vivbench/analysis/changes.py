@@ -158,6 +158,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.linalg.lapack import dposv
 from scipy.stats import chi2, false_discovery_control, norm
+from scipy.stats import t as student_t
 
 from vivbench.core.record import Record
 
@@ -197,12 +198,14 @@ def event_residual_checks(model, records: Sequence[Record], *, block_s: float = 
         ``residual_rms`` (m/s), ``residual_ratio`` (1), ``residual_rel_rms``
         (residual RMS over the RMS of dA/dt, 1), ``linear_offset`` and
         ``linear_offset_se`` (1/s), ``weight`` (sum of A^2 over the valid
-        samples, m^2), ``n_valid`` (valid sample-sections); NaN where an event
-        has no valid sample (or, for the standard error, fewer than two pieces).
+        samples, m^2), ``n_valid`` (valid sample-sections), ``n_pieces`` (the
+        ``block_s`` pieces behind the standard error, which has ``n_pieces`` - 1
+        degrees of freedom); NaN where an event has no valid sample (or, for the
+        standard error, fewer than two pieces).
     """
     E = len(records)
     out = {k: np.full(E, np.nan) for k in ("residual_rms", "residual_rel_rms", "linear_offset", "linear_offset_se",
-                                           "weight", "n_valid")}
+                                           "weight", "n_valid", "n_pieces")}
     for e, rec in enumerate(records):  # one prediction per event
         res = rec.dA - model.predict(rec)
         ok = np.isfinite(res) & np.isfinite(rec.A)
@@ -225,6 +228,7 @@ def event_residual_checks(model, records: Sequence[Record], *, block_s: float = 
         piece = np.floor((rec.t - rec.t[0]) / block_s).astype(np.int64)
         _, piece = np.unique(piece, return_inverse=True)
         nb = int(piece.max()) + 1
+        out["n_pieces"][e] = nb
         if nb >= 2:
             u = np.bincount(piece, weights=num_t - delta * den_t, minlength=nb)
             out["linear_offset_se"][e] = np.sqrt(nb / (nb - 1) * np.sum(u**2)) / den
@@ -627,7 +631,7 @@ def _benjamini_hochberg(p: np.ndarray, fdr: float) -> np.ndarray:
     return out
 
 
-def offset_flags(delta, se, *, fdr: float = FLAG_FDR) -> dict:
+def offset_flags(delta, se, *, n_pieces=None, fdr: float = FLAG_FDR) -> dict:
     """Events whose linear offset departs from the other events' by more than the events' own spread.
 
     A change-agnostic "not predicted" flag: each event's offset delta_e
@@ -636,11 +640,20 @@ def offset_flags(delta, se, *, fdr: float = FLAG_FDR) -> dict:
     tau^2, so the usual spread of a misspecified model's offsets is part of
     the null, calibrated on the events themselves):
     z_e = (delta_e - mu_-e) / sqrt(se_e^2 + tau_-e^2 + var(mu_-e)), two-sided
-    normal p-values, Benjamini-Hochberg over the events at ``fdr``.
+    p-values, Benjamini-Hochberg over the events at ``fdr``. With
+    ``n_pieces`` the p-values are Student-t with the Welch-Satterthwaite
+    degrees of freedom (se_e^2 + rest)^2 / (se_e^4 / (n_pieces_e - 1)), the
+    other events' terms taken as known (:func:`_satterthwaite_p`): se_e comes
+    from the event's own few pieces (a 10 min event has 5 of 120 s), and a
+    normal z then over-flags short events whose se_e happens to be small
+    (seen on independent no-change campaigns, README); without, normal
+    p-values.
 
     Parameters
     ----------
     delta, se : array_like, shape (E,), 1/s
+    n_pieces : array_like, shape (E,), optional
+        Pieces behind each se (``event_residual_checks``' ``n_pieces``).
     fdr : float, false-discovery rate of the flags
 
     Returns
@@ -651,32 +664,51 @@ def offset_flags(delta, se, *, fdr: float = FLAG_FDR) -> dict:
     """
     delta, se = np.asarray(delta, dtype=float), np.asarray(se, dtype=float)
     ok = np.isfinite(delta) & np.isfinite(se) & (se > 0)
-    z = np.full(delta.size, np.nan)
+    z, rest = np.full(delta.size, np.nan), np.full(delta.size, np.nan)
     for e in np.flatnonzero(ok):  # one random-effects fit per event (events, not samples)
         o = ok.copy()
         o[e] = False
-        z[e] = _random_effects_z(delta[e], se[e], delta[o], se[o])
-    p = 2.0 * norm.sf(np.abs(z))
+        z[e], rest[e] = _random_effects_z(delta[e], se[e], delta[o], se[o])
+    p = _satterthwaite_p(z, se, rest, n_pieces)
     return {"z": z, "p": p, "flag": _benjamini_hochberg(p, fdr)}
 
 
-def _random_effects_z(d: float, s: float, ref: np.ndarray, ref_se: np.ndarray) -> float:
+def _satterthwaite_p(z, se, rest, n_pieces) -> np.ndarray:
+    """Two-sided p-values of z = d / sqrt(se^2 + rest): Student-t with Welch-Satterthwaite degrees of freedom.
+
+    se^2 is estimated from ``n_pieces`` - 1 degrees of freedom, ``rest`` (the
+    reference's variance terms) is taken as known; ``n_pieces`` None (or < 2): normal.
+    """
+    z = np.asarray(z, dtype=float)
+    if n_pieces is None:
+        return 2.0 * norm.sf(np.abs(z))
+    nu = np.asarray(n_pieces, dtype=float) - 1.0
+    v = np.asarray(se, dtype=float) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        df = (v + rest) ** 2 / (v**2 / nu)
+    df = np.where(np.isfinite(df) & (nu >= 1), df, np.inf)
+    return 2.0 * student_t.sf(np.abs(z), df)
+
+
+def _random_effects_z(d: float, s: float, ref: np.ndarray, ref_se: np.ndarray) -> tuple[float, float]:
     """z-score of the estimate d (standard error s) against the random-effects model of ``ref``.
 
     DerSimonian-Laird between-event variance tau^2 of the reference estimates; NaN with fewer than 3.
+    Returns z and the reference's share of its variance, tau^2 + var(mu) (the rest is s^2).
     """
     if ref.size < 3:
-        return float("nan")
+        return float("nan"), float("nan")
     w = 1.0 / ref_se**2
     mu_fe = np.sum(w * ref) / w.sum()
     q = np.sum(w * (ref - mu_fe) ** 2)
     tau2 = max(0.0, (q - (ref.size - 1)) / (w.sum() - np.sum(w**2) / w.sum()))
     wr = 1.0 / (ref_se**2 + tau2)
     mu = np.sum(wr * ref) / wr.sum()
-    return float((d - mu) / np.sqrt(s**2 + tau2 + 1.0 / wr.sum()))
+    rest = tau2 + 1.0 / wr.sum()
+    return float((d - mu) / np.sqrt(s**2 + rest)), float(rest)
 
 
-def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_scale, *,
+def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_scale, *, n_pieces=None,
                           fdr: float = FLAG_FDR) -> dict:
     """Events from a located change on whose held-out linear offset departs from the events' before it.
 
@@ -709,6 +741,7 @@ def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_sca
     se : array_like, shape (E,), 1/s, the offsets' standard errors (:func:`event_residual_checks`)
     a_ref, y_scale : array_like, shape (S,), m and m/s: the model's per-equation scales of A and dA/dt
         (``VaryingCoefficientSINDy.a_ref_``, ``y_scale_``), to give the offsets in 1/s
+    n_pieces : array_like, shape (E,), optional: Student-t p-values as in :func:`offset_flags`
     fdr : float
 
     Returns
@@ -744,8 +777,9 @@ def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_sca
     ok = np.isfinite(delta) & np.isfinite(se) & (se > 0)
     before = np.arange(E) < k
     ref = before & ok
+    rest = np.full(E, np.nan)
     for e in np.flatnonzero(~before & ok):  # events after the change, one z each
-        out["z"][e] = _random_effects_z(delta[e], se[e], delta[ref], se[ref])
-    out["p"] = 2.0 * norm.sf(np.abs(out["z"]))
+        out["z"][e], rest[e] = _random_effects_z(delta[e], se[e], delta[ref], se[ref])
+    out["p"] = _satterthwaite_p(out["z"], se, rest, n_pieces)
     out["flag"] = _benjamini_hochberg(out["p"], fdr)
     return out

@@ -313,7 +313,7 @@ def pool_results(result_files: Sequence, model=None, *,
                               {"units": "m2 s-2", "long_name": "between-group sum of squares of event_linear_offset "
                                "for a change just before this event"}),
     })
-    offsets = offset_flags(checks["linear_offset"], checks["linear_offset_se"])
+    offsets = offset_flags(checks["linear_offset"], checks["linear_offset_se"], n_pieces=checks["n_pieces"])
     data.update({
         "event_offset_z": (("event",), offsets["z"],
                            {"units": "1", "long_name": "event_linear_offset against a random-effects model of the "
@@ -329,7 +329,8 @@ def pool_results(result_files: Sequence, model=None, *,
         model_scan = statistics_change_scan(stats, seed=model.seed)
         # Flags relative to the located change, only when the scan reports one.
         ci = model_scan["change_index"] if model_scan["detected"] else -1
-        rel = change_relative_flags(stats, ci, checks["linear_offset_se"], model.a_ref_, model.y_scale_)
+        rel = change_relative_flags(stats, ci, checks["linear_offset_se"], model.a_ref_, model.y_scale_,
+                                    n_pieces=checks["n_pieces"])
         data.update({
             "event_after_change": (("event",), (np.arange(len(records)) >= ci if ci >= 0
                                                 else np.zeros(len(records), dtype=bool)).astype(np.int8),
