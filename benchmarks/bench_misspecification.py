@@ -34,8 +34,7 @@ measured from the event's anemometers; the truth's record gets the latter on
 its own grid). The "additive U, yaw" rows sum a curve of every section's
 wind and yaw in each equation (``wind_input="additive"``), with
 ``ADDITIVE_SETTINGS`` (chosen on the seed-0 campaign) or the model's own CV
-("own CV"); ``--departure-weight W|cv`` sets their ``departure_weight``
-(``cv``: from ``DEPARTURE_WEIGHT_GRID``). ``--wind-smoothing S`` is the varying models' ``wind_smoothing_s``
+("own CV"). ``--wind-smoothing S`` is the varying models' ``wind_smoothing_s``
 (default: the model's, 30 s; ``cv``: chosen per campaign from ``WIND_SMOOTHING_GRID``
 by the model's cross-validation over events): the fit on the measured records smooths their U
 and yaw, the verdicts use ``model.measured_wind`` of the measured record, the
@@ -73,7 +72,7 @@ import dataclasses  # noqa: E402
 from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
 from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
-from vivbench.models.varying import ADDITIVE_SETTINGS, DEPARTURE_WEIGHT_GRID, WIND_SMOOTHING_GRID  # noqa: E402
+from vivbench.models.varying import ADDITIVE_SETTINGS, WIND_SMOOTHING_GRID  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
                               varying_window_verdicts)
 
@@ -186,8 +185,7 @@ def score(model, events, verdicts: str | None = None, records=None) -> dict:
 def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
         only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float | None = None,
         n_basis: tuple[int, ...] | None = None, model_set_level: float | None = None,
-        substitutions: tuple[tuple[str, ...], ...] = (), eiv_weights: bool = True,
-        departure_weight: str | None = None) -> dict:
+        substitutions: tuple[tuple[str, ...], ...] = (), eiv_weights: bool = True) -> dict:
     t0 = time.perf_counter()
     if wind_smoothing_s == "cv":  # chosen per campaign by the model's cross-validation over events
         vary = {"wind_smoothing_grid": WIND_SMOOTHING_GRID}
@@ -199,10 +197,6 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         vary["model_set_level"] = float(model_set_level)
     if not eiv_weights:
         vary["eiv_weights"] = False
-    if departure_weight == "cv":
-        vary["departure_weight_grid"] = DEPARTURE_WEIGHT_GRID
-    elif departure_weight is not None:
-        vary["departure_weight"] = float(departure_weight)
     measured, events = load_campaign(camp, results)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
@@ -295,9 +289,6 @@ def main(argv=None) -> dict:
     parser.add_argument("--no-eiv-weights", action="store_true",
                         help="the varying models' eiv_weights=False (default: the model's, True: effective-variance "
                              "weights against the wind error)")
-    parser.add_argument("--departure-weight", default=None,
-                        help="the varying models' departure_weight (each section's wind departure from the mean "
-                             "kept, 0..1; default the model's), or 'cv': chosen from DEPARTURE_WEIGHT_GRID")
     parser.add_argument("--substitute", default="",
                         help="comma-separated truth substitutions for the varying models, each a '+'-joined "
                              "subset of U, A, dA (e.g. 'U,A,dA'): fits on the measured records with those inputs "
@@ -318,7 +309,7 @@ def main(argv=None) -> dict:
         out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders, args.only, not args.no_truth_fits,
                              args.wind_smoothing,
                              None if args.n_basis is None else tuple(int(x) for x in args.n_basis.split(",")),
-                             args.model_set_level, subs, not args.no_eiv_weights, args.departure_weight)
+                             args.model_set_level, subs, not args.no_eiv_weights)
     for camp, rows in out.items():
         print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
     args.json.parent.mkdir(parents=True, exist_ok=True)

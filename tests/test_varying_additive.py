@@ -125,16 +125,3 @@ def test_event_statistics_feed_the_change_scan(additive):
     assert strata.shape == (len(recs),)
     scan = statistics_change_scan(stats, min_events=3, n_permutations=20, seed=0)
     assert not scan["detected"]  # no change in a noise-free, time-invariant campaign
-
-
-def test_shrink_departures_and_its_parameter():
-    from vivbench.core.errors import InputError
-    from vivbench.models.varying import shrink_departures
-    rec = _records(1)[0]
-    half = shrink_departures(rec, 0.5)
-    m = rec.U.mean(axis=1, keepdims=True)
-    np.testing.assert_allclose(half.U, m + 0.5 * (rec.U - m))
-    np.testing.assert_allclose(shrink_departures(rec, 0.0).U, np.repeat(m, 3, axis=1))
-    assert shrink_departures(rec, 1.0) is rec
-    with pytest.raises(InputError):
-        VaryingCoefficientSINDy(departure_weight_grid=(0.5, 1.5)).fit(_records(2))

@@ -43,10 +43,10 @@ the sections' winds are strongly correlated, and the penalty keeps the split
 between them smooth, only their sum being identifiable). The curve of DESIGN
 3.5 at wind U is then the model at the uniform wind U_j = U, i.e. the sum over
 the sections. Measured winds add each point anemometer's own slow turbulence
-to each input (no longer averaged over the sections), which
-``departure_weight`` (each section's departure from the mean wind, shrunk
-before the fit, a regression calibration) was meant to counter; it does not
-(its CV choice, 0.5, raised the seed-0 error to 0.169), so it stays 1.
+to each input (no longer averaged over the sections); shrinking each
+section's departure from the mean wind before the fit (a regression
+calibration, weight chosen by the CV over events) did not counter it: its
+choice, 0.5, raised the seed-0 error to 0.169, and it was dropped.
 Measured (``benchmarks/bench_misspecification.py``; median dA/dt error on the
 truth's (A, U), coverage at flagged accuracy), fitted on the truth's own
 (A, U, yaw, dA) of the seed-0 realistic campaign: 0.038 (the mean wind 0.114).
@@ -80,7 +80,6 @@ checks for them).
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import warnings
 from collections.abc import Sequence
@@ -98,7 +97,7 @@ from vivbench.models.simulate import Simulation, nmse
 from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
-           "WIND_SMOOTHING_GRID", "DEPARTURE_WEIGHT_GRID", "ADDITIVE_SETTINGS", "shrink_departures"]
+           "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS"]
 
 #: Spline degree (cubic).
 DEGREE = 3
@@ -107,10 +106,6 @@ DEGREE = 3
 #: the cross-validated error over events: roughly doubling steps, from the exact wind of an in-library
 #: campaign to a point anemometer's slow turbulence (the seed-0 realistic campaign chose 30 s).
 WIND_SMOOTHING_GRID = (0.0, 15.0, 30.0, 60.0)
-
-#: Default candidates of the departure weight of the sections' measured winds from their mean
-#: (``wind_input="additive"``; 1: each section's own anemometer), chosen by the cross-validated error over events.
-DEPARTURE_WEIGHT_GRID = (0.25, 0.5, 1.0)
 
 #: Settings of ``wind_input="additive"`` chosen on the seed-0 realistic campaign (tuning) by the median
 #: dA/dt error on the truth's (A, U), ``benchmarks/bench_misspecification.py``: there the model's own
@@ -338,17 +333,6 @@ class VaryingCoefficientSINDy(ModelBase):
         (coverage 0.49), against 100 % (coverage 0.17) at 0.95; so 0.95 stays
         the default, and a smaller level is for large campaigns only, at the
         user's risk.
-    departure_weight : float, [0, 1]
-        Each section's measured wind (and yaw) is replaced by the mean over
-        the sections plus this weight times its departure from that mean
-        (:func:`shrink_departures`), at fit and in :meth:`measured_wind`: the
-        point anemometers differ from each other more than the felt winds do.
-        Default 1 (unchanged); only matters with ``wind_input="additive"``.
-        Ignored when ``departure_weight_grid`` is given.
-    departure_weight_grid : sequence of float, or None
-        Candidate departure weights, chosen per campaign (``departure_weight_``)
-        by the same cross-validated error as the wind smoothing (jointly with
-        it); e.g. ``DEPARTURE_WEIGHT_GRID``. None (default): ``departure_weight``.
     model_set_test : {"signed_rank", "z"}
         The paired test of the model set: Wilcoxon's one-sided signed-rank test
         of the per-event differences of held-out loss (default), or the
@@ -401,10 +385,6 @@ class VaryingCoefficientSINDy(ModelBase):
         m^(1-i)/s (zero beyond section k's ``n_basis_[k]``). With
         ``wind_input="additive"`` (n_in = S, else 1) entry s M_k + m holds the
         coefficient of B_km(U_s): a_ki = sum_s sum_m coef_[k, s M_k + m, i] B_km(U_s).
-    departure_weight_ : float
-        The departure weight of the fit (``departure_weight`` or the CV's choice).
-    departure_cv_ : ndarray, shape (n_smoothings, n_departure_weights)
-        Cross-validated error of each candidate pair (not saved).
     coef_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4)
     knots_ : ndarray, shape (S, M_max + 4), m/s (NaN-padded)
     n_basis_ : ndarray of int, shape (S,); penalty_ : ndarray, shape (S,) (relative)
@@ -444,8 +424,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
                  wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None, eiv_weights: bool = True,
-                 model_set_test: str = "signed_rank", departure_weight: float = 1.0,
-                 departure_weight_grid: Sequence[float] | None = None):
+                 model_set_test: str = "signed_rank"):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -462,8 +441,6 @@ class VaryingCoefficientSINDy(ModelBase):
         self.wind_smoothing_grid = wind_smoothing_grid
         self.eiv_weights = eiv_weights
         self.model_set_test = model_set_test
-        self.departure_weight = departure_weight
-        self.departure_weight_grid = departure_weight_grid
 
     def _wind(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
@@ -495,18 +472,7 @@ class VaryingCoefficientSINDy(ModelBase):
         record of the wind the deck itself feels (a synthetic truth) is
         evaluated as it is.
         """
-        return shrink_departures(smooth_wind(as_record(record), self.fitted_wind_smoothing()),
-                                 self.fitted_departure_weight())
-
-    def fitted_departure_weight(self) -> float:
-        """The weight of each section's departure from the mean wind in the measured wind (1: none shrunk):
-        ``departure_weight_`` once fitted, before that ``departure_weight``."""
-        return float(getattr(self, "departure_weight_", self.departure_weight))
-
-    def _departure_candidates(self) -> list[float]:
-        """The departure weights the fit chooses from: ``departure_weight_grid``, or ``departure_weight`` alone."""
-        grid = self.departure_weight_grid
-        return [float(self.departure_weight)] if grid is None else [float(x) for x in grid]
+        return smooth_wind(as_record(record), self.fitted_wind_smoothing())
 
     def fitted_wind_smoothing(self) -> float:
         """The wind smoothing of the fit, s: ``wind_smoothing_s_`` once fitted (the cross-validated
@@ -547,9 +513,6 @@ class VaryingCoefficientSINDy(ModelBase):
         params["wind_smoothing_grid"] = None if grid is None else [float(x) for x in grid]
         params["model_set_level"] = float(params["model_set_level"])
         params["eiv_weights"] = bool(params["eiv_weights"])
-        params["departure_weight"] = float(params["departure_weight"])
-        dgrid = params["departure_weight_grid"]
-        params["departure_weight_grid"] = None if dgrid is None else [float(x) for x in dgrid]
         return json.dumps(params, sort_keys=True)
 
     def _validate(self) -> None:
@@ -581,11 +544,6 @@ class VaryingCoefficientSINDy(ModelBase):
             if g.ndim != 1 or g.size == 0 or np.any(~np.isfinite(g)) or np.any(g < 0):
                 raise InputError("wind_smoothing_grid must be None (use wind_smoothing_s) or a non-empty sequence "
                                  f"of seconds >= 0; got {self.wind_smoothing_grid!r}")
-        for w in [self.departure_weight] + list(self.departure_weight_grid or []):
-            if not (np.isfinite(w) and 0.0 <= w <= 1.0):
-                raise InputError(f"departure weights must lie in [0, 1] (0: every section at the mean wind, 1: its "
-                                 f"own); got departure_weight={self.departure_weight!r}, "
-                                 f"departure_weight_grid={self.departure_weight_grid!r}")
         if self.model_set_test not in ("z", "signed_rank"):
             raise InputError(f"model_set_test must be 'z' or 'signed_rank'; got {self.model_set_test!r}")
         if self.wind_input not in ("section", "mean", "additive"):
@@ -613,23 +571,18 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"the varying-coefficient model needs at least 2 events (its basis and penalty are "
                              f"chosen by cross-validation over events); got {len(raw)}")
         grid = self._smoothing_candidates()
-        weights = self._departure_candidates()
-        # The wind smoothing (and the sections' departure weight) is chosen like M and lambda, by the
-        # cross-validated error over events (the target dA/dt and the folds do not depend on it, so the
-        # errors are comparable).
-        self.departure_cv_ = np.full((len(grid), len(weights)), np.nan)
+        # The wind smoothing is chosen like M and lambda, by the cross-validated error over events
+        # (the target dA/dt and the folds do not depend on it, so the errors are comparable).
+        self.wind_smoothing_cv_ = np.full(len(grid), np.nan)
         chosen = None
         for g, sigma in enumerate(grid):
-            smoothed = [smooth_wind(r, float(sigma)) for r in raw]
-            for h, w in enumerate(weights):
-                prep = self._prepare([shrink_departures(r, w) for r in smoothed])
-                sel = [self._select_basis(prep, k) for k in range(prep["S"])]
-                self.departure_cv_[g, h] = float(sum(x["best"][0] for x in sel))
-                if chosen is None or self.departure_cv_[g, h] < chosen[0]:
-                    chosen = (self.departure_cv_[g, h], float(sigma), float(w), prep, sel)
-                del prep, sel
-        self.wind_smoothing_cv_ = self.departure_cv_.min(axis=1)
-        _total, self.wind_smoothing_s_, self.departure_weight_, prep, sel = chosen
+            prep = self._prepare([smooth_wind(r, float(sigma)) for r in raw])
+            sel = [self._select_basis(prep, k) for k in range(prep["S"])]
+            self.wind_smoothing_cv_[g] = float(sum(x["best"][0] for x in sel))
+            if chosen is None or self.wind_smoothing_cv_[g] < chosen[0]:
+                chosen = (self.wind_smoothing_cv_[g], float(sigma), prep, sel)
+            del prep, sel
+        _total, self.wind_smoothing_s_, prep, sel = chosen
         self.wind_error_share_ = np.zeros(prep["S"])
         if self.eiv_weights and prep["U_se"] is not None:
             # Effective variance: refit at the chosen basis and penalty with each sample weighted by the
@@ -1310,7 +1263,6 @@ class VaryingCoefficientSINDy(ModelBase):
         attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
                  "wind_smoothing_s_fitted": float(self.wind_smoothing_s_),
                  "wind_smoothing_cv": json.dumps([float(x) for x in self.wind_smoothing_cv_]),
-                 "departure_weight_fitted": float(self.departure_weight_),
                  "n_blocks": self.n_blocks_, "events": json.dumps(self.event_ids_)}
         return xr.Dataset(data, coords={"equation": section_names(self.n_sections_), "order": np.arange(4)},
                           attrs=attrs)
@@ -1334,10 +1286,6 @@ class VaryingCoefficientSINDy(ModelBase):
         params.setdefault("wind_smoothing_grid", None)  # files written before the smoothing was cross-validated
         params.setdefault("eiv_weights", False)  # files written before the effective-variance weights
         params.setdefault("model_set_test", "z")  # files written before the signed-rank test
-        params.setdefault("departure_weight", 1.0)  # files written before the departure weight
-        params.setdefault("departure_weight_grid", None)
-        if params["departure_weight_grid"] is not None:
-            params["departure_weight_grid"] = tuple(params["departure_weight_grid"])
         if params["wind_smoothing_grid"] is not None:
             params["wind_smoothing_grid"] = tuple(params["wind_smoothing_grid"])
         model = cls(**params)
@@ -1372,7 +1320,6 @@ class VaryingCoefficientSINDy(ModelBase):
         model.event_ids_ = json.loads(ds.attrs["events"])
         model.wind_smoothing_s_ = float(ds.attrs.get("wind_smoothing_s_fitted", params["wind_smoothing_s"]))
         model.wind_smoothing_cv_ = np.asarray(json.loads(ds.attrs.get("wind_smoothing_cv", "[NaN]")), dtype=float)
-        model.departure_weight_ = float(ds.attrs.get("departure_weight_fitted", params["departure_weight"]))
         return model
 
 
@@ -1398,27 +1345,6 @@ def penalised_rss(G: np.ndarray, b: np.ndarray, yy: np.ndarray, P: np.ndarray, p
     ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / max(idx.size, 1))[..., None, None] * np.eye(idx.size)
     c = np.linalg.solve(Gk + (penalty * scale)[..., None, None] * Pk + ridge, bk[..., None])[..., 0]
     return np.einsum("...p,...pq,...q->...", c, Gk, c) - 2.0 * np.einsum("...p,...p->...", c, bk) + yy
-
-
-def shrink_departures(record: Record, weight: float) -> Record:
-    """``record`` with each section's wind (and yaw) moved towards the mean over the sections.
-
-    U_j <- mean_s U_s + ``weight`` (U_j - mean_s U_s), the same for the yaw: a
-    regression calibration of the felt winds from point anemometers, whose
-    departures from each other are partly their own slow turbulence, which
-    the deck does not feel (1: the record unchanged; 0: every section at the mean).
-    """
-    weight = float(weight)
-    if weight == 1.0 or record.n_sections < 2:
-        return record
-
-    def shrink(x):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows stay NaN
-            m = np.nanmean(x, axis=1, keepdims=True)
-        return m + weight * (x - m)
-
-    return dataclasses.replace(record, U=shrink(record.U), yaw=None if record.yaw is None else shrink(record.yaw))
 
 
 def _confidence_set(loss: np.ndarray, level: float, test: str = "z") -> np.ndarray:
