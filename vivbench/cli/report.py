@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vivbench.report.markdown import EXTRA_STEPS
+from vivbench.core.steps import EXTRA_STEPS
 
 
 def run(args) -> int:

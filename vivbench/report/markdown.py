@@ -31,6 +31,7 @@ from vivbench.io.netcdf import atomic_path
 from vivbench.regimes.model import model_window_regimes
 from vivbench.io.event import list_events, read_event
 from vivbench.core.regime import DEFAULT_TAU
+from vivbench.core.steps import EXTRA_STEPS
 from vivbench.core.terms import reference_section, section_exponents
 from vivbench.io.event import read_event_summary
 from vivbench.io.result import read_result, result_record
@@ -39,9 +40,6 @@ from vivbench.report.leaderboard import leaderboard_section
 from vivbench.report.sidebyside import CampaignRun, baseline_section, campaign_run
 
 __all__ = ["EXTRA_STEPS", "write_report"]
-
-#: The steps whose output directories the report embeds, in report order.
-EXTRA_STEPS = ("cluster", "forecast", "refit", "greybox", "validate", "compare", "sweep", "leaderboard")
 
 # Canonical command of each step, used when its directory does not record the
 # exact command (a ``command`` key in summary.json or a command.txt file).
