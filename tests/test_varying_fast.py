@@ -22,6 +22,9 @@ def _reference_verdicts(model, record, window_start, window_end):
     Rs, c1s, _ = window_order_stats(model.subset_order_contributions(record), A, t, window_start, window_end)
     sub = regime_rule(np.nan_to_num(Rs), c1s, model.tau)
     set_agree = np.all((sub == point[None]) | ~model.subset_plausible_[:, None, :], axis=0)
+    Rp, c1p, _ = window_order_stats(model.penalty_order_contributions(record), A, t, window_start, window_end)
+    pen = regime_rule(np.nan_to_num(Rp), c1p, model.tau)
+    set_agree &= np.all((pen == point[None]) | ~model.penalty_plausible_[:, None, :], axis=0)
     return {"regime": point, "identifiable": (agree >= model.agreement) & (point > 0) & set_agree,
             "agreement": agree, "order_rms": R, "model_set_agree": set_agree, "Rb": Rb, "c1b": c1b, "c1": c1}
 

@@ -413,6 +413,12 @@ class VaryingCoefficientSINDy(ModelBase):
         Their leave-one-event-out squared prediction errors (summed over events).
     subset_plausible_ : ndarray of bool, shape (n_subsets, S)
         Membership of the confidence set.
+    penalty_coef_, penalty_coef_yaw_ : ndarray, shapes (len(penalties),) + those of ``coef_``, ``coef_yaw_``
+        The fits at every candidate penalty (selected basis and orders).
+    penalty_plausible_ : ndarray of bool, shape (len(penalties), S)
+        The confidence set of penalties: leave-one-event-out error not significantly above the best
+        penalty's (``model_set_test`` at ``model_set_level``). None (all three) for a model loaded from
+        a file written before it.
     """
 
     _fitted_attribute = "coef_"
@@ -625,6 +631,9 @@ class VaryingCoefficientSINDy(ModelBase):
         self.subset_loeo_ = np.full((n_sub, S), np.nan)
         self.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
         self.subset_loeo_event_ = np.full((n_sub, S, len(records)), np.nan)  # not saved: for studies of the level
+        self.penalty_coef_ = np.zeros((pen.size, S, Lmax, 4))
+        self.penalty_coef_yaw_ = np.zeros((pen.size, S, Lmax, 4, J))
+        self.penalty_plausible_ = np.zeros((pen.size, S), dtype=bool)
         self.yaw_ref_ = np.ones(S)
         self.yaw_fallback_ = np.zeros(S)
         n_samples = 0
@@ -689,6 +698,17 @@ class VaryingCoefficientSINDy(ModelBase):
             self.subset_loeo_[:, k] = np.nansum(loeo, axis=1) * ys**2
             self.subset_loeo_event_[:, k] = loeo * ys**2
             self.subset_plausible_[:, k] = _confidence_set(loeo[:, has], self.model_set_level, self.model_set_test)
+            # The confidence set of penalties (same basis and orders): a penalty's bias is shared by every
+            # bootstrap replicate, so the verdict also needs the fits at every penalty whose
+            # leave-one-event-out error is not significantly above the best one's to agree.
+            lams = pen * _penalty_scale(Gs, P)
+            held = _solve(Gs[None] - ev_b[has], bs[None] - eb[has], P, lams, keep)  # (n_has, n_pen, p)
+            loss = _quad_error(held, ev_b[has], eb[has], ey[has])  # (n_has, n_pen)
+            self.penalty_plausible_[:, k] = _confidence_set(loss.T, self.model_set_level, self.model_set_test)
+            cpen = _solve(Gs, bs, P, lams, keep).reshape(pen.size, 4, J + 1, L).transpose(0, 3, 1, 2)
+            cpen = cpen * to_phys[:, None] * zscale
+            self.penalty_coef_[:, k, :L] = cpen[..., 0]
+            self.penalty_coef_yaw_[:, k, :L] = cpen[..., 1:]
         self.n_samples_ = n_samples
         self.n_blocks_ = n_blocks_used
         self.n_sections_ = S
@@ -1020,6 +1040,18 @@ class VaryingCoefficientSINDy(ModelBase):
         return (self.coefficient_values(self._inputs(record)[0], self.subset_coef_, self._record_yaw(record),
                                         self.subset_coef_yaw_) * record.A[..., None] ** np.arange(4))
 
+    def penalty_order_contributions(self, record: Record) -> np.ndarray | None:
+        """Order contributions of the fits at every candidate penalty, shape (n_penalties, n, S, 4), m/s.
+
+        ``penalty_plausible_`` (n_penalties, S) says which belong to the confidence set of penalties.
+        None for a model loaded from a file written before that set was kept.
+        """
+        if getattr(self, "penalty_coef_", None) is None:
+            return None
+        record = self._check_record(record)
+        return (self.coefficient_values(self._inputs(record)[0], self.penalty_coef_, self._record_yaw(record),
+                                        self.penalty_coef_yaw_) * record.A[..., None] ** np.arange(4))
+
     def order_contributions(self, record: Record) -> np.ndarray:
         """r[:, k, i] = a_ki(U_k) A_k^i, shape (n_samples, n_sections, 4), m/s (NaN where A or U is missing)."""
         record = self._check_record(record)
@@ -1244,6 +1276,11 @@ class VaryingCoefficientSINDy(ModelBase):
     #: The confidence set of order subsets (absent from files written before it existed).
     _SUBSET_ARRAYS = {"subset_coef_": ("subset", "equation", "basis", "order"), "subset_loeo_": ("subset", "equation"),
                       "subset_plausible_": ("subset", "equation")}
+    #: The confidence set of penalties (absent from files written before it; the yaw coefficients only with
+    #: ``yaw_degree_`` > 0).
+    _PENALTY_ARRAYS = {"penalty_coef_": ("penalty_candidate", "equation", "basis", "order"),
+                       "penalty_plausible_": ("penalty_candidate", "equation"),
+                       "penalty_coef_yaw_": ("penalty_candidate", "equation", "basis", "order", "yaw_power")}
     #: Written only with ``yaw_degree_`` > 0 (files of models without yaw stay as they were).
     _YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
                    "coef_yaw_bootstrap_": ("bootstrap", "equation", "basis", "order", "yaw_power"),
@@ -1260,6 +1297,10 @@ class VaryingCoefficientSINDy(ModelBase):
         if self.yaw_degree_:
             data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name), dtype=float))
                          for name, dims in self._YAW_ARRAYS.items()})
+        if getattr(self, "penalty_coef_", None) is not None:
+            data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(
+                         np.int8 if name == "penalty_plausible_" else float))
+                         for name, dims in self._PENALTY_ARRAYS.items() if self.yaw_degree_ or "yaw" not in name})
         attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
                  "wind_smoothing_s_fitted": float(self.wind_smoothing_s_),
                  "wind_smoothing_cv": json.dumps([float(x) for x in self.wind_smoothing_cv_]),
@@ -1313,6 +1354,13 @@ class VaryingCoefficientSINDy(ModelBase):
             model.subset_loeo_ = np.full((n_sub, S), np.nan)
             model.subset_plausible_ = np.zeros((n_sub, S), dtype=bool)
             model.subset_plausible_[0] = True
+        if "penalty_coef" in ds:
+            model.penalty_coef_ = np.asarray(ds["penalty_coef"].values)
+            model.penalty_plausible_ = np.asarray(ds["penalty_plausible"].values).astype(bool)
+            model.penalty_coef_yaw_ = (np.asarray(ds["penalty_coef_yaw"].values) if J
+                                       else np.zeros(model.penalty_coef_.shape + (0,)))
+        else:  # older files: the fitted penalty alone is its set
+            model.penalty_coef_ = model.penalty_coef_yaw_ = model.penalty_plausible_ = None
         model.n_basis_ = model.n_basis_.astype(int)
         model.orders_ = model.orders_.astype(bool)
         model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
