@@ -24,7 +24,7 @@ S1      31  0.89 (E007)      0            (0/25, not detected)       0          
 B       31  0.68 (E024)      0            (2/8, not detected)        4 false       0
 
 (The offset flags above are the former rule's; with the stratified posterior
-rule of :func:`offset_flags` see its docstring and the flagcal note.)
+rule of :func:`offset_flags` see the docstring of :mod:`vivbench.analysis.changes`.)
 """
 
 from __future__ import annotations
