@@ -22,6 +22,9 @@ nodrift 20  0.01 (E007)     14 false      2/14 false                 0          
 A       31  0.94 (E028)      0            (0/4, not detected)        0             0
 S1      31  0.89 (E007)      0            (0/25, not detected)       0             0
 B       31  0.68 (E024)      0            (2/8, not detected)        4 false       0
+
+(The offset flags above are the former rule's; with the stratified posterior
+rule of :func:`offset_flags` see the docstring of :mod:`vivbench.analysis.changes`.)
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ import numpy as np  # noqa: E402
 
 from vivbench.analysis import CAMPAIGN_DERIVATIVE, records_from_results  # noqa: E402
 from vivbench.analysis.changes import (change_relative_flags, event_residual_checks, offset_flags,  # noqa: E402
-                                       statistics_change_scan)
+                                       offset_strata, statistics_change_scan)
 from vivbench.models import VaryingCoefficientSINDy  # noqa: E402
 
 
@@ -57,7 +60,8 @@ def run_case(results: Path, change: int | None) -> str:
     k = scan["change_index"]
     rel = change_relative_flags(stats, k, checks["linear_offset_se"], model.a_ref_, model.y_scale_,
                                 n_pieces=checks["n_pieces"])
-    off = offset_flags(checks["linear_offset"], checks["linear_offset_se"], n_pieces=checks["n_pieces"])
+    off = offset_flags(checks["linear_offset"], checks["linear_offset_se"], n_pieces=checks["n_pieces"],
+                       stratum=offset_strata(checks["residual_rel_rms"]))
     after = np.arange(ids.size) >= k if scan["detected"] else np.zeros(ids.size, dtype=bool)
 
     def show(flag):

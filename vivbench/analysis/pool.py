@@ -179,10 +179,11 @@ def pool_results(result_files: Sequence, model=None, *,
         (``event_residual_ratio``, ``event_residual_rel_rms``,
         ``event_linear_offset``, ``event_linear_offset_se``,
         ``event_change_stat``), the change-agnostic "not predicted" flags
-        ``event_offset_z`` and ``event_offset_flag``
-        (:func:`vivbench.analysis.changes.offset_flags`) and the attributes
+        ``event_offset_stratum``, ``event_offset_z``, ``event_offset_p`` and
+        ``event_offset_flag`` (:func:`vivbench.analysis.changes.offset_flags`,
+        :func:`~vivbench.analysis.changes.offset_strata`) and the attributes
         ``change_event``, ``change_p_value``, ``change_detected``,
-        ``change_heterogeneity_p``, ``offset_flagged_events`` (JSON list),
+        ``change_heterogeneity_p``, ``offset_flagged_events``, ``offset_not_assessed_events`` (JSON lists),
         ``flag_fdr``. With a ``VaryingCoefficientSINDy`` also the model change
         scan (``event_misfit``, ``event_misfit_flag``,
         ``event_model_split_gain``; attributes ``model_change_event``,
@@ -202,7 +203,7 @@ def pool_results(result_files: Sequence, model=None, *,
         ``campaign.pooled.nc``.
     """
     from vivbench.analysis.changes import (FLAG_FDR, change_point_scan, change_relative_flags, event_residual_checks,
-                                           offset_flags, statistics_change_scan)
+                                           offset_flags, offset_strata, statistics_change_scan)
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes.varying import varying_window_verdicts
 
@@ -313,14 +314,22 @@ def pool_results(result_files: Sequence, model=None, *,
                               {"units": "m2 s-2", "long_name": "between-group sum of squares of event_linear_offset "
                                "for a change just before this event"}),
     })
-    offsets = offset_flags(checks["linear_offset"], checks["linear_offset_se"], n_pieces=checks["n_pieces"])
+    stratum = offset_strata(checks["residual_rel_rms"])
+    offsets = offset_flags(checks["linear_offset"], checks["linear_offset_se"], n_pieces=checks["n_pieces"],
+                           stratum=stratum)
     data.update({
+        "event_offset_stratum": (("event",), stratum,
+                                 {"long_name": "1: the campaign model explains less than half of the event's mean "
+                                  "square of dA/dt (its offset is judged only against such events), else 0"}),
         "event_offset_z": (("event",), offsets["z"],
-                           {"units": "1", "long_name": "event_linear_offset against a random-effects model of the "
-                            "other events' offsets (z-score, the events' own spread in the null)"}),
+                           {"units": "1", "long_name": "signed normal quantile of event_offset_p (NaN: not assessed)"}),
+        "event_offset_p": (("event",), offsets["p"],
+                           {"units": "1", "long_name": "posterior predictive p-value of event_linear_offset under a "
+                            "random-effects model of the other events' offsets of its stratum, the between-event "
+                            "spread integrated over its posterior (NaN: not assessed)"}),
         "event_offset_flag": (("event",), offsets["flag"].astype(np.int8),
                               {"long_name": "1: not predicted, the event's linear offset departs from the other "
-                               "events' (Benjamini-Hochberg over the events at FLAG_FDR)"}),
+                               "events' of its stratum (Benjamini-Hochberg over the assessed events at FLAG_FDR)"}),
     })
     event_ids = [str(a["event_id"]) for _p, _d, a, _e in results]
     model_scan = None
@@ -398,6 +407,7 @@ def pool_results(result_files: Sequence, model=None, *,
                       "change_flagged_events": json.dumps([event_ids[i] for i in np.flatnonzero(
                           data["event_change_flag"][1])])})
     attrs["offset_flagged_events"] = json.dumps([event_ids[i] for i in np.flatnonzero(offsets["flag"])])
+    attrs["offset_not_assessed_events"] = json.dumps([event_ids[i] for i in np.flatnonzero(np.isnan(offsets["p"]))])
     attrs["flag_fdr"] = FLAG_FDR
     return xr.Dataset(data, coords=coords, attrs=attrs)
 

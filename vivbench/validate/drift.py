@@ -24,7 +24,7 @@ __all__ = ["FLAG_VARIABLES", "event_structural_state", "score_change_flags"]
 FLAG_VARIABLES = {
     "event_after_change": "from the change the model change scan located (campaign-level test)",
     "event_change_flag": "after the located change, held-out offset departs from the before-events' (per event)",
-    "event_offset_flag": "linear offset departs from the other events' (change-agnostic)",
+    "event_offset_flag": "linear offset departs from the other events' of its stratum (change-agnostic)",
     "event_misfit_flag": "held-out misfit is a robust outlier (change-agnostic)",
 }
 
