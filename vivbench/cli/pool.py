@@ -65,7 +65,9 @@ def run(args) -> int:
               f"most likely from {ds.attrs['change_event']} on): the campaign model averages over a change the "
               "wind does not carry", file=sys.stderr)
     for key, what in (("change_flagged_events", "after the change whose own offset departs from the events' before it"),
-                      ("offset_flagged_events", "whose linear offset departs from the other events'")):
+                      ("offset_flagged_events", "whose linear offset departs from the other events' of its stratum"),
+                      ("offset_not_assessed_events", "whose offset was not tested (no finite offset, or fewer "
+                       "than 4 events of its stratum)")):
         if flagged := json.loads(ds.attrs.get(key, "[]")):
             print(f"vivbench pool: events {what}: {', '.join(flagged)}", file=sys.stderr)
     print(f"wrote {model_out}: the fitted campaign model (vivbench.analysis.load_campaign_model)")
