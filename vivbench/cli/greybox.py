@@ -77,7 +77,8 @@ def run(args) -> int:
     estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, penalty_grid=grid, band=args.band, dt=args.dt,
                              shooting_interval=args.interval, max_iter=args.max_iter, yaw_factor=not args.no_yaw,
                              n_starts=args.starts, seed=args.seed, block_s=args.block, n_boot=args.boot,
-                             boot_iter=args.boot_iter)
+                             boot_iter=args.boot_iter, wind_draws=args.wind_draws, wind_scale=args.wind_scale,
+                             wind_iter=args.wind_iter)
     t0 = time.perf_counter()
 
     def progress(it, cost, mu):
@@ -214,12 +215,22 @@ def register(sub) -> None:
                    help="penalties whose fits (continued from the one at --penalty) are scored by GCV with the "
                         "effective sample size of the correlated residuals; the best is kept (default 0.1,0.3,1; "
                         "'none': keep --penalty)")
-    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias", "bootstrap", "bootstrap_bias"),
+    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias", "bootstrap", "bootstrap_bias",
+                                      "sandwich_bias_wind"),
                    default="sandwich_bias",
                    help="covariance of the bands: the Bayesian posterior sigma^2 kappa (J'J + R)^-1, the block "
                         "sandwich (variance only), the sandwich plus the prior-averaged squared smoothing bias "
                         "(default; the posterior was half the sandwich's width on campaign A, README), or the event "
-                        "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias")
+                        "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias, or sandwich_bias "
+                        "plus the wind's errors-in-variables (needs --wind-draws >= 2)")
+    s.add_argument("--wind-draws", dest="wind_draws", type=int, default=0, metavar="N",
+                   help="refits with the wind perturbed by draws of the anemometers' error (other events' spread "
+                        "between the sections' anemometers), for the band's wind component (default 0: none)")
+    s.add_argument("--wind-scale", dest="wind_scale", type=float, default=1.0,
+                   help="factor on the drawn wind error's size (default 1)")
+    s.add_argument("--wind-iter", dest="wind_iter", type=int, default=2, metavar="K",
+                   help="Levenberg-Marquardt iterations of a wind refit in each of its two continuation stages "
+                        "(default 2)")
     s.add_argument("--boot", type=int, default=0, metavar="N",
                    help="event bootstrap replicates after the fit (refits on events drawn with replacement, "
                         "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians: "
