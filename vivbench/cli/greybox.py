@@ -123,6 +123,13 @@ def run(args) -> int:
                "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean()),
                "verdict_bounds": w.attrs.get("verdict_bounds"), "verdict_reference": w.attrs.get("verdict_reference")}
+    if info.get("wind_error"):
+        from vivbench.core.terms import reference_section
+
+        # how much of a_k1's band (reference section) the wind's errors-in-variables make, median over the winds
+        comp = model.band_components()["band_sd"].isel(equation=reference_section(model.n_sections_), order=1)
+        summary["wind_band_variance_share"] = float(np.nanmedian(comp.sel(component="wind") ** 2
+                                                                 / (comp**2).sum("component")))
     campaign_curves = None
     truth_curves = truth_functions = truth_yaw = None
     from vivbench.analysis.pool import campaign_model_file, load_campaign_model
@@ -174,6 +181,13 @@ def run(args) -> int:
     print(f"penalty {info.get('penalty', model.penalty):g} ({info.get('penalty_criterion', 'given')}); bands: "
           f"{info.get('band', '')}, sigma^2 {bi.get('sigma2', float('nan')):.3g}, kappa "
           f"{bi.get('kappa', float('nan')):.3g}, edf {bi.get('edf', float('nan')):.1f}")
+    wi = info.get("wind_error")
+    if wi:
+        share = summary["wind_band_variance_share"]
+        print(f"wind's errors-in-variables: {wi['n_draws']} refits with drawn wind errors (anemometers' RMS relative "
+              f"spread {wi['relative_spread_rms']:.3f}, scale {wi['scale']:g}) in {wi['seconds']:.1f} s; median share "
+              f"of the wind component in the variance of a_k1's band {share:.2f}"
+              + ("" if model.band == "sandwich_bias_wind" else f" (not in the band {model.band!r})"))
     print(f"start: {info['start']}; {info.get('yaw', '')}" + (
         f"; c = {model.yaw_coef_:.3g} [{float(yc['yaw_coef_lower']):.3g}, {float(yc['yaw_coef_upper']):.3g}]"
         if model.yaw_used_ else ""))

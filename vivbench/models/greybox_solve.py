@@ -195,10 +195,7 @@ class GaussNewtonResult:
 
     ``cov`` is the block sandwich; ``covariances`` holds "sandwich",
     "posterior" and "sandwich_bias" (module docstring); ``band_info`` holds
-    sigma2, kappa, edf, n_data, n_constraints and rss (for :func:`gcv_score`);
-    ``hinv_rows`` the theta rows of (J^T J + R)^-1, shape (P, P + I) (the
-    linear response of theta to a change of the gradient; None without the
-    covariances).
+    sigma2, kappa, edf, n_data, n_constraints and rss (for :func:`gcv_score`).
     """
 
     theta: np.ndarray
@@ -214,7 +211,6 @@ class GaussNewtonResult:
     Q: np.ndarray
     covariances: dict | None = None
     band_info: dict | None = None
-    hinv_rows: np.ndarray | None = None
 
 
 def block_ids(grid: ShootingGrid, block_s: float) -> np.ndarray:
@@ -276,7 +272,7 @@ def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndar
     it = total
     cost, H, grad, (gloc, arow, d), Q = lin
     history.append(cost)
-    cov, covs, band_info, Hinv_rows = np.zeros((0, 0)), None, None, None
+    cov, covs, band_info = np.zeros((0, 0)), None, None
     if covariance:
         blocks = block_ids(problem.grid, block_s)
         Hinv_rows = _theta_rows_of_inverse(problem, H)
@@ -288,7 +284,7 @@ def solve_gauss_newton(problem: ShootingProblem, theta0: np.ndarray, s0: np.ndar
     return GaussNewtonResult(theta=theta, s=s, cov=cov, cost=cost, iterations=it, converged=converged,
                              message=message, max_defect=float(defect.max(initial=0.0)),
                              seconds=time.perf_counter() - t_start, history=history, Q=Q,
-                             covariances=covs, band_info=band_info, hinv_rows=Hinv_rows)
+                             covariances=covs, band_info=band_info)
 
 
 def _levenberg_marquardt(problem, theta, s, max_iter, tol, history, callback, offset):

@@ -44,15 +44,21 @@ refit, and the refits run in order: the same data and seed give the same bytes.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from vivbench.models.greybox_solve import ShootingProblem, solve_gauss_newton
 
-__all__ = ["relative_spread", "wind_error_draws", "wind_refits", "wind_second_moment", "simex_extrapolate",
-           "WindRefits"]
+__all__ = [
+    "WindRefits",
+    "relative_spread",
+    "simex_extrapolate",
+    "wind_error_draws",
+    "wind_refits",
+    "wind_second_moment",
+]
 
 
 def relative_spread(U: np.ndarray) -> np.ndarray:
