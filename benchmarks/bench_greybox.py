@@ -5,8 +5,10 @@ Run: ``.venv/bin/python benchmarks/bench_greybox.py --results demo/identify --ca
 from the first event's generator configuration (a benchmark may; the fit never
 does), the warm start is the campaign model beside the results. The fit is
 the default one: yaw factor (when the results carry the yaw) and the
-multi-start (screening of every start, then the final solve) and the
-penalty chosen by GCV from a grid (a fit continued at each value). Reported:
+multi-start (screening of every start, then the final solve), the
+penalty chosen by GCV from a grid (a fit continued at each value) and the
+wind refits of the band's errors-in-variables component
+(``--wind-draws 0``: none, band "sandwich_bias"). Reported:
 wall and CPU time of ``GreyBoxRefit.fit`` alone (reading the results and
 the window verdicts excluded), Gauss-Newton iterations, the process's peak
 resident memory (imports included) and the cost after every accepted step

@@ -231,15 +231,16 @@ def register(sub) -> None:
                         "'none': keep --penalty)")
     s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias", "bootstrap", "bootstrap_bias",
                                       "sandwich_bias_wind"),
-                   default="sandwich_bias",
+                   default="sandwich_bias_wind",
                    help="covariance of the bands: the Bayesian posterior sigma^2 kappa (J'J + R)^-1, the block "
                         "sandwich (variance only), the sandwich plus the prior-averaged squared smoothing bias "
-                        "(default; the posterior was half the sandwich's width on campaign A, README), or the event "
+                        "(the posterior was half the sandwich's width on campaign A, README), or the event "
                         "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias, or sandwich_bias "
-                        "plus the wind's errors-in-variables (needs --wind-draws >= 2)")
-    s.add_argument("--wind-draws", dest="wind_draws", type=int, default=0, metavar="N",
+                        "plus the wind's errors-in-variables (default; needs --wind-draws >= 2)")
+    s.add_argument("--wind-draws", dest="wind_draws", type=int, default=4, metavar="N",
                    help="refits with the wind perturbed by draws of the anemometers' error (other events' spread "
-                        "between the sections' anemometers), for the band's wind component (default 0: none)")
+                        "between the sections' anemometers), for the band's wind component (default 4; 0: none, "
+                        "then give another --band)")
     s.add_argument("--wind-scale", dest="wind_scale", type=float, default=1.0,
                    help="factor on the drawn wind error's size (default 1)")
     s.add_argument("--wind-iter", dest="wind_iter", type=int, default=2, metavar="K",
