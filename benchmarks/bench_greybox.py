@@ -5,8 +5,10 @@ Run: ``.venv/bin/python benchmarks/bench_greybox.py --results demo/identify --ca
 from the first event's generator configuration (a benchmark may; the fit never
 does), the warm start is the campaign model beside the results. The fit is
 the default one: yaw factor (when the results carry the yaw) and the
-multi-start (screening of every start, then the final solve) and the
-penalty chosen by GCV from a grid (a fit continued at each value). Reported:
+multi-start (screening of every start, then the final solve), the
+penalty chosen by GCV from a grid (a fit continued at each value) and the
+wind refits of the band's errors-in-variables component
+(``--wind-draws 0``: none, band "sandwich_bias"). Reported:
 wall and CPU time of ``GreyBoxRefit.fit`` alone (reading the results and
 the window verdicts excluded), Gauss-Newton iterations, the process's peak
 resident memory (imports included) and the cost after every accepted step
@@ -60,6 +62,10 @@ def main(argv=None) -> dict:
                    help="event bootstrap replicates after the fit (default 0, as vivbench greybox); timed with it")
     p.add_argument("--boot-iter", dest="boot_iter", type=int, default=10,
                    help="iterations of a bootstrap replicate per continuation stage (default 10)")
+    p.add_argument("--wind-draws", dest="wind_draws", type=int, default=None,
+                   help="refits with drawn wind errors for the band's wind component (default: as vivbench greybox)")
+    p.add_argument("--wind-iter", dest="wind_iter", type=int, default=None,
+                   help="iterations of a wind refit per continuation stage (default: as vivbench greybox)")
     args = p.parse_args(argv)
     from vivbench.analysis.greybox import campaign_warm_start
     from vivbench.analysis.pool import curve_wind_grid, records_from_results
@@ -74,8 +80,11 @@ def main(argv=None) -> dict:
     bridge = _bridge(Path(args.campaign))
     history = []
     t0, c0 = time.perf_counter(), time.process_time()
+    wind_kw = {k: v for k, v in (("wind_draws", args.wind_draws), ("wind_iter", args.wind_iter)) if v is not None}
+    if wind_kw.get("wind_draws") == 0:
+        wind_kw["band"] = "sandwich_bias"
     model = GreyBoxRefit(bridge=bridge, warm_start=warm, n_starts=args.starts, penalty_grid=grid, n_boot=args.boot,
-                         boot_iter=args.boot_iter)
+                         boot_iter=args.boot_iter, **wind_kw)
     model.fit(records, callback=lambda it, cost, mu: history.append((time.perf_counter() - t0, cost)))
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2  # Linux: kB
@@ -85,7 +94,7 @@ def main(argv=None) -> dict:
            "peak_rss_gb": peak_gb, "warm_start": source, "max_continuity_defect": info["max_defect"],
            "start": info["start"], "n_starts": len(info["starts"]) or 1, "yaw_coef": model.yaw_coef_,
            "yaw": info["yaw"], "penalty": info["penalty"], "penalty_criterion": info["penalty_criterion"],
-           "bootstrap": info.get("bootstrap")}
+           "bootstrap": info.get("bootstrap"), "wind_error": info.get("wind_error")}
     print(f"grey-box refit of {len(records)} events ({info['n_intervals']} shooting intervals, {info['n_samples']} "
           f"grid samples): {wall:.1f} s wall, {cpu:.1f} s CPU, {info['iterations']} Gauss-Newton iterations "
           f"({'converged' if info['converged'] else 'not converged'}), peak RSS {peak_gb:.2f} GB "
@@ -96,6 +105,10 @@ def main(argv=None) -> dict:
         print(f"event bootstrap: {b['n_boot']} replicates of {b['n_events']} events in {b['seconds']:.1f} s (included "
               f"above), median {b['iterations_median']:g} iterations, last step's relative decrease median "
               f"{b['last_step_median']:.2g}, max {b['last_step_max']:.2g}")
+    if info.get("wind_error"):
+        w = info["wind_error"]
+        print(f"wind's errors-in-variables: {w['n_draws']} refits (and one unperturbed) in {w['seconds']:.1f} s "
+              f"(included above), median {w['iterations_median']:g} iterations")
     if args.figure:
         import matplotlib
 

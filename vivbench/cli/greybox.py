@@ -77,7 +77,8 @@ def run(args) -> int:
     estimator = GreyBoxRefit(n_basis=args.n_basis, penalty=args.penalty, penalty_grid=grid, band=args.band, dt=args.dt,
                              shooting_interval=args.interval, max_iter=args.max_iter, yaw_factor=not args.no_yaw,
                              n_starts=args.starts, seed=args.seed, block_s=args.block, n_boot=args.boot,
-                             boot_iter=args.boot_iter)
+                             boot_iter=args.boot_iter, wind_draws=args.wind_draws, wind_scale=args.wind_scale,
+                             wind_iter=args.wind_iter)
     t0 = time.perf_counter()
 
     def progress(it, cost, mu):
@@ -122,6 +123,13 @@ def run(args) -> int:
                "yaw_coef_upper": float(model.yaw_curve()["yaw_coef_upper"]), "wind_smoothing_s": args.wind_smoothing,
                "nmse_median": float(np.nanmedian(events["nmse"])), "regime_coverage": float(table["identifiable"].mean()),
                "verdict_bounds": w.attrs.get("verdict_bounds"), "verdict_reference": w.attrs.get("verdict_reference")}
+    if info.get("wind_error"):
+        from vivbench.core.terms import reference_section
+
+        # how much of a_k1's band (reference section) the wind's errors-in-variables make, median over the winds
+        comp = model.band_components()["band_sd"].isel(equation=reference_section(model.n_sections_), order=1)
+        summary["wind_band_variance_share"] = float(np.nanmedian(comp.sel(component="wind") ** 2
+                                                                 / (comp**2).sum("component")))
     campaign_curves = None
     truth_curves = truth_functions = truth_yaw = None
     from vivbench.analysis.pool import campaign_model_file, load_campaign_model
@@ -173,6 +181,13 @@ def run(args) -> int:
     print(f"penalty {info.get('penalty', model.penalty):g} ({info.get('penalty_criterion', 'given')}); bands: "
           f"{info.get('band', '')}, sigma^2 {bi.get('sigma2', float('nan')):.3g}, kappa "
           f"{bi.get('kappa', float('nan')):.3g}, edf {bi.get('edf', float('nan')):.1f}")
+    wi = info.get("wind_error")
+    if wi:
+        share = summary["wind_band_variance_share"]
+        print(f"wind's errors-in-variables: {wi['n_draws']} refits with drawn wind errors (anemometers' RMS relative "
+              f"spread {wi['relative_spread_rms']:.3f}, scale {wi['scale']:g}) in {wi['seconds']:.1f} s; median share "
+              f"of the wind component in the variance of a_k1's band {share:.2f}"
+              + ("" if model.band == "sandwich_bias_wind" else f" (not in the band {model.band!r})"))
     print(f"start: {info['start']}; {info.get('yaw', '')}" + (
         f"; c = {model.yaw_coef_:.3g} [{float(yc['yaw_coef_lower']):.3g}, {float(yc['yaw_coef_upper']):.3g}]"
         if model.yaw_used_ else ""))
@@ -214,12 +229,23 @@ def register(sub) -> None:
                    help="penalties whose fits (continued from the one at --penalty) are scored by GCV with the "
                         "effective sample size of the correlated residuals; the best is kept (default 0.1,0.3,1; "
                         "'none': keep --penalty)")
-    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias", "bootstrap", "bootstrap_bias"),
-                   default="sandwich_bias",
+    s.add_argument("--band", choices=("posterior", "sandwich", "sandwich_bias", "bootstrap", "bootstrap_bias",
+                                      "sandwich_bias_wind"),
+                   default="sandwich_bias_wind",
                    help="covariance of the bands: the Bayesian posterior sigma^2 kappa (J'J + R)^-1, the block "
                         "sandwich (variance only), the sandwich plus the prior-averaged squared smoothing bias "
-                        "(default; the posterior was half the sandwich's width on campaign A, README), or the event "
-                        "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias")
+                        "(the posterior was half the sandwich's width on campaign A, README), or the event "
+                        "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias, or sandwich_bias "
+                        "plus the wind's errors-in-variables (default; needs --wind-draws >= 2)")
+    s.add_argument("--wind-draws", dest="wind_draws", type=int, default=4, metavar="N",
+                   help="refits with the wind perturbed by draws of the anemometers' error (other events' spread "
+                        "between the sections' anemometers), for the band's wind component (default 4; 0: none, "
+                        "then give another --band)")
+    s.add_argument("--wind-scale", dest="wind_scale", type=float, default=1.0,
+                   help="factor on the drawn wind error's size (default 1)")
+    s.add_argument("--wind-iter", dest="wind_iter", type=int, default=2, metavar="K",
+                   help="Levenberg-Marquardt iterations of a wind refit in each of its two continuation stages "
+                        "(default 2)")
     s.add_argument("--boot", type=int, default=0, metavar="N",
                    help="event bootstrap replicates after the fit (refits on events drawn with replacement, "
                         "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians: "
