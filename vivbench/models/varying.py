@@ -86,7 +86,6 @@ from collections.abc import Sequence
 
 import numpy as np
 import xarray as xr
-from scipy.interpolate import BSpline
 
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
@@ -96,7 +95,7 @@ from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.preprocess.wind_smoothing import smooth_wind
 
-__all__ = ["VaryingCoefficientSINDy", "bspline_basis", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
+__all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
            "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS"]
 
 #: Spline degree (cubic).
@@ -139,6 +138,48 @@ def uniform_knots(lo: float, hi: float, n_basis: int, degree: int = DEGREE) -> n
     return lo + h * np.arange(-degree, n_int + degree + 1)
 
 
+def bspline_local(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> tuple[np.ndarray, np.ndarray]:
+    """The non-zero B-splines at each U (local form of :func:`bspline_basis`), U clipped to the base interval.
+
+    The Cox-de Boor recursion, vectorised over the samples, with the same
+    operations in the same order as scipy's ``BSpline.design_matrix`` (so the
+    values are the same to the bit; ``tests/test_varying_speed.py`` checks it)
+    but without building a sparse matrix per call.
+
+    Parameters
+    ----------
+    U : ndarray, shape (n,), m/s (NaN allowed: that row's values are NaN, its first index 0)
+    knots : ndarray, shape (M + degree + 1,), non-decreasing with distinct base-interval knots
+
+    Returns
+    -------
+    first : ndarray of intp, shape (n,)
+        Index of the first non-zero B-spline (0..M - degree - 1).
+    vals : ndarray, shape (n, degree + 1)
+        B_{first + a}(U), a = 0..degree.
+    """
+    U = np.asarray(U, dtype=float).ravel()
+    knots = np.asarray(knots, dtype=float)
+    n_b = knots.size - degree - 1
+    lo, hi = knots[degree], knots[n_b]
+    ok = np.isfinite(U)
+    x = np.clip(np.where(ok, U, lo), lo, hi)
+    # the knot interval t[ell] <= x < t[ell + 1], the last one at the right end (as scipy's find_interval)
+    ell = np.clip(np.searchsorted(knots, x, side="right") - 1, degree, n_b - 1)
+    h = np.zeros((x.size, degree + 1))
+    h[:, 0] = 1.0
+    for j in range(1, degree + 1):  # the recursion's degrees, not samples
+        hh = h[:, :j].copy()
+        h[:, 0] = 0.0
+        for m in range(1, j + 1):
+            xb, xa = knots[ell + m], knots[ell + m - j]
+            w = hh[:, m - 1] / (xb - xa)
+            h[:, m - 1] += w * (xb - x)
+            h[:, m] = w * (x - xa)
+    h[~ok] = np.nan
+    return np.where(ok, ell - degree, 0), h
+
+
 def bspline_basis(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> np.ndarray:
     """Dense B-spline design matrix, U clipped to the knots' base interval.
 
@@ -150,13 +191,13 @@ def bspline_basis(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> np.
     Returns
     -------
     ndarray, shape (n, M)
+        The same values as scipy's ``BSpline.design_matrix`` (:func:`bspline_local`).
     """
-    U = np.asarray(U, dtype=float)
-    lo, hi = knots[degree], knots[-degree - 1]
-    ok = np.isfinite(U)
-    x = np.clip(np.where(ok, U, lo), lo, hi)
-    B = BSpline.design_matrix(x, knots, degree).toarray()
-    B[~ok] = np.nan
+    first, vals = bspline_local(U, knots, degree)
+    n = first.size
+    B = np.zeros((n, knots.size - degree - 1))
+    B[np.arange(n)[:, None], first[:, None] + np.arange(degree + 1)] = vals
+    B[np.isnan(vals[:, 0])] = np.nan
     return B
 
 
@@ -166,6 +207,32 @@ def difference_penalty(n_basis: int, order: int = 2) -> np.ndarray:
     return D.T @ D
 
 
+def _design_local(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,
+                  n_yaw: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """The non-zero entries of the rows of :func:`_design`: columns (n, Q) and values (n, Q), Q = 4 (J + 1) n_in (DEGREE + 1).
+
+    Each row has DEGREE + 1 non-zero B-splines per wind input, so Q of its
+    p = 4 (J + 1) n_in M entries are non-zero; the values are the products of
+    :func:`_design` in the same order, (A / a_ref)^i z_s^j times B_m(U_s).
+    """
+    U2 = np.asarray(U, dtype=float).reshape(np.shape(U)[0], -1)
+    n, n_in = U2.shape
+    M = knots.size - DEGREE - 1
+    first = np.empty((n, n_in), dtype=np.intp)
+    B = np.empty((n, n_in, DEGREE + 1))
+    for s_ in range(n_in):  # a few wind inputs
+        first[:, s_], B[:, s_] = bspline_local(U2[:, s_], knots)
+    Apow = (A / a_ref)[:, None] ** np.arange(4)
+    Z2 = np.ones_like(U2) if z is None else np.asarray(z, dtype=float).reshape(n, -1)
+    Zpow = Z2[:, None, :] ** np.arange(n_yaw + 1)[None, :, None]  # (n, J + 1, n_in)
+    vals = Apow[:, :, None, None, None] * Zpow[:, None, :, :, None] * B[:, None, None, :, :]
+    # column of (i, j, s, first_s + a): ((i (J + 1) + j) n_in + s) M + first_s + a
+    base = ((np.arange(4)[:, None, None] * (n_yaw + 1) + np.arange(n_yaw + 1)[None, :, None]) * n_in
+            + np.arange(n_in)[None, None, :]) * M  # (4, J + 1, n_in)
+    cols = base[None, :, :, :, None] + first[:, None, None, :, None] + np.arange(DEGREE + 1)
+    return cols.reshape(n, -1), vals.reshape(n, -1)
+
+
 def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,
             n_yaw: int = 0) -> np.ndarray:
     """Columns B_m(U_s) (A / a_ref)^i z_s^j, ordered (i, j, s, m); shape (n, 4 (n_yaw + 1) n_in M).
@@ -173,15 +240,23 @@ def _design(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np
     ``U`` is shape (n,) (one wind, n_in = 1) or (n, n_in) (one column per
     section whose wind enters additively, ``wind_input="additive"``); ``z``,
     the scaled yaw covariate (sin^2 psi over its reference) of the same shape,
-    is used for j = 1..n_yaw.
+    is used for j = 1..n_yaw. Built from the local form (:func:`_design_local`);
+    a wind input that is not finite makes its columns NaN.
     """
+    cols, vals = _design_local(U, A, knots, a_ref, z, n_yaw)
     U2 = np.asarray(U, dtype=float).reshape(np.shape(U)[0], -1)
     n, n_in = U2.shape
-    B = np.stack([bspline_basis(U2[:, s], knots) for s in range(n_in)], axis=1)  # (n, n_in, M)
-    Apow = (A / a_ref)[:, None] ** np.arange(4)
+    M = knots.size - DEGREE - 1
+    X = np.zeros((n, 4 * (n_yaw + 1) * n_in * M))
+    np.put_along_axis(X, cols, vals, axis=1)
+    # As the dense product: a non-finite factor makes every column it multiplies NaN, not only the local ones.
     Z2 = np.ones_like(U2) if z is None else np.asarray(z, dtype=float).reshape(n, -1)
-    Zpow = Z2[:, None, :] ** np.arange(n_yaw + 1)[None, :, None]  # (n, J + 1, n_in)
-    return (Apow[:, :, None, None, None] * Zpow[:, None, :, :, None] * B[:, None, None, :, :]).reshape(n, -1)
+    factor = ((A / a_ref)[:, None, None, None] ** np.arange(4)[:, None, None]
+              * Z2[:, None, None, :] ** np.arange(n_yaw + 1)[:, None] * np.where(np.isfinite(U2), 1.0, np.nan)[:, None, None, :])
+    bad = ~np.isfinite(factor)  # (n, 4, J + 1, n_in)
+    if bad.any():
+        X.reshape(n, 4, n_yaw + 1, n_in, M)[bad] = np.nan
+    return X
 
 
 def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
