@@ -23,7 +23,7 @@ import numpy as np
 
 from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
-from vivbench.models.varying import VaryingCoefficientSINDy
+from vivbench.models.varying import DEGREE, VaryingCoefficientSINDy
 
 __all__ = ["gram_order_stats", "varying_window_verdicts", "window_grams", "window_order_stats"]
 
@@ -141,8 +141,11 @@ def _segment_grams(seg: np.ndarray, n_seg: int, cols: np.ndarray, vals: np.ndarr
     m = seg.size
     if m == 0:
         return out.transpose(0, 3, 1, 2)
-    _, pattern = np.unique(cols, axis=0, return_inverse=True)
-    key = seg.astype(np.int64) * (int(pattern.max()) + 1) + pattern.ravel()
+    # Group key: the segment, then the row's columns; a row's columns follow from the first of every run
+    # of DEGREE + 1 consecutive B-splines (renumbered after each step, so the key cannot overflow).
+    key = seg.astype(np.int64)
+    for q in range(0, cols.shape[1], DEGREE + 1):
+        key = np.unique(key * P + cols[:, q], return_inverse=True)[1].ravel()
     order = np.argsort(key, kind="stable")
     ks = key[order]
     starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
