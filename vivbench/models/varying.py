@@ -1235,15 +1235,8 @@ class VaryingCoefficientSINDy(ModelBase):
             knots = self.knots_[k, :M + DEGREE + 1]
             for s_ in range(n_in):  # additive: each section's wind has its own M columns
                 u = s_ if n_in > 1 else k
-                B = bspline_basis(U[:, u], knots)
-                x = np.clip(np.nan_to_num(U[:, u], nan=knots[DEGREE]), knots[DEGREE], knots[-DEGREE - 1])
-                first = np.clip(np.searchsorted(knots, x, side="right") - 1 - DEGREE, 0, M - DEGREE - 1)
+                first, picked = bspline_local(U[:, u], knots)  # the row's only non-zero B-splines
                 idx = first[:, None] + a
-                picked = np.take_along_axis(B, idx, axis=1)
-                # Local support: the row has no weight outside the picked functions (a wrong interval is a bug).
-                miss = np.abs(np.nansum(B, axis=1) - np.nansum(picked, axis=1))
-                if np.any(miss > 1e-12):
-                    raise RuntimeError("B-spline row has non-zero entries outside its knot interval")
                 zp = np.ones((n, 1)) if z is None else z[:, u, None] ** np.arange(J + 1)
                 cols[:, k, :, s_] = idx[:, None, :] + s_ * M + Lmax * np.arange(J + 1)[:, None]
                 vals[:, k, :, s_] = zp[:, :, None] * picked[:, None, :]

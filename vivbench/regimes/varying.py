@@ -103,6 +103,9 @@ def window_grams(model: VaryingCoefficientSINDy, record: Record, window_start, w
     n_valid = np.empty((W, S))
     n_pos = np.empty((W, S))
     bounds = np.stack([il, ih], axis=1).ravel()
+    # the windows each segment belongs to (a few: windows overlap)
+    inwin = (il[None, :] <= np.arange(G_seg)[:, None]) & (np.arange(G_seg)[:, None] < ih[None, :])
+    windows_of = [np.flatnonzero(row) for row in inwin]
     empty = ih <= il
 
     def windowed(per_segment):
@@ -116,7 +119,7 @@ def window_grams(model: VaryingCoefficientSINDy, record: Record, window_start, w
         a_k = A[:, k]
         ok = np.isfinite(vals[:, k]).all(axis=1) & np.isfinite(a_k) & inside
         okA = ok & (a_k > 0)
-        gram[:, k] = windowed(_segment_grams(seg[ok], G_seg, cols[ok, k], vals[ok, k], a_k[ok], P))
+        gram[:, k] = _window_grams(seg[ok], windows_of, W, cols[ok, k], vals[ok, k], a_k[ok], P)
         aA = a_k[okA]
         # r_1 / A as the direct evaluation forms it: (phi^T theta) A (1 / A)
         wA = cols[okA, k], vals[okA, k] * (aA * (1.0 / aA))[:, None]
@@ -127,17 +130,20 @@ def window_grams(model: VaryingCoefficientSINDy, record: Record, window_start, w
     return {"gram": gram, "mean1": mean1, "n_valid": n_valid, "n_positive": n_pos}
 
 
-def _segment_grams(seg: np.ndarray, n_seg: int, cols: np.ndarray, vals: np.ndarray, a: np.ndarray,
-                   P: int) -> np.ndarray:
-    """Per segment and order i, sum of A^(2i) phi phi^T over the samples, shape (n_seg, 4, P, P).
+def _window_grams(seg: np.ndarray, windows_of: list, n_windows: int, cols: np.ndarray, vals: np.ndarray,
+                  a: np.ndarray, P: int) -> np.ndarray:
+    """Per window and order i, sum of A^(2i) phi phi^T over the window's samples, shape (n_windows, 4, P, P).
 
-    seg (m,) segment of each sample; cols, vals (m, Q) the non-zero entries of each design row phi
+    seg (m,) segment (piece between window edges) of each sample, ``windows_of[g]`` the windows segment g
+    belongs to; cols, vals (m, Q) the non-zero entries of each design row phi
     (:meth:`VaryingCoefficientSINDy.basis_rows`); a (m,) amplitudes, m. The samples of a segment whose
-    winds lie in the same knot intervals share their Q columns: each such group adds one dense product
-    (A^i V)^T (A^i V) per order (BLAS, Q x Q) at its columns, instead of 4 Q^2 scattered additions
-    per sample. Equal to the per-sample sums up to rounding.
+    winds lie in the same knot intervals share their Q columns: each such group gives one dense product
+    (A^i V)^T (A^i V) per order (BLAS, Q x Q), added at its columns to each window holding the segment,
+    instead of 4 Q^2 scattered additions per sample. Each window sums its own samples only (no difference
+    of running sums: a quiet window's A^6-weighted Gram would drown in the rounding of the record's total).
+    Equal to the per-sample sums up to rounding.
     """
-    out = np.zeros((n_seg, P, P, 4))
+    out = np.zeros((n_windows, P, P, 4))
     m = seg.size
     if m == 0:
         return out.transpose(0, 3, 1, 2)
@@ -154,9 +160,12 @@ def _segment_grams(seg: np.ndarray, n_seg: int, cols: np.ndarray, vals: np.ndarr
     Y = (a[order][None, :] ** np.arange(4)[:, None])[:, None, :] * vals[order].T[None, :, :]
     cs, ss = cols[order], seg[order]
     for lo, hi in zip(starts, ends):  # one batched BLAS product per group (a few per segment), not per sample
+        wins = windows_of[ss[lo]]
+        if wins.size == 0:
+            continue
         Yg = Y[:, :, lo:hi]
         c = cs[lo]
-        out[ss[lo], c[:, None], c] += (Yg @ Yg.transpose(0, 2, 1)).transpose(1, 2, 0)
+        out[wins[:, None, None], c[None, :, None], c[None, None, :]] += (Yg @ Yg.transpose(0, 2, 1)).transpose(1, 2, 0)
     return out.transpose(0, 3, 1, 2)
 
 
