@@ -369,19 +369,24 @@ def _split_gain(reduced: list[dict], order: np.ndarray, splits: np.ndarray) -> n
     """Relative drop of the penalised RSS when fitting before/after each split, summed over equations.
 
     reduced: :func:`_reduced_sums`; order (R, E) event orderings; splits (K,) numbers of events before
-    the split; returns (R, K). The sums before every split of every ordering are running sums of the
-    events' rows in that ordering; the whole-campaign fit does not depend on the ordering and is solved once.
+    the split (increasing); returns (R, K). The sums before every split of every ordering are running
+    sums of the events' rows in that ordering; the whole-campaign fit does not depend on the ordering and is solved once.
     """
     R, E = order.shape
     gain = np.zeros((R, splits.size))
     for red in reduced:
         total = red["Z"].sum(axis=0)
         full = float(_rss_of_sums(total[None].copy(), red)[0])
-        # the sums before every split: running sums of the events' rows in each ordering (R E rows added,
-        # not a product of the (R K, E) 0/1 membership with them: E times fewer operations)
-        pre = np.empty((R, splits.size, red["Z"].shape[1]))
-        for r in range(R):  # orderings, not samples
-            pre[r] = np.cumsum(red["Z"][order[r]], axis=0)[splits - 1]
+        # the sums before every split: each split's from the previous one's plus the events in between
+        # (R E rows added in place, not a product of the (R K, E) 0/1 membership with the rows)
+        Z = red["Z"]
+        pre = np.empty((R, splits.size, Z.shape[1]))
+        for r in range(R):  # orderings and splits, not samples: one row addition each
+            o = order[r]
+            pre[r, 0] = Z[o[:splits[0]]].sum(axis=0)
+            for j in range(1, splits.size):
+                between = o[splits[j - 1]:splits[j]]
+                np.add(pre[r, j - 1], Z[between[0]] if between.size == 1 else Z[between].sum(axis=0), out=pre[r, j])
         pre = pre.reshape(R * splits.size, -1)
         post = total[None] - pre
         rss = _rss_of_sums(pre, red) + _rss_of_sums(post, red)
