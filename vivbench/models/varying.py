@@ -356,12 +356,13 @@ def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray,
         if sw is not None:
             vals *= sw[sel]
         off = starts[g0]
-        for g in range(g0, g1):  # one BLAS product per group (a few per block), not per sample
-            lo, hi = starts[g] - off, ends[g] - off
-            V, c = vals[:, lo:hi], _local_columns(first[lo:lo + 1], M, n_yaw)[0]
-            j = int(block[sel[lo]])
+        glo, ghi = starts[g0:g1] - off, ends[g0:g1] - off
+        gcols = _local_columns(first[glo], M, n_yaw)  # every group's columns at once
+        gblock = block[sel[glo]]
+        for g in range(g1 - g0):  # one BLAS product per group (a few per block), not per sample
+            V, c, j = vals[:, glo[g]:ghi[g]], gcols[g], gblock[g]
             G[j, c[:, None], c] += V @ V.T
-            b[j, c] += V @ ysel[lo:hi]
+            b[j, c] += V @ ysel[glo[g]:ghi[g]]
         g0 = g1
     return G, b, cy[bounds[1:]] - cy[bounds[:-1]], np.diff(bounds)
 
