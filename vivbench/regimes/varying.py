@@ -91,7 +91,8 @@ def window_grams(model: VaryingCoefficientSINDy, record: Record, window_start, w
     P = model.stacked_coefficients().shape[-2]
     lo = np.searchsorted(t, np.asarray(window_start, dtype=float), side="left")
     hi = np.searchsorted(t, np.asarray(window_end, dtype=float), side="left")
-    # Sums over the disjoint segments between window edges, then each window from cumulative segment sums.
+    # Disjoint segments between window edges: the Grams are added per segment to each window holding it,
+    # the other sums per segment and then per window from its own segments.
     edges = np.unique(np.concatenate([lo, hi, [0]]))
     seg = np.searchsorted(edges, np.arange(n), side="right") - 1
     inside = np.arange(n) < edges[-1]
