@@ -337,8 +337,10 @@ def _reduced_sums(stats: list[dict]) -> list[dict]:
         Gk = st["G"][:, idx[:, None], idx].reshape(E, q * q)
         Z = np.concatenate([Gk, st["b"][:, idx], st["yy"][:, None],
                             np.trace(st["G"], axis1=1, axis2=2)[:, None]], axis=1)
-        out.append({"Z": Z, "q": q, "Pk": st["P"][idx[:, None], idx], "trP": max(float(np.trace(st["P"])), 1e-300),
-                    "penalty": float(st["penalty"])})
+        Pk = st["P"][idx[:, None], idx]
+        nz = np.flatnonzero(Pk)  # the penalty is banded: its few non-zeros are added, not a dense q x q
+        out.append({"Z": Z, "q": q, "Pk": Pk, "Pk_nz": nz, "Pk_vals": Pk.ravel()[nz],
+                    "trP": max(float(np.trace(st["P"])), 1e-300), "penalty": float(st["penalty"])})
     return out
 
 
@@ -354,7 +356,11 @@ def _rss_of_sums(S: np.ndarray, red: dict) -> np.ndarray:
     mu = red["penalty"] * S[:, q * q + q + 1] / red["trP"]
     diag = S[:, :q * q:q + 1]  # the diagonal of every G, a view
     ridge = 1e-10 * diag.sum(axis=1) / max(q, 1)
-    H += mu[:, None, None] * red["Pk"]
+    nz = red.get("Pk_nz")
+    if nz is None:
+        H += mu[:, None, None] * red["Pk"]
+    else:  # the same sums at the penalty's non-zeros only (no N x q x q temporary)
+        S[:, nz] += mu[:, None] * red["Pk_vals"]
     diag += ridge[:, None]
     c = _spd_solve(H, b)
     return yy - (c * b).sum(axis=1) - mu * ((c @ red["Pk"]) * c).sum(axis=1) - ridge * (c * c).sum(axis=1)
@@ -379,19 +385,25 @@ def _split_gain(reduced: list[dict], order: np.ndarray, splits: np.ndarray) -> n
     """Relative drop of the penalised RSS when fitting before/after each split, summed over equations.
 
     reduced: :func:`_reduced_sums`; order (R, E) event orderings; splits (K,) numbers of events before
-    the split; returns (R, K). The sums before every split of every ordering are one matrix product of
-    the 0/1 membership (R K, E) with the events' rows (no per-ordering cumulative sums of p x p arrays);
-    the whole-campaign fit does not depend on the ordering and is solved once.
+    the split (increasing); returns (R, K). The sums before every split of every ordering are running
+    sums of the events' rows in that ordering; the whole-campaign fit does not depend on the ordering and is solved once.
     """
     R, E = order.shape
-    pos = np.empty_like(order)
-    pos[np.arange(R)[:, None], order] = np.arange(E)[None, :]  # position of every event in every ordering
-    member = (pos[:, None, :] < splits[None, :, None]).reshape(R * splits.size, E).astype(float)
     gain = np.zeros((R, splits.size))
     for red in reduced:
         total = red["Z"].sum(axis=0)
         full = float(_rss_of_sums(total[None].copy(), red)[0])
-        pre = member @ red["Z"]
+        # the sums before every split: each split's from the previous one's plus the events in between
+        # (R E rows added in place, not a product of the (R K, E) 0/1 membership with the rows)
+        Z = red["Z"]
+        pre = np.empty((R, splits.size, Z.shape[1]))
+        for r in range(R):  # orderings and splits, not samples: one row addition each
+            o = order[r]
+            pre[r, 0] = Z[o[:splits[0]]].sum(axis=0)
+            for j in range(1, splits.size):
+                between = o[splits[j - 1]:splits[j]]
+                np.add(pre[r, j - 1], Z[between[0]] if between.size == 1 else Z[between].sum(axis=0), out=pre[r, j])
+        pre = pre.reshape(R * splits.size, -1)
         post = total[None] - pre
         rss = _rss_of_sums(pre, red) + _rss_of_sums(post, red)
         gain += ((full - rss) / max(full, 1e-300)).reshape(R, splits.size)

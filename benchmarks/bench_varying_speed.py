@@ -1,0 +1,89 @@
+"""The varying model's fast numerics against the straightforward ones they replaced (issue 11, speed).
+
+Run: ``.venv/bin/python benchmarks/bench_varying_speed.py [--samples 60000] [--json OUT]``.
+
+On synthetic inputs shaped like the additive model on the default campaign (3 sections' winds as
+inputs, the yaw covariate, M = 10 B-splines: p = 240 columns, 1200-sample blocks), one core, best of 3:
+
+- B-splines: :func:`vivbench.models.varying.bspline_local` against scipy's ``BSpline.design_matrix``
+  (dense, as the model built it before), and their largest difference (0 expected: same recursion);
+- block statistics: the grouped local products (``_block_stats``) against the dense design per block
+  and X_b^T X_b (what it did before), and the largest relative difference of the Grams.
+
+Whole ``vivbench pool`` runs (wall, CPU, peak memory) are in the closing note of the branch; this
+benchmark measures the kernels only. It asserts nothing.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from _timing import best_of  # noqa: E402
+
+
+def _inputs(n: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    from vivbench.models.varying import uniform_knots
+
+    knots = uniform_knots(4.0, 14.0, 10)
+    # slowly varying winds (a smoothed anemometer at 4 Hz), amplitudes, yaw covariate, 1200-sample blocks
+    U = np.clip(9.0 + np.cumsum(rng.normal(0.0, 0.02, (n, 3)), axis=0), 4.0, 14.0)
+    A = rng.uniform(0.0, 0.3, n)
+    z = rng.uniform(0.0, 2.0, (n, 3))
+    y = rng.normal(size=n)
+    block = np.arange(n) // 1200
+    return knots, U, A, z, y, block
+
+
+def main(samples: int = 60_000) -> dict:
+    from scipy.interpolate import BSpline
+
+    from vivbench.models import varying as vm
+
+    knots, U, A, z, y, block = _inputs(samples)
+    nb = int(block.max()) + 1
+    out = {"samples": samples, "p": 240}
+
+    x = np.clip(U[:, 0], knots[3], knots[-4])
+    t_old, B_old = best_of(lambda: BSpline.design_matrix(x, knots, 3).toarray())
+    t_new, B_new = best_of(lambda: vm.bspline_basis(x, knots))
+    out["bspline"] = {"scipy_s": t_old, "local_s": t_new, "max_abs_diff": float(np.abs(B_old - B_new).max())}
+
+    def dense():
+        G = np.empty((nb, 240, 240))
+        for j in range(nb):
+            r = block == j
+            X = vm._design(U[r], A[r], knots, 0.1, z[r], 1)
+            G[j] = X.T @ X
+        return G
+
+    t_old, G_old = best_of(dense)
+    t_new, (G_new, *_rest) = best_of(lambda: vm._block_stats(U, A, y, block, nb, knots, 0.1, z, 1))
+    out["block_stats"] = {"dense_s": t_old, "grouped_s": t_new,
+                          "max_rel_diff": float(np.abs(G_new - G_old).max() / np.abs(G_old).max())}
+
+    return out
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--samples", type=int, default=60_000)
+    ap.add_argument("--json", default=None)
+    a = ap.parse_args()
+    res = main(a.samples)
+    print(json.dumps(res, indent=2))
+    if a.json:
+        Path(a.json).write_text(json.dumps(res, indent=2) + "\n")
