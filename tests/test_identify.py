@@ -215,10 +215,13 @@ def test_cli_demo_small(tmp_path):
     import re
     from urllib.parse import unquote
 
+    # two workers: the grey-box step runs in a child process beside the later steps
     run = subprocess.run([sys.executable, "-m", "vivbench.cli", "demo", "--out", str(tmp_path), "--events", "2",
-                          "--duration", "8", "--workers", "1"], capture_output=True, text=True)
+                          "--duration", "8", "--workers", "2"], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     assert "report:" in run.stdout and "campaign model" in run.stdout and "coverage" in run.stdout
+    assert "(beside the next steps)" in run.stderr and "wrote " + str(tmp_path / "greybox") in run.stderr
+    assert (tmp_path / "greybox" / "greybox.nc").is_file()
     assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == [
         "E001.identify.nc", "E002.identify.nc", "campaign.model.nc", "campaign.pooled.nc"]
     report = tmp_path / "reports" / "demo" / "report.md"
@@ -230,3 +233,17 @@ def test_cli_demo_small(tmp_path):
         assert (report.parent / unquote(target)).is_file(), f"{target} is linked but missing"
     for step in ("cluster", "forecast", "validate"):
         assert (tmp_path / step / "command.txt").read_text().startswith(f"vivbench {step} ")
+
+
+def test_demo_background_step_reports_failure(tmp_path, capsys):
+    """A step run beside the others (the demo's grey-box) replays its messages and records its failure."""
+    from vivbench.cli.demo import _Background
+
+    failures: list[str] = []
+    step = _Background(["greybox", str(tmp_path / "missing"), "--out", str(tmp_path / "gb"), "--mass", "1",
+                        "--depth", "1", "--damping-ratio", "0.01"], tmp_path / "gb")
+    assert not step.finish(failures)
+    err = capsys.readouterr().err
+    assert "vivbench greybox:" in err and "missing" in err
+    assert failures and failures[0].startswith("greybox exited 2")
+    assert (tmp_path / "gb" / "command.txt").read_text().startswith("vivbench greybox ")
