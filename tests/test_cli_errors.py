@@ -68,6 +68,13 @@ def test_missing_results_directory_exits_2(tmp_path, capsys):
     assert len(lines) == 1 and lines[0].startswith("vivbench pool: "), lines
 
 
+@pytest.mark.parametrize("bad", ["mode", "1,x,2", "1,-1,1"])
+def test_bad_wind_weights_exit_2_in_one_line(tmp_path, capsys, bad):
+    assert main(["pool", str(tmp_path), "--wind-weights", bad]) == EXIT_INPUT
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and "--wind-weights must be" in lines[0], lines
+
+
 def test_os_error_exits_2_in_one_line(tmp_path, monkeypatch, capsys):
     def denied(*_a, **_k):
         raise PermissionError(13, "Permission denied", str(tmp_path / "r"))

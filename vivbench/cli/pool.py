@@ -19,6 +19,7 @@ def run(args) -> int:
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_pooled
 
+    weights = _wind_weights(args.wind_weights)  # a bad option is reported before any file is read
     results_dir = Path(args.results)
     files = list_results(results_dir)
     campaign = Path(args.campaign) if args.campaign else None
@@ -28,7 +29,8 @@ def run(args) -> int:
     if args.model == "varying":
         # The model's own defaults (yaw when the results store it, 30 s wind smoothing) unless overridden.
         extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing),
-                                   ("wind_input", args.wind_input))
+                                   ("wind_input", args.wind_input),
+                                   ("wind_weights", weights))
                  if v is not None}
         if args.wind_input == "additive":  # its settings chosen on the tuning campaign, unless overridden
             extra = {**ADDITIVE_SETTINGS, **extra}
@@ -74,6 +76,21 @@ def run(args) -> int:
     return 0
 
 
+def _wind_weights(text: str | None):
+    """``--wind-weights``: None (the model's default), a named choice, or comma-separated numbers."""
+    if text is None or text in ("modal", "equal"):
+        return text
+    from vivbench.models.wind_weights import check_wind_weights
+
+    try:
+        weights = tuple(float(x) for x in text.split(","))
+        check_wind_weights(weights)
+    except ValueError:  # InputError is one
+        raise InputError(f"--wind-weights must be modal, equal or comma-separated numbers >= 0 with a positive sum "
+                         f"(one per section); got {text!r}") from None
+    return weights
+
+
 def register(sub) -> None:
     s = sub.add_parser("pool", help="fit one model to a whole campaign's results and label every window with it")
     s.add_argument("results", help="directory of <event_id>.identify.nc")
@@ -93,6 +110,12 @@ def register(sub) -> None:
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
                         "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
+    s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",
+                   help="with --model varying and the mean wind: the sections' weights in it: equal (default, the "
+                        "plain mean), modal (each section's share of the mode's energy, sum of A_k^2: the weights "
+                        "of the averaged truth when the sections' tributary lengths are equal; README: better on "
+                        "some campaigns, a broken verdict on one), or one number per section (e.g. L_k phi_k^2 "
+                        "from the bridge's drawings)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
                         "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "

@@ -51,6 +51,7 @@ from vivbench.models.simulate import (
 )
 from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
 from vivbench.models.varying import VaryingCoefficientSINDy
+from vivbench.models.wind_weights import modal_wind_weights, weighted_section_mean
 from vivbench.models.model_input import measured_input
 from vivbench.models.window import WindowProblem, WindowedSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
@@ -64,6 +65,7 @@ __all__ = [
     "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients", "order_rms",
     "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",
     "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "WindowedSINDy",
-    "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "measured_input",
+    "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "modal_wind_weights", "weighted_section_mean",
+    "measured_input",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
 ]

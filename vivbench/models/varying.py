@@ -93,6 +93,8 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.netcdf import write_netcdf_atomic
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.wind_weights import (check_wind_weights, resolve_wind_weights, weighted_mean_standard_error,
+                                          weighted_section_mean)
 from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
@@ -519,6 +521,29 @@ class VaryingCoefficientSINDy(ModelBase):
         higher coverage, flagged accuracy >= 0.996, none flagged on
         forced_only. Costs a second weighted pass at the chosen basis only.
         :meth:`event_statistics` stays unweighted.
+    wind_weights : {"equal", "modal"} or sequence of float
+        The sections' weights in the mean wind (and yaw) of ``wind_input="mean"``
+        (:mod:`vivbench.models.wind_weights`): ``"equal"`` (default) the plain
+        mean; ``"modal"`` each section's share of the mode's energy, sum_t A_k^2
+        over the campaign, which are the averaged truth's weights L_k phi_k^2 of
+        the linear order when the tributary lengths are equal; or one weight per
+        section (normalised), e.g. L_k phi_k^2 from the bridge's drawings.
+        Measured with ``vivbench pool DIR --wind-weights modal`` then ``vivbench
+        validate`` (median dA/dt error on the true (A, U); coverage at flagged
+        accuracy; equal -> modal): the seed-0 realistic campaign 0.109 -> 0.101,
+        0.567 -> 0.478 (0.996 -> 0.999); seed 1 0.137 -> 0.100, 0.458 -> 0.459;
+        the second bridge (asymmetric 4-section mode) 0.146 -> 0.087, 0.457 ->
+        0.483; in-library 0.167 -> 0.096, 0.587 -> 0.654; but bridge C 0.160 ->
+        0.180 and, on the 20-event no-change campaign of the drift study,
+        0.114 -> 0.134 with only 0.806 of the flagged windows right (0.996):
+        the cross-validation there chose a 100 times larger penalty, whose bias
+        every bootstrap replicate and the penalty set share. Fitted on the
+        truth's own (A, U, dA) of the seed-0 campaign the floor falls from 0.089
+        to 0.054 (``benchmarks/bench_misspecification.py --wind-weights
+        modal``). So it is an option, not the default: the data's own
+        cross-validated error (the model file's ``wind_smoothing_cv``) cannot
+        choose it, as it prefers modal most on the no-change campaign (0.256
+        against 0.435), where the truth says it is worse.
 
     Attributes
     ----------
@@ -527,6 +552,9 @@ class VaryingCoefficientSINDy(ModelBase):
     wind_smoothing_cv_ : ndarray, shape (n_candidates,)
         Cross-validated error of each candidate smoothing (summed over the
         equations' per-sample errors of the standardised target).
+    wind_weights_ : ndarray, shape (S,)
+        The sections' weights in the mean wind (summing to 1; equal for files
+        written before the weights existed).
     wind_error_share_ : ndarray, shape (S,)
         With ``eiv_weights``, the share of the first fit's residual variance
         attributed to the mean wind's error (0 without; not saved).
@@ -580,7 +608,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
                  wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None, eiv_weights: bool = True,
-                 model_set_test: str = "signed_rank"):
+                 model_set_test: str = "signed_rank", wind_weights: str | Sequence[float] = "equal"):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -597,16 +625,23 @@ class VaryingCoefficientSINDy(ModelBase):
         self.wind_smoothing_grid = wind_smoothing_grid
         self.eiv_weights = eiv_weights
         self.model_set_test = model_set_test
+        self.wind_weights = wind_weights
 
     def _wind(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""
         U = np.asarray(U, dtype=float)
         if self.wind_input == "mean":
+            return np.repeat(self._section_mean(U)[:, None], U.shape[1], axis=1)
+        return U
+
+    def _section_mean(self, X: np.ndarray) -> np.ndarray:
+        """The weighted mean over the sections (``wind_weights_``) of X (n, S), shape (n,); NaN rows stay NaN."""
+        w = getattr(self, "wind_weights_", None)
+        if w is None or np.all(w == w[0]):  # equal weights: the plain mean, as before the weights existed
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows stay NaN
-                m = np.nanmean(U, axis=1, keepdims=True)
-            return np.repeat(m, U.shape[1], axis=1)
-        return U
+                return np.nanmean(X, axis=1)
+        return weighted_section_mean(X, w)
 
     def _n_inputs(self, n_sections: int) -> int:
         """Winds that enter each equation: every section's with ``wind_input="additive"``, else one."""
@@ -638,7 +673,7 @@ class VaryingCoefficientSINDy(ModelBase):
     def _zeta(self, record_or_yaw, n: int) -> np.ndarray | None:
         """The yaw covariate sin^2(psi) of each equation, shape (n, S) (None without ``yaw_degree``).
 
-        With ``wind_input="mean"`` it is the mean over the sections, like the wind.
+        With ``wind_input="mean"`` it is the weighted mean over the sections, like the wind.
         A record without yaw gets the median of the fitted samples' (``yaw_fallback_``).
         """
         if self.yaw_degree_ == 0:
@@ -652,9 +687,7 @@ class VaryingCoefficientSINDy(ModelBase):
             return np.broadcast_to(np.asarray(fallback, dtype=float), (n, np.size(fallback))).copy()
         z = np.sin(np.radians(np.asarray(yaw, dtype=float))) ** 2
         if self.wind_input == "mean":
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                z = np.repeat(np.nanmean(z, axis=1, keepdims=True), z.shape[1], axis=1)
+            z = np.repeat(self._section_mean(z)[:, None], z.shape[1], axis=1)
         return z
 
     def to_json(self) -> str:
@@ -669,6 +702,8 @@ class VaryingCoefficientSINDy(ModelBase):
         params["wind_smoothing_grid"] = None if grid is None else [float(x) for x in grid]
         params["model_set_level"] = float(params["model_set_level"])
         params["eiv_weights"] = bool(params["eiv_weights"])
+        if not isinstance(params["wind_weights"], str):
+            params["wind_weights"] = [float(x) for x in params["wind_weights"]]
         return json.dumps(params, sort_keys=True)
 
     def _validate(self) -> None:
@@ -704,6 +739,7 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"model_set_test must be 'z' or 'signed_rank'; got {self.model_set_test!r}")
         if self.wind_input not in ("section", "mean", "additive"):
             raise InputError(f"wind_input must be 'section', 'mean' or 'additive'; got {self.wind_input!r}")
+        check_wind_weights(self.wind_weights)
 
     # -- fitting -------------------------------------------------------------------------------------
 
@@ -726,6 +762,12 @@ class VaryingCoefficientSINDy(ModelBase):
             # M, lambda and the wind smoothing are chosen by cross-validation over events
             raise InputError(f"the varying-coefficient model needs at least 2 events (its basis and penalty are "
                              f"chosen by cross-validation over events); got {len(raw)}")
+        for rec in raw:
+            if rec.n_sections != raw[0].n_sections:
+                raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {raw[0].n_sections}")
+        # The weights come from the amplitudes, which the wind's smoothing does not touch.
+        self.wind_weights_ = resolve_wind_weights(self.wind_weights if self.wind_input == "mean" else "equal",
+                                                  np.concatenate([r.A for r in raw]))
         grid = self._smoothing_candidates()
         # The wind smoothing is chosen like M and lambda, by the cross-validated error over events
         # (the target dA/dt and the folds do not depend on it, so the errors are comparable).
@@ -876,8 +918,6 @@ class VaryingCoefficientSINDy(ModelBase):
         for rec in records:
             if rec.dA is None:
                 raise ValueError(f"record {rec.event_id!r} has no dA: the model is fitted to dA/dt")
-            if rec.n_sections != S:
-                raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {S}")
         t = np.concatenate([r.t for r in records])
         with_yaw = all(r.yaw is not None for r in records)
         J = (1 if with_yaw else 0) if self.yaw_degree is None else int(self.yaw_degree)
@@ -906,21 +946,23 @@ class VaryingCoefficientSINDy(ModelBase):
     def _wind_standard_error(self, U: np.ndarray) -> np.ndarray | None:
         """Standard error of each equation's wind input, shape (n,), m/s (None: not estimable).
 
-        The spread of the S (smoothed) anemometers about their mean over sqrt(S):
-        the mean's error if each anemometer's slow turbulence, which the deck
+        The spread of the S (smoothed) anemometers about their mean times
+        sqrt(sum_j w_j^2) (``wind_weights_``; 1/sqrt(S) for equal weights): the
+        weighted mean's error if each anemometer's slow turbulence, which the deck
         does not feel, is independent of the others' (on the seed-0 realistic
-        campaign this gives 0.147 m/s against a true RMS error of 0.143 m/s).
+        campaign, equal weights, this gives 0.147 m/s against a true RMS error of 0.143 m/s).
         With ``wind_input="additive"`` each section's own anemometer is an
         input, whose error is the spread itself (not over sqrt(S)).
         Only for ``wind_input`` "mean" or "additive" with two or more sections.
         """
         if self.wind_input == "section" or U.shape[1] < 2:
             return None
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # rows with fewer than two winds: NaN
-            se = np.nanstd(U, axis=1, ddof=1)
-            if self.wind_input == "mean":
-                se = se / np.sqrt(np.isfinite(U).sum(axis=1))
+        if self.wind_input == "mean":
+            se = weighted_mean_standard_error(U, self.wind_weights_)
+        else:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # rows with fewer than two winds: NaN
+                se = np.nanstd(U, axis=1, ddof=1)
         return np.where(np.isfinite(se), se, np.nanmedian(se))
 
     def _eiv_weight(self, prep: dict, k: int, sk: dict, step: float = 0.05, chunk: int = 50_000):
@@ -1443,6 +1485,7 @@ class VaryingCoefficientSINDy(ModelBase):
             data.update({name.rstrip("_"): (dims, np.asarray(getattr(self, name)).astype(
                          np.int8 if name == "penalty_plausible_" else float))
                          for name, dims in self._PENALTY_ARRAYS.items() if self.yaw_degree_ or "yaw" not in name})
+        data["wind_weights"] = (("equation",), np.asarray(self.wind_weights_, dtype=float))
         attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
                  "wind_smoothing_s_fitted": float(self.wind_smoothing_s_),
                  "wind_smoothing_cv": json.dumps([float(x) for x in self.wind_smoothing_cv_]),
@@ -1469,6 +1512,9 @@ class VaryingCoefficientSINDy(ModelBase):
         params.setdefault("wind_smoothing_grid", None)  # files written before the smoothing was cross-validated
         params.setdefault("eiv_weights", False)  # files written before the effective-variance weights
         params.setdefault("model_set_test", "z")  # files written before the signed-rank test
+        params.setdefault("wind_weights", "equal")  # files written before the sections' winds were weighted
+        if not isinstance(params["wind_weights"], str):
+            params["wind_weights"] = tuple(params["wind_weights"])
         if params["wind_smoothing_grid"] is not None:
             params["wind_smoothing_grid"] = tuple(params["wind_smoothing_grid"])
         model = cls(**params)
@@ -1507,6 +1553,8 @@ class VaryingCoefficientSINDy(ModelBase):
         model.orders_ = model.orders_.astype(bool)
         model.n_samples_, model.n_blocks_ = int(ds.attrs["n_samples"]), int(ds.attrs["n_blocks"])
         model.n_sections_ = int(ds.sizes["equation"])
+        model.wind_weights_ = (np.asarray(ds["wind_weights"].values, dtype=float) if "wind_weights" in ds
+                               else np.full(model.n_sections_, 1.0 / model.n_sections_))
         model.event_ids_ = json.loads(ds.attrs["events"])
         model.wind_smoothing_s_ = float(ds.attrs.get("wind_smoothing_s_fitted", params["wind_smoothing_s"]))
         model.wind_smoothing_cv_ = np.asarray(json.loads(ds.attrs.get("wind_smoothing_cv", "[NaN]")), dtype=float)
