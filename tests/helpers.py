@@ -47,3 +47,149 @@ def change_records(n: int = 12, change_at: int | None = None, *, scale: float = 
         dA = a1 * A - 2.0 * A**3 + 2e-4 * rng.standard_normal(t.size)
         out.append(Record(event_id=f"E{e + 1:03d}", t=t, A=A[:, None], U=U[:, None], dA=dA[:, None]))
     return out
+
+
+def bell(U, centre_m_s: float = 10.0):
+    """Net linear coefficient a_1(U) with a Gaussian lock-in bell, 1/s.
+
+    Parameters
+    ----------
+    U : array_like, m/s
+        Wind speed.
+    centre_m_s : float, m/s
+        Wind at the bell's top.
+
+    Returns
+    -------
+    ndarray, shape of ``U``, 1/s
+        -0.01 + 0.05 exp(-((U - centre_m_s) / 1.5)^2 / 2): damped (-0.01 1/s) off lock-in,
+        self-excited (+0.04 1/s) at its centre, 1.5 m/s wide.
+    """
+    return -0.01 + 0.05 * np.exp(-0.5 * ((U - centre_m_s) / 1.5) ** 2)
+
+
+def bell_records(n_events: int, *, seed: int, duration_s: float, dt_s: float, mode_shape,
+                 wind_period_s: tuple[float, float], amplitude_period_s: float,
+                 wind_low_m_s: float = 7.0, wind_spread_m_s: float = 6.0,
+                 wind_offsets_m_s: float = 0.0, wind_walk_m_s: float = 0.0,
+                 section_swing_m_s: float = 0.0, section_swing_period_s: tuple[float, float, float] = (170.0, 37.0, 11.0),
+                 section_swing_phased: bool = True,
+                 yaw_deg: float = 0.0, yaw_period_s: float = 700.0, yaw_in_truth: bool = False,
+                 bell_centre_m_s: float = 10.0, wind_shares=None, wind_weights=None,
+                 a0: float = 0.0, a3: float = -2.0, modal: bool = False, noise_m_s: float = 0.0) -> list:
+    """Synthetic records of dA/dt = a0 + a_1 A + a3 A^3 (+ noise) whose a_1 is a lock-in :func:`bell` of the wind.
+
+    Event e (0-based, ``event_id`` ``f"E{e:03d}"``) has samples ``arange(0, duration_s, dt_s)`` and
+
+    * a deck wind U0(t) = wind_low_m_s + wind_spread_m_s r + 2 sin(2 pi t / (P0 + P1 e) + e) m/s,
+      (P0, P1) = ``wind_period_s``;
+    * section k's wind U0 plus, in this order, a persistent offset drawn uniformly in
+      +-``wind_offsets_m_s``, a swing ``section_swing_m_s`` sin(2 pi t / (S0 + S1 k + S2 e) [+ k + e]),
+      (S0, S1, S2) = ``section_swing_period_s`` (the phase k + e where ``section_swing_phased``), and a
+      random walk ``wind_walk_m_s`` cumsum(N(0, 1)) / 30 (its standard deviation after 900 samples is
+      ``wind_walk_m_s``);
+    * a modal amplitude Q(t) = 0.05 + 0.1 r' (1 + sin(2 pi t / ``amplitude_period_s`` + e)) m and
+      section amplitudes A_k = ``mode_shape``_k Q;
+    * where ``yaw_deg``: a yaw ``yaw_deg`` sin(2 pi t / ``yaw_period_s`` + e) degrees at every section,
+      stored in the record; ``yaw_in_truth`` multiplies a_1 by cos^2(yaw).
+
+    a_1 is ``bell(U_k, bell_centre_m_s)`` at each section's own wind; with ``wind_shares`` s_j, the
+    sum over sections sum_j s_j bell(U_j) in every equation; with ``wind_weights`` w_j, bell(sum_j w_j U_j).
+    ``modal=False``: each section's A_k follows the equation; ``modal=True``: Q follows it and
+    dA_k/dt = ``mode_shape``_k dQ/dt. Random numbers are drawn per event in the order r, offsets,
+    walk, r', noise, so each option leaves the other draws where they were.
+
+    Parameters
+    ----------
+    n_events : int
+        Number of events.
+    seed : int
+        Seed of ``numpy.random.default_rng``.
+    duration_s, dt_s : float, s
+        Record length and sample step.
+    mode_shape : array_like, shape (n_sections,)
+        Each section's amplitude relative to Q (also fixes the number of sections).
+    wind_period_s : (float, float), s
+        The deck wind's swing period P0 + P1 e.
+    amplitude_period_s : float, s
+        Period of Q's swing.
+    wind_low_m_s, wind_spread_m_s : float, m/s
+        Event mean wind uniform in [low, low + spread) (before the +-2 m/s swing).
+    wind_offsets_m_s, wind_walk_m_s, section_swing_m_s : float, m/s
+        Section winds' departures from the deck wind (0: none, and nothing drawn for it).
+    section_swing_period_s : (float, float, float), s
+        Swing period S0 + S1 k + S2 e.
+    section_swing_phased : bool
+        Add the phase k + e (rad) to the section swing.
+    yaw_deg : float, degrees
+        Yaw amplitude (0: the records carry no yaw).
+    yaw_period_s : float, s
+        Yaw period.
+    yaw_in_truth : bool
+        a_1 falls off as cos^2(yaw).
+    bell_centre_m_s : float, m/s
+        The bell's centre.
+    wind_shares, wind_weights : array_like, shape (n_sections,), optional
+        At most one of them: see above.
+    a0 : float, m/s
+        Constant term (0: none added).
+    a3 : float, 1/(m^2 s)
+        Cubic coefficient.
+    modal : bool
+        Q, not each A_k, follows the equation (needs ``wind_weights``: one a_1 for the mode).
+    noise_m_s : float, m/s
+        Standard deviation of white noise added to dA/dt (0: noise-free, nothing drawn).
+
+    Returns
+    -------
+    list of Record
+        ``n_events`` records with ``dA`` (and ``yaw`` where ``yaw_deg``).
+    """
+    from vivbench.core import Record
+
+    if wind_shares is not None and wind_weights is not None:
+        raise ValueError("give wind_shares or wind_weights, not both")
+    if modal and wind_weights is None:
+        raise ValueError("modal=True needs wind_weights: the mode follows one linear coefficient")
+    if yaw_in_truth and (modal or not yaw_deg):
+        raise ValueError("yaw_in_truth needs yaw_deg and modal=False")
+    shape = np.asarray(mode_shape, dtype=float)
+    S = shape.size
+    rng = np.random.default_rng(seed)
+    out = []
+    for e in range(n_events):
+        t = np.arange(0.0, duration_s, dt_s)
+        base = wind_low_m_s + wind_spread_m_s * rng.random() + 2.0 * np.sin(
+            2 * np.pi * t / (wind_period_s[0] + wind_period_s[1] * e) + e)
+        U = np.repeat(base[:, None], S, axis=1)
+        if wind_offsets_m_s:
+            U = U + rng.uniform(-wind_offsets_m_s, wind_offsets_m_s, S)[None, :]
+        if section_swing_m_s:
+            p0, p1, p2 = section_swing_period_s
+            phases = [2 * np.pi * t / (p0 + p1 * k + p2 * e) for k in range(S)]
+            if section_swing_phased:
+                phases = [x + k + e for k, x in enumerate(phases)]
+            U = U + section_swing_m_s * np.stack([np.sin(x) for x in phases], axis=1)
+        if wind_walk_m_s:
+            U = U + wind_walk_m_s * rng.standard_normal((t.size, S)).cumsum(axis=0) / 30.0
+        Q = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / amplitude_period_s + e))
+        yaw = np.repeat((yaw_deg * np.sin(2 * np.pi * t / yaw_period_s + e))[:, None], S, axis=1) if yaw_deg else None
+        if wind_weights is not None:
+            a1 = bell(U @ np.asarray(wind_weights), bell_centre_m_s)
+            a1 = a1 if modal else a1[:, None]
+        elif wind_shares is not None:
+            a1 = (bell(U, bell_centre_m_s) * np.asarray(wind_shares)).sum(axis=1, keepdims=True)
+        else:
+            a1 = bell(U, bell_centre_m_s)
+        if yaw_in_truth:
+            a1 = a1 * np.cos(np.radians(yaw)) ** 2
+        x = Q if modal else Q[:, None] * shape[None, :]  # the amplitude the equation is written in
+        linear = a1 * x
+        if a0:
+            linear = a0 + linear
+        dx = linear + a3 * x**3
+        A, dA = (Q[:, None] * shape, dx[:, None] * shape) if modal else (x, dx)
+        if noise_m_s:
+            dA = dA + noise_m_s * rng.standard_normal(A.shape)
+        out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=dA, yaw=yaw))
+    return out

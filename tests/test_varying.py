@@ -7,6 +7,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.helpers import bell, bell_records
 from vivbench.core import Record
 from vivbench.core.errors import InputError
 from vivbench.models import (CampaignLevel, FittedModel, HasEquations, Method, NotFittedError, Persistent, Predictor,
@@ -16,26 +17,13 @@ from vivbench.preprocess import smooth_wind
 from vivbench.regimes import model_window_regimes, varying_window_verdicts
 
 
-def bell(U):
-    """a_1(U): net damping with a Gaussian lock-in bell, 1/s."""
-    return -0.01 + 0.05 * np.exp(-0.5 * ((U - 10.0) / 1.5) ** 2)
-
-
 A3 = -2.0  # a_3, 1/(m^2 s)
 
 
 def _records(n_events: int = 10, seed: int = 0, S: int = 2):
-    """Noise-free records: dA/dt = bell(U) A + A3 A^3 on (A, U) histories spanning 6-15 m/s."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for e in range(n_events):
-        t = np.arange(0.0, 1200.0, 0.5)
-        U = 7.0 + 6.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (600 + 100 * e) + e)
-        A = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 300 + e))
-        U = np.repeat(U[:, None], S, axis=1)
-        A = A[:, None] * np.linspace(1.0, 0.6, S)[None, :]
-        out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=bell(U) * A + A3 * A**3))
-    return out
+    """Noise-free records: dA/dt = bell(U) A + A3 A^3 on (A, U) histories spanning 5-15 m/s, equal winds."""
+    return bell_records(n_events, seed=seed, duration_s=1200.0, dt_s=0.5, mode_shape=np.linspace(1.0, 0.6, S),
+                        wind_period_s=(600.0, 100.0), amplitude_period_s=300.0, a3=A3)
 
 
 @pytest.fixture(scope="module")
