@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.helpers import bell, bell_records
 from vivbench.analysis.changes import statistics_change_scan, wind_strata
 from vivbench.core import Record
 from vivbench.models import VaryingCoefficientSINDy
@@ -21,24 +22,12 @@ SHARE = np.array([0.5, 0.3, 0.2])
 A3 = -2.0  # 1/(m^2 s)
 
 
-def bell(U):
-    """Lock-in bell of the net linear coefficient at a uniform wind, 1/s."""
-    return -0.01 + 0.05 * np.exp(-0.5 * ((U - 10.0) / 1.5) ** 2)
-
-
 def _records(n_events: int = 8, seed: int = 0):
     """Noise-free records of dA_k/dt = sum_j SHARE_j bell(U_j) A_k + A3 A_k^3, winds differing by +-1 m/s."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for e in range(n_events):
-        t = np.arange(0.0, 1200.0, 2.0)
-        base = 7.0 + 6.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (600 + 100 * e) + e)
-        U = np.stack([base + np.sin(2 * np.pi * t / (170 + 37 * j + 11 * e) + j + e) for j in range(3)], axis=1)
-        A = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 300 + e))
-        A = A[:, None] * np.linspace(1.0, 0.6, 3)[None, :]
-        a1 = (bell(U) * SHARE).sum(axis=1, keepdims=True)
-        out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=a1 * A + A3 * A**3))
-    return out
+    return bell_records(n_events, seed=seed, duration_s=1200.0, dt_s=2.0, mode_shape=np.linspace(1.0, 0.6, 3),
+                        wind_period_s=(600.0, 100.0), amplitude_period_s=300.0, section_swing_m_s=1.0,
+                        section_swing_period_s=(170.0, 37.0, 11.0), section_swing_phased=True, wind_shares=SHARE,
+                        a3=A3)
 
 
 def _fit(wind_input: str, n_bootstrap: int = 0):
