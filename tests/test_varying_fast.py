@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.helpers import bell_records
 from vivbench.core import Record
 from vivbench.core.regime import regime_rule
 from vivbench.models import VaryingCoefficientSINDy
@@ -31,20 +32,9 @@ def _reference_verdicts(model, record, window_start, window_end):
 
 def _records(n_events=6, seed=3, S=2):
     """Self-excited records with a yaw that modulates the linear term, 0.5 s samples, 15 min each."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for e in range(n_events):
-        t = np.arange(0.0, 900.0, 0.5)
-        U = 7.0 + 6.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (500 + 80 * e) + e)
-        yaw = 20.0 * np.sin(2 * np.pi * t / 700 + e)
-        A = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 250 + e))
-        U = np.repeat(U[:, None], S, axis=1)
-        yaw = np.repeat(yaw[:, None], S, axis=1)
-        A = A[:, None] * np.linspace(1.0, 0.7, S)[None, :]
-        a1 = (-0.01 + 0.05 * np.exp(-0.5 * ((U - 10.0) / 1.5) ** 2)) * np.cos(np.radians(yaw)) ** 2
-        dA = 0.002 + a1 * A - 2.0 * A**3 + 1e-4 * rng.standard_normal(A.shape)
-        out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=dA, yaw=yaw))
-    return out
+    return bell_records(n_events, seed=seed, duration_s=900.0, dt_s=0.5, mode_shape=np.linspace(1.0, 0.7, S),
+                        wind_period_s=(500.0, 80.0), amplitude_period_s=250.0, yaw_deg=20.0, yaw_period_s=700.0,
+                        yaw_in_truth=True, a0=0.002, a3=-2.0, noise_m_s=1e-4)
 
 
 @pytest.fixture(scope="module", params=["section", "mean"])

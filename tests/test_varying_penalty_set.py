@@ -6,25 +6,15 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from vivbench.core import Record
+from tests.helpers import bell_records
 from vivbench.models import VaryingCoefficientSINDy
 from vivbench.regimes import varying_window_verdicts
 
 
 def _records(n_events: int = 8, seed: int = 1, S: int = 2):
-    """Noisy records dA/dt = a_1(U) A - 2 A^3 + noise, a lock-in bell a_1 over 6-15 m/s, 0.5 s samples."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for e in range(n_events):
-        t = np.arange(0.0, 900.0, 0.5)
-        U = 7.0 + 6.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (500 + 80 * e) + e)
-        A = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 250 + e))
-        U = np.repeat(U[:, None], S, axis=1)
-        A = A[:, None] * np.linspace(1.0, 0.7, S)[None, :]
-        a1 = -0.01 + 0.05 * np.exp(-0.5 * ((U - 10.0) / 1.5) ** 2)
-        dA = a1 * A - 2.0 * A**3 + 2e-4 * rng.standard_normal(A.shape)
-        out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=dA))
-    return out
+    """Noisy records dA/dt = a_1(U) A - 2 A^3 + noise, a lock-in bell a_1 over 5-15 m/s, 0.5 s samples."""
+    return bell_records(n_events, seed=seed, duration_s=900.0, dt_s=0.5, mode_shape=np.linspace(1.0, 0.7, S),
+                        wind_period_s=(500.0, 80.0), amplitude_period_s=250.0, a3=-2.0, noise_m_s=2e-4)
 
 
 SETTINGS = dict(n_basis=(8,), wind_smoothing_s=0.0, eiv_weights=False, block_s=150.0)
