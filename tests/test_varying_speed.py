@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from tests.helpers import assert_close
+from tests.helpers import assert_close, bell_records
 from vivbench.core import Record
 from vivbench.models import VaryingCoefficientSINDy
 from vivbench.models.varying import DEGREE, bspline_basis, bspline_local, uniform_knots
@@ -107,17 +107,11 @@ def test_input_contributions_sum_to_the_design():
 
 
 def _records(n_events=4, S=2, seed=5):
-    rng = np.random.default_rng(seed)
-    out = []
-    for e in range(n_events):
-        t = np.arange(0.0, 600.0, 0.5)
-        U = 7.0 + 5.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (400 + 50 * e) + e)
-        U = U[:, None] + 0.3 * rng.standard_normal((t.size, S)).cumsum(axis=0) / 30.0
-        yaw = np.repeat((15.0 * np.sin(2 * np.pi * t / 500 + e))[:, None], S, axis=1)
-        A = (0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 200 + e)))[:, None] * np.linspace(1, 0.7, S)
-        dA = (-0.01 + 0.05 * np.exp(-0.5 * ((U - 9.0) / 1.5) ** 2)) * A - 2.0 * A**3 + 1e-4 * rng.standard_normal(A.shape)
-        out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=dA, yaw=yaw))
-    return out
+    """Noisy records with a bell at 9 m/s, each section's wind wandering off the deck's, and a yaw the truth ignores."""
+    return bell_records(n_events, seed=seed, duration_s=600.0, dt_s=0.5, mode_shape=np.linspace(1, 0.7, S),
+                        wind_spread_m_s=5.0, wind_period_s=(400.0, 50.0), wind_walk_m_s=0.3,
+                        amplitude_period_s=200.0, yaw_deg=15.0, yaw_period_s=500.0, yaw_in_truth=False,
+                        bell_centre_m_s=9.0, a3=-2.0, noise_m_s=1e-4)
 
 
 def test_window_grams_equal_window_sums():

@@ -11,21 +11,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vivbench.core import Record
 from vivbench.core.errors import InputError
 from vivbench.models import VaryingCoefficientSINDy
 from vivbench.models.wind_weights import (check_wind_weights, modal_wind_weights, resolve_wind_weights,
                                           weighted_mean_standard_error, weighted_section_mean)
-from tests.helpers import assert_close
+from tests.helpers import assert_close, bell_records
 
 PHI = np.array([0.45, 1.0, 0.8])  # an asymmetric in-phase mode
 W_MODAL = PHI**2 / np.sum(PHI**2)
 A3 = -2.0  # 1/(m^2 s)
-
-
-def bell(U):
-    """Lock-in bell of the net linear coefficient, 1/s."""
-    return -0.01 + 0.05 * np.exp(-0.5 * ((U - 10.0) / 1.5) ** 2)
 
 
 def _records(weights, n_events: int = 8, seed: int = 0):
@@ -33,18 +27,10 @@ def _records(weights, n_events: int = 8, seed: int = 0):
 
     The sections' winds differ by persistent offsets of +-1.5 m/s, so the weighted and the plain mean differ.
     """
-    rng = np.random.default_rng(seed)
-    out = []
-    for e in range(n_events):
-        t = np.arange(0.0, 1200.0, 2.0)
-        base = 7.0 + 6.0 * rng.random() + 2.0 * np.sin(2 * np.pi * t / (600 + 100 * e) + e)
-        offset = rng.uniform(-1.5, 1.5, 3)
-        U = base[:, None] + offset[None, :] + 0.2 * np.sin(2 * np.pi * t[:, None] / (170 + 37 * np.arange(3) + e))
-        Q = 0.05 + 0.1 * rng.random() * (1 + np.sin(2 * np.pi * t / 300 + e))
-        a1 = bell(U @ np.asarray(weights))
-        dQ = a1 * Q + A3 * Q**3
-        out.append(Record(event_id=f"E{e:03d}", t=t, A=Q[:, None] * PHI, U=U, dA=dQ[:, None] * PHI))
-    return out
+    return bell_records(n_events, seed=seed, duration_s=1200.0, dt_s=2.0, mode_shape=PHI, modal=True,
+                        wind_period_s=(600.0, 100.0), wind_offsets_m_s=1.5, section_swing_m_s=0.2,
+                        section_swing_period_s=(170.0, 37.0, 1.0), section_swing_phased=False,
+                        amplitude_period_s=300.0, wind_weights=weights, a3=A3)
 
 
 def _fit(records, wind_weights):
