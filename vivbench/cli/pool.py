@@ -30,7 +30,7 @@ def run(args) -> int:
         # The model's own defaults (yaw when the results store it, 30 s wind smoothing) unless overridden.
         extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing),
                                    ("wind_input", args.wind_input),
-                                   ("wind_weights", weights))
+                                   ("wind_weights", weights), ("penalty_choice", args.penalty_choice))
                  if v is not None}
         if args.wind_input == "additive":  # its settings chosen on the tuning campaign, unless overridden
             extra = {**ADDITIVE_SETTINGS, **extra}
@@ -116,6 +116,11 @@ def register(sub) -> None:
                         "of the averaged truth when the sections' tributary lengths are equal; README: better on "
                         "some campaigns, a broken verdict on one), or one number per section (e.g. L_k phi_k^2 "
                         "from the bridge's drawings)")
+    s.add_argument("--penalty-choice", choices=("cv", "least"), default=None,
+                   help="with --model varying: the curves' roughness penalty: cv (the cross-validated error's "
+                        "minimum) or least (the least penalty whose leave-one-event-out error is not significantly "
+                        "above the minimum's: errors in the measured wind make held-out data prefer over-smoothed "
+                        "curves; README)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
                         "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "
