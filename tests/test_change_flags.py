@@ -11,9 +11,7 @@ from tests.helpers import assert_close, change_records
 def _fit(records):
     from vivbench.models import VaryingCoefficientSINDy
 
-    # The 5-fold penalty, with which the figures below were measured: the default least plausible penalty lets
-    # the curves absorb more of a step where one side's winds dominate (held-out offsets -0.002 apart, not -0.0075).
-    return VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,), wind_smoothing_s=0.0, penalty_choice="cv").fit(records)
+    return VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,), wind_smoothing_s=0.0).fit(records)
 
 
 def test_scan_gains_equal_separate_refits_before_and_after_every_split():

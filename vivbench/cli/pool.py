@@ -110,16 +110,17 @@ def register(sub) -> None:
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
                         "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
-    s.add_argument("--wind-weights", default=None, metavar="modal|equal|W1,W2,...",
-                   help="with --model varying and the mean wind: the sections' weights in it: modal (default: each "
-                        "section's share of the mode's energy, sum of A_k^2, the weights of the averaged truth when "
-                        "the sections' tributary lengths are equal), equal (the plain mean, the default before), or "
-                        "one number per section (e.g. L_k phi_k^2 from the bridge's drawings)")
-    s.add_argument("--penalty-choice", choices=("least", "cv", "loeo"), default=None,
-                   help="with --model varying: the curves' roughness penalty: least (default: the least penalty "
-                        "whose leave-one-event-out error is not significantly above the best one's), cv (the 5-fold "
-                        "cross-validated error's minimum, the default before) or loeo (the leave-one-event-out "
-                        "error's minimum); README")
+    s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",
+                   help="with --model varying and the mean wind: the sections' weights in it: equal (default, the "
+                        "plain mean), modal (each section's share of the mode's energy, sum of A_k^2: the weights "
+                        "of the averaged truth when the sections' tributary lengths are equal; README: better on "
+                        "the large realistic campaigns with --penalty-choice least), or one number per section "
+                        "(e.g. L_k phi_k^2 from the bridge's drawings)")
+    s.add_argument("--penalty-choice", choices=("cv", "least", "loeo"), default=None,
+                   help="with --model varying: the curves' roughness penalty: cv (default: the 5-fold cross-"
+                        "validated error's minimum), least (the least penalty whose leave-one-event-out error is not "
+                        "significantly above the best one's) or loeo (the leave-one-event-out error's minimum); "
+                        "README")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
                         "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "

@@ -524,51 +524,43 @@ class VaryingCoefficientSINDy(ModelBase):
         higher coverage, flagged accuracy >= 0.996, none flagged on
         forced_only. Costs a second weighted pass at the chosen basis only.
         :meth:`event_statistics` stays unweighted.
-    wind_weights : {"modal", "equal"} or sequence of float
+    wind_weights : {"equal", "modal"} or sequence of float
         The sections' weights in the mean wind (and yaw) of ``wind_input="mean"``
-        (:mod:`vivbench.models.wind_weights`): ``"modal"`` (default) each
-        section's share of the mode's energy, sum_t A_k^2 over the campaign,
-        which are the averaged truth's weights L_k phi_k^2 of the linear order
-        when the tributary lengths are equal; ``"equal"`` the plain mean (the
-        default before); or one weight per section (normalised), e.g. L_k
-        phi_k^2 from the bridge's drawings. Fitted on the truth's own (A, U,
-        dA) of the seed-0 realistic campaign the floor falls from 0.089
-        (equal) to 0.054 (``benchmarks/bench_misspecification.py
-        --wind-weights modal``). With the 5-fold penalty (``penalty_choice=
-        "cv"``) modal weights were worse on bridge C (0.160 -> 0.180) and on
-        the 20-event no-change campaign (0.114 -> 0.134, flagged accuracy
-        0.806): that choice took a 100 times larger penalty there. With the
-        default ``"least"`` they are better on every realistic campaign
-        measured (README, "The campaign model's defaults").
-    penalty_choice : {"least", "cv", "loeo"}
+        (:mod:`vivbench.models.wind_weights`): ``"equal"`` (default) the plain
+        mean; ``"modal"`` each section's share of the mode's energy, sum_t A_k^2
+        over the campaign, which are the averaged truth's weights L_k phi_k^2 of
+        the linear order when the tributary lengths are equal; or one weight per
+        section (normalised), e.g. L_k phi_k^2 from the bridge's drawings.
+        Fitted on the truth's own (A, U, dA) of the seed-0 realistic campaign
+        the floor falls from 0.089 to 0.054
+        (``benchmarks/bench_misspecification.py --wind-weights modal``).
+        Measured on seven campaigns with each ``penalty_choice`` (README, "The
+        sections' weights" and "The roughness penalty"): no combination is
+        better everywhere, so the default stays the plain mean.
+    penalty_choice : {"cv", "least", "loeo"}
         How the roughness penalty of the fitted curves is chosen at the
-        selected basis. ``"least"`` (default): the least penalty of the
-        confidence set of penalties (leave-one-event-out error of the final,
-        effective-variance weighted fit not significantly above the best
-        one's, ``model_set_test`` at ``model_set_level``): the least
-        smoothing the held-out events cannot tell from the best. ``"cv"``
-        (the default before): the minimum of the 5-fold cross-validated
-        error of the unweighted fit that chose the basis. ``"loeo"``: the
-        best member of the confidence set. The cross-validated error is flat
-        over decades of penalty (seed 0, modal weights: within 4 % from 1e-5
-        to 1e-2) and its minimum sits at the smoothing end (0.01 there,
-        outside the confidence set {1e-5, 1e-4, 1e-3}), while the realistic
-        lock-in bells are sharp. Measured with ``vivbench pool DIR
-        --wind-weights modal --penalty-choice least|loeo`` then ``vivbench
-        validate`` (median dA/dt error on the true (A, U), least / loeo):
-        seed 0 0.082 / 0.080; held out, seed 1 0.092 / 0.100, the second
-        bridge 0.101 / 0.093, bridge C 0.089 / 0.110, the no-change campaign
-        0.092 / 0.091, in-library 0.097 / 0.097; but on the drift study's
-        campaign "loeo" (and "cv") with modal weights missed the damping
-        change and only 0.786 of its flagged windows were right, while
-        "least" found the change (E010, p = 0.010) with every flagged window
-        right. Known failure of "least": when no candidate penalty is
-        rejected (the smallest is plausible) it takes the smallest, and with
-        a large wind error that the sections' spread does not show, the
-        curve overshoots the bell (``tests/test_varying_penalty_choice.py``);
-        in toy campaigns with a wide bell it is as good as "cv" at wind
-        errors of 0.2 m/s and up to 3.5 times worse in curve error at 0.5-1
-        m/s (README).
+        selected basis. ``"cv"`` (default): the minimum of the 5-fold
+        cross-validated error of the unweighted fit that chose the basis.
+        ``"least"``: the least penalty of the confidence set of penalties
+        (leave-one-event-out error of the final, effective-variance weighted
+        fit not significantly above the best one's, ``model_set_test`` at
+        ``model_set_level``). ``"loeo"``: the best member of that set. The
+        cross-validated error is flat over decades of penalty (seed 0, modal
+        weights: within 4 % from 1e-5 to 1e-2) and its 5-fold minimum sits
+        at the smoothing end (0.01 there, outside the confidence set {1e-5,
+        1e-4, 1e-3}). With modal weights, median dA/dt error on the true
+        (A, U), cv / least / loeo (``vivbench pool DIR --wind-weights modal
+        --penalty-choice ...`` then ``vivbench validate``): seed 0 0.101 /
+        0.082 / 0.080; held out, seed 1 0.100 / 0.092 / 0.100, the second
+        bridge 0.087 / 0.101 / 0.093, bridge C 0.180 / 0.089 / 0.110, the
+        no-change campaign 0.134 / 0.092 / 0.091 (flagged accuracy 0.806 /
+        0.995 / 0.996). But on the drift study's campaign "cv" and "loeo"
+        missed the change and "loeo" flagged windows only 0.786 right, and
+        on the leaderboard's 8-event scenarios "least" is worse than the
+        default on five of seven (README). Known failure of "least": when no
+        candidate penalty is rejected (few events) it takes the smallest,
+        and with a large wind error the curve overshoots the bell
+        (``tests/test_varying_penalty_choice.py``).
 
     Attributes
     ----------
@@ -636,8 +628,8 @@ class VaryingCoefficientSINDy(ModelBase):
                  wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
                  wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None, eiv_weights: bool = True,
-                 model_set_test: str = "signed_rank", wind_weights: str | Sequence[float] = "modal",
-                 penalty_choice: str = "least"):
+                 model_set_test: str = "signed_rank", wind_weights: str | Sequence[float] = "equal",
+                 penalty_choice: str = "cv"):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
