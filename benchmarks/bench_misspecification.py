@@ -138,6 +138,23 @@ def substitute(ev: dict, what: tuple[str, ...]) -> Record:
     return dataclasses.replace(rec, **new)
 
 
+def window_dA_errors(pred: np.ndarray, ev: dict) -> np.ndarray:
+    """Relative RMS errors of ``pred`` (the truth's grid, (n, S)) against the truth's dA/dt per (window, section).
+
+    Only the pairs with dynamics: true dA/dt RMS over the window >= 10 % of its RMS over the event.
+    """
+    trec, ws, we = ev["truth_rec"], ev["ws"], ev["we"]
+    t, true = trec.t, trec.dA
+    okp = np.isfinite(pred) & np.isfinite(true)
+    num = _window_sums(np.where(okp, (pred - true) ** 2, 0.0), t, ws, we)
+    den = _window_sums(np.where(okp, true**2, 0.0), t, ws, we)
+    cnt = _window_sums(okp.astype(float), t, ws, we)
+    event_ms = np.nanmean(np.where(okp, true, np.nan) ** 2, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dyn = (cnt > 0) & (den / np.maximum(cnt, 1) >= 0.01 * event_ms)  # RMS >= 10 % of the event's
+        return np.sqrt(num / den)[dyn]
+
+
 def score(model, events, verdicts: str | None = None, records=None) -> dict:
     """dA/dt error and regime accuracy on the truth's (A, U); verdicts on the measured record when asked.
 
@@ -146,16 +163,7 @@ def score(model, events, verdicts: str | None = None, records=None) -> dict:
     errs, hits, n_reg, flagged, flag_ok, n_win, flag_self = [], 0, 0, 0, 0, 0, 0
     for e, ev in enumerate(events):
         trec, ws, we = ev["truth_rec"], ev["ws"], ev["we"]
-        t, true = trec.t, trec.dA
-        pred = model.predict(trec)
-        okp = np.isfinite(pred) & np.isfinite(true)
-        num = _window_sums(np.where(okp, (pred - true) ** 2, 0.0), t, ws, we)
-        den = _window_sums(np.where(okp, true**2, 0.0), t, ws, we)
-        cnt = _window_sums(okp.astype(float), t, ws, we)
-        event_ms = np.nanmean(np.where(okp, true, np.nan) ** 2, axis=0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            dyn = (cnt > 0) & (den / np.maximum(cnt, 1) >= 0.01 * event_ms)  # RMS >= 10 % of the event's
-            errs.append(np.sqrt(num / den)[dyn])
+        errs.append(window_dA_errors(model.predict(trec), ev))
         reg = model_window_regimes(model, trec, ws, we)["regime"]
         tr = ev["true_regime"]
         valid = tr > 0

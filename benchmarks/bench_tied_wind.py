@@ -126,18 +126,7 @@ def _predict(model, d: dict, w: np.ndarray, mode: str) -> np.ndarray:
 
 def score(model, events, w: np.ndarray, mode: str) -> float:
     """Median over the (window, section) pairs with dynamics of the relative RMS dA/dt error on the truth's (A, U)."""
-    errs = []
-    for ev in events:
-        trec, ws, we = ev["truth_rec"], ev["ws"], ev["we"]
-        pred, true = _predict(model, _stack([trec], 1), w, mode), trec.dA
-        ok = np.isfinite(pred) & np.isfinite(true)
-        num = bm._window_sums(np.where(ok, (pred - true) ** 2, 0.0), trec.t, ws, we)
-        den = bm._window_sums(np.where(ok, true**2, 0.0), trec.t, ws, we)
-        cnt = bm._window_sums(ok.astype(float), trec.t, ws, we)
-        event_ms = np.nanmean(np.where(ok, true, np.nan) ** 2, axis=0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            dyn = (cnt > 0) & (den / np.maximum(cnt, 1) >= 0.01 * event_ms)
-            errs.append(np.sqrt(num / den)[dyn])
+    errs = [bm.window_dA_errors(_predict(model, _stack([ev["truth_rec"]], 1), w, mode), ev) for ev in events]
     return float(np.median(np.concatenate(errs)))
 
 

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+import shutil
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from tests.helpers import bell, bell_records
 from vivbench.core.errors import InputError
@@ -86,12 +89,8 @@ def test_choice_is_validated_saved_and_defaults_for_older_files(fits, tmp_path):
     loaded = VaryingCoefficientSINDy.load(path)
     assert loaded.penalty_choice == "least"
     np.testing.assert_array_equal(loaded.penalty_cv_, fits["least"].penalty_cv_)
-    import xarray as xr
-
     with xr.open_dataset(path) as ds:
         old = ds.load()
-    import json
-
     params = json.loads(old.attrs["params_json"])
     del params["penalty_choice"]
     old.attrs["params_json"] = json.dumps(params)
@@ -103,8 +102,6 @@ def test_choice_is_validated_saved_and_defaults_for_older_files(fits, tmp_path):
 
 
 def test_pool_passes_the_choice_to_the_model(small_results, tmp_path):
-    import shutil
-
     from vivbench.analysis import load_campaign_model
     from vivbench.cli import main
 

@@ -879,13 +879,14 @@ class VaryingCoefficientSINDy(ModelBase):
             np.add.at(eb, ev_of_block, b)
             ey = np.bincount(ev_of_block, weights=yy, minlength=n_ev)
             has = np.bincount(ev_of_block, minlength=n_ev) > 0
+            lams = pen * _penalty_scale(Gs, P)
+            loss_all = None  # every candidate penalty's leave-one-event-out losses with every order kept
             if self.penalty_choice in ("least", "loeo"):
                 # The 5-fold choice came from the unweighted fit on 80 % of the events; re-choose on the final
                 # fit's leave-one-event-out errors (every order kept): their minimum, or the least penalty of
                 # their confidence set (which suits which campaigns: the parameter's docstring).
-                lams = pen * _penalty_scale(Gs, P)
-                held = _solve(Gs[None] - ev_b[has], bs[None] - eb[has], P, lams, np.ones(P.shape[0], dtype=bool))
-                loss = _quad_error(held, ev_b[has], eb[has], ey[has]).T  # (n_pen, n_has)
+                loss = loss_all = _penalty_loeo(Gs, bs, ev_b[has], eb[has], ey[has], P, lams,
+                                                np.ones(P.shape[0], dtype=bool))
                 if self.penalty_choice == "loeo":
                     lam_rel = float(pen[int(np.argmin(loss.sum(axis=1)))])
                 else:
@@ -936,10 +937,9 @@ class VaryingCoefficientSINDy(ModelBase):
             # The confidence set of penalties (same basis and orders): a penalty's bias is shared by every
             # bootstrap replicate, so the verdict also needs the fits at every penalty whose
             # leave-one-event-out error is not significantly above the best one's to agree.
-            lams = pen * _penalty_scale(Gs, P)
-            held = _solve(Gs[None] - ev_b[has], bs[None] - eb[has], P, lams, keep)  # (n_has, n_pen, p)
-            loss = _quad_error(held, ev_b[has], eb[has], ey[has])  # (n_has, n_pen)
-            self.penalty_plausible_[:, k] = _confidence_set(loss.T, self.model_set_level, self.model_set_test)
+            loss = (loss_all if loss_all is not None and keep.all()
+                    else _penalty_loeo(Gs, bs, ev_b[has], eb[has], ey[has], P, lams, keep))
+            self.penalty_plausible_[:, k] = _confidence_set(loss, self.model_set_level, self.model_set_test)
             cpen = _solve(Gs, bs, P, lams, keep).reshape(pen.size, 4, J + 1, L).transpose(0, 3, 1, 2)
             cpen = cpen * to_phys[:, None] * zscale
             self.penalty_coef_[:, k, :L] = cpen[..., 0]
@@ -1659,6 +1659,17 @@ def _confidence_set(loss: np.ndarray, level: float, test: str = "z") -> np.ndarr
     se = diff.std(axis=1, ddof=1) / np.sqrt(max(n, 1)) if n > 1 else np.zeros(loss.shape[0])
     z = norm.ppf(level)
     return diff.mean(axis=1) <= z * se + 1e-12 * np.abs(loss[best]).mean()
+
+
+def _penalty_loeo(Gs: np.ndarray, bs: np.ndarray, ev_G: np.ndarray, ev_b: np.ndarray, ev_yy: np.ndarray,
+                  P: np.ndarray, lams: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Held-out squared error of each event under the fit to all the others, at every penalty; shape (n_pen, n_ev).
+
+    ``Gs``, ``bs``: the summed statistics; ``ev_G`` (n_ev, p, p), ``ev_b`` (n_ev, p), ``ev_yy`` (n_ev,): each
+    event's; ``lams`` (n_pen,): absolute penalties; ``keep`` (p,): the columns fitted.
+    """
+    held = _solve(Gs[None] - ev_G, bs[None] - ev_b, P, lams, keep)  # (n_ev, n_pen, p)
+    return _quad_error(held, ev_G, ev_b, ev_yy).T
 
 
 def _penalty_scale(G: np.ndarray, P: np.ndarray) -> float:
