@@ -42,8 +42,9 @@ truth's (A, U) is evaluated as it is (the deck's own wind; fits on the truth
 use no smoothing), ``--only TEXT`` fits only the models whose
 name contains TEXT, ``--no-truth-fits`` skips the fits on the truth, ``--n-basis 6,8,...``
 sets the varying models' candidate numbers of B-splines, ``--model-set-level L`` their
-``model_set_level``, ``--no-eiv-weights`` their ``eiv_weights=False``, ``--wind-weights modal`` their
-``wind_weights``. ``--substitute U,A,dA,U+A+dA`` adds, for the varying models, fits on
+``model_set_level``, ``--no-eiv-weights`` their ``eiv_weights=False``, ``--wind-weights`` and
+``--penalty-choice`` their ``wind_weights`` and ``penalty_choice`` (default: equal and cv, the settings of every
+figure this benchmark gave before the model's defaults became "auto"; ``auto`` follows the model's). ``--substitute U,A,dA,U+A+dA`` adds, for the varying models, fits on
 the measured records with some inputs replaced by the truth's (interpolated to the
 measured grid, the measured gaps kept): which errors-in-variables cost most
 (a replaced U is the deck's own wind and is fitted without smoothing; the
@@ -194,7 +195,8 @@ def score(model, events, verdicts: str | None = None, records=None) -> dict:
 def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders: bool = False,
         only: str | None = None, truth_fits: bool = True, wind_smoothing_s: float | None = None,
         n_basis: tuple[int, ...] | None = None, model_set_level: float | None = None,
-        substitutions: tuple[tuple[str, ...], ...] = (), eiv_weights: bool = True, wind_weights=None) -> dict:
+        substitutions: tuple[tuple[str, ...], ...] = (), eiv_weights: bool = True, wind_weights="equal",
+        penalty_choice: str = "cv") -> dict:
     t0 = time.perf_counter()
     if wind_smoothing_s == "cv":  # chosen per campaign by the model's cross-validation over events
         vary = {"wind_smoothing_grid": WIND_SMOOTHING_GRID}
@@ -206,8 +208,7 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         vary["model_set_level"] = float(model_set_level)
     if not eiv_weights:
         vary["eiv_weights"] = False
-    if wind_weights is not None:
-        vary["wind_weights"] = wind_weights
+    vary["wind_weights"], vary["penalty_choice"] = wind_weights, penalty_choice
     measured, events = load_campaign(camp, results)
     truth_records = [ev["truth_rec"] for ev in events]
     print(f"{camp}: {len(events)} events, loaded in {time.perf_counter() - t0:.1f} s", flush=True)
@@ -300,9 +301,11 @@ def main(argv=None) -> dict:
     parser.add_argument("--no-eiv-weights", action="store_true",
                         help="the varying models' eiv_weights=False (default: the model's, True: effective-variance "
                              "weights against the wind error)")
-    parser.add_argument("--wind-weights", default=None, choices=("equal", "modal"),
+    parser.add_argument("--wind-weights", default="equal", choices=("equal", "modal", "auto"),
                         help="the varying models' wind_weights: the sections' weights in the mean wind (default: "
-                             "the model's, equal)")
+                             "equal, the model's default before 'auto')")
+    parser.add_argument("--penalty-choice", default="cv", choices=("cv", "least", "loeo", "auto"),
+                        help="the varying models' penalty_choice (default: cv, the model's default before 'auto')")
     parser.add_argument("--substitute", default="",
                         help="comma-separated truth substitutions for the varying models, each a '+'-joined "
                              "subset of U, A, dA (e.g. 'U,A,dA'): fits on the measured records with those inputs "
@@ -323,7 +326,8 @@ def main(argv=None) -> dict:
         out[str(camp)] = run(camp, res, args.pooled_verdicts, args.select_orders, args.only, not args.no_truth_fits,
                              args.wind_smoothing,
                              None if args.n_basis is None else tuple(int(x) for x in args.n_basis.split(",")),
-                             args.model_set_level, subs, not args.no_eiv_weights, args.wind_weights)
+                             args.model_set_level, subs, not args.no_eiv_weights, args.wind_weights,
+                             args.penalty_choice)
     for camp, rows in out.items():
         print_table(f"{camp}: dA/dt error and regimes on the truth's (A, U)", rows)
     args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -53,7 +53,8 @@ def run(args) -> int:
     if ds.attrs.get("note"):
         print(f"vivbench pool: {ds.attrs['note']}", file=sys.stderr)
     if args.model == "varying":
-        shape = f"cubic B-splines per curve {', '.join(str(int(k)) for k in ds['n_basis'].values)}"
+        shape = (f"cubic B-splines per curve {', '.join(str(int(k)) for k in ds['n_basis'].values)} "
+                 f"({model.wind_weights_choice_} wind weights, {model.penalty_choice_} penalty)")
     else:
         shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
     print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, {shape}, "
@@ -78,7 +79,7 @@ def run(args) -> int:
 
 def _wind_weights(text: str | None):
     """``--wind-weights``: None (the model's default), a named choice, or comma-separated numbers."""
-    if text is None or text in ("modal", "equal"):
+    if text is None or text in ("auto", "modal", "equal"):
         return text
     from vivbench.models.wind_weights import check_wind_weights
 
@@ -86,7 +87,7 @@ def _wind_weights(text: str | None):
         weights = tuple(float(x) for x in text.split(","))
         check_wind_weights(weights)
     except ValueError:  # InputError is one
-        raise InputError(f"--wind-weights must be modal, equal or comma-separated numbers >= 0 with a positive sum "
+        raise InputError(f"--wind-weights must be auto, modal, equal or comma-separated numbers >= 0 with a positive sum "
                          f"(one per section); got {text!r}") from None
     return weights
 
@@ -110,17 +111,17 @@ def register(sub) -> None:
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
                         "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
-    s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",
-                   help="with --model varying and the mean wind: the sections' weights in it: equal (default, the "
-                        "plain mean), modal (each section's share of the mode's energy, sum of A_k^2: the weights "
-                        "of the averaged truth when the sections' tributary lengths are equal; README: better on "
-                        "the large realistic campaigns with --penalty-choice least), or one number per section "
-                        "(e.g. L_k phi_k^2 from the bridge's drawings)")
-    s.add_argument("--penalty-choice", choices=("cv", "least", "loeo"), default=None,
-                   help="with --model varying: the curves' roughness penalty: cv (default: the 5-fold cross-"
-                        "validated error's minimum), least (the least penalty whose leave-one-event-out error is not "
-                        "significantly above the best one's) or loeo (the leave-one-event-out error's minimum); "
-                        "README")
+    s.add_argument("--wind-weights", default=None, metavar="auto|equal|modal|W1,W2,...",
+                   help="with --model varying and the mean wind: the sections' weights in it: auto (default: modal "
+                        "on campaigns of 4 h of records or more and 5 events or more, else equal; README), equal (the plain mean), modal (each "
+                        "section's share of the mode's energy, sum of A_k^2: the weights of the averaged truth when "
+                        "the sections' tributary lengths are equal), or one number per section (e.g. L_k phi_k^2 "
+                        "from the bridge's drawings)")
+    s.add_argument("--penalty-choice", choices=("auto", "cv", "least", "loeo"), default=None,
+                   help="with --model varying: the curves' roughness penalty: auto (default: least on campaigns "
+                        "of 4 h of records or more and 5 events or more, else cv; README), cv (the 5-fold cross-validated error's "
+                        "minimum), least (the least penalty whose leave-one-event-out error is not significantly "
+                        "above the best one's) or loeo (the leave-one-event-out error's minimum)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
                         "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "
