@@ -388,6 +388,39 @@ def test_verdict_reference_must_give_the_same_regime(fitted):
     np.testing.assert_array_equal(other["identifiable"], alone["identifiable"] & (alone["regime"] == 4))
 
 
+def test_verdict_reference_fits_at_its_plausible_penalties_must_agree(fitted):
+    """A reference with a confidence set of penalties: each plausible fit must give the grey-box regime too."""
+    from vivbench.regimes.greybox import greybox_window_verdicts
+
+    model, records = fitted
+    rec = records[0]
+    start = np.arange(rec.t[0], rec.t[-1] - 100.0, 100.0)
+    end = start + 100.0
+    alone = greybox_window_verdicts(model, rec, start, end, n_draws=20)
+
+    class WithPenaltySet:
+        """The grey-box model's own dynamics at its fitted penalty; at a second penalty the cubic order alone."""
+
+        def __init__(self, plausible):
+            self.penalty_plausible_ = np.array([[True] * plausible.size, plausible])  # (n_pen, S)
+
+        def order_contributions(self, record):
+            return model.order_contributions(record)
+
+        def penalty_order_contributions(self, record):
+            cubic = np.zeros(record.A.shape + (4,))
+            cubic[..., 3] = record.A**3
+            return np.stack([model.order_contributions(record), cubic])
+
+    S = rec.A.shape[1]
+    for plausible in (np.zeros(S, dtype=bool), np.ones(S, dtype=bool), np.arange(S) == 0):
+        out = greybox_window_verdicts(model, rec, start, end, n_draws=20, reference=WithPenaltySet(plausible))
+        np.testing.assert_array_equal(out["reference_regime"], alone["regime"])  # the fitted penalty's regime
+        expected = alone["identifiable"] & ((alone["regime"] == 4) | ~plausible[None, :])
+        np.testing.assert_array_equal(out["identifiable"], expected)
+    assert alone["identifiable"].any() and not np.all(alone["regime"][alone["identifiable"]] == 4)
+
+
 def test_verdict_reference_sees_its_own_record(fitted):
     """The reference model is evaluated on ``reference_record`` (its wind as at its fit), the grey-box on ``record``."""
     import dataclasses

@@ -38,6 +38,19 @@ reflect with reference: campaign A 0.994, 0.687 -> 0.995, 0.654; bridge B
 0.983, 0.662 -> 0.990, 0.579; bridge C (varying warm start) 0.851, 0.864 ->
 0.952, 0.711, (pooled warm start, pooled reference) 0.874, 0.840 -> 0.978,
 0.535. C was the diagnosis campaign, so its figures are not held out.
+
+A reference with a confidence set of penalties (the varying campaign model's
+``penalty_order_contributions`` and ``penalty_plausible_``) must give the
+window the grey-box regime at every plausible penalty as well, the rule of its
+own verdict: its point estimate is one member of that set, and with the least
+plausible penalty (its default on campaigns of 4 h or more) the roughest one.
+Measured with ``vivbench greybox R --bridge ... --campaign CAMP`` after
+``vivbench pool R`` (share of flagged windows with the true regime, coverage),
+the point reference -> the set: bridge C 0.937, 0.722 -> 0.997, 0.611 (with a
+reference pooled with equal weights and the 5-fold penalty 0.962 -> 0.996,
+0.599); held out, a fresh bridge-C campaign (seed 97, 20 events) 0.973, 0.667
+-> 0.994, 0.598 and a fresh bridge-B one (seed 93, 16 events) 0.998, 0.434 ->
+1.000, 0.422; campaign A 0.995, 0.623 -> 0.997, 0.603.
 """
 
 from __future__ import annotations
@@ -115,7 +128,9 @@ def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, w
     reference : model of the protocol (``order_contributions``) or None
         A second campaign-level model of the same records (the campaign
         model); a window is identifiable only if its point regime equals the
-        grey-box one (see the module docstring). None: the draws alone.
+        grey-box one, and so do its fits at every plausible penalty when it
+        has them (``penalty_order_contributions``, ``penalty_plausible_``; see
+        the module docstring). None: the draws alone.
     reference_record : Record or None
         The same samples as the reference model saw them at fit
         (:func:`vivbench.models.measured_input`: its own wind smoothing, not
@@ -161,5 +176,13 @@ def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, w
         Rr, c1r, nvr = window_order_stats(reference.order_contributions(ref_in), A, t, window_start, window_end)
         ref = np.where(nvr > 0, regime_rule(np.nan_to_num(Rr), c1r, tau), 0).astype(np.int8)
         identifiable &= ref == point
+        pen = getattr(reference, "penalty_order_contributions", None)
+        r_pen = pen(ref_in) if pen is not None else None
+        if r_pen is not None:
+            # the reference's fits at its other plausible penalties must agree too (its own verdict's rule)
+            Rp, c1p, nvp = window_order_stats(r_pen, A, t, window_start, window_end)  # (n_pen, W, S, ...)
+            ref_pen = np.where(nvp > 0, regime_rule(np.nan_to_num(Rp), c1p, tau), 0)
+            plausible = np.asarray(reference.penalty_plausible_, dtype=bool)[:, None, :]  # (n_pen, 1, S)
+            identifiable &= np.all((ref_pen == point[None]) | ~plausible, axis=0)
     return {"regime": point, "identifiable": identifiable, "agreement": agree,
             "order_rms": R, "c1": c1, "reference_regime": ref}
