@@ -44,7 +44,8 @@ name contains TEXT, ``--no-truth-fits`` skips the fits on the truth, ``--n-basis
 sets the varying models' candidate numbers of B-splines, ``--model-set-level L`` their
 ``model_set_level``, ``--no-eiv-weights`` their ``eiv_weights=False``, ``--wind-weights`` and
 ``--penalty-choice`` their ``wind_weights`` and ``penalty_choice`` (default: equal and cv, the settings of every
-figure this benchmark gave before the model's defaults became "auto"; ``auto`` follows the model's). ``--substitute U,A,dA,U+A+dA`` adds, for the varying models, fits on
+figure this benchmark gave before the model's defaults became "auto"; ``auto`` follows the model's).
+``--substitute U,A,dA,U+A+dA`` adds, for the varying models, fits on
 the measured records with some inputs replaced by the truth's (interpolated to the
 measured grid, the measured gaps kept): which errors-in-variables cost most
 (a replaced U is the deck's own wind and is fitted without smoothing; the

@@ -87,8 +87,8 @@ def _wind_weights(text: str | None):
         weights = tuple(float(x) for x in text.split(","))
         check_wind_weights(weights)
     except ValueError:  # InputError is one
-        raise InputError(f"--wind-weights must be auto, modal, equal or comma-separated numbers >= 0 with a positive sum "
-                         f"(one per section); got {text!r}") from None
+        raise InputError(f"--wind-weights must be auto, modal, equal or comma-separated numbers >= 0 with a "
+                         f"positive sum (one per section); got {text!r}") from None
     return weights
 
 
@@ -112,16 +112,17 @@ def register(sub) -> None:
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
                         "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
     s.add_argument("--wind-weights", default=None, metavar="auto|equal|modal|W1,W2,...",
-                   help="with --model varying and the mean wind: the sections' weights in it: auto (default: modal "
-                        "on campaigns of 4 h of records or more and 5 events or more, else equal; README), equal (the plain mean), modal (each "
-                        "section's share of the mode's energy, sum of A_k^2: the weights of the averaged truth when "
-                        "the sections' tributary lengths are equal), or one number per section (e.g. L_k phi_k^2 "
-                        "from the bridge's drawings)")
+                   help="with --model varying and the mean wind: the sections' weights in it: auto (default: "
+                        "modal on campaigns of 4 h of records or more and 5 events or more, else equal; README), "
+                        "equal (the plain mean), modal (each section's share of the mode's energy, sum of A_k^2: "
+                        "the weights of the averaged truth when the sections' tributary lengths are equal), or one "
+                        "number per section (e.g. L_k phi_k^2 from the bridge's drawings)")
     s.add_argument("--penalty-choice", choices=("auto", "cv", "least", "loeo"), default=None,
-                   help="with --model varying: the curves' roughness penalty: auto (default: least on campaigns "
-                        "of 4 h of records or more and 5 events or more, else cv; README), cv (the 5-fold cross-validated error's "
-                        "minimum), least (the least penalty whose leave-one-event-out error is not significantly "
-                        "above the best one's) or loeo (the leave-one-event-out error's minimum)")
+                   help="with --model varying: the curves' roughness penalty: auto (default: least on campaigns of "
+                        "4 h of records or more and 5 events or more, else cv; README), cv (the 5-fold "
+                        "cross-validated error's minimum), least (the least penalty whose leave-one-event-out error "
+                        "is not significantly above the best one's) or loeo (the leave-one-event-out error's "
+                        "minimum)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
                         "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "

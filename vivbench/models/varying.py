@@ -20,10 +20,11 @@ Criterion: M (from ``n_basis``) and lambda (from ``penalties``, relative to
 trace(X^T X) / trace(P)) are chosen per section by K-fold cross-validation over
 events (whole events are left out, so the strong correlation of derivative
 errors within an event cannot make a rough fit look good, as it does with
-GCV); on campaigns of ``AUTO_MIN_HOURS`` or more the default (``penalty_choice``
-"auto") then takes the least lambda that the final fit's leave-one-event-out
-errors cannot tell from the best (the parameter's docstring). Optionally (``select_orders``) the same cross-validation then drops every
-order whose removal does not increase the cross-validated error.
+GCV); on campaigns of ``AUTO_MIN_HOURS`` or more the default
+(``penalty_choice="auto"``) then takes the least lambda that the final fit's
+leave-one-event-out errors cannot tell from the best (the parameter's
+docstring). Optionally (``select_orders``) the same cross-validation then
+drops every order whose removal does not increase the cross-validated error.
 
 Everything is computed from per-block sufficient statistics (X_b^T X_b, X_b^T y_b,
 y_b^T y_b): the folds, the penalty grid and the block bootstrap of the bands
@@ -95,8 +96,8 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.netcdf import write_netcdf_atomic
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
-from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights, weighted_mean_standard_error,
-                                          weighted_section_mean)
+from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights,
+                                          weighted_mean_standard_error, weighted_section_mean)
 from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
@@ -548,8 +549,9 @@ class VaryingCoefficientSINDy(ModelBase):
         section (normalised), e.g. L_k phi_k^2 from the bridge's drawings.
         ``"auto"`` (default): ``"modal"`` for campaigns of at least
         ``AUTO_MIN_HOURS`` of records and ``AUTO_MIN_EVENTS`` events, else
-        ``"equal"`` (with ``penalty_choice`` ``"auto"``, below). Fitted on the truth's own (A, U, dA) of the seed-0
-        realistic campaign the floor falls from 0.089 to 0.054
+        ``"equal"`` (with ``penalty_choice`` ``"auto"``, below). Fitted on the
+        truth's own (A, U, dA) of the seed-0 realistic campaign the floor
+        falls from 0.089 to 0.054
         (``benchmarks/bench_misspecification.py --wind-weights modal``).
     penalty_choice : {"auto", "cv", "least", "loeo"}
         How the roughness penalty of the fitted curves is chosen at the
@@ -564,10 +566,10 @@ class VaryingCoefficientSINDy(ModelBase):
         ``"cv"``. The cross-validated error
         is flat over decades of penalty (seed 0, modal weights: within 4 %
         from 1e-5 to 1e-2) and its 5-fold minimum sits at the smoothing end
-        (0.01 there, outside the confidence set {1e-5, 1e-4, 1e-3}): the
-        measured wind's errors blur the lock-in bell, and the penalty that
-        predicts the measured data best smooths the curve more than the
-        truth's. With modal weights, median dA/dt error on the true (A, U),
+        (0.01 there, outside the confidence set {1e-5, 1e-4, 1e-3}); a
+        reading, not measured: the measured wind's errors blur the lock-in
+        bell, so the penalty that predicts the measured data best smooths the
+        curve more than the truth's. With modal weights, median dA/dt error on the true (A, U),
         cv / least / loeo (``vivbench pool DIR --wind-weights modal
         --penalty-choice ...`` then ``vivbench validate``): seed 0 0.101 /
         0.082 / 0.080; held out, seed 1 0.100 / 0.092 / 0.100, seed 81
