@@ -361,15 +361,29 @@ def test_verdict_draws_reflect_at_bounds_instead_of_piling_on_them():
         greybox_draws(fitted, 10, bounds="fold")
 
 
-def test_verdict_reference_must_give_the_same_regime(fitted):
-    """A window is identifiable only where the reference model's point regime equals the grey-box one."""
+def _cubic_only(record):
+    """Order contributions of the cubic order alone: regime 4 in every window, shape (n, S, 4)."""
+    r = np.zeros(record.A.shape + (4,))
+    r[..., 3] = record.A**3
+    return r
+
+
+def _windows_and_verdicts(fitted):
+    """The fitted model, its first record, 100 s windows over it and the verdicts without a reference."""
     from vivbench.regimes.greybox import greybox_window_verdicts
 
     model, records = fitted
     rec = records[0]
     start = np.arange(rec.t[0], rec.t[-1] - 100.0, 100.0)
     end = start + 100.0
-    alone = greybox_window_verdicts(model, rec, start, end, n_draws=20)
+    return model, rec, start, end, greybox_window_verdicts(model, rec, start, end, n_draws=20)
+
+
+def test_verdict_reference_must_give_the_same_regime(fitted):
+    """A window is identifiable only where the reference model's point regime equals the grey-box one."""
+    from vivbench.regimes.greybox import greybox_window_verdicts
+
+    model, rec, start, end, alone = _windows_and_verdicts(fitted)
     same = greybox_window_verdicts(model, rec, start, end, n_draws=20, reference=model)
     assert alone["identifiable"].any()
     np.testing.assert_array_equal(same["identifiable"], alone["identifiable"])
@@ -379,9 +393,7 @@ def test_verdict_reference_must_give_the_same_regime(fitted):
         """Dynamics of the cubic order alone: regime 4 in every window."""
 
         def order_contributions(self, record):
-            r = np.zeros(record.A.shape + (4,))
-            r[..., 3] = record.A**3
-            return r
+            return _cubic_only(record)
 
     other = greybox_window_verdicts(model, rec, start, end, n_draws=20, reference=CubicOnly())
     assert np.all(other["reference_regime"][alone["regime"] > 0] == 4)
@@ -392,11 +404,7 @@ def test_verdict_reference_fits_at_its_plausible_penalties_must_agree(fitted):
     """A reference with a confidence set of penalties: each plausible fit must give the grey-box regime too."""
     from vivbench.regimes.greybox import greybox_window_verdicts
 
-    model, records = fitted
-    rec = records[0]
-    start = np.arange(rec.t[0], rec.t[-1] - 100.0, 100.0)
-    end = start + 100.0
-    alone = greybox_window_verdicts(model, rec, start, end, n_draws=20)
+    model, rec, start, end, alone = _windows_and_verdicts(fitted)
 
     class WithPenaltySet:
         """The grey-box model's own dynamics at its fitted penalty; at a second penalty the cubic order alone."""
@@ -408,9 +416,7 @@ def test_verdict_reference_fits_at_its_plausible_penalties_must_agree(fitted):
             return model.order_contributions(record)
 
         def penalty_order_contributions(self, record):
-            cubic = np.zeros(record.A.shape + (4,))
-            cubic[..., 3] = record.A**3
-            return np.stack([model.order_contributions(record), cubic])
+            return np.stack([model.order_contributions(record), _cubic_only(record)])
 
     S = rec.A.shape[1]
     for plausible in (np.zeros(S, dtype=bool), np.ones(S, dtype=bool), np.arange(S) == 0):

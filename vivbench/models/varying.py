@@ -797,11 +797,11 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"model_set_test must be 'z' or 'signed_rank'; got {self.model_set_test!r}")
         if self.wind_input not in ("section", "mean", "additive"):
             raise InputError(f"wind_input must be 'section', 'mean' or 'additive'; got {self.wind_input!r}")
-        if isinstance(self.wind_weights, str) and self.wind_weights not in ("auto",) + WIND_WEIGHT_MODES:
+        if not isinstance(self.wind_weights, str):
+            check_wind_weights(self.wind_weights)
+        elif self.wind_weights not in ("auto",) + WIND_WEIGHT_MODES:
             raise InputError(f"wind_weights must be 'auto', 'modal', 'equal' or a sequence of one weight per "
                              f"section; got {self.wind_weights!r}")
-        if not _is_auto(self.wind_weights):
-            check_wind_weights(self.wind_weights)
         if self.penalty_choice not in PENALTY_CHOICES:
             raise InputError(f"penalty_choice must be one of {', '.join(map(repr, PENALTY_CHOICES))}; "
                              f"got {self.penalty_choice!r}")
