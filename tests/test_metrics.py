@@ -358,3 +358,16 @@ def test_validate_field_events_are_skipped_with_a_message(identified, tmp_path):
     assert run.returncode == 0, run.stderr
     assert "no /truth group (field data)" in run.stderr and camp.files[0].name in run.stderr
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["n_events"] == 1
+
+
+def test_energy_relative_error_weights_large_values_and_counts_misses():
+    from vivbench.validate import energy_relative_error
+
+    f_true = np.array([[1.0, 0.0], [10.0, 2.0]])
+    f_model = np.array([[2.0, 0.0], [10.0, np.nan]])  # 1 off on a small value, the 2 missed entirely
+    assert_close(energy_relative_error(f_model, f_true), math.sqrt((1.0 + 4.0) / (1.0 + 100.0 + 4.0)))
+    # the median of per-sample relative errors would say 50 % off; energy weighting says 22 %
+    assert energy_relative_error(f_true, f_true) == 0.0
+    assert math.isnan(energy_relative_error(np.zeros(3), np.zeros(3)))
+    with pytest.raises(ValueError, match="same shape"):
+        energy_relative_error(np.zeros(2), np.zeros(3))

@@ -59,6 +59,7 @@ from vivbench.validate.metrics import (
     cluster_purity,
     confusion_matrix,
     curve_errors,
+    energy_relative_error,
     forecast_summary,
     merge_support_scores,
     order_support,
@@ -74,6 +75,7 @@ from vivbench.validate.pooled import pooled_recovery
 from vivbench.validate.drift import FLAG_VARIABLES, event_structural_state, score_change_flags
 from vivbench.validate.recovery import (
     campaign_recovery,
+    model_rhs_true_AU,
     model_window_rhs_errors,
     model_window_rhs_errors_true_AU,
     recovery_by_event,
@@ -83,6 +85,7 @@ from vivbench.validate.recovery import (
     record_yaw_on,
     window_rhs_errors,
     window_rhs_errors_true_AU,
+    window_relative_errors,
 )
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.sweep import (
@@ -123,7 +126,7 @@ __all__ = [
     "cluster_agreement",
     "cluster_purity",
     "confusion_matrix",
-    "curve_errors",
+    "curve_errors", "energy_relative_error",
     "forecast_summary",
     "merge_support_scores",
     "order_support",
@@ -144,8 +147,8 @@ __all__ = [
     "validate_campaign",
     "window_rhs_errors",
     "model_window_rhs_errors",
-    "model_window_rhs_errors_true_AU",
-    "window_rhs_errors_true_AU",
+    "model_window_rhs_errors_true_AU", "model_rhs_true_AU",
+    "window_rhs_errors_true_AU", "window_relative_errors",
     "truth_record",
     "record_yaw_on",
     "write_validation",

@@ -43,6 +43,10 @@ plug-in methods:
   the model's dA/dt (``predict``, or the sum of the order contributions) on the
   truth's own (A, U) against the truth's dA/dt, per window
   (:func:`vivbench.validate.model_window_rhs_errors_true_AU`);
+  ``rhs_error_true_AU_energy``: the same error energy-weighted over every sample
+  of every record, sqrt(sum (f_model - f_true)^2 / sum f_true^2)
+  (:func:`vivbench.validate.metrics.energy_relative_error`): the median hides
+  the large-amplitude phases, this does not;
   ``rhs_median_rel_error`` and ``..._active``: on the record's measured (A, U)
   against the exact coefficient matrix (in-library truths; NaN otherwise).
 - ``curve_error_linear``, ``curve_error_total``: the model's ``curves`` against
@@ -82,9 +86,9 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.model_input import measured_input
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
-from vivbench.validate.metrics import curve_errors
-from vivbench.validate.recovery import (finite_median, model_window_rhs_errors, model_window_rhs_errors_true_AU,
-                                       record_yaw_on, regime_scores)
+from vivbench.validate.metrics import curve_errors, energy_relative_error
+from vivbench.validate.recovery import (finite_median, model_rhs_true_AU, model_window_rhs_errors, record_yaw_on,
+                                       regime_scores, window_relative_errors)
 
 __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
            "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
@@ -98,7 +102,7 @@ BUILTIN_METHODS = ("windows", "campaign", "varying", "pysindy-cp")
 SCORE_KEYS = ("n_scored", "truth_majority_share", "truth_share_regime1", "truth_share_regime2", "truth_share_regime3",
               "truth_share_regime4", "coverage", "accuracy_all", "accuracy_identifiable", "accuracy_not_identifiable",
               "no_model_share", "rhs_median_rel_error", "rhs_median_rel_error_active", "rhs_error_true_AU_median",
-              "rhs_error_true_AU_median_active", "curve_error_linear", "curve_error_total", "simulation_nmse",
+              "rhs_error_true_AU_median_active", "rhs_error_true_AU_energy", "curve_error_linear", "curve_error_total", "simulation_nmse",
               "simulation_covered", "fit_time_s")
 
 _SPEC = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*:[A-Za-z_][A-Za-z0-9_]*$")
@@ -608,6 +612,7 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
     has_own = callable(getattr(fitted, "window_regimes", None))
     predictor = fitted if callable(getattr(fitted, "predict", None)) else _SumPredict(fitted)
     reg, tru, flag, et, et_act, em, em_act = [], [], [], [], [], [], []
+    fm_all, ft_all = [], []
     for rec, truth, (start, end) in zip(records, truths, windows):
         start = np.atleast_1d(np.asarray(start, dtype=float))
         end = np.atleast_1d(np.asarray(end, dtype=float))
@@ -629,9 +634,12 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
             ok = np.zeros(r.shape, dtype=bool)  # no verdict: scored on all windows, coverage 0
         flag.append(ok)
         # The truth stores no yaw: a model using it sees the measured record's (as on field data).
-        e, act = model_window_rhs_errors_true_AU(predictor, truth, start, end, event_id=rec.event_id,
-                                                 active_share=active_share,
-                                                 yaw=record_yaw_on(rec, truth["time"].values))
+        t_true, f_model, f_true = model_rhs_true_AU(predictor, truth, event_id=rec.event_id,
+                                                    yaw=record_yaw_on(rec, truth["time"].values))
+        e, act = window_relative_errors(f_model, f_true, t_true, start, end, np.sqrt(np.mean(f_true**2, axis=0)),
+                                active_share)
+        fm_all.append(f_model.ravel())
+        ft_all.append(f_true.ravel())
         et.append(e.ravel())
         et_act.append(np.where(act, e, np.nan).ravel())
         if "coef" in truth.data_vars:
@@ -652,6 +660,7 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
     out["no_model_share"] = float(np.mean(reg_all == 0))
     out["rhs_error_true_AU_median"] = finite_median(np.concatenate(et))
     out["rhs_error_true_AU_median_active"] = finite_median(np.concatenate(et_act))
+    out["rhs_error_true_AU_energy"] = energy_relative_error(np.concatenate(fm_all), np.concatenate(ft_all))
     out["rhs_median_rel_error"] = finite_median(np.concatenate(em)) if em else math.nan
     out["rhs_median_rel_error_active"] = finite_median(np.concatenate(em_act)) if em else math.nan
     out["curve_error_linear"], out["curve_error_total"] = _curve_scores(fitted, records, truths)

@@ -42,6 +42,7 @@ __all__ = [
     "merge_support_scores",
     "rhs_error_summary",
     "curve_errors",
+    "energy_relative_error",
     "cluster_purity",
     "cluster_agreement",
     "forecast_summary",
@@ -369,6 +370,35 @@ def _rel_rms(x: np.ndarray, ref: np.ndarray) -> float:
         return float("nan")
     den = np.sqrt(np.mean(ref[ok] ** 2))
     return float(np.sqrt(np.mean((x[ok] - ref[ok]) ** 2)) / den) if den > 0 else float("nan")
+
+
+def energy_relative_error(f_model, f_true) -> float:
+    """Energy-weighted relative RMS error of a prediction over every sample.
+
+    sqrt(sum (f_model - f_true)^2 / sum f_true^2) over the samples where both
+    are finite: the large values (large-amplitude phases, where VIV matters)
+    weigh as their energy, unlike a median of per-window errors.
+
+    Parameters
+    ----------
+    f_model, f_true : array_like, same shape (any), same units (e.g. dA/dt in m/s)
+        A sample missing in the prediction (NaN) counts as a total miss: its
+        true value enters the error as well as the denominator.
+
+    Returns
+    -------
+    float, dimensionless; NaN when no true sample is finite or all are zero
+    """
+    f_model = np.asarray(f_model, dtype=float)
+    f_true = np.asarray(f_true, dtype=float)
+    if f_model.shape != f_true.shape:
+        raise ValueError(f"f_model and f_true must have the same shape; got {f_model.shape} and {f_true.shape}")
+    ok = np.isfinite(f_true)
+    den = float(np.sum(f_true[ok] ** 2))
+    if not ok.any() or den <= 0:
+        return float("nan")
+    miss = np.where(np.isfinite(f_model[ok]), f_model[ok] - f_true[ok], f_true[ok])
+    return float(np.sqrt(np.sum(miss**2) / den))
 
 
 def curve_errors(curves: np.ndarray, wind: np.ndarray, true_curves: np.ndarray, true_wind: np.ndarray,

@@ -26,7 +26,7 @@ from vivbench.core.record import Record
 from vivbench.core.terms import evaluate_library
 from vivbench.regimes.truth import truth_window_regimes
 
-__all__ = ["recovery_by_event", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
+__all__ = ["recovery_by_event", "model_rhs_true_AU", "window_relative_errors", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
            "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU",
            "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on"]
 
@@ -212,9 +212,21 @@ def record_yaw_on(record: Record, t) -> np.ndarray | None:
     return out
 
 
-def _window_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start, end, scale: np.ndarray,
-                   active_share: float) -> tuple[np.ndarray, np.ndarray]:
-    """Relative RMS error (W, S) of f_model against f_true (n, S) over each window, and the active mask."""
+def window_relative_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start, end, scale: np.ndarray,
+                           active_share: float) -> tuple[np.ndarray, np.ndarray]:
+    """Relative RMS error of ``f_model`` against ``f_true`` over each window, and the active mask.
+
+    Parameters
+    ----------
+    f_model, f_true : ndarray, shape (n, S); t : ndarray, shape (n,), s
+    start, end : array_like, shape (W,), s; a window holds the samples with start <= t < end
+    scale : ndarray, shape (S,); a window-equation is active when its RMS f_true >= active_share * scale
+    active_share : float
+
+    Returns
+    -------
+    errors : ndarray, shape (W, S); active : ndarray of bool, shape (W, S)
+    """
     start = np.atleast_1d(np.asarray(start, dtype=float))
     end = np.atleast_1d(np.asarray(end, dtype=float))
     inside = (t[None, :] >= start[:, None]) & (t[None, :] < end[:, None])  # (W, n)
@@ -259,12 +271,32 @@ def model_window_rhs_errors_true_AU(model, truth: xr.Dataset, window_start, wind
         true dynamics).
     active : ndarray of bool, shape (W, S)
     """
+    t, f_model, f_true = model_rhs_true_AU(model, truth, event_id=event_id, yaw=yaw)
+    scale = np.sqrt(np.mean(f_true**2, axis=0))
+    return window_relative_errors(f_model, f_true, t, window_start, window_end, scale, active_share)
+
+
+def model_rhs_true_AU(model, truth: xr.Dataset, *, event_id: str = "truth",
+                      yaw=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A model's dA/dt and the truth's on the true (A, U) of an event, sample by sample.
+
+    Parameters
+    ----------
+    model : fitted model with ``predict(record)`` -> dA/dt, shape (n_samples, S), m/s
+    truth : xarray.Dataset, an event's ``/truth`` (``time``, ``A``, ``U``, ``r``)
+    event_id : str, the record's event id
+    yaw : array_like, shape (n_t, S), degrees, optional (see :func:`truth_record`)
+
+    Returns
+    -------
+    t : ndarray, shape (n_t,), s
+    f_model, f_true : ndarray, shape (n_t, S), m/s
+    """
     record = truth_record(truth, event_id, yaw)
     f_model = np.asarray(model.predict(record), dtype=float)
     if f_model.shape != record.A.shape:
         raise ValueError(f"predict must return shape {record.A.shape} (n_samples, n_sections); got {f_model.shape}")
-    scale = np.sqrt(np.mean(record.dA**2, axis=0))
-    return _window_errors(f_model, record.dA, record.t, window_start, window_end, scale, active_share)
+    return record.t, f_model, record.dA
 
 
 def window_rhs_errors_true_AU(result: xr.Dataset, truth: xr.Dataset, *,
