@@ -29,6 +29,20 @@ from vivbench.analysis.pool import (
     load_campaign_model,
     pooled_wind_smoothing,
 )
+from vivbench.analysis.selection import (
+    CRITERIA,
+    VARYING_OPTIONS,
+    VARYING_PRIORS,
+    Candidate,
+    ModelSelection,
+    event_folds,
+    held_out_loss,
+    one_se_set,
+    perturbed_wind,
+    varying_selection,
+    wind_error_scale,
+    without_yaw,
+)
 from vivbench.analysis.wind_inputs import with_yaw
 from vivbench.preprocess.yaw import event_yaw  # re-exported: analysis is where campaign scripts look
 from vivbench.preprocess.wind_smoothing import smooth_wind  # re-exported, likewise
@@ -39,5 +53,7 @@ __all__ = [
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
     "with_campaign_model", "campaign_model_file", "load_campaign_model", "pooled_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
+    "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "ModelSelection", "event_folds", "held_out_loss",
+    "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

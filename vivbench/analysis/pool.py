@@ -204,12 +204,23 @@ def pool_results(result_files: Sequence, model=None, *,
     """
     from vivbench.analysis.changes import (FLAG_FDR, change_point_scan, change_relative_flags, event_residual_checks,
                                            offset_flags, offset_strata, statistics_change_scan)
+    from vivbench.analysis.selection import ModelSelection, without_yaw
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes.varying import varying_window_verdicts
 
     model = PooledSINDy() if model is None else model
-    varying = isinstance(model, VaryingCoefficientSINDy)
-    if not varying and not isinstance(model, PooledSINDy):
+    selection = model if isinstance(model, ModelSelection) else None
+    if selection is not None:
+        inner = [c.model for c in selection.candidates]
+        if not (all(isinstance(m, VaryingCoefficientSINDy) for m in inner)
+                or all(isinstance(m, PooledSINDy) for m in inner)):
+            raise InputError("pool_results takes a selection among VaryingCoefficientSINDy candidates or among "
+                             "PooledSINDy candidates")
+        first = inner[0]
+    else:
+        first = model
+    varying = isinstance(first, VaryingCoefficientSINDy)
+    if not varying and not isinstance(first, PooledSINDy):
         raise InputError(f"pool_results takes a PooledSINDy or a VaryingCoefficientSINDy; got {type(model).__name__}")
     results = []
     for path in result_files:
@@ -229,21 +240,31 @@ def pool_results(result_files: Sequence, model=None, *,
     if campaign is not None:
         records = [r if r.yaw is not None else _with_event_yaw(r, attrs, campaign)
                    for r, (_p, _d, attrs, _e) in zip(records, results)]
-    if varying and model.yaw_degree and any(r.yaw is None for r in records):
-        raise InputError(f"the varying model with a yaw covariate (yaw_degree = {model.yaw_degree}) needs every "
+    if selection is not None and varying and any(r.yaw is None for r in records):
+        selection = model = without_yaw(selection)  # no yaw to choose from: the yaw-free candidates
+        inner = [c.model for c in selection.candidates]
+    if varying and any(m.yaw_degree for m in ([first] if selection is None else inner)) \
+            and any(r.yaw is None for r in records):
+        raise InputError("the varying model with a yaw covariate (yaw_degree > 0) needs every "
                          "result to store the wind's yaw (identify it again) or the campaign's event files "
                          "(campaign / --campaign)")
     model.fit(records if varying else [smooth_wind(r, wind_smoothing_s) for r in records])
+    if selection is not None:
+        model = selection.model_  # the chosen candidate, fitted to every event
     # Verdicts and checks on the wind the model was fitted on: the varying model smooths its own.
+    raw_records = records
     records = [measured_input(model, r, wind_smoothing_s=wind_smoothing_s) for r in records]
     keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}
-    for (_path, ds, attrs, _eq), record in zip(results, records):
+    for (_path, ds, attrs, _eq), record, raw in zip(results, records, raw_records):
         s, e = ds["window_start"].values, ds["window_end"].values
         if varying:
             out = varying_window_verdicts(model, record, s, e)
         else:
             out = campaign_window_verdicts(model, record.t, record.A, record.U, s, e)
+        if selection is not None:
+            # Every model of the confidence set and every wind-perturbed refit must give the window's regime.
+            out["identifiable"] = out["identifiable"] & selection.agreement(raw, s, e, out["regime"])
         min_snr = json.loads(attrs.get("identify_config_json", "{}")).get("min_snr")
         if min_snr is not None and "amplitude_snr" in ds:
             # The identification's noise-floor test holds for any model: below the floor A is noise.
@@ -380,6 +401,8 @@ def pool_results(result_files: Sequence, model=None, *,
         "n_samples": model.n_samples_,
         "n_blocks": model.n_blocks_,
     }
+    if selection is not None:
+        attrs["selection_json"] = json.dumps(selection.evidence(), sort_keys=True)
     if varying:
         attrs["model"] = type(model).__name__
     else:

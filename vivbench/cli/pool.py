@@ -14,7 +14,8 @@ MODELS = ("varying", "pooled", "sindy")
 
 def run(args) -> int:
     from vivbench.models.campaign import PooledSINDy
-    from vivbench.models.varying import ADDITIVE_SETTINGS, VaryingCoefficientSINDy
+    from vivbench.models.varying import ADDITIVE_SETTINGS
+    from vivbench.analysis.selection import varying_selection
     from vivbench.io.result import list_results
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_pooled
@@ -27,15 +28,17 @@ def run(args) -> int:
     if args.model not in MODELS:
         raise InputError(f"--model must be one of {', '.join(MODELS)}; got {args.model!r}")
     if args.model == "varying":
-        # The model's own defaults (yaw when the results store it, 30 s wind smoothing) unless overridden.
+        # Options given on the command line are pinned; the others of VARYING_OPTIONS are chosen from the
+        # campaign's held-out evidence (vivbench.analysis.selection).
         extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing),
                                    ("wind_input", args.wind_input),
                                    ("wind_weights", weights), ("penalty_choice", args.penalty_choice))
                  if v is not None}
         if args.wind_input == "additive":  # its settings chosen on the tuning campaign, unless overridden
             extra = {**ADDITIVE_SETTINGS, **extra}
-        model = VaryingCoefficientSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement,
-                                        tau=args.tau, seed=args.seed, **extra)
+        model = varying_selection(n_folds=args.folds, criterion=args.criterion, n_perturbations=args.perturbations,
+                                  seed=args.seed, workers=args.workers, n_bootstrap=args.bootstrap,
+                                  block_s=args.block, agreement=args.agreement, tau=args.tau, **extra)
     else:
         model = PooledSINDy(n_bootstrap=args.bootstrap, block_s=args.block, agreement=args.agreement, tau=args.tau,
                             seed=args.seed)
@@ -53,8 +56,10 @@ def run(args) -> int:
     if ds.attrs.get("note"):
         print(f"vivbench pool: {ds.attrs['note']}", file=sys.stderr)
     if args.model == "varying":
+        print(f"vivbench pool: chose {model.chosen_} from the campaign's own evidence; " + model.evidence_text())
         shape = (f"cubic B-splines per curve {', '.join(str(int(k)) for k in ds['n_basis'].values)} "
-                 f"({model.wind_weights_choice_} wind weights, {model.penalty_choice_} penalty)")
+                 f"({model.wind_weights_choice_} wind weights, {model.penalty_choice_} penalty, "
+                 f"yaw degree {model.yaw_degree_}, wind smoothing {model.fitted_wind_smoothing():g} s)")
     else:
         shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
     print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, {shape}, "
@@ -105,28 +110,39 @@ def register(sub) -> None:
                    help="directory of the results' event files, only for results identified before the result "
                         "stored the wind's yaw: their yaw is then measured from the events' anemometers")
     s.add_argument("--yaw-degree", type=int, default=None, choices=(0, 1, 2),
-                   help="with --model varying: powers of sin^2(yaw) in the curves (default: 1 when the results "
-                        "store the yaw, else 0)")
+                   help="with --model varying: powers of sin^2(yaw) in the curves (default: 0 or 1, chosen from "
+                        "the campaign's held-out evidence when the results store the yaw, else 0)")
     s.add_argument("--wind-input", default=None, choices=("mean", "section", "additive"),
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
                         "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
     s.add_argument("--wind-weights", default=None, metavar="auto|equal|modal|W1,W2,...",
-                   help="with --model varying and the mean wind: the sections' weights in it: auto (default: "
-                        "modal on campaigns of 4 h of records or more and 5 events or more, else equal; README), "
-                        "equal (the plain mean), modal (each section's share of the mode's energy, sum of A_k^2: "
-                        "the weights of the averaged truth when the sections' tributary lengths are equal), or one "
+                   help="with --model varying and the mean wind: the sections' weights in it: modal (default, a "
+                        "prior: each section's share of the mode's energy, sum of A_k^2, the weights of the averaged "
+                        "truth when the sections' tributary lengths are equal), equal (the plain mean), auto (modal "
+                        "on campaigns of 4 h and 5 events or more, else equal), or one "
                         "number per section (e.g. L_k phi_k^2 from the bridge's drawings)")
     s.add_argument("--penalty-choice", choices=("auto", "cv", "least", "loeo"), default=None,
-                   help="with --model varying: the curves' roughness penalty: auto (default: least on campaigns of "
-                        "4 h of records or more and 5 events or more, else cv; README), cv (the 5-fold "
+                   help="with --model varying: the curves' roughness penalty (default: cv or least, chosen from the "
+                        "campaign's held-out evidence): auto (least on campaigns of 4 h and 5 events or more, else cv), "
+                        "cv (the 5-fold "
                         "cross-validated error's minimum), least (the least penalty whose leave-one-event-out error "
                         "is not significantly above the best one's) or loeo (the leave-one-event-out error's "
                         "minimum)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
-                        "cut-off against the point anemometer's slow turbulence (default: the varying model's own, "
-                        "30 s, chosen by cross-validation over events; 0 with --model pooled)")
+                        "cut-off against the point anemometer's slow turbulence (default: 30 s with --model varying, "
+                        "a stated prior; 0 with --model pooled)")
+    s.add_argument("--folds", type=int, default=5,
+                   help="with --model varying: folds of whole events for the held-out choice of the options not "
+                        "given here (yaw degree, penalty choice; default 5, one event per fold with fewer events)")
+    s.add_argument("--criterion", choices=("output", "derivative"), default="output",
+                   help="held-out criterion of that choice: output (each held-out event's envelope simulated "
+                        "from its start under its measured wind; default) or derivative (its dA/dt)")
+    s.add_argument("--perturbations", type=int, default=2,
+                   help="with --model varying: refits on winds perturbed by their estimated error whose regimes a "
+                        "flagged window must match (default 2; 0: none)")
+    s.add_argument("--workers", type=int, default=1, help="local processes for the held-out fits (default 1)")
     s.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates (default 100)")
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")
     s.add_argument("--agreement", type=float, default=0.9,

@@ -1,0 +1,200 @@
+"""Held-out model selection (vivbench.analysis.selection): folds, the one-standard-error set, the choice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tests.helpers import assert_close, bell_records
+from vivbench.analysis.selection import (Candidate, ModelSelection, event_folds, held_out_loss, one_se_set,
+                                         perturbed_wind, varying_selection, wind_error_scale, without_yaw)
+from vivbench.core.errors import InputError
+from vivbench.core.record import Record
+from vivbench.models.simulate import Simulation
+
+
+class _Poly:
+    """dA/dt = sum_{i < order} c_i A^i, fitted by least squares over every sample (a model of the protocol)."""
+
+    def __init__(self, order: int = 2):
+        self.order = order
+
+    def get_params(self):
+        return {"order": self.order}
+
+    def set_params(self, **params):
+        for k, v in params.items():
+            setattr(self, k, v)
+        return self
+
+    def fit(self, records):
+        A = np.concatenate([r.A[:, 0] for r in records])
+        dA = np.concatenate([r.dA[:, 0] for r in records])
+        self.coef_ = np.linalg.lstsq(A[:, None] ** np.arange(self.order), dA, rcond=None)[0]
+        return self
+
+    def order_contributions(self, record):
+        out = np.zeros(record.A.shape + (4,))
+        for i, c in enumerate(self.coef_):
+            out[..., i] = c * record.A**i
+        return out
+
+    def predict(self, record):
+        return self.order_contributions(record).sum(axis=-1)
+
+    def simulate(self, record, t0, t1):
+        i0, i1 = np.searchsorted(record.t, t0), np.searchsorted(record.t, t1) + 1
+        t = record.t[i0:i1]
+        x = np.empty(t.size)
+        x[0] = record.A[i0, 0]
+        for n in range(t.size - 1):  # explicit Euler on the record's grid: a toy
+            x[n + 1] = x[n] + (t[n + 1] - t[n]) * np.polyval(self.coef_[::-1], x[n])
+        return Simulation(t=t, A_sim=x[:, None], A_meas=record.A[i0:i1], stopped_at=None, reason=None,
+                          nmse=np.zeros(1), covered=1.0, windows=np.zeros(t.size - 1, dtype=int))
+
+
+def _linear_records(n_events: int, slope: float, seed: int = 0, noise: float = 0.02) -> list[Record]:
+    """Envelopes of dA/dt = 0.05 - slope A (exact decays to 0.05 / slope), measured dA/dt with noise."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for e in range(n_events):
+        t = np.arange(0.0, 200.0, 1.0)
+        a_inf = 0.05 / slope
+        a0 = rng.uniform(0.0, 2 * a_inf)
+        A = a_inf + (a0 - a_inf) * np.exp(-slope * t)
+        dA = 0.05 - slope * A + noise * rng.standard_normal(t.size)
+        out.append(Record(event_id=f"E{e:03d}", t=t, A=A[:, None], U=np.full((t.size, 1), 8.0), dA=dA[:, None]))
+    return out
+
+
+@given(n=st.integers(2, 40), k=st.integers(2, 10), seed=st.integers(0, 2**16))
+@settings(max_examples=40, deadline=None)
+def test_event_folds_partition_every_event_once(n, k, seed):
+    fold = event_folds(n, k, seed)
+    assert fold.shape == (n,)
+    counts = np.bincount(fold)
+    assert counts.size == min(n, k) and counts.min() >= 1 and counts.max() - counts.min() <= 1
+    assert np.array_equal(fold, event_folds(n, k, seed))  # same seed, same folds
+
+
+def test_event_folds_needs_two_events():
+    with pytest.raises(InputError, match="at least 2 events"):
+        event_folds(1, 5)
+
+
+def test_one_se_set_keeps_candidates_within_one_standard_error():
+    losses = np.array([[1.0, 1.0, 1.0, 1.0],    # best, total 4
+                       [1.1, 0.9, 1.2, 1.0],    # +0.2, diffs (0.1, -0.1, 0.2, 0): se = 2 * std(ddof=1)
+                       [2.0, 2.0, 2.0, 2.1]])   # +4.1, se = 2 * 0.05
+    in_set, excess, se = one_se_set(losses)
+    assert_close(excess, [0.0, 0.2, 4.1])
+    assert_close(se[1], 2 * np.std([0.1, -0.1, 0.2, 0.0], ddof=1))
+    assert in_set.tolist() == [True, True, False]
+
+
+def test_selection_prefers_the_simpler_model_unless_the_data_demand_more():
+    # The data follow dA/dt = 0.05 - 0.02 A: the constant model (order 1) cannot follow the decay.
+    recs = _linear_records(10, slope=0.02)
+    sel = ModelSelection(candidates=[Candidate(name="const", model=_Poly(1), complexity=0),
+                                     Candidate(name="linear", model=_Poly(2), complexity=1),
+                                     Candidate(name="quadratic", model=_Poly(3), complexity=2)],
+                         n_folds=5, n_perturbations=0).fit(recs)
+    assert sel.chosen_ == "linear"
+    assert not sel.in_set_[0]
+    A = np.linspace(0.0, 5.0, 11)
+    assert_close(np.polyval(sel.model_.coef_[::-1], A), 0.05 - 0.02 * A, atol=0.01,
+                 reason="dA/dt noise 0.02 m/s, as large as the signal, on 2000 samples")
+    # held out: each event's loss comes from a model fitted without it
+    assert sel.losses_.shape == (3, 10) and np.all(sel.losses_ > 0)
+    ev = sel.evidence()
+    assert ev["chosen"] == "linear" and [c["in_set"] for c in ev["candidates"]][1]
+    assert "linear" in sel.evidence_text()
+
+
+def test_selection_with_the_derivative_criterion_and_one_candidate():
+    recs = _linear_records(4, slope=0.02)
+    sel = ModelSelection(candidates=[Candidate(name="linear", model=_Poly(2))], criterion="derivative",
+                         n_perturbations=0).fit(recs)
+    assert sel.chosen_ == "linear" and sel.losses_.shape == (1, 4)
+    # the protocol passes through to the chosen model
+    assert_close(sel.predict(recs[0]), sel.model_.predict(recs[0]))
+
+
+def test_held_out_loss_counts_a_stopped_run_as_missed():
+    recs = _linear_records(2, slope=0.02)
+    m = _Poly(2).fit(recs)
+    assert np.isfinite(held_out_loss(m, recs[0]))
+
+    class Stopped(_Poly):
+        def simulate(self, record, t0, t1):
+            sim = super().simulate(record, t0, t1)
+            sim.A_sim[5:] = np.nan
+            return sim
+
+    s = Stopped(2).fit(recs)
+    peak = np.nanmax(recs[0].A)
+    # every sample after the stop is missed by the event's peak amplitude
+    assert held_out_loss(s, recs[0]) >= (recs[0].t.size - 5) * peak**2
+
+
+@pytest.mark.parametrize("bad, match", [
+    (dict(candidates=[]), "at least one candidate"),
+    (dict(criterion="aic"), "criterion must be one of"),
+    (dict(n_folds=1), "n_folds must be"),
+    (dict(n_perturbations=-1), "n_perturbations must be"),
+])
+def test_selection_refuses_bad_settings(bad, match):
+    kw = dict(candidates=[Candidate(name="a", model=_Poly(1))])
+    kw.update(bad)
+    with pytest.raises(InputError, match=match):
+        ModelSelection(**kw).fit(_linear_records(3, slope=0.02))
+
+
+def test_candidate_names_are_unique():
+    with pytest.raises(InputError, match="unique"):
+        ModelSelection(candidates=[Candidate(name="a", model=_Poly(1)),
+                                   Candidate(name="a", model=_Poly(2))]).fit(_linear_records(3, slope=0.02))
+
+
+def test_wind_error_scale_is_the_spread_between_sections():
+    t = np.arange(0.0, 3000.0, 1.0)
+    rng = np.random.default_rng(1)
+    base = 8.0 + np.sin(t / 300.0)
+    offsets = np.array([-0.3, 0.0, 0.3])  # persistent offsets: rms deviation 0.245, x sqrt(3/2) = 0.3
+    U = base[:, None] + offsets[None, :]
+    rec = Record(event_id="E", t=t, A=np.full(U.shape, 0.1), U=U, dA=np.zeros(U.shape))
+    assert_close(wind_error_scale(rec, 60.0), np.full(3, 0.3))
+    one = Record(event_id="E", t=t, A=np.full((t.size, 1), 0.1), U=base[:, None], dA=np.zeros((t.size, 1)))
+    assert_close(wind_error_scale(one, 60.0), [0.03 * base.mean()], rtol=1e-3,
+                 reason="the mean of the wind smoothed at 60 s, whose edges differ from the raw wind's")
+    pert = perturbed_wind(rec, np.full(3, 0.3), 60.0, rng)
+    d = pert.U - rec.U
+    assert_close(d.std(axis=0), np.full(3, 0.3))
+    assert np.array_equal(pert.A, rec.A) and np.array_equal(pert.dA, rec.dA)
+
+
+def _yaw_records(in_truth: bool):
+    return bell_records(8, seed=3, duration_s=900.0, dt_s=1.0, mode_shape=np.array([1.0, 0.7]),
+                        wind_period_s=(500.0, 80.0), amplitude_period_s=250.0, yaw_deg=40.0, yaw_period_s=600.0,
+                        yaw_in_truth=in_truth, a0=0.002, a3=-2.0, noise_m_s=1e-4)
+
+
+@pytest.mark.parametrize("in_truth, chosen_yaw", [(True, 1), (False, 0)])
+def test_the_yaw_enters_only_where_the_campaign_demands_it(in_truth, chosen_yaw):
+    sel = varying_selection(criterion="derivative", options={"yaw_degree": (0, 1)}, n_perturbations=1,
+                            n_basis=(8,), n_bootstrap=10, wind_smoothing_s=0.0).fit(_yaw_records(in_truth))
+    assert sel.model_.yaw_degree_ == chosen_yaw, sel.evidence_text()
+    if in_truth:
+        assert not sel.in_set_[0]  # the yaw-free model is significantly worse held out
+    assert len(sel.perturbed_models_) == 1
+
+
+def test_without_yaw_keeps_the_yaw_free_candidates():
+    sel = varying_selection(options={"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")})
+    assert len(sel.candidates) == 4
+    assert [c.name for c in without_yaw(sel).candidates] == ["yaw0-cv", "yaw0-least"]
+    assert len(sel.candidates) == 4  # the original is left as it was
+    with pytest.raises(InputError, match="needs the wind's yaw"):
+        without_yaw(varying_selection(yaw_degree=1, options={"yaw_degree": (1,)}))

@@ -1,0 +1,569 @@
+"""Choices from the campaign's own evidence: held-out selection among candidate campaign models.
+
+A field campaign has no truth, so every modelling option that changes a campaign
+model's class or inputs (a covariate such as the yaw, the wind's smoothing and
+weights, penalties, the model class) is chosen here from the campaign's measured
+data alone, the same way on a synthetic campaign as on a field one:
+
+1. The events are dealt to ``n_folds`` folds in a seeded random order (with
+   fewer events than folds, one event per fold). Every candidate is fitted on
+   the other folds' events and predicts each held-out event.
+2. The held-out loss of an event is its **output error** by default: each valid
+   run of the event's envelope is simulated from its first measured amplitude
+   under its measured wind, and the squared differences to the measured
+   envelope are summed over samples and sections (m^2). A run that a model
+   stops (it left the data's amplitude range) counts every sample after the
+   stop as missed by the event's largest measured amplitude. With
+   ``criterion="derivative"`` the loss is the squared error of the predicted
+   dA/dt against the measured one (the fallback for models that cannot
+   simulate).
+3. The **confidence set** holds the candidates whose summed held-out loss is
+   not significantly above the best's: the paired difference to the best over
+   events is at most one standard error of its sum (a one-standard-error rule
+   over events).
+4. The model reported is the **simplest** of the set (the lowest complexity,
+   ties to the lower loss), so that a covariate or a rougher fit enters only
+   where the campaign's own data demand it.
+
+The verdict of the selected model (:meth:`ModelSelection.identifiable`) flags a
+window only when its own verdict does, when every model of the confidence set
+gives the window the same regime, and when the regime survives refits of the
+chosen candidate with the measured wind perturbed by its estimated error
+(:func:`wind_error_scale`): errors in the wind bias every bootstrap replicate
+alike, so the bootstrap alone cannot see them.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+import xarray as xr
+
+from vivbench.core.errors import InputError
+from vivbench.core.parallel import run_tasks
+from vivbench.core.record import Record
+from vivbench.core.regime import DEFAULT_TAU
+from vivbench.models.model_input import measured_input
+from vivbench.models.protocol import as_record
+from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.regimes.model import model_window_regimes
+
+__all__ = ["Candidate", "ModelSelection", "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "event_folds",
+           "held_out_loss", "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
+
+#: Held-out criteria: simulated envelope (output error) or dA/dt (equation error).
+CRITERIA = ("output", "derivative")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Candidate:
+    """One candidate campaign model of a selection.
+
+    Attributes
+    ----------
+    name : str
+        Short label, e.g. ``"yaw0-cv"``; unique within a selection.
+    model : object
+        An unfitted model of the protocol (``fit(records)`` returning the fitted model,
+        ``simulate`` for the output error or ``predict`` for the derivative criterion,
+        ``order_contributions``); fitted on copies, never in place.
+    complexity : int
+        Rank of simplicity (0 the simplest); the selection reports the simplest member of
+        the confidence set.
+    options : dict
+        The option values this candidate stands for (recorded with the choice).
+    """
+
+    name: str
+    model: Any
+    complexity: int = 0
+    options: dict | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"a candidate's name must be a non-empty string; got {self.name!r}")
+        if not callable(getattr(self.model, "fit", None)):
+            raise InputError(f"candidate {self.name!r}: its model has no fit(records) method")
+        if int(self.complexity) != self.complexity or self.complexity < 0:
+            raise InputError(f"candidate {self.name!r}: complexity must be an integer >= 0; got {self.complexity!r}")
+
+
+def event_folds(n_events: int, n_folds: int, seed: int = 0) -> np.ndarray:
+    """Fold of every event, shape (n_events,): events dealt in a seeded random order.
+
+    With fewer events than ``n_folds`` every event is its own fold (leave one event out).
+    """
+    if n_events < 2:
+        raise InputError(f"held-out selection needs at least 2 events; got {n_events}")
+    order = np.random.default_rng(seed).permutation(n_events)
+    k = min(int(n_folds), n_events)
+    fold = np.empty(n_events, dtype=int)
+    fold[order] = np.arange(n_events) % k
+    return fold
+
+
+def _runs(ok: np.ndarray) -> list[slice]:
+    """Contiguous runs of True in ``ok`` (n,), as slices."""
+    edges = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
+    return [slice(int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+
+
+def _decimated(record: Record, step_s: float) -> Record:
+    """Every k-th sample of the record, k = round(step_s / its median step) (the record itself when k <= 1)."""
+    if record.n_samples < 2:
+        return record
+    k = int(round(step_s / float(np.median(np.diff(record.t)))))
+    if k <= 1:
+        return record
+    sl = slice(None, None, k)
+    pick = (lambda x: None if x is None else np.asarray(x)[sl])
+    return Record(event_id=record.event_id, t=record.t[sl], A=record.A[sl], U=record.U[sl], dA=record.dA[sl],
+                  yaw=pick(record.yaw), noise_std=record.noise_std)
+
+
+def held_out_loss(model, record: Record, criterion: str = "output", min_samples: int = 20,
+                  step_s: float = 1.0) -> float:
+    """Squared prediction error of a fitted model on one record it was not fitted on (module docstring).
+
+    Parameters
+    ----------
+    model : fitted model of the protocol
+    record : Record, measured (its wind is transformed as the model's was at fit)
+    criterion : "output" (simulated envelope) or "derivative" (dA/dt)
+    min_samples : int, runs shorter than this (on the simulation's grid) are not simulated
+    step_s : float, s
+        Time step of the output error's simulation and sum: the record's wind, once transformed
+        as at fit, is taken every ``step_s`` (the envelope and the smoothed wind vary over tens
+        of seconds, so the integration's step does not limit the loss).
+
+    Returns
+    -------
+    float, m^2 (output) or m^2/s^2 (derivative); 0 when the record has no valid run
+    """
+    rec = measured_input(model, record)
+    ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
+    if criterion == "derivative":
+        f = np.asarray(model.predict(rec), dtype=float)
+        err = np.where(ok[:, None], f - rec.dA, 0.0)
+        good = ok[:, None] & np.isfinite(rec.dA)
+        miss = good & ~np.isfinite(err)
+        err = np.where(miss, rec.dA, np.where(good, err, 0.0))
+        return float(np.sum(err**2))
+    rec = _decimated(rec, step_s)
+    ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
+    total = 0.0
+    peak = float(np.nanmax(np.abs(rec.A))) if np.isfinite(rec.A).any() else 0.0
+    for run in _runs(ok):
+        if run.stop - run.start < min_samples:
+            continue
+        sim = model.simulate(rec, float(rec.t[run.start]), float(rec.t[run.stop - 1]))
+        d = np.asarray(sim.A_sim, dtype=float) - np.asarray(sim.A_meas, dtype=float)
+        d = np.where(np.isfinite(d), d, peak)
+        total += float(np.sum(d**2))
+    return total
+
+
+def one_se_set(losses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The confidence set of candidates by the one-standard-error rule over events.
+
+    Parameters
+    ----------
+    losses : ndarray, shape (C, E)
+        Held-out loss of every candidate on every event.
+
+    Returns
+    -------
+    in_set : ndarray of bool, shape (C,)
+        Candidates whose summed loss exceeds the best's by at most one standard error of the
+        paired sum of differences over events (the best is always in).
+    excess : ndarray, shape (C,)
+        Summed loss minus the best's (0 for the best).
+    se : ndarray, shape (C,)
+        Standard error of that sum: sqrt(E) times the standard deviation of the per-event
+        differences (0 for the best).
+    """
+    L = np.asarray(losses, dtype=float)
+    if L.ndim != 2 or L.shape[0] < 1:
+        raise ValueError(f"losses must have shape (n_candidates, n_events); got {L.shape}")
+    total = L.sum(axis=1)
+    best = int(np.argmin(total))
+    diff = L - L[best]
+    E = L.shape[1]
+    se = np.sqrt(E) * diff.std(axis=1, ddof=1) if E > 1 else np.zeros(L.shape[0])
+    excess = total - total[best]
+    return excess <= se, excess, se
+
+
+def wind_error_scale(record: Record, timescale_s: float, single_section_share: float = 0.03) -> np.ndarray:
+    """Estimated rms error of each section's measured mean wind at a time scale, shape (S,), m/s.
+
+    With two sections or more: the spread between the sections' winds smoothed at
+    ``timescale_s`` (rms over time of each section's deviation from the sections' mean,
+    pooled over sections): independent anemometers' point turbulence and offsets. With one
+    section there is nothing to compare with, and the error is taken as
+    ``single_section_share`` of the event's mean wind (a stated prior).
+    """
+    rec = smooth_wind(record, float(timescale_s))
+    U = rec.U
+    S = U.shape[1]
+    if S == 1:
+        m = float(np.nanmean(U)) if np.isfinite(U).any() else 0.0
+        return np.array([single_section_share * m])
+    dev = U - np.nanmean(U, axis=1, keepdims=True)
+    ok = np.isfinite(dev)
+    if not ok.any():
+        return np.zeros(S)
+    # pooled over sections, with the S/(S-1) correction for the mean taken over the same sections
+    s = math.sqrt(float(np.mean(dev[ok] ** 2)) * S / (S - 1))
+    return np.full(S, s)
+
+
+def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: np.random.Generator) -> Record:
+    """The record with each section's U perturbed by smooth Gaussian noise of rms ``scale`` (S,), m/s.
+
+    The noise is white noise smoothed by a Gaussian of standard deviation ``timescale_s``
+    and rescaled to unit variance; NaN samples stay NaN.
+    """
+    n, S = record.U.shape
+    dt = float(np.median(np.diff(record.t))) if n > 1 else 1.0
+    noise = rng.standard_normal((n, S))
+    probe = Record(event_id=record.event_id, t=record.t, A=record.A, U=noise, dA=record.dA)
+    smooth = smooth_wind(probe, float(timescale_s)).U
+    sd = smooth.std(axis=0)
+    smooth = smooth / np.where(sd > 0, sd, 1.0)
+    del dt
+    U = record.U + smooth * np.asarray(scale, dtype=float)[None, :]
+    return Record(event_id=record.event_id, t=record.t, A=record.A, U=U, dA=record.dA, yaw=record.yaw,
+                  noise_std=record.noise_std)
+
+
+def _unfitted(model, **params):
+    """A fresh copy of an unfitted model with ``params`` set where it has them (e.g. n_bootstrap)."""
+    m = copy.deepcopy(model)
+    if callable(getattr(m, "get_params", None)) and callable(getattr(m, "set_params", None)):
+        own = m.get_params()
+        m.set_params(**{k: v for k, v in params.items() if k in own})
+    return m
+
+
+def _fit(model, records):
+    fitted = model.fit(list(records))
+    return model if fitted is None else fitted
+
+
+def _fold_task(task: dict) -> dict:
+    """Fit one candidate without one fold's events and score it on them (a picklable top-level task)."""
+    model = _unfitted(task["model"], n_bootstrap=0)
+    records, fold, f = task["records"], task["fold"], task["fold_index"]
+    train = [r for r, g in zip(records, fold) if g != f]
+    fitted = _fit(model, train)
+    idx = [i for i, g in enumerate(fold) if g == f]
+    return {"events": idx, "loss": [held_out_loss(fitted, records[i], task["criterion"]) for i in idx]}
+
+
+class ModelSelection:
+    """A campaign model chosen among candidates by held-out prediction with whole events left out.
+
+    A model of the protocol itself: after :meth:`fit`, ``predict``, ``simulate``,
+    ``order_contributions``, ``curves``, ``measured_wind`` and ``save`` are those of the
+    chosen candidate fitted to every event (``model_``), and :meth:`identifiable` is its
+    verdict narrowed to the windows every model of the confidence set and every
+    wind-perturbed refit agree on (module docstring).
+
+    Parameters
+    ----------
+    candidates : sequence of Candidate
+        At least one; names unique. A single candidate is fitted without held-out runs.
+    n_folds : int, >= 2
+        Folds of events (fewer events: one event per fold).
+    criterion : {"output", "derivative"}
+        Held-out loss (module docstring).
+    n_perturbations : int, >= 0
+        Refits of the chosen candidate on winds perturbed by their estimated error
+        (:func:`wind_error_scale`, :func:`perturbed_wind`) whose regimes the verdict must
+        match (0: none).
+    perturbation_timescale_s : float, s
+        Time scale of the wind's perturbation and of its error estimate.
+    tau : float
+        Regime threshold of the set and perturbation agreement.
+    verdict : callable or None
+        ``verdict(model, record, window_start, window_end)`` -> dict with ``identifiable`` (W, S), the
+        chosen model's own verdict (e.g. :func:`vivbench.regimes.varying_window_verdicts`); None: the
+        model's ``identifiable`` method, or no window flagged without one.
+    seed : int
+        Seed of the folds and of the perturbations.
+    workers : int
+        Local processes for the held-out fits (1: in this process).
+    scheduler : str or None
+        A dask scheduler address instead (see :func:`vivbench.core.parallel.run_tasks`).
+
+    Attributes
+    ----------
+    model_ : the chosen candidate fitted to every event
+    chosen_ : str, its name
+    names_ : list of str, the candidates' names
+    losses_ : ndarray, shape (C, E), held-out loss of every candidate on every event
+    in_set_ : ndarray of bool, shape (C,), the confidence set
+    excess_, se_ : ndarray, shape (C,), summed loss above the best's and its standard error
+    set_models_ : list of fitted models of the set other than the chosen (n_bootstrap 0)
+    perturbed_models_ : list of fitted models of the chosen candidate on perturbed winds
+    wind_error_ : ndarray, shape (E, S), m/s, the estimated wind error of every event
+    event_ids_ : list of str
+    """
+
+    def __init__(self, *, candidates: Sequence[Candidate], n_folds: int = 5, criterion: str = "output",
+                 n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, tau: float = DEFAULT_TAU,
+                 verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None):
+        self.candidates = tuple(candidates)
+        self.n_folds = n_folds
+        self.criterion = criterion
+        self.n_perturbations = n_perturbations
+        self.perturbation_timescale_s = perturbation_timescale_s
+        self.tau = tau
+        self.verdict = verdict
+        self.seed = seed
+        self.workers = workers
+        self.scheduler = scheduler
+
+    def _validate(self) -> None:
+        if not self.candidates:
+            raise InputError("a model selection needs at least one candidate")
+        if not all(isinstance(c, Candidate) for c in self.candidates):
+            raise InputError("candidates must be Candidate objects (name, model, complexity)")
+        names = [c.name for c in self.candidates]
+        if len(set(names)) != len(names):
+            raise InputError(f"candidate names must be unique; got {names}")
+        if int(self.n_folds) != self.n_folds or self.n_folds < 2:
+            raise InputError(f"n_folds must be an integer >= 2; got {self.n_folds!r}")
+        if self.criterion not in CRITERIA:
+            raise InputError(f"criterion must be one of {', '.join(map(repr, CRITERIA))}; got {self.criterion!r}")
+        if int(self.n_perturbations) != self.n_perturbations or self.n_perturbations < 0:
+            raise InputError(f"n_perturbations must be an integer >= 0; got {self.n_perturbations!r}")
+        if not (np.isfinite(self.perturbation_timescale_s) and self.perturbation_timescale_s > 0):
+            raise InputError(f"perturbation_timescale_s must be a positive number of seconds; "
+                             f"got {self.perturbation_timescale_s!r}")
+
+    def fit(self, records: Sequence[Record]) -> "ModelSelection":
+        """Choose among the candidates on held-out events, then fit the choice (and its checks) to every event.
+
+        Parameters
+        ----------
+        records : sequence of Record, one per event (A, U, dA of shape (n, S) in m, m/s, m/s)
+
+        Returns
+        -------
+        self
+        """
+        self._validate()
+        records = [as_record(r, k) for k, r in enumerate(records)]
+        C, E = len(self.candidates), len(records)
+        self.names_ = [c.name for c in self.candidates]
+        self.event_ids_ = [r.event_id for r in records]
+        self.losses_ = np.zeros((C, E))
+        if C > 1:
+            fold = event_folds(E, self.n_folds, self.seed)
+            tasks = [{"model": c.model, "records": records, "fold": fold, "fold_index": f,
+                      "criterion": self.criterion}
+                     for c in self.candidates for f in range(int(fold.max()) + 1)]
+            n_f = int(fold.max()) + 1
+            for out in run_tasks(_fold_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
+                if out.error is not None:
+                    c = self.candidates[out.index // n_f]
+                    raise InputError(f"candidate {c.name!r} failed on a held-out fold: {out.error}")
+                self.losses_[out.index // n_f, out.value["events"]] = out.value["loss"]
+            self.in_set_, self.excess_, self.se_ = one_se_set(self.losses_)
+        else:
+            self.in_set_, self.excess_, self.se_ = np.ones(1, dtype=bool), np.zeros(1), np.zeros(1)
+        members = np.flatnonzero(self.in_set_)
+        complexity = np.array([c.complexity for c in self.candidates])
+        total = self.losses_.sum(axis=1)
+        chosen = int(min(members, key=lambda i: (complexity[i], total[i], i)))
+        self.chosen_index_ = chosen
+        self.chosen_ = self.names_[chosen]
+        self.model_ = _fit(_unfitted(self.candidates[chosen].model), records)
+        self.set_models_ = [_fit(_unfitted(self.candidates[i].model, n_bootstrap=0), records)
+                            for i in members if i != chosen]
+        rng = np.random.default_rng([int(self.seed), 1])
+        self.wind_error_ = np.stack([wind_error_scale(r, self.perturbation_timescale_s) for r in records])
+        self.perturbed_models_ = []
+        for _ in range(int(self.n_perturbations)):
+            pert = [perturbed_wind(r, s, self.perturbation_timescale_s, rng) for r, s in zip(records, self.wind_error_)]
+            self.perturbed_models_.append(_fit(_unfitted(self.candidates[chosen].model, n_bootstrap=0), pert))
+        return self
+
+    # -- the protocol, through the chosen model ------------------------------------------------------
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "model_"):
+            raise InputError("this ModelSelection is not fitted: call fit(records) first")
+
+    def __getattr__(self, name):
+        # Everything else (predict, simulate, order_contributions, curves, measured_wind, equations, save, ...)
+        # is the chosen model's. Fitted attributes of the selection itself are found before this is called.
+        if name.startswith("__") or name in ("model_", "candidates"):
+            raise AttributeError(name)
+        model = self.__dict__.get("model_")
+        if model is None:
+            raise AttributeError(name)
+        return getattr(model, name)
+
+    def _regimes(self, model, record: Record, window_start, window_end) -> np.ndarray:
+        rec = measured_input(model, record)
+        own = getattr(model, "window_regimes", None)
+        if callable(own):
+            return np.asarray(own(rec, window_start, window_end), dtype=int)
+        return model_window_regimes(model, rec, window_start, window_end, tau=self.tau)["regime"].astype(int)
+
+    def window_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
+        """Regime of every window (W, S) by the chosen model, on the record's wind as at fit."""
+        self._check_fitted()
+        if self.verdict is not None:
+            rec = measured_input(self.model_, record)
+            return np.asarray(self.verdict(self.model_, rec, window_start, window_end)["regime"], dtype=int)
+        return self._regimes(self.model_, record, window_start, window_end)
+
+    def agreement(self, record: Record, window_start, window_end, regime: np.ndarray | None = None) -> np.ndarray:
+        """Windows (W, S) on which every other member of the confidence set and every perturbed refit give
+        ``regime`` (default: the chosen model's)."""
+        self._check_fitted()
+        ref = self.window_regimes(record, window_start, window_end) if regime is None else np.asarray(regime)
+        ok = np.ones(ref.shape, dtype=bool)
+        for m in list(self.set_models_) + list(self.perturbed_models_):
+            ok &= self._regimes(m, record, window_start, window_end) == ref
+        return ok
+
+    def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
+        """The chosen model's verdict (W, S) narrowed to :meth:`agreement`'s windows."""
+        self._check_fitted()
+        rec = measured_input(self.model_, record)
+        if self.verdict is not None:
+            flag = np.asarray(self.verdict(self.model_, rec, window_start, window_end)["identifiable"], dtype=bool)
+        elif callable(getattr(self.model_, "identifiable", None)):
+            flag = np.asarray(self.model_.identifiable(rec, window_start, window_end), dtype=bool)
+        else:
+            return np.zeros(self.window_regimes(record, window_start, window_end).shape, dtype=bool)
+        return flag & self.agreement(record, window_start, window_end)
+
+    # -- the evidence ----------------------------------------------------------------------------------
+
+    def evidence(self) -> dict:
+        """The held-out evidence of the choice as plain data (JSON-ready)."""
+        self._check_fitted()
+        return {
+            "criterion": self.criterion,
+            "n_folds": int(min(self.n_folds, len(self.event_ids_))),
+            "chosen": self.chosen_,
+            "candidates": [
+                {"name": c.name, "complexity": int(c.complexity), "options": c.options or {},
+                 "held_out_loss": float(self.losses_[i].sum()), "excess": float(self.excess_[i]),
+                 "se": float(self.se_[i]), "in_set": bool(self.in_set_[i])}
+                for i, c in enumerate(self.candidates)],
+            "events": list(self.event_ids_),
+            "n_perturbations": int(self.n_perturbations),
+            "perturbation_timescale_s": float(self.perturbation_timescale_s),
+            "wind_error_rms": float(np.sqrt(np.mean(self.wind_error_**2))),
+        }
+
+    def evidence_text(self) -> str:
+        """One line per candidate: its held-out loss relative to the best, and the set and choice."""
+        ev = self.evidence()
+        best = min(c["held_out_loss"] for c in ev["candidates"])
+        unit = "m^2" if self.criterion == "output" else "m^2/s^2"
+        lines = [f"held-out {('output' if self.criterion == 'output' else 'dA/dt')} error over "
+                 f"{len(ev['events'])} events in {ev['n_folds']} folds (sum of squares, {unit}):"]
+        for c in ev["candidates"]:
+            rel = c["held_out_loss"] / best if best > 0 else float("nan")
+            mark = "chosen" if c["name"] == ev["chosen"] else ("in the confidence set" if c["in_set"] else "")
+            lines.append(f"  {c['name']:<22} {c['held_out_loss']:.4g} ({rel:.3f} x best; +{c['excess']:.3g} "
+                         f"+- {c['se']:.3g}) {mark}".rstrip())
+        return "\n".join(lines)
+
+    def to_dataset(self) -> xr.Dataset:
+        """The chosen model's dataset with the evidence as the attribute ``selection_json``."""
+        ds = self.model_.to_dataset()
+        ds.attrs["selection_json"] = json.dumps(self.evidence(), sort_keys=True)
+        return ds
+
+    def save(self, path):
+        """Write the chosen model's file with the selection's evidence (atomically); returns the path."""
+        from vivbench.io.netcdf import write_netcdf_atomic
+
+        return write_netcdf_atomic(self.to_dataset(), path)
+
+
+#: The options of :class:`vivbench.models.VaryingCoefficientSINDy` that :func:`varying_selection`
+#: chooses from the campaign's evidence by default, each listed simplest first: the yaw covariate
+#: (none, or sin^2 of the yaw) and the roughness penalty (the 5-fold cross-validated one, or the least
+#: penalty of the leave-one-event-out confidence set, which gives rougher curves).
+VARYING_OPTIONS = {"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")}
+
+#: Options of the varying model that stay fixed in :func:`varying_selection` unless given: stated priors.
+#: The modal section weights are the averaged truth's for a mode seen at the sections (each section's
+#: share of the mode's energy); 30 s is the wind's smoothing time scale.
+VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0}
+
+
+def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterion: str = "output",
+                      n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, seed: int = 0,
+                      workers: int = 1, scheduler: str | None = None, **params) -> ModelSelection:
+    """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
+
+    Parameters
+    ----------
+    options : dict of str to sequence, optional
+        Parameter name -> candidate values, simplest first (default :data:`VARYING_OPTIONS`);
+        the grid is their product and a candidate's complexity is the sum of its values' positions.
+        A parameter given in ``params`` is pinned: it leaves the grid.
+    n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler
+        Those of :class:`ModelSelection` (``seed`` also the models').
+    **params
+        Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given).
+
+    Returns
+    -------
+    ModelSelection, unfitted, whose verdict is :func:`vivbench.regimes.varying_window_verdicts`
+    """
+    import itertools
+
+    from vivbench.models.varying import VaryingCoefficientSINDy
+    from vivbench.regimes.varying import varying_window_verdicts
+
+    grid = {k: tuple(v) for k, v in (VARYING_OPTIONS if options is None else options).items() if k not in params}
+    for k, v in grid.items():
+        if not v:
+            raise InputError(f"option {k!r} has no candidate value")
+    fixed = {**{k: v for k, v in VARYING_PRIORS.items() if k not in grid}, **params, "seed": seed}
+    names = list(grid)
+    candidates = []
+    for idx in itertools.product(*(range(len(grid[k])) for k in names)):
+        chosen = {k: grid[k][i] for k, i in zip(names, idx)}
+        label = "-".join(_option_label(k, v) for k, v in chosen.items()) or "varying"
+        candidates.append(Candidate(name=label, model=VaryingCoefficientSINDy(**fixed, **chosen),
+                                    complexity=int(sum(idx)), options=chosen))
+    return ModelSelection(candidates=candidates, n_folds=n_folds, criterion=criterion,
+                          n_perturbations=n_perturbations, perturbation_timescale_s=perturbation_timescale_s,
+                          tau=fixed.get("tau", DEFAULT_TAU), verdict=varying_window_verdicts, seed=seed,
+                          workers=workers, scheduler=scheduler)
+
+
+def _option_label(name: str, value) -> str:
+    short = {"yaw_degree": "yaw", "penalty_choice": "", "wind_weights": "", "wind_smoothing_s": "smooth"}
+    return f"{short.get(name, name)}{value:g}" if isinstance(value, float) else f"{short.get(name, name)}{value}"
+
+
+def without_yaw(selection: ModelSelection) -> ModelSelection:
+    """The selection's candidates that need no yaw (``yaw_degree`` 0), for records that carry none.
+
+    Raises InputError when none is left.
+    """
+    kept = [c for c in selection.candidates if not getattr(c.model, "yaw_degree", 0)]
+    if not kept:
+        raise InputError("every candidate model needs the wind's yaw, which the records do not carry")
+    out = copy.copy(selection)
+    out.candidates = tuple(kept)
+    return out
