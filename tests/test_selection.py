@@ -198,3 +198,12 @@ def test_without_yaw_keeps_the_yaw_free_candidates():
     assert len(sel.candidates) == 4  # the original is left as it was
     with pytest.raises(InputError, match="needs the wind's yaw"):
         without_yaw(varying_selection(yaw_degree=1, options={"yaw_degree": (1,)}))
+
+
+def test_two_events_give_no_held_out_choice_and_say_so():
+    recs = _linear_records(2, slope=0.02)
+    sel = ModelSelection(candidates=[Candidate(name="const", model=_Poly(1), complexity=0),
+                                     Candidate(name="linear", model=_Poly(2), complexity=1)],
+                         n_perturbations=0).fit(recs)
+    assert sel.chosen_ == "const" and np.isnan(sel.losses_).all()
+    assert "too few for a held-out choice" in sel.evidence_text()

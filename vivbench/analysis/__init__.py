@@ -35,6 +35,7 @@ from vivbench.analysis.selection import (
     VARYING_PRIORS,
     Candidate,
     ModelSelection,
+    STRUCTURAL_OPTIONS,
     event_folds,
     held_out_loss,
     one_se_set,
@@ -53,7 +54,7 @@ __all__ = [
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
     "with_campaign_model", "campaign_model_file", "load_campaign_model", "pooled_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
-    "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "ModelSelection", "event_folds", "held_out_loss",
+    "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "ModelSelection", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss",
     "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

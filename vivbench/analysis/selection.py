@@ -53,8 +53,11 @@ from vivbench.models.protocol import as_record
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regimes.model import model_window_regimes
 
-__all__ = ["Candidate", "ModelSelection", "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "event_folds",
+__all__ = ["Candidate", "ModelSelection", "CRITERIA", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "VARYING_OPTIONS", "VARYING_PRIORS", "event_folds",
            "held_out_loss", "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
+
+#: Fewest events for a held-out choice among several candidates (every training set keeps two events).
+MIN_EVENTS = 3
 
 #: Held-out criteria: simulated envelope (output error) or dA/dt (equation error).
 CRITERIA = ("output", "derivative")
@@ -307,6 +310,7 @@ class ModelSelection:
     model_ : the chosen candidate fitted to every event
     chosen_ : str, its name
     names_ : list of str, the candidates' names
+    note_ : str, why no held-out choice was made ("" when it was)
     losses_ : ndarray, shape (C, E), held-out loss of every candidate on every event
     in_set_ : ndarray of bool, shape (C,), the confidence set
     excess_, se_ : ndarray, shape (C,), summed loss above the best's and its standard error
@@ -365,7 +369,14 @@ class ModelSelection:
         self.names_ = [c.name for c in self.candidates]
         self.event_ids_ = [r.event_id for r in records]
         self.losses_ = np.zeros((C, E))
-        if C > 1:
+        self.note_ = ""
+        if C > 1 and E < MIN_EVENTS:
+            # Leaving events out would leave a single event to fit: no evidence, the simplest candidate.
+            self.losses_[:] = np.nan
+            self.note_ = (f"{E} events: too few for a held-out choice (at least {MIN_EVENTS}); "
+                          "the simplest candidate is used")
+            self.in_set_, self.excess_, self.se_ = np.ones(C, dtype=bool), np.zeros(C), np.zeros(C)
+        elif C > 1:
             fold = event_folds(E, self.n_folds, self.seed)
             tasks = [{"model": c.model, "records": records, "fold": fold, "fold_index": f,
                       "criterion": self.criterion}
@@ -381,7 +392,7 @@ class ModelSelection:
             self.in_set_, self.excess_, self.se_ = np.ones(1, dtype=bool), np.zeros(1), np.zeros(1)
         members = np.flatnonzero(self.in_set_)
         complexity = np.array([c.complexity for c in self.candidates])
-        total = self.losses_.sum(axis=1)
+        total = np.nan_to_num(self.losses_.sum(axis=1))
         chosen = int(min(members, key=lambda i: (complexity[i], total[i], i)))
         self.chosen_index_ = chosen
         self.chosen_ = self.names_[chosen]
@@ -405,7 +416,7 @@ class ModelSelection:
     def __getattr__(self, name):
         # Everything else (predict, simulate, order_contributions, curves, measured_wind, equations, save, ...)
         # is the chosen model's. Fitted attributes of the selection itself are found before this is called.
-        if name.startswith("__") or name in ("model_", "candidates"):
+        if name.startswith("_") or name in ("model_", "candidates"):
             raise AttributeError(name)
         model = self.__dict__.get("model_")
         if model is None:
@@ -419,13 +430,30 @@ class ModelSelection:
             return np.asarray(own(rec, window_start, window_end), dtype=int)
         return model_window_regimes(model, rec, window_start, window_end, tau=self.tau)["regime"].astype(int)
 
+    def _own_verdict(self, record: Record, window_start, window_end) -> dict:
+        """The chosen model's verdict on the measured record (the last one kept: regimes and flags ask in turn)."""
+        start = np.atleast_1d(np.asarray(window_start, dtype=float))
+        end = np.atleast_1d(np.asarray(window_end, dtype=float))
+        key = (id(record), start.tobytes(), end.tobytes())
+        last = self.__dict__.get("_last_verdict")
+        if last is not None and last[0] == key and last[1] is record:
+            return last[2]
+        rec = measured_input(self.model_, record)
+        if self.verdict is not None:
+            out = dict(self.verdict(self.model_, rec, start, end))
+        else:
+            regime = self._regimes(self.model_, record, start, end)
+            own = getattr(self.model_, "identifiable", None)
+            flag = (np.asarray(own(rec, start, end), dtype=bool) if callable(own)
+                    else np.zeros(regime.shape, dtype=bool))
+            out = {"regime": regime, "identifiable": flag}
+        self.__dict__["_last_verdict"] = (key, record, out)
+        return out
+
     def window_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
         """Regime of every window (W, S) by the chosen model, on the record's wind as at fit."""
         self._check_fitted()
-        if self.verdict is not None:
-            rec = measured_input(self.model_, record)
-            return np.asarray(self.verdict(self.model_, rec, window_start, window_end)["regime"], dtype=int)
-        return self._regimes(self.model_, record, window_start, window_end)
+        return np.asarray(self._own_verdict(record, window_start, window_end)["regime"], dtype=int)
 
     def agreement(self, record: Record, window_start, window_end, regime: np.ndarray | None = None) -> np.ndarray:
         """Windows (W, S) on which every other member of the confidence set and every perturbed refit give
@@ -440,14 +468,9 @@ class ModelSelection:
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
         """The chosen model's verdict (W, S) narrowed to :meth:`agreement`'s windows."""
         self._check_fitted()
-        rec = measured_input(self.model_, record)
-        if self.verdict is not None:
-            flag = np.asarray(self.verdict(self.model_, rec, window_start, window_end)["identifiable"], dtype=bool)
-        elif callable(getattr(self.model_, "identifiable", None)):
-            flag = np.asarray(self.model_.identifiable(rec, window_start, window_end), dtype=bool)
-        else:
-            return np.zeros(self.window_regimes(record, window_start, window_end).shape, dtype=bool)
-        return flag & self.agreement(record, window_start, window_end)
+        own = self._own_verdict(record, window_start, window_end)
+        flag = np.asarray(own["identifiable"], dtype=bool)
+        return flag & self.agreement(record, window_start, window_end, own["regime"])
 
     # -- the evidence ----------------------------------------------------------------------------------
 
@@ -467,6 +490,7 @@ class ModelSelection:
             "n_perturbations": int(self.n_perturbations),
             "perturbation_timescale_s": float(self.perturbation_timescale_s),
             "wind_error_rms": float(np.sqrt(np.mean(self.wind_error_**2))),
+            "note": self.note_,
         }
 
     def evidence_text(self) -> str:
@@ -474,6 +498,8 @@ class ModelSelection:
         ev = self.evidence()
         best = min(c["held_out_loss"] for c in ev["candidates"])
         unit = "m^2" if self.criterion == "output" else "m^2/s^2"
+        if self.note_:
+            return self.note_
         lines = [f"held-out {('output' if self.criterion == 'output' else 'dA/dt')} error over "
                  f"{len(ev['events'])} events in {ev['n_folds']} folds (sum of squares, {unit}):"]
         for c in ev["candidates"]:
@@ -502,6 +528,11 @@ class ModelSelection:
 #: penalty of the leave-one-event-out confidence set, which gives rougher curves).
 VARYING_OPTIONS = {"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")}
 
+#: Options that change what enters the model (a covariate): a candidate's complexity counts their positions in
+#: the grid, so the one-standard-error rule prefers leaving them out. The other options (regularisation levels)
+#: add no complexity: among the confidence set's models of one structure, the lowest held-out loss decides.
+STRUCTURAL_OPTIONS = ("yaw_degree",)
+
 #: Options of the varying model that stay fixed in :func:`varying_selection` unless given: stated priors.
 #: The modal section weights are the averaged truth's for a mode seen at the sections (each section's
 #: share of the mode's energy); 30 s is the wind's smoothing time scale.
@@ -517,7 +548,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     ----------
     options : dict of str to sequence, optional
         Parameter name -> candidate values, simplest first (default :data:`VARYING_OPTIONS`);
-        the grid is their product and a candidate's complexity is the sum of its values' positions.
+        the grid is their product and a candidate's complexity is the sum of its values' positions
+        in the :data:`STRUCTURAL_OPTIONS`.
         A parameter given in ``params`` is pinned: it leaves the grid.
     n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler
         Those of :class:`ModelSelection` (``seed`` also the models').
@@ -544,7 +576,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         chosen = {k: grid[k][i] for k, i in zip(names, idx)}
         label = "-".join(_option_label(k, v) for k, v in chosen.items()) or "varying"
         candidates.append(Candidate(name=label, model=VaryingCoefficientSINDy(**fixed, **chosen),
-                                    complexity=int(sum(idx)), options=chosen))
+                                    complexity=int(sum(i for k, i in zip(names, idx) if k in STRUCTURAL_OPTIONS)),
+                                    options=chosen))
     return ModelSelection(candidates=candidates, n_folds=n_folds, criterion=criterion,
                           n_perturbations=n_perturbations, perturbation_timescale_s=perturbation_timescale_s,
                           tau=fixed.get("tau", DEFAULT_TAU), verdict=varying_window_verdicts, seed=seed,

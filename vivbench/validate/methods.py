@@ -92,7 +92,7 @@ from vivbench.validate.recovery import (finite_median, model_rhs_true_AU, model_
 
 __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
            "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
-           "CampaignMethod",
+           "CampaignMethod", "SelectedVerdictModel",
            "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel"]
 
 #: Names of the built-in methods.
@@ -225,14 +225,43 @@ class CampaignMethod:
         return f"CampaignMethod({self.kind!r}{''.join(f', {k}={v!r}' for k, v in self.params.items())})"
 
     def fit(self, records: Sequence[Record]) -> VerdictModel:
+        from vivbench.analysis.selection import varying_selection, without_yaw
         from vivbench.models.campaign import PooledSINDy
-        from vivbench.models.varying import VaryingCoefficientSINDy
 
         if self.kind == "campaign":
             return VerdictModel(PooledSINDy(**self.params).fit(records), _campaign_verdict)
-        model = VaryingCoefficientSINDy(**self.params).fit(records)
-        # Measured records are evaluated on the wind the model was fitted on; the truth's own wind as it is.
-        return MeasuredWindVerdictModel(model, _varying_verdict)
+        # The options not given in params are chosen from the records' held-out evidence, as by vivbench pool.
+        params = dict(self.params)
+        selection_keys = ("n_folds", "criterion", "n_perturbations", "perturbation_timescale_s", "workers", "options")
+        sel_params = {k: params.pop(k) for k in selection_keys if k in params}
+        selection = varying_selection(**sel_params, **params)
+        if any(r.yaw is None for r in records):
+            selection = without_yaw(selection)
+        return SelectedVerdictModel(selection.fit(records))
+
+
+class SelectedVerdictModel(VerdictModel):
+    """A fitted :class:`vivbench.analysis.ModelSelection` as a method: its own verdict on measured records.
+
+    The selection evaluates measured records on the wind each of its models was fitted on; ``predict``
+    and ``order_contributions`` take a record's wind as given (the truth's own wind).
+    """
+
+    def __init__(self, model):
+        super().__init__(model, None)
+
+    def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
+        """Bool (W, S): the selection's verdict, and the window above the noise floor."""
+        ok = np.asarray(self.model.identifiable(record, window_start, window_end), dtype=bool)
+        return ok & above_noise_floor(record, window_start, window_end)
+
+    def window_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
+        """Int (W, S): the chosen model's regime of each window of the measured record."""
+        return np.asarray(self.model.window_regimes(record, window_start, window_end), dtype=int)
+
+    def simulate(self, record: Record, *args, **kwargs):
+        """The chosen model's ``simulate`` on the measured record's wind as it was fitted on it."""
+        return self.model.simulate(measured_input(self.model, record), *args, **kwargs)
 
 
 class FittedWindows:
