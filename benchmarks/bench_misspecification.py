@@ -302,10 +302,10 @@ def main(argv=None) -> dict:
     parser.add_argument("--no-eiv-weights", action="store_true",
                         help="the varying models' eiv_weights=False (default: the model's, True: effective-variance "
                              "weights against the wind error)")
-    parser.add_argument("--wind-weights", default="equal", choices=("equal", "modal", "auto"),
+    parser.add_argument("--wind-weights", default="equal", choices=("equal", "modal"),
                         help="the varying models' wind_weights: the sections' weights in the mean wind (default: "
                              "equal, the model's default before 'auto')")
-    parser.add_argument("--penalty-choice", default="cv", choices=("cv", "least", "loeo", "auto"),
+    parser.add_argument("--penalty-choice", default="cv", choices=("cv", "least", "loeo"),
                         help="the varying models' penalty_choice (default: cv, the model's default before 'auto')")
     parser.add_argument("--substitute", default="",
                         help="comma-separated truth substitutions for the varying models, each a '+'-joined "

@@ -83,11 +83,11 @@ def test_least_penalty_overshoots_when_no_penalty_is_rejected(fits):
 
 
 def test_choice_is_validated_saved_and_defaults_for_older_files(fits, tmp_path):
-    with pytest.raises(InputError, match="penalty_choice must be one of 'auto', 'cv', 'least', 'loeo'"):
+    with pytest.raises(InputError, match="penalty_choice must be one of 'cv', 'least', 'loeo'"):
         VaryingCoefficientSINDy(penalty_choice="smallest").fit(_noisy_wind_records(2))
-    with pytest.raises(InputError, match="wind_weights must be 'auto', 'modal', 'equal'"):
-        VaryingCoefficientSINDy(wind_weights="automatic").fit(_noisy_wind_records(2))
-    assert VaryingCoefficientSINDy().penalty_choice == VaryingCoefficientSINDy().wind_weights == "auto"
+    with pytest.raises(InputError, match="wind_weights must be 'modal', 'equal'"):
+        VaryingCoefficientSINDy(wind_weights="auto").fit(_noisy_wind_records(2))
+    assert (VaryingCoefficientSINDy().penalty_choice, VaryingCoefficientSINDy().wind_weights) == ("cv", "modal")
     path = fits["least"].save(tmp_path / "m.nc")
     loaded = VaryingCoefficientSINDy.load(path)
     assert loaded.penalty_choice == loaded.penalty_choice_ == "least"
@@ -106,38 +106,19 @@ def test_choice_is_validated_saved_and_defaults_for_older_files(fits, tmp_path):
     np.testing.assert_array_equal(older.penalty_cv_, older.penalty_)
 
 
-@pytest.mark.parametrize("min_hours, min_events, expected", [(4.0, 5, ("modal", "least")),
-                                                            (6.0, 5, ("equal", "cv")), (4.0, 11, ("equal", "cv"))])
-def test_auto_follows_the_campaign_size(monkeypatch, tmp_path, min_hours, min_events, expected):
-    # "auto" (the default of both) is modal weights and the least plausible penalty for campaigns of at least
-    # AUTO_MIN_HOURS of records and AUTO_MIN_EVENTS events, else the plain mean and the 5-fold penalty: the fit
-    # must equal the explicit setting's, bit for bit.
-    import vivbench.models.varying as varying
-
-    recs = _noisy_wind_records()  # 10 events of 30 min: 5 h; the sections' amplitudes differ (modal != equal)
-    monkeypatch.setattr(varying, "AUTO_MIN_HOURS", min_hours)
-    monkeypatch.setattr(varying, "AUTO_MIN_EVENTS", min_events)
-    settings = {k: v for k, v in SETTINGS.items() if k != "wind_weights"}
-    auto = VaryingCoefficientSINDy(**settings).fit(recs)
-    weights, choice = expected
-    explicit = VaryingCoefficientSINDy(wind_weights=weights, penalty_choice=choice, **settings).fit(recs)
-    assert (auto.wind_weights_choice_, auto.penalty_choice_) == expected
-    assert not np.allclose(auto.wind_weights_, 0.5) if weights == "modal" else np.all(auto.wind_weights_ == 0.5)
-    np.testing.assert_array_equal(auto.wind_weights_, explicit.wind_weights_)
-    np.testing.assert_array_equal(auto.penalty_, explicit.penalty_)
-    np.testing.assert_array_equal(auto.coef_, explicit.coef_)
-    loaded = VaryingCoefficientSINDy.load(auto.save(tmp_path / "auto.nc"))
-    assert loaded.penalty_choice == "auto" and (loaded.wind_weights_choice_, loaded.penalty_choice_) == expected
-
-
-def test_campaign_hours_are_the_records_spans():
-    from vivbench.models.varying import _record_hours
-
-    recs = _noisy_wind_records(3)
-    recs[0] = dataclasses.replace(recs[0], t=recs[0].t + 1e6)  # the events' spans, not their start times
-    expected = sum(float(r.t[-1] - r.t[0]) for r in recs) / 3600.0
-    assert _record_hours(recs) == pytest.approx(expected, rel=1e-12)
-    assert 1.4 < _record_hours(recs) < 1.5  # three events of 30 min at 1 s steps
+def test_files_of_the_former_size_rule_load_with_the_choice_they_made(fits, tmp_path):
+    # Files written while wind_weights and penalty_choice defaulted to "auto" (chosen by the campaign's size)
+    # load with the weights and penalty choice the fit made.
+    path = fits["least"].save(tmp_path / "m.nc")
+    with xr.open_dataset(path) as ds:
+        old = ds.load()
+    params = json.loads(old.attrs["params_json"])
+    params["penalty_choice"] = params["wind_weights"] = "auto"
+    old.attrs["params_json"] = json.dumps(params)
+    old.to_netcdf(tmp_path / "auto.nc")
+    loaded = VaryingCoefficientSINDy.load(tmp_path / "auto.nc")
+    assert (loaded.penalty_choice, loaded.wind_weights) == ("least", fits["least"].wind_weights_choice_)
+    np.testing.assert_array_equal(loaded.coef_, fits["least"].coef_)
 
 
 def test_pool_passes_the_choice_to_the_model(small_results, tmp_path):

@@ -62,7 +62,7 @@ def test_modal_weights_follow_a_bell_of_the_weighted_wind(modal_truth):
     fit, held_out = modal_truth
     modal = _fit(fit, "modal")
     assert_close(modal.wind_weights_, W_MODAL)
-    equal = _fit(fit, "equal")  # the default ("auto") on campaigns smaller than AUTO_MIN_HOURS
+    equal = _fit(fit, "equal")
     assert_close(equal.wind_weights_, np.full(3, 1 / 3))
     # One curve of the plain mean cannot carry a bell of the weighted mean when the sections' winds differ.
     assert _rel_err(equal, held_out) > 5 * _rel_err(modal, held_out)

@@ -113,7 +113,7 @@ def _chain(out: Path, *, mode: str, events: int, seed: int, minutes: str, worker
     if not list(identify.glob("*.identify.nc")):
         print(f"vivbench demo: no event was identified in {identify}; nothing else to do", file=sys.stderr)
         return False
-    _step(["pool", str(identify), "--model", model], None, failures)
+    _step(["pool", str(identify), "--model", model, *common], None, failures)
     greybox = None
     if refit:
         # The grey-box reference refit is given the synthetic bridge's properties as a user would give

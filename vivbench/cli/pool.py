@@ -84,7 +84,7 @@ def run(args) -> int:
 
 def _wind_weights(text: str | None):
     """``--wind-weights``: None (the model's default), a named choice, or comma-separated numbers."""
-    if text is None or text in ("auto", "modal", "equal"):
+    if text is None or text in ("modal", "equal"):
         return text
     from vivbench.models.wind_weights import check_wind_weights
 
@@ -92,7 +92,7 @@ def _wind_weights(text: str | None):
         weights = tuple(float(x) for x in text.split(","))
         check_wind_weights(weights)
     except ValueError:  # InputError is one
-        raise InputError(f"--wind-weights must be auto, modal, equal or comma-separated numbers >= 0 with a "
+        raise InputError(f"--wind-weights must be modal, equal or comma-separated numbers >= 0 with a "
                          f"positive sum (one per section); got {text!r}") from None
     return weights
 
@@ -116,16 +116,14 @@ def register(sub) -> None:
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
                         "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
-    s.add_argument("--wind-weights", default=None, metavar="auto|equal|modal|W1,W2,...",
+    s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",
                    help="with --model varying and the mean wind: the sections' weights in it: modal (default, a "
                         "prior: each section's share of the mode's energy, sum of A_k^2, the weights of the averaged "
-                        "truth when the sections' tributary lengths are equal), equal (the plain mean), auto (modal "
-                        "on campaigns of 4 h and 5 events or more, else equal), or one "
+                        "truth when the sections' tributary lengths are equal), equal (the plain mean), or one "
                         "number per section (e.g. L_k phi_k^2 from the bridge's drawings)")
-    s.add_argument("--penalty-choice", choices=("auto", "cv", "least", "loeo"), default=None,
+    s.add_argument("--penalty-choice", choices=("cv", "least", "loeo"), default=None,
                    help="with --model varying: the curves' roughness penalty (default: cv or least, chosen from the "
-                        "campaign's held-out evidence): auto (least on campaigns of 4 h and 5 events or more, else cv), "
-                        "cv (the 5-fold "
+                        "campaign's held-out evidence): cv (the 5-fold "
                         "cross-validated error's minimum), least (the least penalty whose leave-one-event-out error "
                         "is not significantly above the best one's) or loeo (the leave-one-event-out error's "
                         "minimum)")

@@ -20,10 +20,9 @@ Criterion: M (from ``n_basis``) and lambda (from ``penalties``, relative to
 trace(X^T X) / trace(P)) are chosen per section by K-fold cross-validation over
 events (whole events are left out, so the strong correlation of derivative
 errors within an event cannot make a rough fit look good, as it does with
-GCV); on campaigns of ``AUTO_MIN_HOURS`` or more the default
-(``penalty_choice="auto"``) then takes the least lambda that the final fit's
-leave-one-event-out errors cannot tell from the best (the parameter's
-docstring). Optionally (``select_orders``) the same cross-validation then
+GCV); with ``penalty_choice="least"`` the fit then takes the least lambda that
+the final fit's leave-one-event-out errors cannot tell from the best (the
+parameter's docstring). Optionally (``select_orders``) the same cross-validation then
 drops every order whose removal does not increase the cross-validated error.
 
 Everything is computed from per-block sufficient statistics (X_b^T X_b, X_b^T y_b,
@@ -101,7 +100,7 @@ from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights,
 from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
-           "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES", "AUTO_MIN_EVENTS", "AUTO_MIN_HOURS"]
+           "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES"]
 
 #: Spline degree (cubic).
 DEGREE = 3
@@ -111,21 +110,10 @@ DEGREE = 3
 #: campaign to a point anemometer's slow turbulence (the seed-0 realistic campaign chose 30 s).
 WIND_SMOOTHING_GRID = (0.0, 15.0, 30.0, 60.0)
 
-PENALTY_CHOICES = ("auto", "cv", "least", "loeo")
-"""Values of ``penalty_choice``: by the campaign's size (``AUTO_MIN_HOURS``, ``AUTO_MIN_EVENTS``), the 5-fold
-cross-validated error's minimum, the least penalty of the confidence set of the leave-one-event-out errors, or
-their minimum."""
-
-#: Campaigns of at least this many hours of records (summed over the events) and at least ``AUTO_MIN_EVENTS``
-#: events get modal weights and the least plausible penalty from ``"auto"`` (``wind_weights`` and
-#: ``penalty_choice``); smaller ones equal weights and the 5-fold penalty. Set between the largest campaign
-#: where that was measured worse (2.67 h) and the smallest where it was measured better (5.06 h): the
-#: parameters' docstrings and the README.
-AUTO_MIN_HOURS = 4.0
-
-#: With fewer events the one-sided signed-rank test of the penalties' confidence set rejects nothing at 0.95
-#: (its smallest p-value is 2^-n), so the least plausible penalty would always be the smallest candidate.
-AUTO_MIN_EVENTS = 5
+PENALTY_CHOICES = ("cv", "least", "loeo")
+"""Values of ``penalty_choice``: the 5-fold cross-validated error's minimum, the least penalty of the confidence
+set of the leave-one-event-out errors, or their minimum. Which suits a campaign is chosen from its own held-out
+evidence by :func:`vivbench.analysis.varying_selection` (``vivbench pool``)."""
 
 #: Settings of ``wind_input="additive"`` chosen on the seed-0 realistic campaign (tuning) by the median
 #: dA/dt error on the truth's (A, U), ``benchmarks/bench_misspecification.py``: there the model's own
@@ -540,59 +528,26 @@ class VaryingCoefficientSINDy(ModelBase):
         higher coverage, flagged accuracy >= 0.996, none flagged on
         forced_only. Costs a second weighted pass at the chosen basis only.
         :meth:`event_statistics` stays unweighted.
-    wind_weights : {"auto", "equal", "modal"} or sequence of float
+    wind_weights : {"modal", "equal"} or sequence of float
         The sections' weights in the mean wind (and yaw) of ``wind_input="mean"``
-        (:mod:`vivbench.models.wind_weights`): ``"equal"`` the plain mean;
-        ``"modal"`` each section's share of the mode's energy, sum_t A_k^2
-        over the campaign, which are the averaged truth's weights L_k phi_k^2 of
-        the linear order when the tributary lengths are equal; or one weight per
-        section (normalised), e.g. L_k phi_k^2 from the bridge's drawings.
-        ``"auto"`` (default): ``"modal"`` for campaigns of at least
-        ``AUTO_MIN_HOURS`` of records and ``AUTO_MIN_EVENTS`` events, else
-        ``"equal"`` (with ``penalty_choice`` ``"auto"``, below). Fitted on the
-        truth's own (A, U, dA) of the seed-0 realistic campaign the floor
-        falls from 0.089 to 0.054
-        (``benchmarks/bench_misspecification.py --wind-weights modal``).
-    penalty_choice : {"auto", "cv", "least", "loeo"}
+        (:mod:`vivbench.models.wind_weights`): ``"modal"`` (default) each
+        section's share of the mode's energy, sum_t A_k^2 over the campaign,
+        which are the averaged truth's weights L_k phi_k^2 of the linear order
+        when the tributary lengths are equal; ``"equal"`` the plain mean; or one
+        weight per section (normalised), e.g. L_k phi_k^2 from the bridge's
+        drawings.
+    penalty_choice : {"cv", "least", "loeo"}
         How the roughness penalty of the fitted curves is chosen at the
-        selected basis. ``"cv"``: the minimum of the 5-fold
+        selected basis. ``"cv"`` (default): the minimum of the 5-fold
         cross-validated error of the unweighted fit that chose the basis.
         ``"least"``: the least penalty of the confidence set of penalties
         (leave-one-event-out error of the final, effective-variance weighted
         fit not significantly above the best one's, ``model_set_test`` at
-        ``model_set_level``). ``"loeo"``: the best member of that set.
-        ``"auto"`` (default): ``"least"`` for campaigns of at least
-        ``AUTO_MIN_HOURS`` of records and ``AUTO_MIN_EVENTS`` events, else
-        ``"cv"``. The cross-validated error
-        is flat over decades of penalty (seed 0, modal weights: within 4 %
-        from 1e-5 to 1e-2) and its 5-fold minimum sits at the smoothing end
-        (0.01 there, outside the confidence set {1e-5, 1e-4, 1e-3}); a
-        reading, not measured: the measured wind's errors blur the lock-in
-        bell, so the penalty that predicts the measured data best smooths the
-        curve more than the truth's. With modal weights, median dA/dt error on the true (A, U),
-        cv / least / loeo (``vivbench pool DIR --wind-weights modal
-        --penalty-choice ...`` then ``vivbench validate``): seed 0 0.101 /
-        0.082 / 0.080; held out, seed 1 0.100 / 0.092 / 0.100, seed 81
-        0.138 / 0.081 / 0.100 (equal weights with cv: 0.166), the second
-        bridge 0.087 / 0.101 / 0.093, bridge C 0.180 / 0.089 / 0.110, the
-        no-change campaign 0.134 / 0.092 / 0.091 (flagged accuracy 0.806 /
-        0.995 / 0.996). On the drift study's campaign "cv" and "loeo"
-        missed the change and "loeo" flagged windows only 0.786 right.
-        Why ``"auto"`` switches on the campaign's size: on the leaderboard's
-        scenarios (8 events of 20 min, 2.67 h) "least" with modal weights is
-        worse than equal weights with "cv" on five of seven, and on the
-        4-event campaign of ``examples/compare_methods.toml`` (2 h) its a_k1
-        curve error is 9.1 (equal with cv: 0.50): the held-out test rejects
-        no small penalty, "least" takes the smallest candidate, and its
-        curves follow the noise (``tests/test_varying_penalty_choice.py``
-        pins this on a toy campaign). On every realistic campaign of 5 h or
-        more measured (8 to 31 events of 20-60 min) its dA/dt error was the
-        lower but on the forced-only one (0.172 against 0.168), not always
-        its regime accuracy, and on two of 10 and 12 events equal with "cv"
-        broke the verdict's promise (flagged accuracy 0.815 and 0.907).
-        ``AUTO_MIN_HOURS`` lies between; the README ("The campaign model's
-        defaults") has the tables and the campaigns near the threshold that
-        were held out.
+        ``model_set_level``): rougher curves, which follow a sharp lock-in
+        bell better where the campaign has the data for it and follow the
+        noise where it has not. ``"loeo"``: the best member of that set.
+        :func:`vivbench.analysis.varying_selection` chooses between them from
+        the campaign's own held-out evidence.
 
     Attributes
     ----------
@@ -664,8 +619,8 @@ class VaryingCoefficientSINDy(ModelBase):
                  wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
                  wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None, eiv_weights: bool = True,
-                 model_set_test: str = "signed_rank", wind_weights: str | Sequence[float] = "auto",
-                 penalty_choice: str = "auto"):
+                 model_set_test: str = "signed_rank", wind_weights: str | Sequence[float] = "modal",
+                 penalty_choice: str = "cv"):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -799,8 +754,8 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"wind_input must be 'section', 'mean' or 'additive'; got {self.wind_input!r}")
         if not isinstance(self.wind_weights, str):
             check_wind_weights(self.wind_weights)
-        elif self.wind_weights not in ("auto",) + WIND_WEIGHT_MODES:
-            raise InputError(f"wind_weights must be 'auto', 'modal', 'equal' or a sequence of one weight per "
+        elif self.wind_weights not in WIND_WEIGHT_MODES:
+            raise InputError(f"wind_weights must be 'modal', 'equal' or a sequence of one weight per "
                              f"section; got {self.wind_weights!r}")
         if self.penalty_choice not in PENALTY_CHOICES:
             raise InputError(f"penalty_choice must be one of {', '.join(map(repr, PENALTY_CHOICES))}; "
@@ -830,9 +785,8 @@ class VaryingCoefficientSINDy(ModelBase):
         for rec in raw:
             if rec.n_sections != raw[0].n_sections:
                 raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {raw[0].n_sections}")
-        large = len(raw) >= AUTO_MIN_EVENTS and _record_hours(raw) >= AUTO_MIN_HOURS
-        weights = ("modal" if large else "equal") if _is_auto(self.wind_weights) else self.wind_weights
-        self.penalty_choice_ = ("least" if large else "cv") if self.penalty_choice == "auto" else self.penalty_choice
+        weights = self.wind_weights
+        self.penalty_choice_ = self.penalty_choice
         if self.wind_input != "mean":
             weights = "equal"
         self.wind_weights_choice_ = weights if isinstance(weights, str) else "given"
@@ -1601,6 +1555,11 @@ class VaryingCoefficientSINDy(ModelBase):
         params.setdefault("model_set_test", "z")  # files written before the signed-rank test
         params.setdefault("wind_weights", "equal")  # files written before the sections' winds were weighted
         params.setdefault("penalty_choice", "cv")  # files written before the least plausible penalty
+        # Files written while "auto" chose by the campaign's size: the choice the fit made.
+        if params["penalty_choice"] == "auto":
+            params["penalty_choice"] = str(ds.attrs.get("penalty_choice_fitted", "cv"))
+        if params["wind_weights"] == "auto":
+            params["wind_weights"] = str(ds.attrs.get("wind_weights_choice", "equal"))
         if not isinstance(params["wind_weights"], str):
             params["wind_weights"] = tuple(params["wind_weights"])
         if params["wind_smoothing_grid"] is not None:
@@ -1677,16 +1636,6 @@ def penalised_rss(G: np.ndarray, b: np.ndarray, yy: np.ndarray, P: np.ndarray, p
     ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / max(idx.size, 1))[..., None, None] * np.eye(idx.size)
     c = np.linalg.solve(Gk + (penalty * scale)[..., None, None] * Pk + ridge, bk[..., None])[..., 0]
     return np.einsum("...p,...pq,...q->...", c, Gk, c) - 2.0 * np.einsum("...p,...p->...", c, bk) + yy
-
-
-def _record_hours(records: Sequence[Record]) -> float:
-    """The records' summed time spans (first to last sample), h."""
-    return float(sum(np.ptp(r.t) if r.t.size else 0.0 for r in records)) / 3600.0
-
-
-def _is_auto(spec) -> bool:
-    """Whether a ``wind_weights`` value is ``"auto"`` (it may also be a sequence or array of numbers)."""
-    return isinstance(spec, str) and spec == "auto"
 
 
 def _confidence_set(loss: np.ndarray, level: float, test: str = "z") -> np.ndarray:
