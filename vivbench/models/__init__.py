@@ -11,6 +11,9 @@ from vivbench.models.campaign import (
     window_sums,
     RATIO_LEVEL,
 )
+from vivbench.models.binned import BinnedPolynomial
+from vivbench.models.curve_support import (EXTRAPOLATED, curves_inside_data, data_wind_range, extrapolated_mask,
+                                           mark_extrapolated)
 from vivbench.models.greybox import BridgeProperties, GreyBoxRefit, curves_to_functions
 from vivbench.models.protocol import (
     Method,
@@ -57,7 +60,8 @@ from vivbench.models.window import WindowProblem, WindowedSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
-    "BridgeProperties", "GreyBoxRefit", "curves_to_functions",
+    "BridgeProperties", "GreyBoxRefit", "curves_to_functions", "BinnedPolynomial",
+    "EXTRAPOLATED", "curves_inside_data", "data_wind_range", "extrapolated_mask", "mark_extrapolated",
     "PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
     "window_record", "window_stats", "window_sums", "RATIO_LEVEL", "Method", "FittedModel", "Predictor",
     "Simulator", "CampaignLevel", "Persistent", "HasEquations", "ModelBase", "NotFittedError", "as_record",
