@@ -50,7 +50,8 @@ def test_binned_fit_is_the_least_squares_of_each_bin_and_equation():
             assert_close(model.coef_[j, k], expected, rtol=1e-7,
                          reason="the fit scales the columns to unit RMS before lstsq: rounding differs")
     # predict: the bin's polynomial; NaN in the bin left empty and outside the fitted bins
-    rec = Record(event_id="p", t=np.arange(3.0), A=np.full((3, 2), 0.1), U=np.array([[7.2, 7.2], [9.2, 9.2], [12.0, 12.0]]))
+    rec = Record(event_id="p", t=np.arange(3.0), A=np.full((3, 2), 0.1),
+                 U=np.array([[7.2, 7.2], [9.2, 9.2], [12.0, 12.0]]))
     pred = model.predict(rec)
     assert_close(pred[0], model.coef_[0] @ (0.1 ** np.arange(4)))
     assert np.isnan(pred[1:]).all()

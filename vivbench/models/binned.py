@@ -13,7 +13,7 @@ import numpy as np
 import xarray as xr
 
 from vivbench.core.record import Record
-from vivbench.models.protocol import ModelBase, as_record, section_names
+from vivbench.models.protocol import ModelBase, fit_records, section_names
 
 __all__ = ["BinnedPolynomial"]
 
@@ -82,15 +82,8 @@ class BinnedPolynomial(ModelBase):
         self
         """
         self._check_params()
-        records = [as_record(r, i) for i, r in enumerate(records)]
-        if not records:
-            raise ValueError("no records to fit")
+        records = fit_records(records)
         S = records[0].n_sections
-        for r in records:
-            if r.n_sections != S:
-                raise ValueError(f"record {r.event_id!r} has {r.n_sections} sections; the first has {S}")
-            if r.dA is None:
-                raise ValueError(f"record {r.event_id!r} has no dA (needed to fit)")
         A = np.concatenate([r.A for r in records])
         dA = np.concatenate([r.dA for r in records])
         U = np.concatenate([r.U for r in records])

@@ -69,8 +69,9 @@ _NOTES = (
     "the truth's (/truth/curves), over the lock-in range (winds of the truth samples whose regime is "
     "self-excited, 2..4): relative RMS of the net linear coefficient a_k1 on the model's wind grid, and of "
     "sum_i a_ki(U) A^i on those samples; and energy-weighted (pooled_curve_error_energy): sum_i a_ki(U_k) A_k^i "
-    "at the truth's (A, U) of every sample of every equation against the same sum with the truth's curves. The curves are scored only "
-    "at winds inside each equation's fitted data (the extrapolated parts, curves_extrapolated, are left out).",
+    "at the truth's (A, U) of every sample of every equation against the same sum with the truth's curves. "
+    "The curves are scored only at winds inside each equation's fitted data (the extrapolated parts, "
+    "curves_extrapolated, are left out).",
     *SUPPORT_NOTES,
 )
 

@@ -100,7 +100,8 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         section's ``linear``, ``total``, ``linear_band_coverage`` and
         ``lock_in_wind``; ``energy``: :func:`curve_energy_error` over every
         sample and equation against the truth's curves; with ``records``
-        every curve score leaves out the winds outside the fitted data), ``y1`` (relative RMS error and band coverage of Y1
+        every curve score leaves out the winds outside the fitted data),
+        ``y1`` (relative RMS error and band coverage of Y1
         over the lock-in range; NaN when the truth's Y1 is not readable),
         ``regime`` (:func:`regime_scores` plus ``precision_identifiable``: share
         of flagged windows with the true regime), ``rhs_error_true_AU_median``
@@ -207,7 +208,8 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         "linear_band_coverage": c.get("linear_band_coverage", float("nan")),
         "y1_error": out["y1"]["error"], "y1_band_coverage": out["y1"]["band_coverage"],
         "nmse_median": out["nmse_median"], "rhs_error_true_AU_median_active": out["rhs_error_true_AU_median_active"],
-        "rhs_error_true_AU_energy": out["rhs_error_true_AU_energy"], "curve_error_energy": c.get("energy", float("nan")),
+        "rhs_error_true_AU_energy": out["rhs_error_true_AU_energy"],
+        "curve_error_energy": c.get("energy", float("nan")),
     }
     if out["regime"] is not None:
         summary.update(regime_coverage=out["regime"]["coverage"],

@@ -74,7 +74,8 @@ def parse_methods(methods: str | Sequence[str]) -> list[str]:
         methods = [m.strip() for m in methods.split(",") if m.strip()]
     methods = list(methods)
     if not methods:
-        raise InputError("no method named: give e.g. --methods windows,campaign,varying,pysindy-cp,binned,pkg.mod:factory")
+        raise InputError("no method named: give e.g. "
+                         "--methods windows,campaign,varying,pysindy-cp,binned,pkg.mod:factory")
     if len(set(methods)) != len(methods):
         raise InputError(f"methods named twice: {', '.join(methods)}")
     return methods

@@ -45,11 +45,11 @@ __all__ = ["SCORES", "VALUES", "SCORE_LABELS", "LEADERBOARD_COLUMNS", "write_csv
            "leaderboard_markdown", "write_markdown", "plot_leaderboard"]
 
 #: The scores of a cell, in table order.
-SCORES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "rhs_error_true_AU_energy", "curve_error",
-          "curve_error_energy", "forecast_nmse", "fit_time_s")
+SCORES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "rhs_error_true_AU_energy",
+          "curve_error", "curve_error_energy", "forecast_nmse", "fit_time_s")
 #: Every value a cell stores: the scores and the share of the forecast runs simulated.
-VALUES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "rhs_error_true_AU_energy", "curve_error",
-          "curve_error_energy", "forecast_nmse", "forecast_covered", "fit_time_s")
+VALUES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "rhs_error_true_AU_energy",
+          "curve_error", "curve_error_energy", "forecast_nmse", "forecast_covered", "fit_time_s")
 #: Values added after the first tables were written: absent from an old table, they read as NaN.
 _ADDED_VALUES = ("rhs_error_true_AU_energy", "curve_error_energy")
 #: Score titles with units.

@@ -400,7 +400,8 @@ def resolve_method(spec: str):
         ``"campaign"`` (:class:`CampaignMethod`: ``PooledSINDy`` with its bootstrap and
         confidence-region verdict), ``"varying"`` (``VaryingCoefficientSINDy`` with its own defaults,
         those of ``vivbench pool --model varying``: the yaw covariate when the records carry the
-        yaw, 30 s wind smoothing; bootstrap and confidence-set verdict), ``"pysindy-cp"`` (:class:`vivbench.models.PySINDyCP`, no verdict),
+        yaw, 30 s wind smoothing; bootstrap and confidence-set verdict), ``"pysindy-cp"``
+        (:class:`vivbench.models.PySINDyCP`, no verdict),
         ``"binned"`` (:class:`vivbench.models.BinnedPolynomial`: per 0.5 m/s bin of mean wind, dA_k/dt
         on [1, A_k, A_k^2, A_k^3] by least squares; no verdict; the floor to beat), or
         ``"package.module:factory"``: the module is imported and ``factory()`` called with no

@@ -462,7 +462,8 @@ def curve_energy_error(curves: np.ndarray, wind: np.ndarray, U: np.ndarray, A: n
     if wind_range is not None:
         rng = np.asarray(wind_range, dtype=float)
         if rng.shape != (U.shape[1], 2):
-            raise ValueError(f"wind_range must have shape ({U.shape[1]}, 2) ([U_min, U_max] per equation); got {rng.shape}")
+            raise ValueError(f"wind_range must have shape ({U.shape[1]}, 2) ([U_min, U_max] per equation); "
+                             f"got {rng.shape}")
         with np.errstate(invalid="ignore"):
             inside = (U >= rng[None, :, 0]) & (U <= rng[None, :, 1])
         dA_true = np.where(inside, dA_true, np.nan)

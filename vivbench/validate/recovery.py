@@ -27,7 +27,9 @@ from vivbench.core.terms import evaluate_library
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import energy_relative_error
 
-__all__ = ["recovery_by_event", "model_rhs_true_AU", "model_window_rhs_true_AU", "window_rhs_true_AU", "window_relative_errors", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
+__all__ = ["recovery_by_event", "model_rhs_true_AU", "model_window_rhs_true_AU", "window_rhs_true_AU",
+           "window_relative_errors", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors",
+           "regime_scores",
            "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU",
            "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on"]
 
