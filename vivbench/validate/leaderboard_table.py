@@ -281,6 +281,8 @@ def plot_leaderboard(rows: Sequence[dict], path: Path) -> Path:
         fig.colorbar(im, ax=ax, shrink=0.8)
     for ax in list(axes.flat)[len(SCORES):]:
         ax.axis("off")
+    if len(axes.flat) > len(SCORES):
+        ax = list(axes.flat)[len(SCORES)]
         ax.text(0.0, 0.5, "rows: scenarios (* in-class: truth inside the\nA^i U^j library, not field performance)\n"
                 "columns: methods\ngrey: not applicable or failed\n(-) dimensionless; fit time in s",
                 fontsize=8, va="center", transform=ax.transAxes)
