@@ -263,6 +263,7 @@ def test_cli_greybox_on_a_small_campaign(small_results, tmp_path, capsys):
     assert model.bridge.frequency == pytest.approx(0.327, rel=0.02)  # from the results, as identify found it
     summary = __import__("json").loads((out / "summary.json").read_text())
     assert summary["n_events"] == 2 and "truth_curve_error_linear" in summary
+    assert 0 < summary["truth_rhs_error_true_AU_energy"] < math.inf and "truth_curve_error_energy" in summary
     assert summary["verdict_bounds"] == "reflect" and isinstance(summary["verdict_reference"], str)
     # the default band holds the wind's errors-in-variables, and says how much of it
     assert 0.0 < summary["wind_band_variance_share"] < 1.0 and summary["truth_sandwich_bias_wind_linear_band_coverage"] >= 0

@@ -240,3 +240,19 @@ def test_report_cli_embeds_the_leaderboard(reference, tmp_path):
     assert "## Leaderboard: methods on the scenario suite" in text and "--leaderboard " in text
     assert "![Leaderboard heat maps](leaderboard_heatmaps.png)" in text
     assert (tmp_path / "lb" / "leaderboard_heatmaps.png").is_file()
+
+
+def test_a_table_written_before_the_energy_weighted_scores_reads_with_nan_there(tmp_path):
+    import math
+
+    from vivbench.validate.leaderboard_table import LEADERBOARD_COLUMNS, leaderboard_markdown, read_leaderboard
+
+    old = [c for c in LEADERBOARD_COLUMNS if c not in ("rhs_error_true_AU_energy", "curve_error_energy")]
+    values = {"scenario": "realistic", "scenario_version": "1", "in_class": "False", "method": "binned",
+              "has_verdict": "False", "error": ""}
+    row = [values.get(c, "0.25") for c in old]
+    (tmp_path / "leaderboard.csv").write_text(",".join(old) + "\n" + ",".join(row) + "\n")
+    (r,) = read_leaderboard(tmp_path)
+    assert r["rhs_error_true_AU"] == 0.25 and math.isnan(r["rhs_error_true_AU_energy"])
+    assert math.isnan(r["curve_error_energy"])
+    assert "| realistic v1 | n/a |" in leaderboard_markdown([r])

@@ -371,3 +371,85 @@ def test_energy_relative_error_weights_large_values_and_counts_misses():
     assert math.isnan(energy_relative_error(np.zeros(3), np.zeros(3)))
     with pytest.raises(ValueError, match="same shape"):
         energy_relative_error(np.zeros(2), np.zeros(3))
+
+
+class _ScaledTruth:
+    """A model whose dA/dt is the truth's 0.1 A, 50 % too large where A > 0.05 m (the large amplitudes)."""
+
+    def order_contributions(self, record):
+        r = np.zeros(record.A.shape + (4,))
+        r[..., 1] = 0.1 * (1.0 + 0.5 * (record.A > 0.05))
+        return r * record.A[..., None] ** np.arange(4)
+
+
+def test_score_fitted_reports_the_energy_weighted_error_beside_the_window_median():
+    """Four 50 s windows, the model exact on three small-amplitude ones and 50 % off on the large one.
+
+    Median over windows 0; energy-weighted sqrt(0.25 * 100 / (1 + 1 + 1 + 100)) (the large window has
+    ten times the dA/dt, a hundred times the energy).
+    """
+    from vivbench.core import Record
+    from vivbench.validate import score_fitted
+
+    t = np.arange(200.0)
+    A = np.where(t >= 150, 0.1, 0.01)[:, None]
+    U = np.full_like(A, 8.0)
+    r = np.zeros((t.size, 1, 4))
+    r[..., 1] = 0.1 * A
+    truth = xr.Dataset({"A": (("time", "section"), A), "U": (("time", "section"), U),
+                        "r": (("time", "section", "order"), r)}, coords={"time": t})
+    rec = Record(event_id="E1", t=t, A=A, U=U, dA=r.sum(-1))
+    windows = [(np.array([0.0, 50.0, 100.0, 150.0]), np.array([50.0, 100.0, 150.0, 200.0]))]
+    s = score_fitted(_ScaledTruth(), [rec], [truth], windows=windows, simulate=False)
+    assert s["rhs_error_true_AU_median"] == 0.0
+    assert s["rhs_error_true_AU_median_active"] == 0.0
+    assert_close(s["rhs_error_true_AU_energy"], math.sqrt(0.25 * 100 / 103))
+    assert math.isnan(s["curve_error_energy"])  # no curves
+
+
+def test_curve_energy_error_scores_inside_the_data_and_counts_holes_as_misses():
+    from vivbench.validate import curve_energy_error, curves_rhs
+
+    wind = np.array([6.0, 8.0, 10.0, 12.0])
+    true = np.zeros((1, 4, 4))
+    true[0, 1] = 0.01
+    true[0, 3] = -0.5
+    model = true.copy()
+    model[0, 1, 3] = 0.03  # wrong only at 12 m/s
+    U = np.array([[7.0], [9.0], [11.0], [12.0]])
+    A = np.full((4, 1), 0.1)
+    f_true = curves_rhs(true, wind, U, A)
+    assert_close(f_true[:, 0], np.full(4, 0.01 * 0.1 - 0.5e-3))
+    f_model = curves_rhs(model, wind, U, A)
+    expected = math.sqrt(np.sum((f_model - f_true) ** 2) / np.sum(f_true**2))
+    assert_close(curve_energy_error(model, wind, U, A, f_true), expected)
+    assert expected > 0
+    # the data end at 10.5 m/s: the samples at 11 and 12 m/s are extrapolations, left out
+    assert curve_energy_error(model, wind, U, A, f_true, [[6.5, 10.5]]) == 0.0
+    # a hole inside the data is a total miss (the 9 m/s sample interpolates a NaN at 8 m/s)
+    holed = model.copy()
+    holed[0, :, 1] = np.nan
+    assert_close(curve_energy_error(holed, wind, U, A, f_true, [[6.5, 10.5]]), math.sqrt(2 / 2))
+
+
+def test_extrapolated_parts_of_the_curves_are_marked_per_equation():
+    from vivbench.core import Record
+    from vivbench.models import EXTRAPOLATED, curves_inside_data, data_wind_range, mark_extrapolated
+
+    U = np.array([[7.0, 6.0], [9.0, np.nan], [8.0, 10.0]])
+    A = np.full((3, 2), 0.1)
+    dA = np.array([[0.0, 0.0], [0.0, 0.0], [np.nan, 0.0]])
+    rec = Record(event_id="E", t=np.arange(3.0), A=A, U=U, dA=dA)
+    rng = data_wind_range([rec])
+    assert_close(rng, [[7.0, 9.0], [6.0, 10.0]])  # the 8 m/s sample of section 1 has no dA: not fitted
+    assert_close(data_wind_range([rec], need_dA=False), [[7.0, 9.0], [6.0, 10.0]])
+    wind = np.array([5.0, 6.5, 7.0, 9.5])
+    curves = xr.Dataset({"curves": (("equation", "order", "wind"), np.ones((2, 4, 4)))},
+                        coords={"equation": ["S1", "S2"], "order": np.arange(4), "wind": wind})
+    marked = mark_extrapolated(curves, rng)
+    np.testing.assert_array_equal(marked[EXTRAPOLATED].values, [[True, True, False, True], [True, False, False, False]])
+    np.testing.assert_array_equal(marked["curves"].values, curves["curves"].values)  # values unchanged
+    inside = curves_inside_data(curves, rng)
+    assert np.isnan(inside[0, :, [0, 1, 3]]).all() and (inside[0, :, 2] == 1).all()
+    with pytest.raises(ValueError, match=r"shape \(2, 2\)"):
+        mark_extrapolated(curves, [[7.0, 9.0]])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -151,7 +153,25 @@ def test_cli_pool_and_validation_of_the_campaign_model(small_results_in_library,
     assert_close(v["summary"]["pooled_regime_accuracy_all"], direct["accuracy_all"])
     assert_close(v["summary"]["pooled_regime_coverage"], direct["coverage"])
     assert_close(v["summary"]["pooled_median_rhs_rel_error_active"], direct["rhs_median_rel_error_active"])
+    # the energy-weighted error on the true (A, U), beside the median, by the same function
+    assert_close(v["summary"]["pooled_energy_rhs_error_true_AU"], direct["rhs_error_true_AU_energy"])
+    # (a 69-term model of two short events: its largest errors at a few truth samples dominate this figure)
+    assert 0 < v["summary"]["pooled_energy_rhs_error_true_AU"] < math.inf
+    assert 0 < v["summary"]["energy_rhs_error_true_AU"] < math.inf
     assert {r["group"] for r in v["regime_confusion"]} >= {"pooled_identifiable", "pooled_all"}
+    # the curves are marked where they extrapolate beyond each section's fitted winds
+    from vivbench.io.campaign_model import read_pooled
+    from vivbench.models import data_wind_range
+    from vivbench.analysis import records_from_results
+
+    pooled = read_pooled(res / POOLED_NAME)
+    ext = pooled["curves_extrapolated"].values.astype(bool)
+    assert ext.shape == (pooled.sizes["equation"], pooled.sizes["wind"])
+    rng = data_wind_range(records_from_results(sorted(res.glob("*.identify.nc")), derivative=None))
+    wind = pooled["wind"].values
+    np.testing.assert_array_equal(ext, (wind[None] < rng[:, :1]) | (wind[None] > rng[:, 1:]))
+    assert ext[:, 0].all() and not ext.all()  # the grid's first point lies below the data, the middle inside
+    assert math.isfinite(v["summary"]["pooled_curve_error_energy"]) or not v["pooled"]["curves"]["scored"]
 
 
 def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_use(small_results, tmp_path):

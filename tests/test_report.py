@@ -154,3 +154,33 @@ def test_layout_figure_without_truth(small_campaign, tmp_path):
     assert a.read_bytes() != b.read_bytes()
     # no temporary file is left beside the figures
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "b.png"]
+
+
+def test_curves_figure_draws_the_extrapolated_parts_apart(tmp_path, monkeypatch):
+    """The curves past the fitted data's winds are a line of their own, grey dotted, named in the legend."""
+    import matplotlib.axes
+
+    from vivbench.models import mark_extrapolated
+    from vivbench.report.figures import curves_figure
+
+    wind = np.linspace(5.0, 12.0, 15)
+    curves = xr.Dataset({"curves": (("equation", "order", "wind"), np.tile(np.linspace(-1, 1, 15), (1, 4, 1)))},
+                        coords={"equation": ["S1"], "order": np.arange(4), "wind": wind})
+    labels = []
+    plot = matplotlib.axes.Axes.plot
+
+    def spy(self, *args, **kwargs):
+        labels.append((kwargs.get("label"), kwargs.get("ls"), args[1] if len(args) > 1 else None))
+        return plot(self, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.axes.Axes, "plot", spy)
+    curves_figure(mark_extrapolated(curves, [[6.0, 10.0]]), tmp_path / "c.png", name="m")
+    ext = [y for label, ls, y in labels if label == "m: extrapolated (outside its data's winds)"]
+    inside = [y for label, ls, y in labels if label == "m" and ls == "--"]
+    assert len(ext) == 4 and len(inside) == 4  # one of each per order
+    outside = (wind < 6.0) | (wind > 10.0)
+    assert np.isnan(inside[0][outside]).all() and np.isfinite(inside[0][~outside]).all()
+    assert np.isfinite(ext[0][outside]).all()
+    labels.clear()
+    curves_figure(curves, tmp_path / "d.png", name="m")  # unmarked curves: one dashed line, no extrapolated entry
+    assert not [1 for label, _ls, _y in labels if label and "extrapolated" in label]

@@ -14,6 +14,7 @@ import xarray as xr
 import vivbench
 from vivbench.core.record import Record
 from vivbench.models.campaign import PooledSINDy
+from vivbench.models.curve_support import EXTRAPOLATED, data_wind_range, mark_extrapolated
 from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.result import read_result, result_noise_std
@@ -175,7 +176,9 @@ def pool_results(result_files: Sequence, model=None, *,
         (DESIGN 3.5, the model's ``curves`` at its default 95 % level)
         ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind)
         in m^(1-i)/s on ``wind`` (m/s, :func:`curve_wind_grid` of the results'
-        U); per event the residual checks of :mod:`vivbench.analysis.changes`
+        U) and ``curves_extrapolated`` (equation, wind; int8, 1 where the wind
+        lies outside the equation's fitted data,
+        :func:`vivbench.models.mark_extrapolated`); per event the residual checks of :mod:`vivbench.analysis.changes`
         (``event_residual_ratio``, ``event_residual_rel_rms``,
         ``event_linear_offset``, ``event_linear_offset_se``,
         ``event_change_stat``), the change-agnostic "not predicted" flags
@@ -316,8 +319,12 @@ def pool_results(result_files: Sequence, model=None, *,
             "order_rms": order_rms,
         }
     curves = model.curves(curve_wind_grid(np.concatenate([ds["U"].values.ravel() for _p, ds, _a, _e in results])))
+    # Marked where a section's curve lies outside the winds it was fitted on (the wind as at fit).
+    curves = mark_extrapolated(curves, data_wind_range(records))
     for name in ("curves", "curves_lower", "curves_upper"):
         data[name] = (("equation", "order", "wind"), curves[name].values, curves[name].attrs)
+    data[EXTRAPOLATED] = (("equation", "wind"), curves[EXTRAPOLATED].values.astype(np.int8),
+                          curves[EXTRAPOLATED].attrs)
     # Does the model's assumption (one function of (A, U) for the whole campaign) hold? (vivbench.analysis.changes)
     checks = event_residual_checks(model, records)
     scan = change_point_scan(checks["linear_offset"], checks["linear_offset_se"], checks["weight"], seed=model.seed)

@@ -212,7 +212,9 @@ def run(args) -> int:
             window, pooled = "median_rhs_error_true_AU_active", "pooled_median_rhs_error_true_AU_active"
             where = " (on the true A, U)"
         print(f"dynamics: median relative error of dA/dt on windows with dynamics{where}: window models "
-              f"{_f(s.get(window))}, campaign model {_f(s.get(pooled))}")
+              f"{_f(s.get(window))}, campaign model {_f(s.get(pooled))}; energy-weighted over every sample on the "
+              f"true (A, U): window models {_f(s.get('energy_rhs_error_true_AU'))}, campaign model "
+              f"{_f(s.get('pooled_energy_rhs_error_true_AU'))} (curves {_f(s.get('pooled_curve_error_energy'))})")
     if c:
         tags = sorted(k[len("n_clusters_"):] for k in c if k.startswith("n_clusters_"))
         print("clusters: " + "; ".join(f"{t}: {c.get('n_clusters_' + t)} clusters, ARI {_f(c.get('ari_' + t))}" for t in tags))
@@ -240,7 +242,8 @@ def run(args) -> int:
               f"{_f(b.get('pooled_regime_coverage'))} / {_f(s.get('pooled_regime_coverage'))}, accuracy all "
               f"{_f(b.get('pooled_regime_accuracy_all'))} / {_f(s.get('pooled_regime_accuracy_all'))}, median dA/dt "
               f"error on the true (A, U) {_f(b.get('pooled_median_rhs_error_true_AU_active'))} / "
-              f"{_f(s.get('pooled_median_rhs_error_true_AU_active'))}")
+              f"{_f(s.get('pooled_median_rhs_error_true_AU_active'))}, energy-weighted "
+              f"{_f(b.get('pooled_energy_rhs_error_true_AU'))} / {_f(s.get('pooled_energy_rhs_error_true_AU'))}")
     for line in failures:
         print(f"vivbench demo: {line}", file=sys.stderr)
     return 1 if failures else 0

@@ -195,7 +195,10 @@ def run(args) -> int:
         s = v["summary"]
         print(f"against the truth: a_k1 error {s['curve_error_linear']:.3f} (band coverage "
               f"{s['linear_band_coverage']:.2f}), Y1 error {s['y1_error']:.3f} (band coverage "
-              f"{s['y1_band_coverage']:.2f}), dA/dt from the curves {s['curve_error_total']:.3f}, flagged windows "
+              f"{s['y1_band_coverage']:.2f}), dA/dt from the curves {s['curve_error_total']:.3f} (energy-weighted "
+              f"{s['curve_error_energy']:.3f}), dA/dt on the true (A, U) median "
+              f"{s['rhs_error_true_AU_median_active']:.3f} / energy-weighted {s['rhs_error_true_AU_energy']:.3f}, "
+              "flagged windows "
               f"with the true regime {s.get('regime_precision_identifiable', float('nan')):.3f}")
     return 0
 

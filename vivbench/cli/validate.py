@@ -26,18 +26,21 @@ def run(args) -> int:
                else f"support {v['support_note']}")
     print(f"validate: {s['n_events']} events, {s['n_window_equations']} window-equations; regime coverage "
           f"{f('regime_coverage')}, accuracy {f('regime_accuracy_identifiable')} identifiable / "
-          f"{f('regime_accuracy_all')} all; median dA/dt rel. error on the true (A, U) "
-          f"{f('median_rhs_error_true_AU_active')} (active)"
+          f"{f('regime_accuracy_all')} all; dA/dt rel. error on the true (A, U): median over windows "
+          f"{f('median_rhs_error_true_AU_active')} (active), energy-weighted {f('energy_rhs_error_true_AU')}"
           + (f", on the measured (A, U) {f('median_rhs_rel_error_active')} (active)" if v["rhs"] is not None else "")
           + f"; {support}")
     if "pooled_regime_coverage" in s:
         curves = v["pooled"]["curves"]
         curve_text = (f"curve error over lock-in ({curves['reference_equation']}): a_k1 {f('pooled_curve_error_linear')}, "
                       f"total {f('pooled_curve_error_total')}" if curves.get("scored")
-                      else f"curves not scored: {curves.get('reason')}")
+                      else f"curves not scored against the truth's curves: {curves.get('reason')}")
+        curve_text += f"; curve dA/dt error energy-weighted {f('pooled_curve_error_energy')}"
         print(f"campaign model (vivbench pool): regime coverage {f('pooled_regime_coverage')}, accuracy "
               f"{f('pooled_regime_accuracy_identifiable')} identifiable / {f('pooled_regime_accuracy_all')} all; "
-              f"median dA/dt rel. error on the true (A, U) {f('pooled_median_rhs_error_true_AU_active')} (active)"
+              f"dA/dt rel. error on the true (A, U): median over windows "
+              f"{f('pooled_median_rhs_error_true_AU_active')} (active), energy-weighted "
+              f"{f('pooled_energy_rhs_error_true_AU')}"
               + (f", on the measured (A, U) {f('pooled_median_rhs_rel_error_active')} (active)"
                  if v["pooled"]["rhs"] is not None else "") + f"; {curve_text}")
     print(f"wrote {len(written)} files to {args.out}")

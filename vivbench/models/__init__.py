@@ -11,6 +11,9 @@ from vivbench.models.campaign import (
     window_sums,
     RATIO_LEVEL,
 )
+from vivbench.models.binned import BinnedPolynomial
+from vivbench.models.curve_support import (EXTRAPOLATED, curves_inside_data, data_wind_range, extrapolated_mask,
+                                           mark_extrapolated)
 from vivbench.models.greybox import BridgeProperties, GreyBoxRefit, curves_to_functions
 from vivbench.models.protocol import (
     Method,
@@ -23,6 +26,7 @@ from vivbench.models.protocol import (
     ModelBase,
     NotFittedError,
     as_record,
+    fit_records,
     coef_order_contributions,
     format_equations,
     section_names,
@@ -57,10 +61,12 @@ from vivbench.models.window import WindowProblem, WindowedSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
-    "BridgeProperties", "GreyBoxRefit", "curves_to_functions",
+    "BridgeProperties", "GreyBoxRefit", "curves_to_functions", "BinnedPolynomial",
+    "EXTRAPOLATED", "curves_inside_data", "data_wind_range", "extrapolated_mask", "mark_extrapolated",
     "PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
     "window_record", "window_stats", "window_sums", "RATIO_LEVEL", "Method", "FittedModel", "Predictor",
     "Simulator", "CampaignLevel", "Persistent", "HasEquations", "ModelBase", "NotFittedError", "as_record",
+    "fit_records",
     "coef_order_contributions", "format_equations", "section_names", "simulate_windows", "RefitConfig",
     "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients", "order_rms",
     "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",

@@ -35,7 +35,7 @@ from vivbench.models.simulate import Simulation, nmse, simulate_identified
 
 __all__ = [
     "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations",
-    "ModelBase", "NotFittedError", "as_record", "coef_order_contributions", "format_equations",
+    "ModelBase", "NotFittedError", "as_record", "fit_records", "coef_order_contributions", "format_equations",
     "section_names", "simulate_windows",
 ]
 
@@ -191,6 +191,39 @@ def as_record(item, index: int = 0) -> Record:
     except (TypeError, ValueError):
         raise TypeError(f"record {index} must be a Record or a (t, A, U, dA) tuple; got {type(item).__name__}") from None
     return Record(event_id=f"record{index}", t=t, A=A, U=U, dA=dA)
+
+
+def fit_records(records, *, need_dA: bool = True, why: str = "needed to fit") -> list[Record]:
+    """The records a model is fitted on, checked: at least one, all with one number of sections (and dA).
+
+    Parameters
+    ----------
+    records : sequence of Record (or legacy ``(t, A, U, dA)`` tuples, :func:`as_record`)
+    need_dA : bool
+        Refuse a record without dA.
+    why : str
+        Said in that refusal, after "has no dA".
+
+    Returns
+    -------
+    list of Record
+
+    Raises
+    ------
+    ValueError
+        No record; a record with another number of sections than the first; a record without dA
+        (with ``need_dA``).
+    """
+    records = [as_record(r, k) for k, r in enumerate(records)]
+    if not records:
+        raise ValueError("no records to fit")
+    S = records[0].n_sections
+    for rec in records:
+        if rec.n_sections != S:
+            raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first record {S}")
+        if need_dA and rec.dA is None:
+            raise ValueError(f"record {rec.event_id!r} has no dA ({why})")
+    return records
 
 
 def coef_order_contributions(A: np.ndarray, U: np.ndarray, coef: np.ndarray) -> np.ndarray:

@@ -47,7 +47,7 @@ import numpy as np
 
 from vivbench.core.record import Record
 from vivbench.models.campaign import amplitude_ratios
-from vivbench.models.protocol import ModelBase, as_record, section_names
+from vivbench.models.protocol import ModelBase, fit_records, section_names
 from vivbench.models.window_model import nearest_window
 from vivbench.preprocess.windows import window_bounds
 
@@ -169,16 +169,7 @@ class _PySINDyBase(ModelBase):
         return A / self.a_scale_, (U - self.u_center_) / self.u_scale_
 
     def _records(self, records) -> list[Record]:
-        records = [as_record(r, k) for k, r in enumerate(records)]
-        if not records:
-            raise ValueError("no records to fit")
-        S = records[0].n_sections
-        for rec in records:
-            if rec.n_sections != S:
-                raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first record {S}")
-            if self.use_record_derivative and rec.dA is None:
-                raise ValueError(f"record {rec.event_id!r} has no dA (use_record_derivative=True needs it)")
-        return records
+        return fit_records(records, need_dA=self.use_record_derivative, why="use_record_derivative=True needs it")
 
     def _fit_sindy(self, pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]):
         """Fit a fresh copy on (t, A, U, dA) pieces (one trajectory each); returns it."""

@@ -42,6 +42,7 @@ from matplotlib.colors import SymLogNorm  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from scipy import signal  # noqa: E402
 
+from vivbench.models.curve_support import EXTRAPOLATED  # noqa: E402
 from vivbench.models.simulate import forecast, simulate_identified
 from vivbench.preprocess.config import PreprocessConfig
 from vivbench.preprocess.vibration import displacement, envelope, modal_frequency
@@ -841,7 +842,9 @@ def curves_figure(curves: xr.Dataset, path: str | Path, *, truth: tuple[np.ndarr
     curves : xarray.Dataset
         ``curves`` and optionally ``curves_lower``, ``curves_upper``
         (equation, order, wind) in m^(1-i)/s with coordinate ``wind`` (m/s),
-        e.g. a ``campaign.pooled.nc`` or :meth:`vivbench.models.PooledSINDy.curves`.
+        e.g. a ``campaign.pooled.nc`` or :meth:`vivbench.models.PooledSINDy.curves`;
+        with ``curves_extrapolated`` (equation, wind; :func:`vivbench.models.mark_extrapolated`)
+        the extrapolated parts are drawn grey dotted, with their own legend entry.
     path : output PNG
     truth : (curves, wind), optional
         The truth's curves (S, 4, n_true) in m^(1-i)/s on wind (n_true,) m/s
@@ -864,6 +867,9 @@ def curves_figure(curves: xr.Dataset, path: str | Path, *, truth: tuple[np.ndarr
     if "curves_lower" in curves and "curves_upper" in curves:
         band = (np.asarray(curves["curves_lower"].values, dtype=float)[k],
                 np.asarray(curves["curves_upper"].values, dtype=float)[k])
+    extrapolated = None
+    if EXTRAPOLATED in curves:
+        extrapolated = np.asarray(curves[EXTRAPOLATED].values, dtype=bool)[k]
     colour = plt.get_cmap("viridis")(0.35)
     with _figure(path, 2, 2, figsize=(10, 7), constrained_layout=True, sharex=True) as (fig, axes):
         for i, ax in enumerate(axes.ravel()):
@@ -873,7 +879,14 @@ def curves_figure(curves: xr.Dataset, path: str | Path, *, truth: tuple[np.ndarr
                 ax.plot(tw[shown], tc[shown], color="k", lw=1.8, label="truth")
             if band is not None and np.isfinite(band[0][i]).any():
                 ax.fill_between(wind, band[0][i], band[1][i], color=colour, alpha=0.25, lw=0, label=f"{name}: band")
-            ax.plot(wind, point[i], color=colour, lw=1.4, ls="--", label=name)
+            if extrapolated is not None and extrapolated.any():
+                # Inside the data dashed; outside grey dotted, joined to the inside at the data's edge.
+                edge = extrapolated | np.r_[extrapolated[1:], False] | np.r_[False, extrapolated[:-1]]
+                ax.plot(wind, np.where(extrapolated, np.nan, point[i]), color=colour, lw=1.4, ls="--", label=name)
+                ax.plot(wind, np.where(edge, point[i], np.nan), color="0.55", lw=1.4, ls=":",
+                        label=f"{name}: extrapolated (outside its data's winds)")
+            else:
+                ax.plot(wind, point[i], color=colour, lw=1.4, ls="--", label=name)
             ax.axhline(0.0, color="0.6", lw=0.6, zorder=0)
             # The y range follows the lines (a wide band at the data's edges would flatten them).
             seen = [point[i]] + ([tc[shown]] if truth is not None else [])

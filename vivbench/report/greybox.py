@@ -186,6 +186,10 @@ def _fmt(x) -> str:
 _COMPARED = (
     ("a_k1 (net linear growth rate) error over lock-in", "truth_curve_error_linear", "truth_campaign_curve_error_linear", "<= 0.10"),
     ("dA/dt from the curves, error over self-excited samples", "truth_curve_error_total", "truth_campaign_curve_error_total", "<= 0.10 (second bridge)"),
+    ("dA/dt from the curves at the true (A, U), energy-weighted over every sample", "truth_curve_error_energy",
+     "truth_campaign_curve_error_energy", "-"),
+    ("dA/dt on the true (A, U), median over windows with dynamics", "truth_rhs_error_true_AU_median_active", None, "-"),
+    ("dA/dt on the true (A, U), energy-weighted over every sample", "truth_rhs_error_true_AU_energy", None, "-"),
     ("band coverage of the truth's a_k1 over lock-in", "truth_linear_band_coverage", "truth_campaign_linear_band_coverage", "1"),
     ("Y1 error over lock-in", "truth_y1_error", None, "<= 0.10"),
     ("band coverage of the truth's Y1 over lock-in", "truth_y1_band_coverage", None, "1"),

@@ -451,7 +451,8 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                    "limiting orders. Black: the truth of the generator (`/truth/curves`"
                    + ("" if truth0 is not None else ", not available for this campaign") + "); dashed: the campaign "
                    "model over its data's wind range, shaded: its 95 % block-bootstrap band (widened to contain the "
-                   "model)."
+                   "model); grey dotted: where the curve lies outside the winds of the equation's fitted data "
+                   "(`curves_extrapolated`), an extrapolation of the model, not a finding."
                    + (" The top axis gives the reduced velocity U/(f D) with the generator's f and D."
                       if f_struct and d_struct else ""),
                    lambda p: F.curves_figure(curves_ds, p, truth=truth0, frequency=f_struct, depth=d_struct),
@@ -672,7 +673,8 @@ def _recovery_section(info, command) -> list[str]:
     header = ["events", "window-equations scored", "coverage (identifiable)", "regime accuracy: identifiable",
               "regime accuracy: not identifiable", "regime accuracy: all", "most common true regime (chance level)",
               "median rel. error of dA/dt: all", "median rel. error of dA/dt: windows with dynamics",
-              "share of windows with dynamics", "median rel. error of dA/dt on the true (A, U): windows with dynamics"]
+              "share of windows with dynamics", "median rel. error of dA/dt on the true (A, U): windows with dynamics",
+              "rel. error of dA/dt on the true (A, U): energy-weighted over every window sample"]
     shares_rows = []
     # Every event scored once; the campaign row aggregates the same windows.
     total, per_event = recovery_by_event([ev for _e, ev, _r in truth_pairs], [res for _e, _ev, res in truth_pairs])
@@ -684,7 +686,7 @@ def _recovery_section(info, command) -> list[str]:
                      _fmt(s["accuracy_identifiable"]), _fmt(s["accuracy_not_identifiable"]), _fmt(s["accuracy_all"]),
                      f"{top}: {_fmt(shares[top])}", _fmt(s["rhs_median_rel_error"]),
                      _fmt(s["rhs_median_rel_error_active"]), _fmt(s["active_share"]),
-                     _fmt(s["rhs_error_true_AU_median_active"])])
+                     _fmt(s["rhs_error_true_AU_median_active"]), _fmt(s["rhs_error_true_AU_energy"])])
         ident = []
         for eid, _ev, _res in subset:
             r = results[eid]
@@ -705,7 +707,9 @@ def _recovery_section(info, command) -> list[str]:
         "truth). *Coverage* is the share of window-equations flagged identifiable; accuracy on "
         "identifiable and on not-identifiable windows is reported apart, never pooled silently. A constant guess "
         "of the most common true regime scores the chance level shown. 'Windows with dynamics' are those whose "
-        "true dA/dt RMS is at least 10 % of the event's.",
+        "true dA/dt RMS is at least 10 % of the event's. The last column weighs the same error by energy: "
+        "sqrt(sum of squared errors / sum of squared true dA/dt) over every window sample, which the "
+        "large-amplitude phases dominate where the median over windows hides them.",
         "",
         _table(header, rows),
         "",

@@ -23,7 +23,10 @@ from vivbench.validate.metrics import (
     REGIMES,
     SUPPORT_NOTES,
     cluster_agreement,
+    curve_energy_error,
     curve_errors,
+    curves_rhs,
+    energy_relative_error,
     forecast_summary,
     merge_support_scores,
     regime_report,
@@ -31,14 +34,15 @@ from vivbench.validate.metrics import (
     support_scores,
 )
 from vivbench.models.model_input import measured_input
+from vivbench.models.curve_support import data_wind_range
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.recovery import (
     model_window_rhs_errors,
-    model_window_rhs_errors_true_AU,
+    model_window_rhs_true_AU,
     record_yaw_on,
     window_rhs_errors,
-    window_rhs_errors_true_AU,
+    window_rhs_true_AU,
 )
 from vivbench.core.errors import InputError
 from vivbench.validate.drift import event_structural_state, score_change_flags
@@ -58,11 +62,16 @@ _NOTES = (
     "RHS error on the true (A, U) (rhs_true_AU, median_rhs_error_true_AU): relative RMS of the model's predict on "
     "the truth's own time, A and U minus the truth's dA/dt (sum of /truth/r over the orders) over the window's "
     "truth samples, for any truth (no coefficient matrix needed); window models use each window's own model, "
-    "'active' as above with the truth's dA/dt.",
+    "'active' as above with the truth's dA/dt. Beside the median over windows, the same error energy-weighted "
+    "(energy_rhs_error_true_AU, rhs_true_AU.energy): sqrt(sum of squared errors / sum of squared true dA/dt) over "
+    "every sample (the window models: over their windows' samples), which the large amplitudes dominate.",
     "Curve errors (pooled.curves): the campaign model's coefficient curves a_ki(U) (campaign.pooled.nc) against "
     "the truth's (/truth/curves), over the lock-in range (winds of the truth samples whose regime is "
     "self-excited, 2..4): relative RMS of the net linear coefficient a_k1 on the model's wind grid, and of "
-    "sum_i a_ki(U) A^i on those samples.",
+    "sum_i a_ki(U) A^i on those samples; and energy-weighted (pooled_curve_error_energy): sum_i a_ki(U_k) A_k^i "
+    "at the truth's (A, U) of every sample of every equation against the same sum with the truth's curves. "
+    "The curves are scored only at winds inside each equation's fitted data (the extrapolated parts, "
+    "curves_extrapolated, are left out).",
     *SUPPORT_NOTES,
 )
 
@@ -257,6 +266,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         pairs.append((event_id, ep, rp))
 
     regimes, truths, flags, errs, actives, per_event = [], [], [], [], [], []
+    f_win, f_win_true, p_f, p_f_true, fitted_records = [], [], [], [], []
     errs_true, actives_true, truth_U, truth_A, truth_excited, truth_curves = [], [], [], [], [], []
     sup_all, sup_ok = [], []
     skipped, truth_by_key, change_states = {}, {}, {}
@@ -311,18 +321,24 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
                                                    active_share=active_share)
                 p_errs.append(pe.ravel())
                 p_act.append(pact.ravel())
+            fitted_records.append(record)
             # The truth stores no yaw: a model using it sees the measured record's (as score_fitted does).
-            pet, pact_t = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
-                                                          active_share=active_share,
-                                                          yaw=record_yaw_on(measured, truth["time"].values))
+            pet, pact_t, fm, ft = model_window_rhs_true_AU(model, truth, start, end, event_id=event_id,
+                                                           active_share=active_share,
+                                                           yaw=record_yaw_on(measured, truth["time"].values))
+            p_f.append(fm.ravel())
+            p_f_true.append(ft.ravel())
             p_errs_true.append(pet.ravel())
             p_act_true.append(pact_t.ravel())
-        et, act_t = window_rhs_errors_true_AU(res, truth, active_share=active_share)
+        et, act_t, fw, fwt = window_rhs_true_AU(res, truth, active_share=active_share)
         errs_true.append(et.ravel())
         actives_true.append(act_t.ravel())
+        f_win.append(fw.ravel())
+        f_win_true.append(fwt.ravel())
         row.update(rhs_error_true_AU_median=float(np.nanmedian(et)) if np.isfinite(et).any() else math.nan,
                    rhs_error_true_AU_median_active=(float(np.nanmedian(et[act_t])) if np.isfinite(et[act_t]).any()
-                                                    else math.nan))
+                                                    else math.nan),
+                   rhs_error_true_AU_energy=energy_relative_error(fw, fwt))
         truth_U.append(truth["U"].values)
         truth_A.append(truth["A"].values)
         truth_excited.append(truth["regime"].values >= 2)
@@ -348,11 +364,13 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     if pooled is not None and p_reg:
         pr = regime_report(np.concatenate(p_reg), np.concatenate(truths), np.concatenate(p_ok))
         pooled_out = {"regime": pr, "rhs": rhs_error_summary(np.concatenate(p_errs), np.concatenate(p_act)) if p_errs else None,
-                      "rhs_true_AU": rhs_error_summary(np.concatenate(p_errs_true), np.concatenate(p_act_true)),
+                      "rhs_true_AU": {**rhs_error_summary(np.concatenate(p_errs_true), np.concatenate(p_act_true)),
+                                      "energy": energy_relative_error(np.concatenate(p_f), np.concatenate(p_f_true))},
                       "file": str(pooled_path), "model_file": str(model_path),
                       "model": type(model).__name__,
                       "n_terms": [int(k) for k in getattr(model, "n_terms_", getattr(model, "n_basis_", []))],
-                      "curves": _pooled_curve_errors(pooled, model, truth_curves, truth_U, truth_A, truth_excited),
+                      "curves": _pooled_curve_errors(pooled, model, truth_curves, truth_U, truth_A, truth_excited,
+                                                     data_wind_range(fitted_records)),
                       "changes": score_change_flags(pooled, change_states)}
     if not regimes:
         raise InputError(f"{campaign_dir}: no event with a /truth group among the {len(pairs)} results; "
@@ -395,7 +413,8 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         "regime": regime,
         "regime_confusion": confusion_rows,
         "rhs": rhs,
-        "rhs_true_AU": rhs_error_summary(np.concatenate(errs_true), np.concatenate(actives_true)),
+        "rhs_true_AU": {**rhs_error_summary(np.concatenate(errs_true), np.concatenate(actives_true)),
+                        "energy": energy_relative_error(np.concatenate(f_win), np.concatenate(f_win_true))},
         "support_note": None if support is not None else NO_TRUE_SUPPORT,
         "support": support,
         "support_table": support_rows,
@@ -414,32 +433,42 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     return out
 
 
-def _pooled_curve_errors(pooled, model, truth_curves, U, A, excited) -> dict:
-    """:func:`curve_errors` of the campaign model's curves against the truth's, or why they are not scored."""
+def _pooled_curve_errors(pooled, model, truth_curves, U, A, excited, wind_range) -> dict:
+    """Curve errors of the campaign model against the truth, or why they are not scored.
+
+    :func:`curve_errors` and :func:`curve_energy_error` against the truth's curves (needs one
+    campaign curve), only inside ``wind_range`` (S, 2), the fitted data's winds per equation.
+    """
     from vivbench.core.terms import reference_section
+    from vivbench.models.curve_support import curves_inside_data
 
     if "curves" in pooled.data_vars:
-        curves, wind = pooled["curves"].values, pooled["wind"].values
+        c = pooled[["curves"]]
     elif hasattr(model, "curves") and getattr(model, "amplitude_ratios_", None) is not None:
         from vivbench.analysis.pool import curve_wind_grid
 
         c = model.curves(curve_wind_grid(np.concatenate([u.ravel() for u in U])))
-        curves, wind = c["curves"].values, c["wind"].values
     else:
         return {"scored": False, "reason": "the campaign model has no curves (re-run vivbench pool)"}
+    curves, wind = c["curves"].values, c["wind"].values
+    if curves.shape[0] != U[0].shape[1]:
+        return {"scored": False, "reason": f"the truth has {U[0].shape[1]} equations, the model {curves.shape[0]}"}
+    U, A = np.concatenate(U), np.concatenate(A)
+    inside = curves_inside_data(c, wind_range)
     if not truth_curves or any(tc is None for tc in truth_curves):
-        return {"scored": False, "reason": "an event's truth has no coefficient curves (a damping drift, or a truth "
-                                          "without /truth/curves nor vivbench's config_json to rebuild them)"}
+        return {"scored": False,
+                "reason": "an event's truth has no coefficient curves (a damping drift, or a truth "
+                          "without /truth/curves nor vivbench's config_json to rebuild them)"}
     tc0, tw0 = truth_curves[0]
     if any(tw.shape != tw0.shape or not np.array_equal(tw, tw0) or not np.array_equal(tc, tc0)
            for tc, tw in truth_curves[1:]):
-        return {"scored": False, "reason": "the truth's curves differ between events (slow changes): no single "
-                                            "campaign curve to compare with"}
-    if tc0.shape[0] != curves.shape[0]:
-        return {"scored": False, "reason": f"the truth has {tc0.shape[0]} equations, the model {curves.shape[0]}"}
-    err = curve_errors(curves, wind, tc0, tw0, np.concatenate(U), np.concatenate(A), np.concatenate(excited))
+        return {"scored": False,
+                "reason": "the truth's curves differ between events (slow changes): no single "
+                          "campaign curve to compare with"}
+    energy = curve_energy_error(curves, wind, U, A, curves_rhs(tc0, tw0, U, A), wind_range)
+    err = curve_errors(inside, wind, tc0, tw0, U, A, np.concatenate(excited))
     k = reference_section(curves.shape[0])
-    return {"scored": True, **err, "reference_equation": f"S{k + 1}",
+    return {"scored": True, **err, "energy": energy, "reference_equation": f"S{k + 1}",
             "reference": {"linear": err["linear"][k], "total": err["total"][k], "lock_in_wind": err["lock_in_wind"][k]}}
 
 
@@ -458,7 +487,8 @@ def _summary(v: dict) -> dict:
     }
     rt = v["rhs_true_AU"]
     out.update(median_rhs_error_true_AU=rt["all"]["median"], median_rhs_error_true_AU_active=rt["active"]["median"],
-               q90_rhs_error_true_AU_active=rt["active"]["q90"], rhs_true_AU_active_share=rt["active_share"])
+               q90_rhs_error_true_AU_active=rt["active"]["q90"], rhs_true_AU_active_share=rt["active_share"],
+               energy_rhs_error_true_AU=rt["energy"])
     if v["rhs"] is not None:
         out.update(median_rhs_rel_error=v["rhs"]["all"]["median"],
                    median_rhs_rel_error_active=v["rhs"]["active"]["median"],
@@ -483,7 +513,8 @@ def _summary(v: dict) -> dict:
             out["pooled_median_rhs_rel_error_active"] = v["pooled"]["rhs"]["active"]["median"]
         prt = v["pooled"]["rhs_true_AU"]
         out.update(pooled_median_rhs_error_true_AU=prt["all"]["median"],
-                   pooled_median_rhs_error_true_AU_active=prt["active"]["median"])
+                   pooled_median_rhs_error_true_AU_active=prt["active"]["median"],
+                   pooled_energy_rhs_error_true_AU=prt["energy"])
         ch = v["pooled"].get("changes")
         if ch is not None:
             for key, sc in ch["flags"].items():
@@ -491,6 +522,7 @@ def _summary(v: dict) -> dict:
                 out.update({f"pooled_{name}_hits": sc["hits"], f"pooled_{name}_false_alarms": sc["false_alarms"]})
             out["pooled_changed_events"] = len(ch["changed_events"])
         c = v["pooled"]["curves"]
+        out["pooled_curve_error_energy"] = c.get("energy", math.nan)
         if c.get("scored"):
             out.update(pooled_curve_error_linear=c["reference"]["linear"], pooled_curve_error_total=c["reference"]["total"])
     for row in v["clusters"] or []:

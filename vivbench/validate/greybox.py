@@ -27,8 +27,9 @@ import numpy as np
 from vivbench.core.terms import reference_section
 from vivbench.models.greybox import GreyBoxRefit
 from vivbench.regimes.truth import truth_window_regimes
-from vivbench.validate.metrics import curve_errors
-from vivbench.validate.recovery import finite_median, model_window_rhs_errors_true_AU, record_yaw_on, regime_scores
+from vivbench.models.curve_support import curves_inside_data, data_wind_range
+from vivbench.validate.metrics import curve_energy_error, curve_errors, curves_rhs, energy_relative_error
+from vivbench.validate.recovery import finite_median, model_window_rhs_true_AU, record_yaw_on, regime_scores
 
 __all__ = ["greybox_recovery", "truth_y1", "truth_yaw_factor"]
 
@@ -97,11 +98,15 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
     dict
         ``curves`` (per-equation :func:`curve_errors` and the reference
         section's ``linear``, ``total``, ``linear_band_coverage`` and
-        ``lock_in_wind``), ``y1`` (relative RMS error and band coverage of Y1
+        ``lock_in_wind``; ``energy``: :func:`curve_energy_error` over every
+        sample and equation against the truth's curves; with ``records``
+        every curve score leaves out the winds outside the fitted data),
+        ``y1`` (relative RMS error and band coverage of Y1
         over the lock-in range; NaN when the truth's Y1 is not readable),
         ``regime`` (:func:`regime_scores` plus ``precision_identifiable``: share
         of flagged windows with the true regime), ``rhs_error_true_AU_median``
-        (and ``_active``), ``nmse_median``, ``campaign_curves`` (the same
+        (and ``_active``; ``rhs_error_true_AU_energy``: the same error
+        energy-weighted over every truth sample), ``nmse_median``, ``campaign_curves`` (the same
         scores for ``campaign_curves``, or None), ``summary`` (flat numbers).
     """
     from vivbench.io.event import read_event
@@ -113,6 +118,7 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         truths[str(tree.attrs["event_id"])] = tree["truth"].ds
     event_of = windows["event_id"].values.astype(str)
     U, A, excited, regimes, truth_reg, flags, errs, errs_act = [], [], [], [], [], [], [], []
+    f_model_all, f_true_all = [], []
     truth_curves = None
     by_id = {r.event_id: r for r in (records or [])}
     for event_id in dict.fromkeys(event_of):
@@ -131,24 +137,30 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         excited.append(truth["regime"].values >= 2)
         rec = by_id.get(event_id)
         yaw = None if rec is None else record_yaw_on(rec, truth["time"].values)
-        e, act = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
-                                                 active_share=active_share, yaw=yaw)
+        e, act, f_model, f_true = model_window_rhs_true_AU(model, truth, start, end, event_id=event_id,
+                                                           active_share=active_share, yaw=yaw)
+        f_model_all.append(f_model.ravel())
+        f_true_all.append(f_true.ravel())
         errs.append(e.ravel())
         errs_act.append(np.where(act, e, np.nan).ravel())
     out: dict = {"n_events_scored": len(U)}
     k = reference_section(model.n_sections_)
     cur = model.curves()
     wind = cur["wind"].values
+    # Curves scored only inside the fitted data's winds, when the fitted records are given.
+    wind_range = data_wind_range(records) if records else None
     if truth_curves is not None and U:
         tc, tw = truth_curves
         Uc, Ac, Xc = np.concatenate(U), np.concatenate(A), np.concatenate(excited)
-        err = curve_errors(cur["curves"].values, wind, tc, tw, Uc, Ac, Xc)
+        f_ref = curves_rhs(tc, tw, Uc, Ac)
+        err = curve_errors(curves_inside_data(cur, wind_range), wind, tc, tw, Uc, Ac, Xc)
         lock = err["lock_in_wind"][k]
         g = (wind >= lock[0]) & (wind <= lock[1]) if lock else np.zeros(wind.size, dtype=bool)
         a_true = np.interp(wind, tw, tc[k, 1], left=np.nan, right=np.nan)
         cov_lin = _coverage(cur["curves_lower"].values[k, 1, g], cur["curves_upper"].values[k, 1, g], a_true[g])
         out["curves"] = {**err, "reference_equation": f"S{k + 1}", "linear": err["linear"][k],
-                         "total": err["total"][k], "linear_band_coverage": cov_lin, "lock_in_wind": lock}
+                         "total": err["total"][k], "linear_band_coverage": cov_lin, "lock_in_wind": lock,
+                         "energy": curve_energy_error(cur["curves"].values, wind, Uc, Ac, f_ref, wind_range)}
         phys = model.physical_curves(wind)
         y1_true = truth_y1(next(iter(truths.values())), wind)
         if y1_true is not None and g.any():
@@ -159,14 +171,16 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
             out["y1"] = {"error": float("nan"), "band_coverage": float("nan")}
         if campaign_curves is not None:
             cw = campaign_curves["wind"].values
-            e2 = curve_errors(campaign_curves["curves"].values, cw, tc, tw, Uc, Ac, Xc)
+            e2 = curve_errors(curves_inside_data(campaign_curves, wind_range), cw, tc, tw, Uc, Ac, Xc)
             g2 = (cw >= lock[0]) & (cw <= lock[1]) if lock else np.zeros(cw.size, dtype=bool)
             a2 = np.interp(cw, tw, tc[k, 1], left=np.nan, right=np.nan)
             cov2 = (_coverage(campaign_curves["curves_lower"].values[k, 1, g2],
                               campaign_curves["curves_upper"].values[k, 1, g2], a2[g2])
                     if "curves_lower" in campaign_curves else float("nan"))
             out["campaign_curves"] = {"linear": e2["linear"][k], "total": e2["total"][k],
-                                      "linear_band_coverage": cov2}
+                                      "linear_band_coverage": cov2,
+                                      "energy": curve_energy_error(campaign_curves["curves"].values, cw, Uc, Ac, f_ref,
+                                                                   wind_range)}
         else:
             out["campaign_curves"] = None
     else:
@@ -184,6 +198,8 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         out["regime"] = None
     out["rhs_error_true_AU_median"] = finite_median(np.concatenate(errs)) if errs else float("nan")
     out["rhs_error_true_AU_median_active"] = finite_median(np.concatenate(errs_act)) if errs_act else float("nan")
+    out["rhs_error_true_AU_energy"] = (energy_relative_error(np.concatenate(f_model_all), np.concatenate(f_true_all))
+                                       if f_model_all else float("nan"))
     nm = np.array([row["nmse"] for row in events], dtype=float)
     out["nmse_median"] = finite_median(nm)
     c = out["curves"] or {}
@@ -192,6 +208,8 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
         "linear_band_coverage": c.get("linear_band_coverage", float("nan")),
         "y1_error": out["y1"]["error"], "y1_band_coverage": out["y1"]["band_coverage"],
         "nmse_median": out["nmse_median"], "rhs_error_true_AU_median_active": out["rhs_error_true_AU_median_active"],
+        "rhs_error_true_AU_energy": out["rhs_error_true_AU_energy"],
+        "curve_error_energy": c.get("energy", float("nan")),
     }
     if out["regime"] is not None:
         summary.update(regime_coverage=out["regime"]["coverage"],
@@ -200,7 +218,8 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
     if out["campaign_curves"] is not None:
         summary.update(campaign_curve_error_linear=out["campaign_curves"]["linear"],
                        campaign_curve_error_total=out["campaign_curves"]["total"],
-                       campaign_linear_band_coverage=out["campaign_curves"]["linear_band_coverage"])
+                       campaign_linear_band_coverage=out["campaign_curves"]["linear_band_coverage"],
+                       campaign_curve_error_energy=out["campaign_curves"]["energy"])
     if out["curves"] is not None and getattr(model, "covariances_", None) and g.any():
         # the same fit's bands with each covariance, to set them side by side
         half = 0.5 * (cur["curves_upper"].values[k, 1, g] - cur["curves_lower"].values[k, 1, g])

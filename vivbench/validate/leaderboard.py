@@ -56,7 +56,9 @@ SCORE_SOURCES = {
     "accuracy_flagged": "accuracy_identifiable",
     "accuracy_all": "accuracy_all",
     "rhs_error_true_AU": "rhs_error_true_AU_median_active",
+    "rhs_error_true_AU_energy": "rhs_error_true_AU_energy",
     "curve_error": "curve_error_total",
+    "curve_error_energy": "curve_error_energy",
     "forecast_nmse": "simulation_nmse",
     "forecast_covered": "simulation_covered",
     "fit_time_s": "fit_time_s",
@@ -72,7 +74,8 @@ def parse_methods(methods: str | Sequence[str]) -> list[str]:
         methods = [m.strip() for m in methods.split(",") if m.strip()]
     methods = list(methods)
     if not methods:
-        raise InputError("no method named: give e.g. --methods windows,campaign,varying,pysindy-cp,pkg.mod:factory")
+        raise InputError("no method named: give e.g. "
+                         "--methods windows,campaign,varying,pysindy-cp,binned,pkg.mod:factory")
     if len(set(methods)) != len(methods):
         raise InputError(f"methods named twice: {', '.join(methods)}")
     return methods
@@ -251,7 +254,7 @@ def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_d
     Parameters
     ----------
     methods : method specs, as :func:`vivbench.validate.methods.resolve_method` takes them:
-        ``"windows"``, ``"campaign"``, ``"varying"``, ``"pysindy-cp"`` or ``"package.module:factory"``
+        ``"windows"``, ``"campaign"``, ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"``
     scenarios : the scenarios (e.g. :func:`vivbench.validate.select_scenarios`)
     out_dir : output directory (created); rerunning into it resumes
     workers, scheduler : see :func:`vivbench.core.parallel.run_tasks`

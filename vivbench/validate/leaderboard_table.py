@@ -9,10 +9,17 @@ score means and when it does not apply:
 - ``accuracy_flagged``, ``accuracy_all``: regime accuracy against the truth
   (DESIGN 2.5) on the flagged windows and on all windows.
 - ``rhs_error_true_AU``: median relative error of the method's dA/dt on the
-  truth's own (A, U), over windows with dynamics.
+  truth's own (A, U), over windows with dynamics; ``rhs_error_true_AU_energy``:
+  the same error energy-weighted over every sample (sum of squared errors over
+  sum of squared true dA/dt), which the large amplitudes dominate and the
+  median hides.
 - ``curve_error``: relative RMS error of the coefficient curves a_ki(U)
-  (DESIGN 3.5) over lock-in; only for methods with ``curves`` and truths
-  that store curves (not with a damping drift).
+  (DESIGN 3.5) over lock-in; ``curve_error_energy``: the dA/dt the curves
+  give at the truth's (A, U) of every sample against the truth's curves',
+  energy-weighted; only for methods with ``curves`` and truths that store
+  curves (not with a damping drift), and only at winds inside the fitted data.
+
+Tables written before the energy-weighted scores existed read with NaN there.
 - ``forecast_nmse``: NMSE of the model's free simulation of each record's
   longest run of valid samples from its first measured A with the measured
   wind (median over records and sections), over the part simulated before a
@@ -38,18 +45,22 @@ __all__ = ["SCORES", "VALUES", "SCORE_LABELS", "LEADERBOARD_COLUMNS", "write_csv
            "leaderboard_markdown", "write_markdown", "plot_leaderboard"]
 
 #: The scores of a cell, in table order.
-SCORES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "curve_error", "forecast_nmse",
-          "fit_time_s")
+SCORES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "rhs_error_true_AU_energy",
+          "curve_error", "curve_error_energy", "forecast_nmse", "fit_time_s")
 #: Every value a cell stores: the scores and the share of the forecast runs simulated.
-VALUES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "curve_error", "forecast_nmse",
-          "forecast_covered", "fit_time_s")
+VALUES = ("coverage", "accuracy_flagged", "accuracy_all", "rhs_error_true_AU", "rhs_error_true_AU_energy",
+          "curve_error", "curve_error_energy", "forecast_nmse", "forecast_covered", "fit_time_s")
+#: Values added after the first tables were written: absent from an old table, they read as NaN.
+_ADDED_VALUES = ("rhs_error_true_AU_energy", "curve_error_energy")
 #: Score titles with units.
 SCORE_LABELS = {
     "coverage": "coverage: share of window-equations flagged identifiable (-)",
     "accuracy_flagged": "regime accuracy on flagged windows (-)",
     "accuracy_all": "regime accuracy on all windows (-)",
     "rhs_error_true_AU": "median rel. error of dA/dt on the true (A, U), active windows (-)",
+    "rhs_error_true_AU_energy": "energy-weighted rel. RMS error of dA/dt on the true (A, U), every sample (-)",
     "curve_error": "rel. RMS error of the coefficient curves a_ki(U) over lock-in (-)",
+    "curve_error_energy": "energy-weighted rel. RMS error of the curves' dA/dt at the true (A, U), every sample (-)",
     "forecast_nmse": "forecast NMSE: free simulation of each record's longest valid run, median (-)",
     "fit_time_s": "fit time (wall clock, s)",
 }
@@ -58,8 +69,10 @@ _SHORT = {
     "coverage": "coverage (-)",
     "accuracy_flagged": "accuracy, flagged windows (-)",
     "accuracy_all": "accuracy, all windows (-)",
-    "rhs_error_true_AU": "dA/dt error on true (A, U) (-)",
-    "curve_error": "curve error (-)",
+    "rhs_error_true_AU": "dA/dt error on true (A, U), median (-)",
+    "rhs_error_true_AU_energy": "dA/dt error on true (A, U), energy (-)",
+    "curve_error": "curve error, lock-in (-)",
+    "curve_error_energy": "curve error, energy (-)",
     "forecast_nmse": "forecast NMSE (-)",
     "fit_time_s": "fit time (s)",
 }
@@ -100,7 +113,7 @@ def read_leaderboard(directory: str | Path) -> list[dict]:
             rows = list(csv.DictReader(fh))
     except FileNotFoundError:
         raise InputError(f"{path}: no leaderboard table here (run `vivbench leaderboard --out {directory}`)") from None
-    if not rows or set(LEADERBOARD_COLUMNS) - set(rows[0]):
+    if not rows or set(LEADERBOARD_COLUMNS) - set(_ADDED_VALUES) - set(rows[0]):
         raise InputError(f"{path}: not a leaderboard table (expected columns {', '.join(LEADERBOARD_COLUMNS)})")
     out = []
     for r in rows:
@@ -112,7 +125,7 @@ def read_leaderboard(directory: str | Path) -> list[dict]:
         row["in_class"] = r["in_class"] == "True"
         row["has_verdict"] = r["has_verdict"] == "True"
         for k in VALUES:
-            row[k] = _float(r[k])
+            row[k] = _float(r.get(k))
         out.append(row)
     return out
 
@@ -268,6 +281,8 @@ def plot_leaderboard(rows: Sequence[dict], path: Path) -> Path:
         fig.colorbar(im, ax=ax, shrink=0.8)
     for ax in list(axes.flat)[len(SCORES):]:
         ax.axis("off")
+    if len(axes.flat) > len(SCORES):
+        ax = list(axes.flat)[len(SCORES)]
         ax.text(0.0, 0.5, "rows: scenarios (* in-class: truth inside the\nA^i U^j library, not field performance)\n"
                 "columns: methods\ngrey: not applicable or failed\n(-) dimensionless; fit time in s",
                 fontsize=8, va="center", transform=ax.transAxes)

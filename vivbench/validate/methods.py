@@ -12,7 +12,7 @@ results.
 API (stable; the leaderboard builds on it)::
 
     resolve_method(spec: str) -> method
-        spec: "windows" | "campaign" | "varying" | "pysindy-cp" | "package.module:factory"
+        spec: "windows" | "campaign" | "varying" | "pysindy-cp" | "binned" | "package.module:factory"
     fit_method(method, records) -> (fitted, fit_time_s)
     score_fitted(fitted, records, truths, *, windows=None, window=50.0, step=25.0,
                  tau=0.2, active_share=0.1, fit_time_s=nan, simulate=True) -> dict
@@ -51,7 +51,17 @@ plug-in methods:
   against the exact coefficient matrix (in-library truths; NaN otherwise).
 - ``curve_error_linear``, ``curve_error_total``: the model's ``curves`` against
   the truth's (:func:`vivbench.validate.curve_errors`, reference section; NaN
-  without ``curves`` or when the truth's curves differ between events).
+  without ``curves`` or when the truth's curves differ between events);
+  ``curve_error_energy``: the dA/dt the curves give at the truth's (A, U) of
+  every sample and equation, sum_i a_ki(U_k) A_k^i, against the same sum with
+  the truth's curves, energy-weighted
+  (:func:`vivbench.validate.metrics.curve_energy_error`; NaN where the other
+  two are). Against the truth's dA/dt itself the curves would also be charged
+  with what no curve of one wind carries (sections at different winds, the
+  yaw): on the demo campaign the truth's own curves are 0.59 off its dA/dt by
+  that measure. All three use the curves only at winds inside each
+  equation's fitted data (:func:`vivbench.models.data_wind_range`): the
+  extrapolated parts are not scored.
 - ``simulation_nmse``: median over records and sections of the NMSE of
   ``simulate`` over each record's longest run of valid samples, over the part
   simulated before the run stopped; ``simulation_covered``: median share of
@@ -86,9 +96,9 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.model_input import measured_input
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
-from vivbench.validate.metrics import curve_errors, energy_relative_error
-from vivbench.validate.recovery import (finite_median, model_rhs_true_AU, model_window_rhs_errors, record_yaw_on,
-                                       regime_scores, window_relative_errors)
+from vivbench.validate.metrics import curve_energy_error, curve_errors, curves_rhs, energy_relative_error
+from vivbench.validate.recovery import (finite_median, model_window_rhs_errors, model_window_rhs_true_AU,
+                                       record_yaw_on, regime_scores)
 
 __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
            "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
@@ -96,14 +106,14 @@ __all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec
            "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel"]
 
 #: Names of the built-in methods.
-BUILTIN_METHODS = ("windows", "campaign", "varying", "pysindy-cp")
+BUILTIN_METHODS = ("windows", "campaign", "varying", "pysindy-cp", "binned")
 
 #: The keys of :func:`score_fitted`'s dict, in table order.
 SCORE_KEYS = ("n_scored", "truth_majority_share", "truth_share_regime1", "truth_share_regime2", "truth_share_regime3",
               "truth_share_regime4", "coverage", "accuracy_all", "accuracy_identifiable", "accuracy_not_identifiable",
               "no_model_share", "rhs_median_rel_error", "rhs_median_rel_error_active", "rhs_error_true_AU_median",
-              "rhs_error_true_AU_median_active", "rhs_error_true_AU_energy", "curve_error_linear", "curve_error_total", "simulation_nmse",
-              "simulation_covered", "fit_time_s")
+              "rhs_error_true_AU_median_active", "rhs_error_true_AU_energy", "curve_error_linear", "curve_error_total",
+              "curve_error_energy", "simulation_nmse", "simulation_covered", "fit_time_s")
 
 _SPEC = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*:[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -419,7 +429,10 @@ def resolve_method(spec: str):
         ``"campaign"`` (:class:`CampaignMethod`: ``PooledSINDy`` with its bootstrap and
         confidence-region verdict), ``"varying"`` (``VaryingCoefficientSINDy`` with its own defaults,
         those of ``vivbench pool --model varying``: the yaw covariate when the records carry the
-        yaw, 30 s wind smoothing; bootstrap and confidence-set verdict), ``"pysindy-cp"`` (:class:`vivbench.models.PySINDyCP`, no verdict), or
+        yaw, 30 s wind smoothing; bootstrap and confidence-set verdict), ``"pysindy-cp"``
+        (:class:`vivbench.models.PySINDyCP`, no verdict),
+        ``"binned"`` (:class:`vivbench.models.BinnedPolynomial`: per 0.5 m/s bin of mean wind, dA_k/dt
+        on [1, A_k, A_k^2, A_k^3] by least squares; no verdict; the floor to beat), or
         ``"package.module:factory"``: the module is imported and ``factory()`` called with no
         arguments; it must return an object with a callable ``fit``.
 
@@ -442,6 +455,10 @@ def resolve_method(spec: str):
         from vivbench.models.pysindy_adapter import PySINDyCP
 
         return PySINDyCP()
+    if spec == "binned":
+        from vivbench.models.binned import BinnedPolynomial
+
+        return BinnedPolynomial()
     module_name, _, attr = spec.partition(":")
     try:
         module = importlib.import_module(module_name)
@@ -534,30 +551,42 @@ def simulation_nmse(fitted, records: Sequence[Record]) -> tuple[float, float]:
     return finite_median(np.concatenate(values)), finite_median(np.array(covered))
 
 
-def _curve_scores(fitted, records, truths) -> tuple[float, float]:
-    """Reference section's linear and total curve errors, or NaN when either side has no single curve."""
+def _curve_scores(fitted, records, truths) -> tuple[float, float, float]:
+    """Curve errors of a fitted model: reference section's linear and total, and the energy-weighted one.
+
+    The curves are evaluated on :func:`vivbench.analysis.curve_wind_grid` of the records' wind
+    and scored only inside each equation's data range (:func:`vivbench.models.data_wind_range`):
+    extrapolated points are left out. The energy-weighted error
+    (:func:`vivbench.validate.metrics.curve_energy_error`) compares the dA/dt the model's
+    curves give at the truth's (A, U) of every sample with the truth's curves' there. All
+    three are NaN when the truth has no single curve.
+    """
     if not callable(getattr(fitted, "curves", None)):
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan
     from vivbench.analysis.pool import curve_wind_grid
     from vivbench.core.terms import reference_section
+    from vivbench.models.curve_support import curves_inside_data, data_wind_range
     from vivbench.validate.campaign import event_truth_curves
 
+    c = fitted.curves(curve_wind_grid(np.concatenate([r.U.ravel() for r in records])))
+    wind_range = data_wind_range(records)
+    if c["curves"].shape[0] != records[0].n_sections:
+        return math.nan, math.nan, math.nan
+    curves = curves_inside_data(c, wind_range)
+    wind = c["wind"].values
     tcs = [event_truth_curves(tr) for tr in truths]
     if not tcs or any(tc is None for tc in tcs):
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan
     tc0, tw0 = tcs[0]
     if any(tw.shape != tw0.shape or not np.array_equal(tw, tw0) or not np.array_equal(tc, tc0) for tc, tw in tcs[1:]):
-        return math.nan, math.nan  # slow changes: no single campaign curve to compare with
-    c = fitted.curves(curve_wind_grid(np.concatenate([r.U.ravel() for r in records])))
-    curves, wind = c["curves"].values, c["wind"].values
-    if curves.shape[0] != tc0.shape[0]:
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan  # slow changes: no single campaign curve to compare with
     U = np.concatenate([tr["U"].values for tr in truths])
     A = np.concatenate([tr["A"].values for tr in truths])
+    energy = curve_energy_error(c["curves"].values, wind, U, A, curves_rhs(tc0, tw0, U, A), wind_range)
     excited = np.concatenate([tr["regime"].values >= 2 for tr in truths])
     err = curve_errors(curves, wind, tc0, tw0, U, A, excited)
     k = reference_section(curves.shape[0])
-    return float(err["linear"][k]), float(err["total"][k])
+    return float(err["linear"][k]), float(err["total"][k]), energy
 
 
 def scoring_inputs(event_files: Sequence, result_files: Sequence, *, derivative=None) -> tuple[list, list, list]:
@@ -663,10 +692,9 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
             ok = np.zeros(r.shape, dtype=bool)  # no verdict: scored on all windows, coverage 0
         flag.append(ok)
         # The truth stores no yaw: a model using it sees the measured record's (as on field data).
-        t_true, f_model, f_true = model_rhs_true_AU(predictor, truth, event_id=rec.event_id,
-                                                    yaw=record_yaw_on(rec, truth["time"].values))
-        e, act = window_relative_errors(f_model, f_true, t_true, start, end, np.sqrt(np.mean(f_true**2, axis=0)),
-                                active_share)
+        e, act, f_model, f_true = model_window_rhs_true_AU(predictor, truth, start, end, event_id=rec.event_id,
+                                                           active_share=active_share,
+                                                           yaw=record_yaw_on(rec, truth["time"].values))
         fm_all.append(f_model.ravel())
         ft_all.append(f_true.ravel())
         et.append(e.ravel())
@@ -692,7 +720,8 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
     out["rhs_error_true_AU_energy"] = energy_relative_error(np.concatenate(fm_all), np.concatenate(ft_all))
     out["rhs_median_rel_error"] = finite_median(np.concatenate(em)) if em else math.nan
     out["rhs_median_rel_error_active"] = finite_median(np.concatenate(em_act)) if em else math.nan
-    out["curve_error_linear"], out["curve_error_total"] = _curve_scores(fitted, records, truths)
+    out["curve_error_linear"], out["curve_error_total"], out["curve_error_energy"] = _curve_scores(fitted, records,
+                                                                                                    truths)
     out["simulation_nmse"], out["simulation_covered"] = (simulation_nmse(fitted, records) if simulate
                                                          else (math.nan, math.nan))
     out["fit_time_s"] = float(fit_time_s)

@@ -43,6 +43,8 @@ __all__ = [
     "rhs_error_summary",
     "curve_errors",
     "energy_relative_error",
+    "curves_rhs",
+    "curve_energy_error",
     "cluster_purity",
     "cluster_agreement",
     "forecast_summary",
@@ -399,6 +401,73 @@ def energy_relative_error(f_model, f_true) -> float:
         return float("nan")
     miss = np.where(np.isfinite(f_model[ok]), f_model[ok] - f_true[ok], f_true[ok])
     return float(np.sqrt(np.sum(miss**2) / den))
+
+
+def curves_rhs(curves: np.ndarray, wind: np.ndarray, U: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """dA_k/dt that coefficient curves give at samples: sum_i a_ki(U_k) A_k^i.
+
+    Parameters
+    ----------
+    curves : ndarray, shape (S, 4, n_wind), a_ki in m^(1-i)/s on ``wind``
+    wind : ndarray, shape (n_wind,), m/s, increasing
+    U, A : ndarray, shape (n, S), m/s and m
+
+    Returns
+    -------
+    ndarray, shape (n, S), m/s
+        Curves linearly interpolated in wind; NaN outside the grid or where a curve is NaN.
+    """
+    curves = np.asarray(curves, dtype=float)
+    U, A = np.asarray(U, dtype=float), np.asarray(A, dtype=float)
+    S = curves.shape[0]
+    if curves.ndim != 3 or curves.shape[1] != 4 or U.shape != A.shape or U.ndim != 2 or U.shape[1] != S:
+        raise ValueError(f"curves must be (S, 4, n_wind) and U, A (n, S); got {curves.shape}, {U.shape}, {A.shape}")
+    out = np.empty(U.shape)
+    powers = np.arange(4)
+    for k in range(S):
+        out[:, k] = np.sum(_interp_curves(curves[k], np.asarray(wind, dtype=float), U[:, k]) * A[:, k, None] ** powers,
+                           axis=1)
+    return out
+
+
+def curve_energy_error(curves: np.ndarray, wind: np.ndarray, U: np.ndarray, A: np.ndarray, dA_true: np.ndarray,
+                       wind_range=None) -> float:
+    """Energy-weighted relative RMS error of the dA/dt that curves give at the true (A, U) of every sample.
+
+    :func:`energy_relative_error` of :func:`curves_rhs` against ``dA_true``
+    (the truth's curves' :func:`curves_rhs` at the same samples, or the
+    truth's dA/dt)
+    over every sample and equation: a sample where the curves are missing
+    (NaN) counts as a total miss, but samples whose U_k lies outside
+    equation k's ``wind_range`` (where the curves are extrapolations) are
+    left out of numerator and denominator.
+
+    Parameters
+    ----------
+    curves : ndarray, shape (S, 4, n_wind), m^(1-i)/s; wind : ndarray, shape (n_wind,), m/s
+    U, A, dA_true : ndarray, shape (n, S), m/s, m and m/s: the truth's samples and the reference dA/dt
+    wind_range : array_like, shape (S, 2), m/s, optional
+        The fitted data's [U_min, U_max] per equation
+        (:func:`vivbench.models.data_wind_range`); None scores every sample.
+
+    Returns
+    -------
+    float, dimensionless (NaN when no sample is scored)
+    """
+    dA_true = np.asarray(dA_true, dtype=float)
+    U = np.asarray(U, dtype=float)
+    f_model = curves_rhs(curves, wind, U, A)
+    if dA_true.shape != f_model.shape:
+        raise ValueError(f"dA_true must have the shape of U and A {f_model.shape}; got {dA_true.shape}")
+    if wind_range is not None:
+        rng = np.asarray(wind_range, dtype=float)
+        if rng.shape != (U.shape[1], 2):
+            raise ValueError(f"wind_range must have shape ({U.shape[1]}, 2) ([U_min, U_max] per equation); "
+                             f"got {rng.shape}")
+        with np.errstate(invalid="ignore"):
+            inside = (U >= rng[None, :, 0]) & (U <= rng[None, :, 1])
+        dA_true = np.where(inside, dA_true, np.nan)
+    return energy_relative_error(f_model, dA_true)
 
 
 def curve_errors(curves: np.ndarray, wind: np.ndarray, true_curves: np.ndarray, true_wind: np.ndarray,

@@ -18,10 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from vivbench.core.regime import DEFAULT_TAU
+from vivbench.validate.metrics import energy_relative_error
 from vivbench.validate.recovery import (
     finite_median,
     model_window_rhs_errors,
-    model_window_rhs_errors_true_AU,
+    model_window_rhs_true_AU,
     record_yaw_on,
     regime_scores,
     truth_window_activity,
@@ -61,7 +62,9 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         without ``/truth/coef``) and ``rhs_error_true_AU_median``,
         ``rhs_error_true_AU_median_active`` (the model's ``predict`` on the
         truth's own A and U against the truth's dA/dt, any truth:
-        :func:`vivbench.validate.model_window_rhs_errors_true_AU`).
+        :func:`vivbench.validate.model_window_rhs_errors_true_AU`), and
+        ``rhs_error_true_AU_energy``, the same error energy-weighted over every
+        truth sample (:func:`vivbench.validate.metrics.energy_relative_error`).
     """
     from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
     from vivbench.io.campaign_model import read_pooled
@@ -83,6 +86,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         results[str(ds.attrs["event_id"])] = ds
     event_of = pooled["event_id"].values.astype(str)
     regimes, truths_w, flags, errs, errs_active, errs_true, errs_true_active = [], [], [], [], [], [], []
+    f_model_all, f_true_all = [], []
     for event_id in dict.fromkeys(event_of):
         if event_id not in truths:
             raise InputError(f"{pooled_file}: event {event_id} has no event file among the {len(truths)} given")
@@ -109,9 +113,11 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         errs.append(e.ravel())
         errs_active.append(np.where(act, e, np.nan).ravel())
         # The truth stores no yaw: a model using it sees the measured record's (as score_fitted does).
-        et, act_t = model_window_rhs_errors_true_AU(model, truth, start, end, event_id=event_id,
-                                                    active_share=active_share,
-                                                    yaw=record_yaw_on(measured, truth["time"].values))
+        et, act_t, f_model, f_true = model_window_rhs_true_AU(model, truth, start, end, event_id=event_id,
+                                                              active_share=active_share,
+                                                              yaw=record_yaw_on(measured, truth["time"].values))
+        f_model_all.append(f_model.ravel())
+        f_true_all.append(f_true.ravel())
         errs_true.append(et.ravel())
         errs_true_active.append(np.where(act_t, et, np.nan).ravel())
     scores = regime_scores(np.concatenate(regimes), np.concatenate(truths_w), np.concatenate(flags))
@@ -119,4 +125,5 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     scores["rhs_median_rel_error_active"] = finite_median(np.concatenate(errs_active))
     scores["rhs_error_true_AU_median"] = finite_median(np.concatenate(errs_true))
     scores["rhs_error_true_AU_median_active"] = finite_median(np.concatenate(errs_true_active))
+    scores["rhs_error_true_AU_energy"] = energy_relative_error(np.concatenate(f_model_all), np.concatenate(f_true_all))
     return scores

@@ -25,8 +25,11 @@ import xarray as xr
 from vivbench.core.record import Record
 from vivbench.core.terms import evaluate_library
 from vivbench.regimes.truth import truth_window_regimes
+from vivbench.validate.metrics import energy_relative_error
 
-__all__ = ["recovery_by_event", "model_rhs_true_AU", "window_relative_errors", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors", "regime_scores",
+__all__ = ["recovery_by_event", "model_rhs_true_AU", "model_window_rhs_true_AU", "window_rhs_true_AU",
+           "window_relative_errors", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors",
+           "regime_scores",
            "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU",
            "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on"]
 
@@ -271,9 +274,24 @@ def model_window_rhs_errors_true_AU(model, truth: xr.Dataset, window_start, wind
         true dynamics).
     active : ndarray of bool, shape (W, S)
     """
+    errors, active, _f_model, _f_true = model_window_rhs_true_AU(model, truth, window_start, window_end,
+                                                                 event_id=event_id, active_share=active_share, yaw=yaw)
+    return errors, active
+
+
+def model_window_rhs_true_AU(model, truth: xr.Dataset, window_start, window_end, *, event_id: str = "truth",
+                             active_share: float = 0.1, yaw=None):
+    """:func:`model_window_rhs_errors_true_AU` and the samples behind it, for energy-weighted errors.
+
+    Returns
+    -------
+    errors, active : ndarray, shape (W, S), as :func:`model_window_rhs_errors_true_AU`
+    f_model, f_true : ndarray, shape (n_t, S), m/s, every truth sample (:func:`model_rhs_true_AU`)
+    """
     t, f_model, f_true = model_rhs_true_AU(model, truth, event_id=event_id, yaw=yaw)
     scale = np.sqrt(np.mean(f_true**2, axis=0))
-    return window_relative_errors(f_model, f_true, t, window_start, window_end, scale, active_share)
+    errors, active = window_relative_errors(f_model, f_true, t, window_start, window_end, scale, active_share)
+    return errors, active, f_model, f_true
 
 
 def model_rhs_true_AU(model, truth: xr.Dataset, *, event_id: str = "truth",
@@ -323,6 +341,22 @@ def window_rhs_errors_true_AU(result: xr.Dataset, truth: xr.Dataset, *,
         true dynamics.
     active : ndarray of bool, shape (n_windows, n_eq)
     """
+    errors, active, _f_model, _f_true = window_rhs_true_AU(result, truth, active_share=active_share)
+    return errors, active
+
+
+def window_rhs_true_AU(result: xr.Dataset, truth: xr.Dataset, *,
+                       active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`window_rhs_errors_true_AU` and the samples it compares, for energy-weighted errors.
+
+    Returns
+    -------
+    errors, active : ndarray, shape (n_windows, n_eq), as :func:`window_rhs_errors_true_AU`
+    f_model, f_true : ndarray, shape (m, n_eq), m/s
+        Each window's model's dA/dt (zero for a window without a model) and
+        the truth's on the truth's samples inside that window, windows one
+        after the other (a sample in two overlapping windows appears twice).
+    """
     from vivbench.models.window_model import WindowSINDy
 
     event_id = str(result.attrs.get("event_id", "truth"))
@@ -332,6 +366,7 @@ def window_rhs_errors_true_AU(result: xr.Dataset, truth: xr.Dataset, *,
     scale = np.sqrt(np.mean(record.dA**2, axis=0))
     errors = np.full((start.size, record.n_sections), np.nan)
     active = np.zeros(errors.shape, dtype=bool)
+    f_models, f_trues = [np.empty((0, record.n_sections))], [np.empty((0, record.n_sections))]
     for w in range(start.size):
         sel = (record.t >= start[w]) & (record.t < end[w])
         if not sel.any():
@@ -342,11 +377,13 @@ def window_rhs_errors_true_AU(result: xr.Dataset, truth: xr.Dataset, *,
             f_id = WindowSINDy.from_result(result, windows=[w]).predict(part)
         else:
             f_id = np.zeros_like(f_true)
+        f_models.append(f_id)
+        f_trues.append(f_true)
         rms_true = np.sqrt(np.mean(f_true**2, axis=0))
         with np.errstate(invalid="ignore", divide="ignore"):
             errors[w] = np.sqrt(np.mean((f_id - f_true) ** 2, axis=0)) / rms_true
         active[w] = rms_true >= active_share * scale
-    return errors, active
+    return errors, active, np.concatenate(f_models), np.concatenate(f_trues)
 def truth_window_activity(truth: xr.Dataset, window_start, window_end, *, active_share: float = 0.1) -> np.ndarray:
     """Which window-equations have dynamics, from the truth alone (no coefficient matrix needed).
 
@@ -408,7 +445,10 @@ def campaign_recovery(event_files, result_files, *, active_share: float = 0.1) -
         window-equations) on the measured (A, U) with the exact matrix (NaN
         for truths without ``coef``); ``rhs_error_true_AU_median``,
         ``rhs_error_true_AU_median_active`` and ``active_share_true_AU`` on the
-        true (A, U) (:func:`window_rhs_errors_true_AU`, any truth); and
+        true (A, U) (:func:`window_rhs_errors_true_AU`, any truth),
+        ``rhs_error_true_AU_energy`` the same error energy-weighted over the
+        windows' samples (:func:`vivbench.validate.metrics.energy_relative_error`
+        of :func:`window_rhs_true_AU`'s samples); and
         ``truth_regime_shares``. The fuller tables are
         :func:`vivbench.validate.validate_campaign`.
     """
@@ -432,13 +472,14 @@ def recovery_by_event(event_files, result_files, *, active_share: float = 0.1) -
         res = read_result(res_path)
         start, end = res["window_start"].values, res["window_end"].values
         e, active = truth_rhs_errors(res, truth, active_share=active_share)
-        et, act_t = window_rhs_errors_true_AU(res, truth, active_share=active_share)
+        et, act_t, f_win, f_true = window_rhs_true_AU(res, truth, active_share=active_share)
         parts.append({"regime": res["regime"].values, "truth": truth_window_regimes(truth, start, end),
                       "flag": res["identifiable"].values.astype(bool), "err": e.ravel(),
                       "err_active": np.where(active, e, np.nan).ravel(),
                       # scored and active; without a coefficient matrix nothing is scored: active alone
                       "active": (active & np.isfinite(e) if "coef" in truth.data_vars else active).ravel(),
-                      "err_true": et.ravel(), "err_true_active": np.where(act_t, et, np.nan).ravel()})
+                      "err_true": et.ravel(), "err_true_active": np.where(act_t, et, np.nan).ravel(),
+                      "f_window": f_win.ravel(), "f_true": f_true.ravel()})
     return _recovery_scores(parts), [_recovery_scores([p]) for p in parts]
 
 
@@ -450,6 +491,7 @@ def _recovery_scores(parts: list[dict]) -> dict:
     scores["active_share"] = float(np.mean(cat["active"]))
     scores["rhs_error_true_AU_median"] = finite_median(cat["err_true"])
     scores["rhs_error_true_AU_median_active"] = finite_median(cat["err_true_active"])
+    scores["rhs_error_true_AU_energy"] = energy_relative_error(cat["f_window"], cat["f_true"])
     scores["active_share_true_AU"] = float(np.mean(np.isfinite(cat["err_true_active"])))
     scores["truth_regime_shares"] = {k: float(np.mean(cat["truth"] == k)) for k in (1, 2, 3, 4)}
     return scores

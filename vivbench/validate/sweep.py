@@ -81,11 +81,13 @@ METRIC_COLUMNS = (
     "rhs_median_rel_error_active",
     "active_share",
     "rhs_error_true_AU_median_active",
+    "rhs_error_true_AU_energy",
     "pooled_coverage",
     "pooled_accuracy_all",
     "pooled_accuracy_identifiable",
     "pooled_rhs_median_rel_error_active",
     "pooled_rhs_error_true_AU_median_active",
+    "pooled_rhs_error_true_AU_energy",
     "truth_share_regime1",
     "truth_share_regime2",
     "truth_share_regime3",
@@ -443,6 +445,8 @@ def _flatten_scores(scores: dict) -> dict[str, float]:
         "active_share": scores["active_share"],
         # on the truth's own (A, U) through the models' predict: scored for truths outside the library too
         "rhs_error_true_AU_median_active": scores["rhs_error_true_AU_median_active"],
+        # the same energy-weighted over every window sample: the large amplitudes the median hides
+        "rhs_error_true_AU_energy": scores["rhs_error_true_AU_energy"],
     }
     for k in (1, 2, 3, 4):
         out[f"truth_share_regime{k}"] = shares.get(k, float("nan"))
@@ -497,7 +501,8 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         ps = pooled_recovery(events, pooled, results)
         metrics.update({f"pooled_{k}": float(ps[k]) for k in ("coverage", "accuracy_all", "accuracy_identifiable",
                                                                "rhs_median_rel_error_active",
-                                                               "rhs_error_true_AU_median_active")})
+                                                               "rhs_error_true_AU_median_active",
+                                                               "rhs_error_true_AU_energy")})
     except Exception as exc:
         # Temporary paths differ from run to run; the table must not.
         message = error_line(exc).replace(str(root), "<campaign>")

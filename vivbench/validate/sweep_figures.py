@@ -23,6 +23,7 @@ _PANELS = (
     ("accuracy_all", "regime accuracy", "share of window-equations (-)"),
     ("coverage", "coverage (flagged identifiable)", "share of window-equations (-)"),
     ("rhs_median_rel_error_active", "error of identified dA/dt", "median relative RMS error (-)"),
+    ("rhs_error_true_AU_energy", "error of dA/dt on the true (A, U)", "energy-weighted relative RMS error (-)"),
 )
 _MAX_DISCRETE = 12  # more distinct x values than this are binned
 
@@ -56,7 +57,9 @@ def plot_recovery(rows: Sequence[dict], parameters: Sequence[str], path: str | P
     Panels: regime accuracy over all scored window-equations (with the share of
     the most common true regime, the accuracy of always guessing it, as the
     chance level), coverage (share flagged identifiable), and the median
-    relative error of the identified dA/dt on windows with dynamics. Each
+    relative error of the identified dA/dt on windows with dynamics, and the
+    error of dA/dt on the true (A, U) energy-weighted over every sample (the
+    large amplitudes the median hides; NaN in tables written before it). Each
     campaign is a dot; the line joins the medians per parameter value.
 
     Parameters
@@ -70,7 +73,7 @@ def plot_recovery(rows: Sequence[dict], parameters: Sequence[str], path: str | P
     ok_rows = [r for r in rows if not r.get("error")]
     n_rows = len(parameters)
     height = 3.2 * n_rows + 0.6
-    fig, axes = plt.subplots(n_rows, len(_PANELS), figsize=(12, height), squeeze=False)
+    fig, axes = plt.subplots(n_rows, len(_PANELS), figsize=(4 * len(_PANELS), height), squeeze=False)
     # Fixed margins: constrained layout costs more than the rest of the figure.
     fig.subplots_adjust(left=0.065, right=0.985, bottom=0.75 / height, top=1 - 0.55 / height, wspace=0.3,
                         hspace=0.75 / 3.2)
@@ -144,7 +147,9 @@ def sweep_summary(rows: Sequence[dict], varied: Sequence[str], n_tasks: int) -> 
     }
     for col in ("accuracy_all", "accuracy_identifiable", "truth_majority_share", "coverage",
                 "rhs_median_rel_error", "rhs_median_rel_error_active", "pooled_coverage", "pooled_accuracy_all",
-                "pooled_accuracy_identifiable", "pooled_rhs_median_rel_error_active"):
+                "pooled_accuracy_identifiable", "pooled_rhs_median_rel_error_active", "rhs_error_true_AU_median_active",
+                "rhs_error_true_AU_energy", "pooled_rhs_error_true_AU_median_active",
+                "pooled_rhs_error_true_AU_energy"):
         out[f"median_{col}"] = _median(ok_rows, col)
     for name in varied:
         x = _column(ok_rows, name)
