@@ -212,6 +212,14 @@ def test_save_load_round_trip_and_bands(fitted, tmp_path):
         lo, hi = ds[f"{name}_lower"].values, ds[f"{name}_upper"].values
         assert np.all(lo <= ds[name].values + 1e-15) and np.all(ds[name].values <= hi + 1e-15)
     assert ds["curves"].dims == ("equation", "order", "wind") and ds["wind"].attrs["units"] == "m/s"
+    # curves outside the fitted wind range are marked as extrapolations, inside they are not
+    lo_w, hi_w = model.wind_range_
+    wide = model.to_dataset(wind=np.linspace(lo_w - 2.0, hi_w + 2.0, 41))
+    outside = (wide["wind"].values < lo_w) | (wide["wind"].values > hi_w)
+    assert outside.any() and not outside.all()
+    np.testing.assert_array_equal(wide["curves_extrapolated"].values.astype(bool),
+                                  np.broadcast_to(outside, wide["curves_extrapolated"].shape))
+    assert not ds["curves_extrapolated"].values.any()  # the default grid spans the data's winds only
     r = model.order_contributions(records[0])
     assert r.shape == records[0].A.shape + (4,)
     np.testing.assert_allclose(r.sum(-1), model.predict(records[0]))

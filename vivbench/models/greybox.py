@@ -182,6 +182,7 @@ from scipy.stats import norm
 
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
+from vivbench.models.curve_support import mark_extrapolated
 from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.greybox_bootstrap import event_bootstrap
 from vivbench.models.greybox_shooting import rk4_step_function, shooting_grid
@@ -1291,6 +1292,8 @@ class GreyBoxRefit(ModelBase):
         comp = self.band_components(cur["wind"].values)
         ds = ds.merge(cur.drop_vars("equation")).merge(phys).merge(self.yaw_curve()).merge(comp.drop_vars("equation"))
         ds = ds.assign_coords(equation=section_names(self.n_sections_))
+        # The curves outside the fitted data's wind range are extrapolations: marked, as every model's are.
+        ds = mark_extrapolated(ds, np.tile(np.asarray(self.wind_range_, dtype=float), (self.n_sections_, 1)))
         ds.attrs.update(model=type(self).__name__)
         return ds
 
