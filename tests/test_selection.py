@@ -207,3 +207,26 @@ def test_two_events_give_no_held_out_choice_and_say_so():
                          n_perturbations=0).fit(recs)
     assert sel.chosen_ == "const" and np.isnan(sel.losses_).all()
     assert "too few for a held-out choice" in sel.evidence_text()
+
+
+def test_curve_bands_span_the_confidence_set_and_yaw_zero_outside_the_data_is_marked():
+    recs = _yaw_records(False)
+    # every record's yaw kept 10-50 degrees away from perpendicular: curves at yaw 0 are an extrapolation
+    recs = [Record(event_id=r.event_id, t=r.t, A=r.A, U=r.U, dA=r.dA, yaw=30.0 + 0.5 * r.yaw) for r in recs]
+    sel = varying_selection(criterion="derivative", options={"yaw_degree": (0, 1)}, n_perturbations=0,
+                            n_basis=(8,), n_bootstrap=10, wind_smoothing_s=0.0).fit(recs)
+    wind = np.linspace(8.0, 14.0, 13)
+    c = sel.curves(wind)
+    own = sel.model_.curves(wind)
+    assert np.all(c["curves_lower"].values <= own["curves_lower"].values + 1e-15)
+    assert np.all(c["curves_upper"].values >= own["curves_upper"].values - 1e-15)
+    for m in sel.set_models_:
+        inner = m.curves(wind)["curves"].values
+        assert np.all((c["curves_lower"].values <= inner + 1e-15) & (inner <= c["curves_upper"].values + 1e-15))
+    with_yaw = varying_selection(criterion="derivative", options={"yaw_degree": (1,)}, n_perturbations=0,
+                                 n_basis=(8,), n_bootstrap=0, wind_smoothing_s=0.0).fit(recs)
+    assert with_yaw.model_.yaw_extrapolated().all()
+    assert with_yaw.curves(wind)["curves_extrapolated"].values.all()
+    free = varying_selection(criterion="derivative", options={"yaw_degree": (0,)}, n_perturbations=0,
+                             n_basis=(8,), n_bootstrap=0, wind_smoothing_s=0.0).fit(recs)
+    assert not free.curves(wind)["curves_extrapolated"].values.any()

@@ -318,7 +318,9 @@ def pool_results(result_files: Sequence, model=None, *,
                        {"long_name": "no model within the fit tolerance gives the window another regime (near-null-space test)"}),
             "order_rms": order_rms,
         }
-    curves = model.curves(curve_wind_grid(np.concatenate([ds["U"].values.ravel() for _p, ds, _a, _e in results])))
+    # With a selection: the chosen model's curves, their bands widened to hold the confidence set's.
+    grid = curve_wind_grid(np.concatenate([ds["U"].values.ravel() for _p, ds, _a, _e in results]))
+    curves = (model if selection is None else selection).curves(grid)
     # Marked where a section's curve lies outside the winds it was fitted on (the wind as at fit).
     curves = mark_extrapolated(curves, data_wind_range(records))
     for name in ("curves", "curves_lower", "curves_upper"):

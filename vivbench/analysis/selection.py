@@ -472,6 +472,36 @@ class ModelSelection:
         flag = np.asarray(own["identifiable"], dtype=bool)
         return flag & self.agreement(record, window_start, window_end, own["regime"])
 
+    def curves(self, wind, level: float = 0.95) -> xr.Dataset:
+        """The chosen model's curves, their bands widened to hold every other member of the confidence set.
+
+        A covariate that the campaign's data cannot tell from something else (a yaw that follows the
+        same course in every event) then widens the bands instead of bending the curves unseen.
+
+        Parameters
+        ----------
+        wind : array_like, shape (n_wind,), m/s
+        level : float, the level of the chosen model's own bands
+
+        Returns
+        -------
+        xarray.Dataset, as the chosen model's ``curves`` (``curves``, ``curves_lower``, ``curves_upper``
+        (equation, order, wind) in m^(1-i)/s), with the attribute ``confidence_set`` (JSON list of names)
+        """
+        self._check_fitted()
+        out = self.model_.curves(wind, level=level)
+        lower, upper = out["curves_lower"].values.copy(), out["curves_upper"].values.copy()
+        point = out["curves"].values
+        lower = np.where(np.isfinite(lower), lower, point)
+        upper = np.where(np.isfinite(upper), upper, point)
+        for m in self.set_models_:
+            c = m.curves(wind, level=level)["curves"].values
+            lower, upper = np.fmin(lower, c), np.fmax(upper, c)
+        out["curves_lower"] = (out["curves_lower"].dims, lower, out["curves_lower"].attrs)
+        out["curves_upper"] = (out["curves_upper"].dims, upper, out["curves_upper"].attrs)
+        out.attrs["confidence_set"] = json.dumps([n for n, ok in zip(self.names_, self.in_set_) if ok])
+        return out
+
     # -- the evidence ----------------------------------------------------------------------------------
 
     def evidence(self) -> dict:

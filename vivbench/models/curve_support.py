@@ -90,7 +90,9 @@ def mark_extrapolated(curves: xr.Dataset, wind_range) -> xr.Dataset:
     -------
     xarray.Dataset
         With the boolean variable ``curves_extrapolated``: True where the
-        curve's wind lies outside the equation's data (an extrapolation).
+        curve's wind lies outside the equation's data (an extrapolation), or
+        where ``curves`` already marked it so (a model that holds a covariate
+        at a value outside its data marks its curves itself).
     """
     S = curves.sizes.get("equation")
     rng = np.asarray(wind_range, dtype=float)
@@ -99,7 +101,10 @@ def mark_extrapolated(curves: xr.Dataset, wind_range) -> xr.Dataset:
     if rng.shape != (S, 2):
         raise ValueError(f"wind_range must have shape ({S}, 2), one [U_min, U_max] per equation (m/s); got {rng.shape}")
     out = curves.copy()
-    out[EXTRAPOLATED] = (("equation", "wind"), extrapolated_mask(curves["wind"].values, rng),
+    mask = extrapolated_mask(curves["wind"].values, rng)
+    if EXTRAPOLATED in curves:  # the model's own marks (e.g. a covariate held outside its data) stay
+        mask = mask | np.asarray(curves[EXTRAPOLATED].values, dtype=bool)
+    out[EXTRAPOLATED] = (("equation", "wind"), mask,
                          {"long_name": "the curve's wind lies outside the fitted data's wind range of the equation "
                           "(an extrapolation of the model)"})
     return out

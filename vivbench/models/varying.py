@@ -93,6 +93,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.netcdf import write_netcdf_atomic
+from vivbench.models.curve_support import EXTRAPOLATED
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights,
@@ -100,7 +101,7 @@ from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights,
 from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
-           "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES"]
+           "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES", "YAW_INSIDE_DEG"]
 
 #: Spline degree (cubic).
 DEGREE = 3
@@ -109,6 +110,10 @@ DEGREE = 3
 #: the cross-validated error over events: roughly doubling steps, from the exact wind of an in-library
 #: campaign to a point anemometer's slow turbulence (the seed-0 realistic campaign chose 30 s).
 WIND_SMOOTHING_GRID = (0.0, 15.0, 30.0, 60.0)
+
+#: Degrees: curves at yaw 0 count as inside the data when some fitted sample's yaw came this close to
+#: perpendicular (about the direction accuracy of an anemometer).
+YAW_INSIDE_DEG = 2.0
 
 PENALTY_CHOICES = ("cv", "least", "loeo")
 """Values of ``penalty_choice``: the 5-fold cross-validated error's minimum, the least penalty of the confidence
@@ -594,8 +599,8 @@ class VaryingCoefficientSINDy(ModelBase):
     coef_yaw_ : ndarray, shape (S, M_max, 4, J)
         Spline coefficients of the yaw terms (coefficients of sin^2j(psi)).
     coef_yaw_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4, yaw_degree)
-    yaw_ref_, yaw_fallback_ : ndarray, shape (S,)
-        RMS and median of sin^2(psi) over the fitted samples.
+    yaw_ref_, yaw_fallback_, yaw_min_ : ndarray, shape (S,)
+        RMS, median and minimum of sin^2(psi) over the fitted samples.
     subset_coef_, subset_coef_yaw_ : ndarray, shapes (n_subsets,) + those of ``coef_``, ``coef_yaw_``
         The models of every order subset at the selected basis and penalty.
     subset_loeo_ : ndarray, shape (n_subsets, S), m^2/s^2
@@ -853,6 +858,7 @@ class VaryingCoefficientSINDy(ModelBase):
         self.penalty_plausible_ = np.zeros((pen.size, S), dtype=bool)
         self.yaw_ref_ = np.ones(S)
         self.yaw_fallback_ = np.zeros(S)
+        self.yaw_min_ = np.zeros(S)
         n_samples = 0
         n_blocks_used = 0
         for k in range(S):
@@ -861,6 +867,7 @@ class VaryingCoefficientSINDy(ModelBase):
             lo, hi = sk["range"]
             ev_of_block, fold_of_block = sk["ev_of_block"], sk["fold_of_block"]
             self.yaw_fallback_[k], self.yaw_ref_[k] = sk["yaw_fallback"], sk["yaw_ref"]
+            self.yaw_min_[k] = sk["yaw_min"]
             self.cv_error_[k] = sk["cv_error"]
             n_samples += n
             n_blocks_used = max(n_blocks_used, nb)
@@ -1080,10 +1087,11 @@ class VaryingCoefficientSINDy(ModelBase):
             raise InputError(f"section {k + 1}: {n} valid samples are too few for {p_max} spline coefficients")
         Uall, Zall = self._equation_inputs(U, Z, k)
         Ak, Uk, yk = A[ok, k], Uall[ok], dA[ok, k]
-        zk, yaw_fallback, yaw_ref = None, 0.0, 1.0
+        zk, yaw_fallback, yaw_ref, yaw_min = None, 0.0, 1.0, 0.0
         if J:
             # sin^2 psi over its RMS keeps the yaw columns on the scale of the others.
             zraw = Zall[ok]
+            yaw_min = float(np.min(zraw))
             yaw_fallback = float(np.median(zraw))
             yaw_ref = float(np.sqrt(np.mean(zraw**2))) or 1.0
             zk = zraw / yaw_ref
@@ -1111,6 +1119,7 @@ class VaryingCoefficientSINDy(ModelBase):
                 best = (float(err[j]), int(M), float(pen[j]), knots, G, b, yy, P)
         return {"n": n, "nb": nb, "ys": ys, "aref": aref, "range": (lo, hi), "ev_of_block": ev_of_block,
                 "fold_of_block": fold_of_block, "yaw_fallback": yaw_fallback, "yaw_ref": yaw_ref,
+                "yaw_min": yaw_min,
                 "cv_error": cv_error, "best": best}
 
     def event_statistics(self, records: Sequence[Record]) -> list[dict]:
@@ -1460,7 +1469,22 @@ class VaryingCoefficientSINDy(ModelBase):
             coords={"equation": section_names(self.n_sections_), "order": np.arange(4),
                     "wind": ("wind", wind, {"units": "m/s"})},
             attrs={"model": type(self).__name__},
-        )
+        ).assign({EXTRAPOLATED: (("equation", "wind"), np.repeat(self.yaw_extrapolated()[:, None], wind.size, axis=1),
+                                 {"long_name": "the curve is an extrapolation: the wind's yaw of the curves (0, "
+                                  "perpendicular) lies outside the fitted data's yaw"})})
+
+    def yaw_extrapolated(self) -> np.ndarray:
+        """Bool (S,): the curves (at yaw 0) are an extrapolation of the yaw covariate.
+
+        True for an equation whose fitted samples never came within ``YAW_INSIDE_DEG`` of a wind
+        perpendicular to the span (sin^2 of the yaw always above sin^2 of it); False without a yaw
+        covariate, and unknown (False) for a model loaded from a file written before it was kept.
+        """
+        self._check_fitted()
+        zmin = np.asarray(getattr(self, "yaw_min_", np.zeros(self.n_sections_)), dtype=float)
+        if not self.yaw_degree_:
+            return np.zeros(self.n_sections_, dtype=bool)
+        return np.nan_to_num(zmin, nan=0.0) > np.sin(np.radians(YAW_INSIDE_DEG)) ** 2
 
     def equations(self, precision: int = 3) -> list[str]:
         """Readable equations, e.g. ``"dA1/dt = a10(U1) + a11(U1) A1 + a12(U1) A1^2 + a13(U1) A1^3"``.
@@ -1506,7 +1530,7 @@ class VaryingCoefficientSINDy(ModelBase):
     #: Written only with ``yaw_degree_`` > 0 (files of models without yaw stay as they were).
     _YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
                    "coef_yaw_bootstrap_": ("bootstrap", "equation", "basis", "order", "yaw_power"),
-                   "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",),
+                   "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",), "yaw_min_": ("equation",),
                    "subset_coef_yaw_": ("subset", "equation", "basis", "order", "yaw_power")}
 
     def to_dataset(self) -> xr.Dataset:
@@ -1572,11 +1596,14 @@ class VaryingCoefficientSINDy(ModelBase):
         model.yaw_degree_ = J
         if J:
             for name in cls._YAW_ARRAYS:
-                setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+                if name.rstrip("_") in ds:  # yaw_min: absent from files written before it (unknown: NaN)
+                    setattr(model, name, np.asarray(ds[name.rstrip("_")].values))
+            if "yaw_min" not in ds:
+                model.yaw_min_ = np.full(S, np.nan)
         else:
             model.coef_yaw_ = np.zeros((S, Mmax, 4, 0))
             model.coef_yaw_bootstrap_ = np.zeros(model.coef_bootstrap_.shape + (0,))
-            model.yaw_ref_, model.yaw_fallback_ = np.ones(S), np.zeros(S)
+            model.yaw_ref_, model.yaw_fallback_, model.yaw_min_ = np.ones(S), np.zeros(S), np.zeros(S)
             model.subset_coef_yaw_ = np.zeros((ORDER_SUBSETS.shape[0], S, Mmax, 4, 0))
         if "subset_coef" in ds:
             for name in cls._SUBSET_ARRAYS:
