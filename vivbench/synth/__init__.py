@@ -27,6 +27,8 @@ from vivbench.synth.config import (
 )
 from vivbench.synth.curves import (
     CURVE_KINDS,
+    YAW_SHAPES,
+    AsymmetricBell,
     Constant,
     GaussianBell,
     LogisticStep,
@@ -47,6 +49,6 @@ __all__ = [
     "bell_polynomial", "campaign_specs", "config_from_dict", "config_to_dict", "davenport_coherence",
     "draw_script", "exact_coefficients", "generate_campaign", "generate_event", "kaimal_psd", "load_config",
     "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
-    "AERO_MODES", "CURVE_KINDS", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
+    "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
     "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
 ]
