@@ -37,9 +37,13 @@ def run(args) -> int:
         result = generate_campaign(campaign, args.out, workers=args.workers, progress=lambda _id: bar.update())
     finally:
         bar.close()
+    return _report(result, f"wrote {len(result.files)} events and {result.catalogue}")
+
+
+def _report(result, done: str) -> int:
     for event_id, message in sorted(result.failures.items()):
         print(f"vivbench synth: {event_id}: {message}", file=sys.stderr)
-    print(f"wrote {len(result.files)} events and {result.catalogue}")
+    print(done)
     return 1 if result.failures else 0
 
 
@@ -51,20 +55,14 @@ def _family(args) -> int:
         raise InputError(f"--family fixes the campaign (bridge, events, duration, seed); drop {', '.join(given)}")
     if args.draw is None:
         raise InputError("--family needs --draw N (the draw's number in the split, from 0)")
-    campaign = draw_bridge(args.family, args.draw).campaign_config(
-        max_events=args.max_events, max_duration=None if args.max_duration is None else args.max_duration * 60.0)
-    bar = progress(campaign.n_events, "synth")
+    caps = {"max_events": args.max_events, "max_duration": None if args.max_duration is None else args.max_duration * 60.0}
+    bar = progress(draw_bridge(args.family, args.draw).campaign_config(**caps).n_events, "synth")
     try:
-        result, described = generate_family_campaign(
-            args.family, args.draw, args.out, workers=args.workers, max_events=args.max_events,
-            max_duration=None if args.max_duration is None else args.max_duration * 60.0,
-            progress=lambda _id: bar.update())
+        result, described = generate_family_campaign(args.family, args.draw, args.out, workers=args.workers,
+                                                     progress=lambda _id: bar.update(), **caps)
     finally:
         bar.close()
-    for event_id, message in sorted(result.failures.items()):
-        print(f"vivbench synth: {event_id}: {message}", file=sys.stderr)
-    print(f"wrote {len(result.files)} events, {result.catalogue} and {described}")
-    return 1 if result.failures else 0
+    return _report(result, f"wrote {len(result.files)} events, {result.catalogue} and {described}")
 
 
 def _positive_int(text: str) -> int:

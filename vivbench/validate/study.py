@@ -51,6 +51,7 @@ from vivbench.regimes.model import model_window_regimes
 from vivbench.synth.family import SPLITS, draw_bridge
 from vivbench.synth.campaign import generate_campaign
 from vivbench.validate.journal import append as journal_append
+from vivbench.validate.journal import check_record
 from vivbench.validate.journal import format_value
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_spec, fit_method, resolve_method
@@ -329,21 +330,11 @@ def _write_csv(path: Path, rows: Sequence[dict]) -> None:
 
 
 def _check_config_record(out: Path, config: StudyConfig) -> None:
-    record = out / "study_config.json"
     data = config.to_dict()
     del data["draws"]
-    text = json.dumps({"fingerprint": config.fingerprint(), "config": data}, indent=1, sort_keys=True) + "\n"
-    if record.exists():
-        try:
-            old = json.loads(record.read_text()).get("fingerprint")
-        except (json.JSONDecodeError, AttributeError):
-            old = None
-        if old != config.fingerprint():
-            raise InputError(f"{record}: this directory holds a study of another split, methods, caps or "
-                             "identification; use another --out (or delete the directory to start over)")
-        return
-    with atomic_path(record) as tmp:
-        tmp.write_text(text)
+    check_record(out / "study_config.json", config.fingerprint(), data,
+                 "this directory holds a study of another split, methods, caps or identification; use another "
+                 "--out (or delete the directory to start over)")
 
 
 def run_study(config: StudyConfig, out_dir: str | Path, *, workers: int = 1, scheduler: str | None = None,
