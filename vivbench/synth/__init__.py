@@ -38,6 +38,16 @@ from vivbench.synth.curves import (
     reduced_velocity,
 )
 from vivbench.synth.draw import draw_aero
+from vivbench.synth.family import (
+    FAMILY_ENTROPY,
+    FAMILY_FILE,
+    FAMILY_VERSION,
+    SPLITS,
+    FamilyDraw,
+    draw_bridge,
+    family_seed,
+    generate_family_campaign,
+)
 from vivbench.synth.event import EventSpec, SimulatedEvent, generate_event, simulate_event
 from vivbench.synth.turbulence import TurbulenceConfig, davenport_coherence, kaimal_psd, simulate_turbulence
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
@@ -51,4 +61,6 @@ __all__ = [
     "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
     "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
     "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
+    "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "family_seed",
+    "generate_family_campaign",
 ]

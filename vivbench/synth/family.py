@@ -139,6 +139,11 @@ class FamilyDraw:
     campaign_seed: int
     labels: dict = field(default_factory=dict)
 
+    @property
+    def duration_min(self) -> tuple[float, float]:
+        """(min, max) event duration, minutes."""
+        return self.duration[0] / 60.0, self.duration[1] / 60.0
+
     def campaign_config(self, *, max_events: int | None = None, max_duration: float | None = None) -> CampaignConfig:
         """The draw's campaign, optionally capped.
 
@@ -147,6 +152,8 @@ class FamilyDraw:
         max_events : at most this many events (the first ones; None: all)
         max_duration : s; event durations capped at this (None: as drawn). Capped campaigns are
             smaller than the family's: for quick checks only, and every output records the caps.
+            The labels describe the whole draw (a damping step after the last kept event is not
+            in the capped campaign).
         """
         n = self.n_events if max_events is None else min(self.n_events, int(max_events))
         lo, hi = self.duration
