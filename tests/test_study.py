@@ -55,7 +55,8 @@ def test_tiny_study_writes_a_row_per_draw_and_method(tiny_study):
     lines = (out / "study.csv").read_text().splitlines()
     assert lines[0].split(",") == list(STUDY_COLUMNS)
     rows = [dict(zip(STUDY_COLUMNS, line.split(","))) for line in lines[1:]]
-    assert [(r["draw"], r["method"]) for r in rows] == [(d, m) for d in ("0", "1") for m in ("varying", "pooled", CLAIMS)]
+    methods = ("varying", "pooled", CLAIMS)
+    assert [(r["draw"], r["method"]) for r in rows] == [(d, m) for d in ("0", "1") for m in methods]
     for r in rows:
         assert r["split"] == "development" and r["n_events"] == "2" and r["error"] == ""
         assert 0.0 < float(r["rhs_error_true_AU_energy"]) < 10.0

@@ -50,12 +50,14 @@ def _report(result, done: str) -> int:
 def _family(args) -> int:
     from vivbench.synth.family import draw_bridge, generate_family_campaign
 
-    given = [f"--{k}" for k in ("config", "mode", "events", "seed", "duration", "scenario") if getattr(args, k) is not None]
+    given = [f"--{k}" for k in ("config", "mode", "events", "seed", "duration", "scenario")
+             if getattr(args, k) is not None]
     if given:
         raise InputError(f"--family fixes the campaign (bridge, events, duration, seed); drop {', '.join(given)}")
     if args.draw is None:
         raise InputError("--family needs --draw N (the draw's number in the split, from 0)")
-    caps = {"max_events": args.max_events, "max_duration": None if args.max_duration is None else args.max_duration * 60.0}
+    caps = {"max_events": args.max_events,
+            "max_duration": None if args.max_duration is None else args.max_duration * 60.0}
     bar = progress(draw_bridge(args.family, args.draw).campaign_config(**caps).n_events, "synth")
     try:
         result, described = generate_family_campaign(args.family, args.draw, args.out, workers=args.workers,

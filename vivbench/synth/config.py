@@ -419,7 +419,8 @@ class WindConfig:
         if self.shared_yaw_deg is not None:
             value = self.shared_yaw_deg
             _check(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-                   and abs(value) <= 45, f"shared_yaw_deg must be None or a number of degrees within +-45; got {value!r}")
+                   and abs(value) <= 45,
+                   f"shared_yaw_deg must be None or a number of degrees within +-45; got {value!r}")
             object.__setattr__(self, "shared_yaw_deg", float(value))
 
 

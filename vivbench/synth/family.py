@@ -33,10 +33,10 @@ lock-in bell (Y1)      centre Ur0 = 1/St (:func:`vivbench.synth.draw_aero`, 5.5-
                        range is (1 + g) zeta w1 with g ~ logU(0.3, 3) (self-excited draws) or
                        h zeta w1 with h ~ U(0.2, 0.8) (forced-only draws: Y1 stays below the
                        structural damping everywhere, also after a damping step)
-(f1, D, Ur0)           redrawn together (with the bell) until the lock-in range (Y1 > 0) lies
-                       within 3-25 m/s, where the campaign scripts (which follow the bridge's
-                       lock-in) can pass through it; so f1 and D are conditioned on a reachable
-                       lock-in, and bridges near 0.1 Hz with shallow decks are rarely kept
+(f1, D, Ur0)           redrawn together (with the rest of the structure and the bell) until
+                       the lock-in range (Y1 > 0) lies within 3-25 m/s, where the campaign
+                       scripts (which follow the bridge's lock-in) can pass through it; so f1
+                       and D are conditioned on a reachable lock-in, and bridges near 0.1 Hz with shallow decks are rarely kept
 e1 / e2                draw_aero's shapes; "both" (1/2), "e1 only" (1/4: e2 = 0), "e2 only" (1/4:
                        e1 = 0)
 C_L, Y2, St            draw_aero's
@@ -200,8 +200,7 @@ def _unit_bell(rng: np.random.Generator, center: float):
 
 def _scaled(bell, factor: float):
     """The bell with peak and baseline multiplied by ``factor``."""
-    return type(bell)(**{k: (getattr(bell, k) * factor if k in ("peak", "baseline") else getattr(bell, k))
-                         for k in bell.__dataclass_fields__ if k != "kind"})
+    return dataclasses.replace(bell, peak=bell.peak * factor, baseline=bell.baseline * factor)
 
 
 _WIND = np.arange(0.5, 40.0, 0.01)

@@ -41,8 +41,8 @@ from vivbench.synth.config import StructureConfig, WindConfig
 from vivbench.synth.turbulence import simulate_turbulence
 from vivbench.core.errors import InputError
 
-__all__ = ["WindScript", "MeanWind", "WindField", "mean_wind", "slow_process", "anemometer_positions", "tributary_points",
-           "wind_field", "measure_wind", "anemometer_records", "felt_mean_wind", "point_turbulence"]
+__all__ = ["WindScript", "MeanWind", "WindField", "mean_wind", "slow_process", "anemometer_positions",
+           "tributary_points", "wind_field", "measure_wind", "anemometer_records", "felt_mean_wind", "point_turbulence"]
 
 
 @dataclass(frozen=True, kw_only=True)

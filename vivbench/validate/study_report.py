@@ -127,6 +127,10 @@ def _ranges(draws: Sequence[int]) -> str:
     return ", ".join(parts)
 
 
+def _subset(subset: str, block: dict) -> str:
+    return f"{subset.replace('_', ' ')} ({block['n_draws']})"
+
+
 def _fmt(x, digits: int = 3) -> str:
     return "–" if x is None else f"{x:.{digits}f}"
 
@@ -164,7 +168,7 @@ def study_markdown(summary: dict[str, Any]) -> str:
                 d = block["scores"][key]
                 tail = d["p90"] if worse == "high" else d["p10"]
                 worst = "–" if d["worst"] is None else f"{d['worst']:.3f} ({d['worst_draw']})"
-                lines.append(f"| {name} | {subset.replace('_', ' ')} ({block['n_draws']}) | {_LABELS[key]} | {d['n']} | "
+                lines.append(f"| {name} | {_subset(subset, block)} | {_LABELS[key]} | {d['n']} | "
                              f"{_fmt(d['median'])} | {_fmt(tail)} | {worst} |")
     lines += ["", "## The verdict's promise", "",
               "| method | draws | draws with enough flags | promise kept | share kept | worst share right (draw) |",
@@ -173,7 +177,7 @@ def study_markdown(summary: dict[str, Any]) -> str:
         for subset, block in blocks.items():
             p = block["promise"]
             worst = "–" if p["worst_draw"] is None else f"{p['worst_flagged_right_share']:.3f} ({p['worst_draw']})"
-            lines.append(f"| {name} | {subset.replace('_', ' ')} ({block['n_draws']}) | {p['draws_with_enough_flags']} | "
+            lines.append(f"| {name} | {_subset(subset, block)} | {p['draws_with_enough_flags']} | "
                          f"{p['draws_kept']} | {_fmt(p['share_kept'])} | {worst} |")
     lines += ["", "## Forced-only draws", "",
               "Self-excited flags: flagged window-equations whose model regime is 2, 3 or 4 on a bridge whose "
@@ -182,7 +186,7 @@ def study_markdown(summary: dict[str, Any]) -> str:
     for name, blocks in summary["methods"].items():
         for subset, block in blocks.items():
             f = block["forced_only"]
-            lines.append(f"| {name} | {subset.replace('_', ' ')} | {f['draws']} | {f['self_excited_flags']} | "
+            lines.append(f"| {name} | {_subset(subset, block)} | {f['draws']} | {f['self_excited_flags']} | "
                          f"{f['draws_with_self_excited_flags']} |")
     errors = {name: blocks["all"]["method_errors"] for name, blocks in summary["methods"].items()}
     if any(errors.values()):
