@@ -229,8 +229,9 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
 
     Returns
     -------
-    dict: ``draw``, ``campaign_seed``, ``n_events``, ``events_failed``, ``labels``, ``seconds`` and
-    ``methods`` (method name -> its scores, or NaNs and ``error`` when that method failed).
+    dict: ``draw``, ``campaign_seed``, ``n_events``, ``events_failed``, ``labels``, ``seconds`` (wall
+    time of the task), ``stage_seconds`` (``generate``, ``identify``) and ``methods`` (method name ->
+    its scores with ``fit_time_s``, or NaNs and ``error`` when that method failed).
     Raises when the campaign cannot be generated or no event can be identified (the draw is retried
     by the next run).
     """
@@ -242,7 +243,9 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
     root = Path(tempfile.mkdtemp(prefix=f"d{task.draw:05d}-", dir=task.work_root))
     try:
         made = generate_campaign(campaign, root / "campaign", workers=1)
+        generated = time.perf_counter()
         written, failures = identify_files(made.files, root / "identify", task.identify, workers=1)
+        stages = {"generate": generated - start, "identify": time.perf_counter() - generated}
         if not written:
             reasons = list(made.failures.values()) + list(failures.values())
             raise InputError(f"no event of {task.split} draw {task.draw} could be identified "
@@ -264,7 +267,7 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
         shutil.rmtree(root, ignore_errors=True)
     return {"draw": task.draw, "campaign_seed": draw.campaign_seed, "n_events": campaign.n_events,
             "events_failed": len(made.failures) + len(failures), "labels": draw.labels, "methods": methods,
-            "seconds": time.perf_counter() - start}
+            "seconds": time.perf_counter() - start, "stage_seconds": stages}
 
 
 @dataclass(frozen=True)
