@@ -8,6 +8,8 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tests.helpers import assert_close
 from vivbench.core.errors import InputError
@@ -45,6 +47,18 @@ def test_the_splits_never_overlap(draws):
     assert not dev_cfg & {json.dumps(config_to_dict(d.config), sort_keys=True) for d in draws["evaluation"]}
     dev, ev = family_seed("development", 3), family_seed("evaluation", 3)
     assert dev.generate_state(4).tolist() != ev.generate_state(4).tolist()
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(split=st.sampled_from(SPLITS), index=st.integers(0, 2**31 - 1))
+def test_any_draw_is_valid_and_carries_its_split(split, index):
+    d = draw_bridge(split, index)
+    assert d.campaign_seed >> 62 == SPLITS.index(split)
+    lo, hi = d.config.lock_in
+    assert 3.0 <= lo < hi <= 25.0 and 3 <= d.n_events <= 60
+    assert d.labels["n_sections"] == d.config.structure.n_sections
+    assert (d.config.aero.yaw is None) == (d.labels["yaw_effect"] == "absent")
+    assert d.config.wind.felt_wind == d.labels["eiv"]
 
 
 @pytest.mark.parametrize("split, index", [("validation", 0), ("development", -1), ("evaluation", 1.5),
