@@ -213,7 +213,7 @@ def test_same_seed_same_bytes_in_tributary_mode():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"felt_wind": "deck"}, r"felt_wind must be one of 'anemometer', 'tributary'; got 'deck'"),
+        ({"felt_wind": "deck"}, r"felt_wind must be one of 'anemometer', 'tributary', 'smooth'; got 'deck'"),
         ({"felt_wind": None}, r"felt_wind must be one of"),
         ({"points_per_section": 0}, r"points_per_section must be an integer from 1 to 64; got 0"),
         ({"points_per_section": 65}, r"points_per_section must be an integer from 1 to 64"),

@@ -11,6 +11,10 @@ from vivbench.core.errors import InputError
 def run(args) -> int:
     from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign, load_config
 
+    if args.family is not None:
+        return _family(args)
+    if args.draw is not None or args.max_events is not None or args.max_duration is not None:
+        raise InputError("--draw, --max-events and --max-duration go with --family")
     if args.scenario:
         given = [f"--{k}" for k in ("config", "mode", "events", "seed", "duration") if getattr(args, k) is not None]
         if given:
@@ -33,10 +37,58 @@ def run(args) -> int:
         result = generate_campaign(campaign, args.out, workers=args.workers, progress=lambda _id: bar.update())
     finally:
         bar.close()
+    return _report(result, f"wrote {len(result.files)} events and {result.catalogue}")
+
+
+def _report(result, done: str) -> int:
     for event_id, message in sorted(result.failures.items()):
         print(f"vivbench synth: {event_id}: {message}", file=sys.stderr)
-    print(f"wrote {len(result.files)} events and {result.catalogue}")
+    print(done)
     return 1 if result.failures else 0
+
+
+def _family(args) -> int:
+    from vivbench.synth.family import draw_bridge, generate_family_campaign
+
+    given = [f"--{k}" for k in ("config", "mode", "events", "seed", "duration", "scenario")
+             if getattr(args, k) is not None]
+    if given:
+        raise InputError(f"--family fixes the campaign (bridge, events, duration, seed); drop {', '.join(given)}")
+    if args.draw is None:
+        raise InputError("--family needs --draw N (the draw's number in the split, from 0)")
+    caps = {"max_events": args.max_events,
+            "max_duration": None if args.max_duration is None else args.max_duration * 60.0}
+    bar = progress(draw_bridge(args.family, args.draw).campaign_config(**caps).n_events, "synth")
+    try:
+        result, described = generate_family_campaign(args.family, args.draw, args.out, workers=args.workers,
+                                                     progress=lambda _id: bar.update(), **caps)
+    finally:
+        bar.close()
+    return _report(result, f"wrote {len(result.files)} events, {result.catalogue} and {described}")
+
+
+def _positive_int(text: str) -> int:
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1; got {text!r}")
+    return value
+
+
+def _minutes(text: str) -> float:
+    import argparse
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not value >= 2.0:
+        raise argparse.ArgumentTypeError(f"expected minutes >= 2; got {text!r}")
+    return value
 
 
 def register(sub) -> None:
@@ -59,5 +111,15 @@ def register(sub) -> None:
                    help="a named scenario of the leaderboard suite (vivbench.validate.SCENARIOS: in_library, realistic, "
                         "other_bridge, forced_only, drift, high_noise, dropouts): its fixed generator, events, "
                         "duration and seed; not combined with --config, --mode, --events, --seed or --duration")
+    s.add_argument("--family", choices=("development", "evaluation"), default=None,
+                   help="a bridge of the generator family (wide priors over bridges and physics variants): its "
+                        "development draws may be used to choose anything, its evaluation draws only to report; "
+                        "with --draw N; writes family.json (what was drawn) beside the events")
+    s.add_argument("--draw", type=int, default=None, metavar="N", help="the family draw's number (from 0)")
+    s.add_argument("--max-events", type=_positive_int, default=None,
+                   help="with --family: at most this many events (a smaller campaign than the draw's, for quick "
+                        "checks; recorded in family.json)")
+    s.add_argument("--max-duration", type=_minutes, default=None, metavar="MINUTES",
+                   help="with --family: events at most this long (recorded in family.json)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help="worker processes (files do not depend on it)")
     s.set_defaults(func=run)

@@ -27,6 +27,8 @@ from vivbench.synth.config import (
 )
 from vivbench.synth.curves import (
     CURVE_KINDS,
+    YAW_SHAPES,
+    AsymmetricBell,
     Constant,
     GaussianBell,
     LogisticStep,
@@ -36,6 +38,16 @@ from vivbench.synth.curves import (
     reduced_velocity,
 )
 from vivbench.synth.draw import draw_aero
+from vivbench.synth.family import (
+    FAMILY_ENTROPY,
+    FAMILY_FILE,
+    FAMILY_VERSION,
+    SPLITS,
+    FamilyDraw,
+    draw_bridge,
+    family_seed,
+    generate_family_campaign,
+)
 from vivbench.synth.event import EventSpec, SimulatedEvent, generate_event, simulate_event
 from vivbench.synth.turbulence import TurbulenceConfig, davenport_coherence, kaimal_psd, simulate_turbulence
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
@@ -47,6 +59,8 @@ __all__ = [
     "bell_polynomial", "campaign_specs", "config_from_dict", "config_to_dict", "davenport_coherence",
     "draw_script", "exact_coefficients", "generate_campaign", "generate_event", "kaimal_psd", "load_config",
     "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
-    "AERO_MODES", "CURVE_KINDS", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
+    "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
     "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
+    "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "family_seed",
+    "generate_family_campaign",
 ]

@@ -279,9 +279,10 @@ class AeroConfig:
                 and 2 + p["C_L"].degree <= 5)
 
 
-FELT_WIND_MODES = ("anemometer", "tributary")
+FELT_WIND_MODES = ("anemometer", "tributary", "smooth")
 """Values of ``WindConfig.felt_wind``; ``"tributary"`` (the default) is the ``realistic`` mode,
-``"anemometer"`` the ``in_library`` mode."""
+``"anemometer"`` the ``in_library`` mode; ``"smooth"`` is the other kind of errors-in-variables
+(a smooth felt wind, point turbulence at the anemometers)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -317,11 +318,37 @@ class WindConfig:
           anemometer's own turbulence; U_k is the anemometer's wind low-passed at
           ``felt_cutoff_hz`` (before the sensor errors), so the identification's U
           differs from the truth only by sensor noise and filter edges.
+        - ``"smooth"``: the deck feels the smooth scripted mean wind (with its slow wander and
+          section offsets, but no turbulence): U_k of the aeroelastic force and of the truth. A
+          turbulence field at the sections (as in ``"anemometer"`` mode) drives the buffeting
+          only, and the anemometers do not record it. Each anemometer records the mean wind plus
+          its own point turbulence: independent exponentially correlated (first-order,
+          Ornstein-Uhlenbeck) processes per anemometer and component, of integral time scale
+          ``point_timescale`` and rms ``point_intensity`` times the section's mean horizontal
+          speed for u' (``turbulence.ratio_v`` and ``ratio_w`` times that for v' and w'), plus the
+          sensor errors. The truth does not depend on ``point_intensity`` nor ``point_timescale``.
     points_per_section : int, 1..64; points over each tributary length (``"tributary"`` only)
     anemometer_offset : float, m; spanwise distance of each anemometer from its section's
         position (``"tributary"`` only). The field lives on one horizontal line, so an
         anemometer on a mast a few metres above the deck is represented by a point this
         far along the span (same Davenport decay); 0 puts it at the section's position.
+    point_intensity : float, in [0, 0.5]; turbulence intensity of the anemometers' point
+        turbulence (``"smooth"`` only)
+    point_timescale : float, s, in [0.5, 3600]; its integral time scale (``"smooth"`` only)
+    yaw_swing_deg : float, degrees, in [0, 20]; amplitude of a direction swing that every event
+        shares: the yaw of every event follows its mean plus
+        ``yaw_swing_deg sin(2 pi t / yaw_swing_period)`` (t from the event's start) plus the
+        random wander. 0: no swing
+    yaw_swing_period : float, s, >= 60; period of the shared swing
+    event_yaw_scale : float, in [0, 3]; multiplies each event's scripted mean yaw (the campaign
+        scripts draw it within +-12 degrees): 2.5 spreads the events' mean yaws over +-30 degrees
+    shared_yaw_deg : float or None, degrees, within +-45; when set, every event's mean yaw is this
+        value instead of its script's, so that (with a swing and little wander) the yaw is the
+        same function of time in every event: yaw and time within an event are confounded.
+        None: each event keeps its script's mean yaw
+
+    The fields from ``point_intensity`` on are left out of :func:`config_to_dict` while they
+    hold their defaults, so configurations that do not use them save as before they existed.
     """
 
     span_azimuth_deg: float = 30.0
@@ -340,6 +367,12 @@ class WindConfig:
     felt_wind: str = "tributary"
     points_per_section: int = 5
     anemometer_offset: float = 0.0
+    point_intensity: float = 0.07
+    point_timescale: float = 10.0
+    yaw_swing_deg: float = 0.0
+    yaw_swing_period: float = 1800.0
+    event_yaw_scale: float = 1.0
+    shared_yaw_deg: float | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.turbulence, dict):
@@ -371,6 +404,24 @@ class WindConfig:
         _check(math.isfinite(offset) and not isinstance(self.anemometer_offset, (bool, np.bool_)),
                f"anemometer_offset must be a finite distance (m); got {self.anemometer_offset!r}")
         object.__setattr__(self, "anemometer_offset", offset)
+        for name in ("point_intensity", "point_timescale", "yaw_swing_deg", "yaw_swing_period", "event_yaw_scale"):
+            value = getattr(self, name)
+            _check(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
+                   f"{name} must be a finite number; got {value!r}")
+            object.__setattr__(self, name, float(value))
+        _check(0 <= self.point_intensity <= 0.5,
+               f"point_intensity must be in [0, 0.5] (a turbulence intensity); got {self.point_intensity}")
+        _check(0.5 <= self.point_timescale <= 3600,
+               f"point_timescale must be in [0.5, 3600] s; got {self.point_timescale}")
+        _check(0 <= self.yaw_swing_deg <= 20, f"yaw_swing_deg must be in [0, 20] degrees; got {self.yaw_swing_deg}")
+        _check(0 <= self.event_yaw_scale <= 3, f"event_yaw_scale must be in [0, 3]; got {self.event_yaw_scale}")
+        _check(self.yaw_swing_period >= 60, f"yaw_swing_period must be >= 60 s; got {self.yaw_swing_period}")
+        if self.shared_yaw_deg is not None:
+            value = self.shared_yaw_deg
+            _check(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+                   and abs(value) <= 45,
+                   f"shared_yaw_deg must be None or a number of degrees within +-45; got {value!r}")
+            object.__setattr__(self, "shared_yaw_deg", float(value))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -681,10 +732,22 @@ def _tuples(d: dict) -> dict:
     return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
 
 
+# Fields added after configurations were first saved: left out of the saved form while they hold
+# their defaults, so that a configuration which does not use them saves (and hashes) as before.
+_LATER_FIELDS = {
+    "YawFactor": ("strength", "cutoff_deg"),
+    "WindConfig": ("point_intensity", "point_timescale", "yaw_swing_deg", "yaw_swing_period", "event_yaw_scale",
+                   "shared_yaw_deg"),
+}
+
+
 def _plain(obj: Any) -> Any:
-    """Dataclasses as dicts in field order (every field, None included), tuples as lists."""
+    """Dataclasses as dicts in field order (every field, None included, but later fields at their
+    defaults), tuples as lists."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        later = _LATER_FIELDS.get(type(obj).__name__, ())
+        return {f.name: _plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                if not (f.name in later and getattr(obj, f.name) == f.default)}
     if isinstance(obj, (list, tuple)):
         return [_plain(x) for x in obj]
     if isinstance(obj, dict):
@@ -723,9 +786,11 @@ def config_to_dict(config) -> dict[str, Any]:
     whatever the defaults: curves of reduced velocity carry their ``kind``,
     polynomials are written as ``{"coefficients": [...]}``, an absent yaw factor
     as ``"yaw": null`` (``yaw = false`` in a TOML file) and the felt-wind keys of
-    ``WindConfig`` always. The one omission: a generator configuration without
+    ``WindConfig`` always. The omissions: a generator configuration without
     slow changes leaves out its ``changes`` section (whose default is no change),
-    so files generated without changes are the same as before the option existed.
+    and the options added later (the yaw factor's ``strength`` and ``cutoff_deg``, the
+    wind's point turbulence and shared yaw course) are left out while they hold their
+    defaults, so files generated without them are the same as before the options existed.
     """
     data = json.loads(json.dumps(_plain(config)))
     if isinstance(config, GeneratorConfig) and not config.changes.any:

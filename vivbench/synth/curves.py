@@ -8,14 +8,14 @@ The functions Y1, e1, e2, Y2 and C_L of the generalised Simiu-Scanlan force
   terms A^i U^j (DESIGN 2.8);
 - shapes in the reduced velocity Ur = U / (f1 D) (dimensionless; f1 the
   mode's frequency in Hz, D the deck depth in m) that are not polynomials:
-  :class:`GaussianBell`, :class:`LorentzianBell`, :class:`LogisticStep` and
-  :class:`Constant`.
+  :class:`GaussianBell`, :class:`LorentzianBell`, :class:`AsymmetricBell`,
+  :class:`LogisticStep` and :class:`Constant`.
 
 Every curve is evaluated on the wind with :meth:`at_wind` ``(U, frequency,
 depth)``, so the caller never needs to know which variable a curve uses;
 ``curve(x)`` evaluates a curve on its own variable (U for a polynomial, Ur for
 the shapes). The shapes carry a ``kind`` key (``"gaussian"``, ``"lorentzian"``,
-``"logistic"``, ``"constant"``) in their plain-data form; a mapping without
+``"asymmetric"``, ``"logistic"``, ``"constant"``) in their plain-data form; a mapping without
 ``kind`` (or a bare coefficient list) is a polynomial, as in configurations
 written before the shapes existed.
 
@@ -38,11 +38,13 @@ __all__ = [
     "Polynomial",
     "GaussianBell",
     "LorentzianBell",
+    "AsymmetricBell",
     "LogisticStep",
     "Constant",
     "Curve",
     "CURVE_KINDS",
     "YawFactor",
+    "YAW_SHAPES",
     "curve_from_data",
     "reduced_velocity",
 ]
@@ -194,6 +196,50 @@ class LorentzianBell(_ReducedVelocityCurve):
 
 
 @dataclass(frozen=True, kw_only=True)
+class AsymmetricBell(_ReducedVelocityCurve):
+    """A Gaussian bell with different widths on its two sides (a split Gaussian).
+
+    baseline + (peak - baseline) exp(-(Ur - center)^2 / (2 w^2)), with w = ``width_low``
+    below the centre and ``width_high`` above it: lock-in that builds up slowly and ends
+    abruptly (or the reverse). Continuous with a continuous first derivative at the centre.
+
+    Attributes
+    ----------
+    peak : value at the centre
+    center : reduced velocity of the peak, > 0
+    width_low, width_high : standard deviations below and above the centre (reduced velocity), > 0
+    baseline : value far from the centre
+    """
+
+    peak: float
+    center: float
+    width_low: float
+    width_high: float
+    baseline: float = 0.0
+    kind: str = field(default="asymmetric", init=False)
+
+    def __post_init__(self) -> None:
+        v = _finite("AsymmetricBell", peak=self.peak, center=self.center, width_low=self.width_low,
+                    width_high=self.width_high, baseline=self.baseline)
+        for k, x in v.items():
+            object.__setattr__(self, k, x)
+        _require(self.center > 0, f"AsymmetricBell center must be a positive reduced velocity; got {self.center}")
+        _require(self.width_low > 0 and self.width_high > 0,
+                 f"AsymmetricBell width_low and width_high must be positive (reduced velocity); "
+                 f"got {self.width_low}, {self.width_high}")
+
+    @property
+    def lower_bound(self) -> float:
+        return min(self.peak, self.baseline)
+
+    def __call__(self, Ur):
+        """Value at reduced velocity ``Ur`` (array of any shape)."""
+        x = np.asarray(Ur, dtype=float) - self.center
+        z = x / np.where(x < 0, self.width_low, self.width_high)
+        return self.baseline + (self.peak - self.baseline) * np.exp(-0.5 * z**2)
+
+
+@dataclass(frozen=True, kw_only=True)
 class LogisticStep(_ReducedVelocityCurve):
     """A smooth step from ``start`` (low Ur) to ``end`` (high Ur): start + (end - start) (1 + tanh((Ur - center) / width)) / 2.
 
@@ -253,12 +299,13 @@ class Constant(_ReducedVelocityCurve):
         return np.full(np.shape(Ur), self.value)
 
 
-Curve = Polynomial | GaussianBell | LorentzianBell | LogisticStep | Constant
+Curve = Polynomial | GaussianBell | LorentzianBell | AsymmetricBell | LogisticStep | Constant
 
 CURVE_KINDS: dict[str, type] = {
     "polynomial": Polynomial,
     "gaussian": GaussianBell,
     "lorentzian": LorentzianBell,
+    "asymmetric": AsymmetricBell,
     "logistic": LogisticStep,
     "constant": Constant,
 }
@@ -300,6 +347,10 @@ def curve_from_data(value: Any, name: str = "curve") -> Curve:
 _YAW_TARGETS = ("Y1", "e1", "e2", "Y2", "C_L")
 
 
+#: Shapes of :class:`YawFactor`.
+YAW_SHAPES = ("cosine", "gaussian", "sin2", "logistic")
+
+
 @dataclass(frozen=True, kw_only=True)
 class YawFactor:
     """Dependence of the aerodynamic functions on the wind's angle to the span (DESIGN 2.2).
@@ -309,7 +360,13 @@ class YawFactor:
     ``applies_to`` are multiplied by
 
     - ``shape = "cosine"``: |cos psi|^exponent;
-    - ``shape = "gaussian"``: exp(-psi^2 / (2 width_deg^2)).
+    - ``shape = "gaussian"``: exp(-psi^2 / (2 width_deg^2));
+    - ``shape = "sin2"``: 1 - strength sin^2 psi (a gentle fall-off that keeps
+      1 - strength at 90 degrees);
+    - ``shape = "logistic"``: a cut-off near ``cutoff_deg``,
+      (1 + exp(-cutoff_deg / width_deg)) / (1 + exp((|psi| - cutoff_deg) / width_deg)):
+      nearly flat below the cut-off, falling to about zero over a few ``width_deg`` above it
+      (exactly 1 at psi = 0).
 
     Vortex-induced vibration weakens as the wind turns away from the normal, so
     by default the factor scales the aerodynamic damping derivative Y1 and the
@@ -317,24 +374,35 @@ class YawFactor:
 
     Attributes
     ----------
-    shape : "cosine" or "gaussian"
+    shape : one of :data:`YAW_SHAPES`
     exponent : exponent n of the cosine shape, >= 0
-    width_deg : standard deviation of the gaussian shape, degrees, > 0
+    width_deg : degrees, > 0; standard deviation of the gaussian shape, transition width
+        of the logistic one
+    strength : strength c of the sin2 shape, in [0, 1]
+    cutoff_deg : degrees, in (0, 90); yaw of the logistic shape's midpoint
     applies_to : names among Y1, e1, e2, Y2, C_L
     """
 
     shape: str = "cosine"
     exponent: float = 2.0
     width_deg: float = 20.0
+    strength: float = 0.5
+    cutoff_deg: float = 20.0
     applies_to: tuple[str, ...] = ("Y1", "C_L")
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "applies_to", tuple(self.applies_to))
-        _require(self.shape in ("cosine", "gaussian"), f"YawFactor shape must be 'cosine' or 'gaussian'; got {self.shape!r}")
-        _require(math.isfinite(self.exponent) and self.exponent >= 0,
-                 f"YawFactor exponent must be a finite number >= 0; got {self.exponent}")
-        _require(math.isfinite(self.width_deg) and self.width_deg > 0,
-                 f"YawFactor width_deg must be positive (degrees); got {self.width_deg}")
+        _require(self.shape in YAW_SHAPES,
+                 f"YawFactor shape must be one of {', '.join(repr(s) for s in YAW_SHAPES)}; got {self.shape!r}")
+        v = _finite("YawFactor", exponent=self.exponent, width_deg=self.width_deg, strength=self.strength,
+                    cutoff_deg=self.cutoff_deg)
+        for k, x in v.items():
+            object.__setattr__(self, k, x)
+        _require(self.exponent >= 0, f"YawFactor exponent must be a finite number >= 0; got {self.exponent}")
+        _require(self.width_deg > 0, f"YawFactor width_deg must be positive (degrees); got {self.width_deg}")
+        _require(0 <= self.strength <= 1, f"YawFactor strength must be in [0, 1] (the factor stays in [0, 1]); "
+                 f"got {self.strength}")
+        _require(0 < self.cutoff_deg < 90, f"YawFactor cutoff_deg must be in (0, 90) degrees; got {self.cutoff_deg}")
         bad = [n for n in self.applies_to if n not in _YAW_TARGETS]
         _require(self.applies_to and not bad,
                  f"YawFactor applies_to must name some of {list(_YAW_TARGETS)}; got {list(self.applies_to)}")
@@ -344,4 +412,10 @@ class YawFactor:
         psi = np.asarray(yaw_deg, dtype=float)
         if self.shape == "cosine":
             return np.abs(np.cos(np.radians(psi))) ** self.exponent
+        if self.shape == "sin2":
+            return 1.0 - self.strength * np.sin(np.radians(psi)) ** 2
+        if self.shape == "logistic":
+            # 1 / (1 + exp(z)) written with exp(-logaddexp(0, z)): no overflow for large z
+            z0, z = -self.cutoff_deg / self.width_deg, (np.abs(psi) - self.cutoff_deg) / self.width_deg
+            return np.minimum(1.0, np.exp(np.logaddexp(0.0, z0) - np.logaddexp(0.0, z)))
         return np.exp(-0.5 * (psi / self.width_deg) ** 2)

@@ -15,9 +15,12 @@ Which signal is which (``WindConfig.felt_wind``, DESIGN 2.8):
   over ``points_per_section`` points spread over the section's tributary
   length, simulated together with the anemometers (Davenport coherence over
   all points); with ``"anemometer"`` (``in_library``) the anemometer's own
-  turbulence. Buffeting uses it;
+  turbulence; with ``"smooth"`` a field at the sections that the anemometers
+  do not record (they see their own point turbulence instead,
+  :func:`point_turbulence`). Buffeting uses it;
 - felt mean wind U_k (:func:`felt_mean_wind`): the scripted mean plus the
-  deck turbulence low-passed at ``felt_cutoff_hz``. The aeroelastic force of
+  deck turbulence low-passed at ``felt_cutoff_hz`` (with ``"smooth"``, the
+  scripted mean alone). The aeroelastic force of
   the full simulation and the averaged truth (``/truth/U``) both use it, so the
   truth is exact; the identification only sees the anemometer records, whose
   low-passed perpendicular wind differs from U_k in ``"tributary"`` mode (the
@@ -27,18 +30,19 @@ Which signal is which (``WindConfig.felt_wind``, DESIGN 2.8):
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
-from scipy.signal import butter, sosfiltfilt
+from scipy.signal import butter, lfilter, sosfiltfilt
 
 from vivbench.synth.config import StructureConfig, WindConfig
 from vivbench.synth.turbulence import simulate_turbulence
 from vivbench.core.errors import InputError
 
-__all__ = ["WindScript", "MeanWind", "WindField", "mean_wind", "slow_process", "anemometer_positions", "tributary_points",
-           "wind_field", "measure_wind", "anemometer_records", "felt_mean_wind"]
+__all__ = ["WindScript", "MeanWind", "WindField", "mean_wind", "slow_process", "anemometer_positions",
+           "tributary_points", "wind_field", "measure_wind", "anemometer_records", "felt_mean_wind", "point_turbulence"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -116,7 +120,12 @@ def slow_process(t: np.ndarray, rms: float, timescales: tuple[float, float], rng
 
 def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.random.Generator,
               n_sections: int = 3) -> MeanWind:
-    """Evaluate the scripted mean wind with its random wander at times ``t`` (s) at ``n_sections`` sections."""
+    """Evaluate the scripted mean wind with its random wander at times ``t`` (s) at ``n_sections`` sections.
+
+    The yaw is the script's mean yaw times ``wind.event_yaw_scale`` (or ``wind.shared_yaw_deg``
+    when set) plus the slow
+    random wander plus the shared swing ``wind.yaw_swing_deg sin(2 pi t / wind.yaw_swing_period)``.
+    """
     t = np.asarray(t, dtype=float)
     base = PchipInterpolator(script.times, script.speeds)(np.clip(t, 0.0, script.duration))
     common = slow_process(t, wind.speed_wander, wind.slow_timescales, rng)
@@ -124,7 +133,10 @@ def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.rando
     wander = np.stack([slow_process(t, wind.section_wander, wind.slow_timescales, rng) for _ in range(n_sections)], axis=1)
     U = (base + common)[:, None] * (1.0 + offsets[None, :] + wander)
     U = np.maximum(U, wind.min_speed)
-    yaw = script.yaw_deg + slow_process(t, wind.direction_wander_deg, wind.slow_timescales, rng)
+    mean_yaw = script.yaw_deg * wind.event_yaw_scale if wind.shared_yaw_deg is None else wind.shared_yaw_deg
+    yaw = mean_yaw + slow_process(t, wind.direction_wander_deg, wind.slow_timescales, rng)
+    if wind.yaw_swing_deg:
+        yaw = yaw + wind.yaw_swing_deg * np.sin(2.0 * np.pi * t / wind.yaw_swing_period)
     V = U / np.cos(np.radians(yaw))[:, None]
     direction = np.mod(wind.span_azimuth_deg + 90.0 * script.side + yaw, 360.0)
     return MeanWind(t=t, U=U, V=V, direction=direction, yaw=np.repeat(np.abs(yaw)[:, None], n_sections, axis=1))
@@ -166,9 +178,9 @@ def anemometer_positions(structure: StructureConfig, wind: WindConfig) -> np.nda
     """Spanwise coordinates of the anemometers, m, shape (S,).
 
     The section's position (k / (n + 1) of the span) plus ``wind.anemometer_offset``
-    in ``"tributary"`` mode; the section's position in ``"anemometer"`` mode.
+    in ``"tributary"`` mode; the section's position in ``"anemometer"`` and ``"smooth"`` modes.
     """
-    if wind.felt_wind == "anemometer":
+    if wind.felt_wind != "tributary":
         return structure.positions
     return structure.positions + wind.anemometer_offset
 
@@ -203,11 +215,15 @@ def wind_field(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: 
     stays constant as the wind changes). All points of section k (its
     anemometer and its tributary points) follow V_k.
 
+    With ``felt_wind = "smooth"`` the field at the sections is the deck's (buffeting only)
+    and the anemometers get their own :func:`point_turbulence`, drawn after the field.
+
     Parameters
     ----------
     mw : MeanWind on the uniform anemometer grid (``wind.anemometer_rate``), n samples, S sections
     structure, wind : configurations; ``wind.felt_wind`` selects the deck's wind
-    rng : numpy.random.Generator; its draws are the random phases of the field only
+    rng : numpy.random.Generator; its draws are the random phases of the field (then, in
+        ``"smooth"`` mode, the point turbulence)
 
     Returns
     -------
@@ -218,9 +234,11 @@ def wind_field(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: 
     V_ref = float(np.mean(mw.V))
     scale = (mw.V / V_ref)[:, :, None]  # (n, S, 1)
     anemo = anemometer_positions(structure, wind)
-    if wind.felt_wind == "anemometer":
+    if wind.felt_wind != "tributary":
         turb = simulate_turbulence(anemo, V_ref, n / wind.anemometer_rate, wind.anemometer_rate, wind.turbulence, rng)[:n]
         turb = turb * scale
+        if wind.felt_wind == "smooth":
+            return WindField(anemometer=point_turbulence(mw, wind, rng), deck=turb, positions=anemo)
         return WindField(anemometer=turb, deck=turb, positions=anemo)
     trib = tributary_points(structure, wind)  # (S, P)
     positions = np.concatenate([anemo, trib.ravel()])
@@ -230,6 +248,33 @@ def wind_field(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: 
     field_ = simulate_turbulence(positions, V_ref, n / wind.anemometer_rate, wind.anemometer_rate, single, rng)[:n]
     deck = field_[:, S:].reshape(n, S, wind.points_per_section, 3).mean(axis=2)
     return WindField(anemometer=field_[:, :S] * scale, deck=deck * scale, positions=positions)
+
+
+def point_turbulence(mw: MeanWind, wind: WindConfig, rng: np.random.Generator) -> np.ndarray:
+    """Point turbulence of each anemometer in ``felt_wind = "smooth"`` mode (the deck does not feel it).
+
+    Independent exponentially correlated (first-order autoregressive, the sampled
+    Ornstein-Uhlenbeck) processes per anemometer and component, started in their stationary
+    state: autocorrelation exp(-|lag| / ``wind.point_timescale``), so the integral time scale is
+    ``point_timescale``. Their rms is ``wind.point_intensity`` times the section's mean
+    horizontal speed V_k(t) for u' and ``turbulence.ratio_v``, ``ratio_w`` times that for v', w'.
+
+    Parameters
+    ----------
+    mw : MeanWind on the uniform anemometer grid, n samples, S sections
+    wind : WindConfig
+    rng : numpy.random.Generator; draws the initial states (S, 3), then the innovations (n, S, 3)
+
+    Returns
+    -------
+    ndarray, shape (n, S, 3), m/s: u', v', w'
+    """
+    n, S = mw.V.shape
+    a = math.exp(-1.0 / (wind.anemometer_rate * wind.point_timescale))
+    start = rng.standard_normal((1, S, 3))
+    unit = lfilter([math.sqrt(1.0 - a * a)], [1.0, -a], rng.standard_normal((n, S, 3)), axis=0, zi=a * start)[0]
+    ratios = wind.point_intensity * np.array([1.0, wind.turbulence.ratio_v, wind.turbulence.ratio_w])
+    return unit * mw.V[:, :, None] * ratios[None, None, :]
 
 
 def measure_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -293,7 +338,8 @@ def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind
     Turbulence slower than ``wind.felt_cutoff_hz`` changes the wind over the
     time scale of the aeroelastic dynamics (minutes), so the deck responds to it
     as to a change of the mean; it is also what a low-pass filter of the
-    measured wind keeps. The perpendicular component of the slow horizontal wind
+    measured wind keeps. With ``felt_wind = "smooth"`` the deck feels the
+    scripted mean alone (``turb`` then drives the buffeting only). The perpendicular component of the slow horizontal wind
     vector becomes the new ``U``.
 
     Parameters
@@ -310,7 +356,7 @@ def felt_mean_wind(mw: MeanWind, turb: np.ndarray, wind: WindConfig) -> MeanWind
     ``U`` (n, S), m/s, is the U_k of the aeroelastic force and of the truth.
     """
     sos = butter(4, wind.felt_cutoff_hz, fs=wind.anemometer_rate, output="sos")
-    slow = sosfiltfilt(sos, turb[:, :, :2], axis=0)
+    slow = np.zeros_like(turb[:, :, :2]) if wind.felt_wind == "smooth" else sosfiltfilt(sos, turb[:, :, :2], axis=0)
     d = np.radians(mw.direction)[:, None]
     along = np.stack([-np.sin(d), -np.cos(d)], axis=-1)  # (n, 1, 2) east, north
     lateral = np.stack([np.cos(d), -np.sin(d)], axis=-1)

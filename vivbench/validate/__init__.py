@@ -106,6 +106,26 @@ from vivbench.validate.sweep import (
     sweep_tasks,
 )
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
+from vivbench.validate.study import (
+    METHOD_ALIASES,
+    STUDY_COLUMNS,
+    StudyConfig,
+    StudyResult,
+    StudyTask,
+    method_spec,
+    parse_draws,
+    run_study,
+    run_study_task,
+    study_tasks,
+)
+from vivbench.validate.study_report import (
+    LABEL_COLUMNS,
+    PROMISE_MIN_FLAGS,
+    PROMISE_SHARE,
+    SUMMARY_SCORES,
+    study_markdown,
+    study_summary,
+)
 
 __all__ = [
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
@@ -157,4 +177,7 @@ __all__ = [
     "truth_record",
     "record_yaw_on",
     "write_validation",
+    "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "method_spec", "parse_draws",
+    "run_study", "run_study_task", "study_tasks",
+    "LABEL_COLUMNS", "PROMISE_MIN_FLAGS", "PROMISE_SHARE", "SUMMARY_SCORES", "study_markdown", "study_summary",
 ]

@@ -18,9 +18,10 @@ import os
 from pathlib import Path
 from typing import Any
 
+from vivbench.core.errors import InputError
 from vivbench.io.netcdf import atomic_path
 
-__all__ = ["load", "append", "write_table", "format_value"]
+__all__ = ["load", "append", "write_table", "format_value", "check_record"]
 
 
 def _valid(record: Any, n_tasks: int, columns) -> bool:
@@ -96,3 +97,23 @@ def write_table(path: Path, rows: dict[int, dict], columns) -> None:
         writer.writerow([format_value(rows[task_id].get(c, "")) for c in columns])
     with atomic_path(path) as tmp:
         tmp.write_text(buf.getvalue(), encoding="utf-8")
+
+
+def check_record(record: Path, fingerprint: str, config: dict, refusal: str) -> None:
+    """Tie an output directory to one run configuration.
+
+    Writes ``record`` (JSON: the fingerprint and the configuration) on the first run; on a later
+    run, a record with another fingerprint (or an unreadable one) raises InputError
+    ``"{record}: {refusal}"``, so that a journal never mixes the rows of two configurations.
+    """
+    if record.exists():
+        try:
+            old = json.loads(record.read_text()).get("fingerprint")
+        except (json.JSONDecodeError, AttributeError):
+            old = None
+        if old != fingerprint:
+            raise InputError(f"{record}: {refusal}")
+        return
+    text = json.dumps({"fingerprint": fingerprint, "config": config}, indent=1, sort_keys=True) + "\n"
+    with atomic_path(record) as tmp:
+        tmp.write_text(text)

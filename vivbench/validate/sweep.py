@@ -46,6 +46,7 @@ from vivbench.core.parallel import parse_scheduler, run_tasks
 from vivbench.synth.campaign import CampaignConfig, generate_campaign
 from vivbench.synth.config import GeneratorConfig, config_from_dict, config_to_dict
 from vivbench.validate.journal import append as journal_append
+from vivbench.validate.journal import check_record
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.journal import write_table
 from vivbench.validate.recovery import campaign_recovery
@@ -548,19 +549,9 @@ def _exclusive(out: Path):
 
 
 def _check_config_record(out: Path, config: SweepConfig) -> None:
-    record = out / "sweep_config.json"
-    text = json.dumps({"fingerprint": config.fingerprint(), "config": config.to_dict()}, indent=1, sort_keys=True) + "\n"
-    if record.exists():
-        try:
-            old = json.loads(record.read_text()).get("fingerprint")
-        except (json.JSONDecodeError, AttributeError):
-            old = None
-        if old != config.fingerprint():
-            raise InputError(f"{record}: this directory holds the results of a different sweep configuration; "
-                             "use another --out (or delete the directory to start over)")
-        return
-    with atomic_path(record) as tmp:
-        tmp.write_text(text)
+    check_record(out / "sweep_config.json", config.fingerprint(), config.to_dict(),
+                 "this directory holds the results of a different sweep configuration; use another --out (or "
+                 "delete the directory to start over)")
 
 
 def run_sweep(config: SweepConfig, out_dir: str | Path, *, workers: int = 1, scheduler: str | None = None,

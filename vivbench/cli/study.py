@@ -1,0 +1,61 @@
+"""``vivbench study``: draws of the generator family generated, identified, and each method scored over them."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from vivbench.cli.common import DEFAULT_WORKERS, progress, record_command
+
+
+def run(args) -> int:
+    from vivbench.validate.study import StudyConfig, parse_draws, run_study
+
+    config = StudyConfig(split=args.split, draws=parse_draws(args.draws),
+                         methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
+                         max_events=args.max_events,
+                         max_duration=None if args.max_duration is None else args.max_duration * 60.0)
+    bar = progress(len(config.draws), "study", unit="draw")
+
+    def advance(done: int, _total: int) -> None:
+        bar.update(done - bar.n)
+
+    try:
+        result = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, progress=advance)
+    except KeyboardInterrupt:
+        bar.close()
+        print(f"vivbench study: interrupted; the finished draws are saved in {Path(args.out) / 'study.jsonl'}: "
+              "run the same command again to resume", file=sys.stderr)
+        return 130
+    finally:
+        bar.close()
+    record_command(args.out, args)
+    for draw, message in sorted(result.failures.items()):
+        print(f"vivbench study: draw {draw}: {message}", file=sys.stderr)
+    times = [result.seconds[d] for d in result.computed if d in result.seconds]
+    timing = f"; {sum(times) / len(times):.0f} s per computed draw" if times else ""
+    print(f"study: {len(config.draws)} draws, {len(result.computed)} computed, {len(result.resumed)} resumed, "
+          f"{len(result.failures)} failed{timing}")
+    print(f"table {result.table}; summary {result.summary}; page {result.page}")
+    return 1 if result.failures else 0
+
+
+def register(sub) -> None:
+    s = sub.add_parser("study", help="score methods over draws of the generator family (study.csv, summary.json, "
+                                     "study.md); resumable")
+    s.add_argument("--split", required=True, choices=("development", "evaluation"),
+                   help="development draws may be used to choose anything; evaluation draws only to report")
+    s.add_argument("--draws", required=True, help="draw numbers: N, N-M or a comma-separated list (e.g. 0-29)")
+    s.add_argument("--methods", default="varying,pooled",
+                   help="comma-separated methods (default varying,pooled; pooled is the built-in campaign model, "
+                        "other names as in vivbench compare, or package.module:factory)")
+    s.add_argument("--out", required=True, help="output directory; rerunning with the same options resumes")
+    s.add_argument("--max-events", type=int, default=None,
+                   help="cap each campaign at this many events (quick checks; recorded on the results page)")
+    s.add_argument("--max-duration", type=float, default=None, metavar="MINUTES",
+                   help="cap each event at this many minutes (quick checks; recorded on the results page)")
+    s.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
+                   help="local worker processes, one draw each (results do not depend on it)")
+    s.add_argument("--scheduler", default=None,
+                   help="dask: local:N starts a local cluster of N processes; or a scheduler address tcp://HOST:PORT")
+    s.set_defaults(func=run)

@@ -1,0 +1,402 @@
+"""Studies over the generator family: every draw generated, identified, and every method fitted and scored.
+
+A study runs draws of one split of the generator family (:mod:`vivbench.synth.family`):
+for each draw it generates the campaign, identifies every event (as ``vivbench identify``
+does, with :class:`~vivbench.analysis.identify.IdentifyConfig`'s defaults unless given), then
+fits each method on the identified records and scores it against the truth with
+:func:`~vivbench.validate.methods.score_fitted` on the identification's windows. Beside the
+standard scores each row holds the draw's labels (what was drawn), the number of flagged
+window-equations (``n_flagged``), the share of them whose regime is right
+(``flagged_right_share``, the verdict's promise is >= 0.95) and, on every draw,
+``self_excited_flags``: flagged window-equations whose model regime is 2, 3 or 4
+(self-excitation claimed; on forced-only draws every one is wrong).
+
+One task is one draw; its seeds are the family's, so a task gives the same numbers wherever
+it runs (this process, local processes, a dask cluster: :func:`vivbench.core.parallel.run_tasks`).
+Finished draws are journalled (``OUT/study.jsonl``, :mod:`vivbench.validate.journal`): a
+study stopped part-way keeps them, and running it again resumes; a failed draw is retried.
+``OUT/study.csv`` (one row per draw and method), ``OUT/summary.json`` and ``OUT/study.md``
+(:mod:`vivbench.validate.study_report`) are rewritten atomically after the run, from the
+journal alone, so the same draws give the same bytes. Wall times are kept in the journal
+only (they change from run to run).
+
+``max_events`` and ``max_duration`` shrink every campaign (for quick checks); a capped
+study's outputs say so on their first lines.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from contextlib import closing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vivbench.analysis.identify import IdentifyConfig, identify_files
+from vivbench.core.errors import InputError, error_line
+from vivbench.core.lock import exclusive_directory
+from vivbench.core.parallel import parse_scheduler, run_tasks
+from vivbench.core.regime import DEFAULT_TAU
+from vivbench.io.netcdf import atomic_path
+from vivbench.regimes.model import model_window_regimes
+from vivbench.synth.family import SPLITS, draw_bridge
+from vivbench.synth.campaign import generate_campaign
+from vivbench.validate.journal import append as journal_append
+from vivbench.validate.journal import check_record
+from vivbench.validate.journal import format_value
+from vivbench.validate.journal import load as journal_load
+from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_spec, fit_method, resolve_method
+from vivbench.validate.methods import score_fitted, scoring_inputs
+from vivbench.validate.study_report import LABEL_COLUMNS, study_markdown, study_summary
+
+__all__ = ["METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "StudyResult", "method_spec",
+           "parse_draws", "run_study", "run_study_task", "study_tasks"]
+
+#: Short names of the study's methods that are not :func:`resolve_method` names.
+METHOD_ALIASES = {"pooled": "campaign"}
+#: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
+_FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags")
+_SCORES = tuple(k for k in SCORE_KEYS if k != "fit_time_s")
+#: Columns of ``study.csv``: one row per draw and method.
+STUDY_COLUMNS = ("split", "draw", "method", "campaign_seed", "n_events", "events_failed", *LABEL_COLUMNS,
+                 *_SCORES, *_FLAG_COLUMNS, "error")
+_JOURNAL_COLUMNS = ("task_id", "draw", "methods")
+_MAX_DRAW = 2**31
+
+
+def method_spec(name: str) -> str:
+    """The :func:`resolve_method` spec of a study method name (``pooled`` is ``campaign``)."""
+    spec = name if name in BUILTIN_METHODS else METHOD_ALIASES.get(name, name)
+    return check_method_spec(spec)
+
+
+def parse_draws(text: str) -> tuple[int, ...]:
+    """``"0-29"``, ``"3"`` or ``"0-3,10,12-13"`` -> sorted draw numbers without repeats."""
+    out: set[int] = set()
+    for part in str(text).split(","):
+        lo, sep, hi = part.strip().partition("-")
+        try:
+            a = int(lo)
+            b = int(hi) if sep else a
+        except ValueError:
+            raise InputError(f"draws must be N, N-M or a comma-separated list of them (from 0); got {text!r}") from None
+        if not 0 <= a <= b < _MAX_DRAW:
+            raise InputError(f"draws must be N, N-M or a comma-separated list of them (from 0); got {text!r}")
+        out.update(range(a, b + 1))
+    return tuple(sorted(out))
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyConfig:
+    """What a study runs.
+
+    Attributes
+    ----------
+    split : "development" or "evaluation"
+    draws : draw numbers, sorted, without repeats
+    methods : study method names (``pooled`` is the built-in ``campaign``; any other name or
+        ``package.module:factory`` that :func:`resolve_method` knows)
+    max_events : cap on each campaign's events (None: the draw's)
+    max_duration : s; cap on each event's duration (None: the draw's)
+    identify : the identification's configuration
+    tau : regime threshold (DESIGN 2.5)
+    """
+
+    split: str
+    draws: tuple[int, ...]
+    methods: tuple[str, ...]
+    max_events: int | None = None
+    max_duration: float | None = None
+    identify: IdentifyConfig = field(default_factory=IdentifyConfig)
+    tau: float = DEFAULT_TAU
+
+    def __post_init__(self) -> None:
+        if self.split not in SPLITS:
+            raise InputError(f"split must be one of {', '.join(SPLITS)}; got {self.split!r}")
+        draws = tuple(int(d) for d in self.draws)
+        if not draws or list(draws) != sorted(set(draws)) or draws[0] < 0:
+            raise InputError(f"draws must be distinct draw numbers >= 0 in increasing order; got {self.draws!r}")
+        object.__setattr__(self, "draws", draws)
+        methods = tuple(self.methods)
+        if not methods or len(set(methods)) != len(methods):
+            raise InputError(f"methods must be one or more distinct names; got {list(methods)}")
+        for m in methods:
+            method_spec(m)
+        object.__setattr__(self, "methods", methods)
+        if self.max_events is not None and not (isinstance(self.max_events, int) and self.max_events >= 1):
+            raise InputError(f"max_events must be an integer >= 1 or None; got {self.max_events!r}")
+        if self.max_duration is not None and not (math.isfinite(self.max_duration) and self.max_duration >= 120.0):
+            raise InputError(f"max_duration must be >= 120 s or None; got {self.max_duration!r}")
+
+    @property
+    def capped(self) -> bool:
+        """True when the campaigns are smaller than the family's draws."""
+        return self.max_events is not None or self.max_duration is not None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (the draws included)."""
+        return {"split": self.split, "draws": list(self.draws), "methods": list(self.methods),
+                "max_events": self.max_events, "max_duration_s": self.max_duration,
+                "identify": json.loads(self.identify.to_json()), "tau": self.tau}
+
+    def fingerprint(self) -> str:
+        """SHA-256 of everything but the draws: the draws of one study directory may grow from run to run."""
+        data = self.to_dict()
+        del data["draws"]
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyTask:
+    """One draw of a study: everything a worker needs (the draw's seeds are the family's)."""
+
+    split: str
+    draw: int
+    methods: tuple[str, ...]
+    max_events: int | None
+    max_duration: float | None
+    identify: IdentifyConfig
+    tau: float = DEFAULT_TAU
+    work_root: str | None = None
+
+
+def study_tasks(config: StudyConfig) -> list[StudyTask]:
+    """One task per draw, in draw order. Cheap: nothing runs."""
+    return [StudyTask(split=config.split, draw=d, methods=config.methods, max_events=config.max_events,
+                      max_duration=config.max_duration, identify=config.identify, tau=config.tau)
+            for d in config.draws]
+
+
+class _FlagRecorder:
+    """A fitted model seen through :func:`score_fitted`, keeping each record's window regimes and flags."""
+
+    def __init__(self, fitted, tau: float):
+        self._fitted = fitted
+        self._tau = tau
+        self.regimes: list[np.ndarray] = []
+        self.flags: list[np.ndarray] = []
+        if callable(getattr(fitted, "identifiable", None)):
+            self.identifiable = self._identifiable
+
+    def __getattr__(self, name):
+        return getattr(self._fitted, name)
+
+    def window_regimes(self, record, window_start, window_end) -> np.ndarray:
+        own = getattr(self._fitted, "window_regimes", None)
+        if callable(own):
+            r = own(record, window_start, window_end)
+        else:  # score_fitted's own rule for a model without window_regimes
+            r = model_window_regimes(self._fitted, record, window_start, window_end, tau=self._tau)["regime"]
+        r = np.asarray(r, dtype=int)
+        self.regimes.append(r)
+        return r
+
+    def _identifiable(self, record, window_start, window_end) -> np.ndarray:
+        ok = np.asarray(self._fitted.identifiable(record, window_start, window_end), dtype=bool)
+        self.flags.append(ok)
+        return ok
+
+    def self_excited_flags(self) -> int:
+        """Flagged window-equations whose model regime is 2, 3 or 4."""
+        if not self.flags:
+            return 0
+        return int(sum(int(np.sum(ok & (r >= 2))) for r, ok in zip(self.regimes, self.flags)))
+
+
+def _score(name: str, records, truths, windows, tau: float) -> dict[str, Any]:
+    method = resolve_method(method_spec(name))
+    fitted, seconds = fit_method(method, records)
+    seen = _FlagRecorder(fitted, tau)
+    scores = score_fitted(seen, records, truths, windows=windows, tau=tau, simulate=False, fit_time_s=seconds)
+    n_flagged = 0 if math.isnan(scores["coverage"]) else int(round(scores["coverage"] * scores["n_scored"]))
+    row = {k: scores[k] for k in _SCORES}
+    row.update(n_flagged=n_flagged, flagged_right_share=scores["accuracy_identifiable"],
+               self_excited_flags=seen.self_excited_flags(), error="", fit_time_s=seconds)
+    return row
+
+
+def run_study_task(task: StudyTask) -> dict[str, Any]:
+    """Generate, identify and score one draw; runs in a worker.
+
+    Returns
+    -------
+    dict: ``draw``, ``campaign_seed``, ``n_events``, ``events_failed``, ``labels``, ``seconds`` (wall
+    time of the task), ``stage_seconds`` (``generate``, ``identify``) and ``methods`` (method name ->
+    its scores with ``fit_time_s``, or NaNs and ``error`` when that method failed).
+    Raises when the campaign cannot be generated or no event can be identified (the draw is retried
+    by the next run).
+    """
+    start = time.perf_counter()
+    draw = draw_bridge(task.split, task.draw)
+    campaign = draw.campaign_config(max_events=task.max_events, max_duration=task.max_duration)
+    if task.work_root is not None:
+        Path(task.work_root).mkdir(parents=True, exist_ok=True)
+    root = Path(tempfile.mkdtemp(prefix=f"d{task.draw:05d}-", dir=task.work_root))
+    try:
+        made = generate_campaign(campaign, root / "campaign", workers=1)
+        generated = time.perf_counter()
+        written, failures = identify_files(made.files, root / "identify", task.identify, workers=1)
+        stages = {"generate": generated - start, "identify": time.perf_counter() - generated}
+        if not written:
+            reasons = list(made.failures.values()) + list(failures.values())
+            raise InputError(f"no event of {task.split} draw {task.draw} could be identified "
+                             f"({reasons[0] if reasons else 'nothing to identify'})")
+        results = sorted(written, key=lambda p: p.name)
+        identified = {p.name.removesuffix(".identify.nc") for p in results}
+        events = sorted((f for f in made.files if f.stem in identified), key=lambda p: p.name)
+        records, truths, windows = scoring_inputs(events, results)
+        methods = {}
+        for name in task.methods:
+            try:
+                methods[name] = _score(name, records, truths, windows, task.tau)
+            except Exception as exc:  # one method failing must not lose the others' scores
+                methods[name] = {**{k: math.nan for k in (*_SCORES, *_FLAG_COLUMNS)},
+                                 "error": error_line(exc).replace(str(root), "<draw>")}
+    except Exception as exc:
+        raise RuntimeError(error_line(exc).replace(str(root), "<draw>")) from None
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    return {"draw": task.draw, "campaign_seed": draw.campaign_seed, "n_events": campaign.n_events,
+            "events_failed": len(made.failures) + len(failures), "labels": draw.labels, "methods": methods,
+            "seconds": time.perf_counter() - start, "stage_seconds": stages}
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """What :func:`run_study` did.
+
+    Attributes
+    ----------
+    table, summary, page : ``study.csv``, ``summary.json``, ``study.md``
+    computed : draws computed by this call; resumed : draws found finished in the journal
+    failures : draw -> one-line error (retried by the next call)
+    seconds : draw -> wall time of its task (computed by this call or an earlier one), s
+    repaired_lines : corrupt or half-written journal lines dropped on start
+    """
+
+    table: Path
+    summary: Path
+    page: Path
+    computed: tuple[int, ...]
+    resumed: tuple[int, ...]
+    failures: dict[int, str]
+    seconds: dict[int, float]
+    repaired_lines: int
+
+
+def _csv_rows(config: StudyConfig, done: dict[int, dict]) -> list[dict[str, Any]]:
+    rows = []
+    for d in config.draws:
+        if d not in done:
+            continue
+        rec = done[d]
+        labels = rec["labels"]
+        for name in config.methods:
+            scores = rec["methods"].get(name)
+            if scores is None:  # a method added to a finished draw is not scored
+                continue
+            row = {"split": config.split, "draw": d, "method": name, "campaign_seed": rec["campaign_seed"],
+                   "n_events": rec["n_events"], "events_failed": rec["events_failed"]}
+            row.update({c: _label_text(labels.get(c)) for c in LABEL_COLUMNS})
+            row.update({k: scores.get(k, math.nan) for k in (*_SCORES, *_FLAG_COLUMNS)})
+            row["error"] = scores.get("error", "")
+            rows.append(row)
+    return rows
+
+
+def _label_text(value) -> Any:
+    if isinstance(value, (list, tuple)):
+        return "-".join(format_value(float(v)) for v in value)
+    return "" if value is None else value
+
+
+def _write_csv(path: Path, rows: Sequence[dict]) -> None:
+    import csv
+    import io
+
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(STUDY_COLUMNS)
+    for row in rows:
+        writer.writerow([format_value(row.get(c, "")) for c in STUDY_COLUMNS])
+    with atomic_path(path) as tmp:
+        tmp.write_text(buf.getvalue(), encoding="utf-8")
+
+
+def _check_config_record(out: Path, config: StudyConfig) -> None:
+    data = config.to_dict()
+    del data["draws"]
+    check_record(out / "study_config.json", config.fingerprint(), data,
+                 "this directory holds a study of another split, methods, caps or identification; use another "
+                 "--out (or delete the directory to start over)")
+
+
+def run_study(config: StudyConfig, out_dir: str | Path, *, workers: int = 1, scheduler: str | None = None,
+              progress: Callable[[int, int], None] | None = None) -> StudyResult:
+    """Run (or resume) a study and write ``study.csv``, ``summary.json`` and ``study.md``.
+
+    Parameters
+    ----------
+    config : StudyConfig
+    out_dir : output directory; it also holds ``study_config.json`` (a study of another split,
+        methods, caps or identification is refused) and the journal ``study.jsonl``
+    workers : local worker processes (1: this process), when ``scheduler`` is None
+    scheduler : None, ``"local:N"`` (a dask LocalCluster) or a dask scheduler address
+    progress : optional ``progress(n_done, n_total)``, on start and after every draw
+
+    Returns
+    -------
+    StudyResult
+        The files do not depend on ``workers``, ``scheduler`` or on interruptions.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kind, _ = parse_scheduler(scheduler)
+    with exclusive_directory(out, ".study.lock", "study"):
+        _check_config_record(out, config)
+        journal = out / "study.jsonl"
+        done, repaired = journal_load(journal, n_tasks=_MAX_DRAW, columns=_JOURNAL_COLUMNS)
+        resumed = tuple(d for d in config.draws if d in done)
+        work = out / ".work"
+        shutil.rmtree(work, ignore_errors=True)
+        work_root = str(work) if kind != "address" else None
+        pending = [dataclasses.replace(t, work_root=work_root) for t in study_tasks(config) if t.draw not in done]
+        if progress is not None:
+            progress(len(resumed), len(config.draws))
+        computed, failures = [], {}
+        try:
+            with closing(run_tasks(run_study_task, pending, workers=workers, scheduler=scheduler)) as outcomes:
+                for outcome in outcomes:
+                    task = pending[outcome.index]
+                    if outcome.ok:
+                        row = {"task_id": task.draw, **outcome.value}
+                        done[task.draw] = row
+                        computed.append(task.draw)
+                    else:
+                        row = {"task_id": task.draw, "draw": task.draw, "methods": {}, "error": outcome.error}
+                        failures[task.draw] = outcome.error
+                    journal_append(journal, task.draw, outcome.ok, row)
+                    if progress is not None:
+                        progress(len(resumed) + len(computed) + len(failures), len(config.draws))
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+        rows = _csv_rows(config, done)
+        table, summary_path, page = out / "study.csv", out / "summary.json", out / "study.md"
+        _write_csv(table, rows)
+        summary = study_summary(config.to_dict(), rows, failed=sorted(failures))
+        with atomic_path(summary_path) as tmp:
+            tmp.write_text(json.dumps(summary, indent=1, sort_keys=True, allow_nan=True) + "\n", encoding="utf-8")
+        with atomic_path(page) as tmp:
+            tmp.write_text(study_markdown(summary), encoding="utf-8")
+    seconds = {d: float(done[d]["seconds"]) for d in config.draws if d in done and "seconds" in done[d]}
+    return StudyResult(table=table, summary=summary_path, page=page, computed=tuple(sorted(computed)),
+                       resumed=resumed, failures=failures, seconds=seconds, repaired_lines=repaired)

@@ -1,0 +1,195 @@
+"""Summary and results page of a study over the generator family (:mod:`vivbench.validate.study`).
+
+Per method, the distribution over the study's campaigns (draws) of each score: the number of
+draws with a finite value, the median, the 10th and 90th percentiles (linear interpolation),
+and the worst campaign with its draw number (the largest error; the smallest share of right
+flags, coverage or accuracy). Beside it, the share of campaigns that keep the verdict's promise
+(at least :data:`PROMISE_SHARE` of the flagged window-equations right, on draws with at least
+:data:`PROMISE_MIN_FLAGS` flags) and the self-excited flags on forced-only draws. Everything
+is given for all draws and split by whether the drawn bridge's aerodynamics depend on yaw.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+__all__ = ["LABEL_COLUMNS", "PROMISE_SHARE", "PROMISE_MIN_FLAGS", "SUMMARY_SCORES", "study_summary", "study_markdown"]
+
+#: Draw labels written in every row of ``study.csv`` (see :func:`vivbench.synth.family.draw_bridge`).
+LABEL_COLUMNS = ("forced_only", "yaw_effect", "yaw_course", "eiv", "bell", "e_mix", "n_sections", "frequency_hz",
+                 "depth_m", "damping_ratio", "lock_in_m_s", "point_intensity", "point_timescale_s", "change",
+                 "step_event", "step_damping_factor")
+#: The verdict's promise: at least this share of flagged window-equations right ...
+PROMISE_SHARE = 0.95
+#: ... on every draw with at least this many flagged window-equations.
+PROMISE_MIN_FLAGS = 20
+#: Scores summarised over draws, each with the direction in which it gets worse.
+SUMMARY_SCORES = (("rhs_error_true_AU_energy", "high"), ("rhs_error_true_AU_median_active", "high"),
+                  ("curve_error_total", "high"), ("curve_error_linear", "high"), ("flagged_right_share", "low"),
+                  ("coverage", "low"), ("accuracy_all", "low"))
+_SUBSETS = (("all", None), ("yaw_present", True), ("yaw_absent", False))
+_LABELS = {"rhs_error_true_AU_energy": "dA/dt error on the true (A, U), energy-weighted",
+           "rhs_error_true_AU_median_active": "dA/dt error on the true (A, U), median over active windows",
+           "curve_error_total": "curve error (total)", "curve_error_linear": "curve error (linear order)",
+           "flagged_right_share": "share of flags right", "coverage": "coverage (share flagged)",
+           "accuracy_all": "regime accuracy, all windows"}
+
+
+def _number(value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _plain(x: float) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def _distribution(rows: Sequence[dict], key: str, worse: str) -> dict[str, Any]:
+    values = np.array([_number(r.get(key)) for r in rows])
+    ok = np.isfinite(values)
+    if not ok.any():
+        return {"n": 0, "median": None, "p10": None, "p90": None, "worst": None, "worst_draw": None}
+    v = values[ok]
+    draws = [r["draw"] for r, good in zip(rows, ok) if good]
+    k = int(np.argmax(v) if worse == "high" else np.argmin(v))
+    return {"n": int(ok.sum()), "median": float(np.median(v)), "p10": float(np.percentile(v, 10)),
+            "p90": float(np.percentile(v, 90)), "worst": float(v[k]), "worst_draw": int(draws[k])}
+
+
+def _promise(rows: Sequence[dict]) -> dict[str, Any]:
+    enough = [r for r in rows if _number(r.get("n_flagged")) >= PROMISE_MIN_FLAGS]
+    right = [_number(r.get("flagged_right_share")) for r in enough]
+    kept = sum(1 for x in right if x >= PROMISE_SHARE)
+    worst = int(np.argmin(right)) if enough else None
+    return {"draws_with_enough_flags": len(enough), "draws_kept": kept,
+            "share_kept": _plain(kept / len(enough)) if enough else None,
+            "worst_flagged_right_share": None if worst is None else _plain(right[worst]),
+            "worst_draw": None if worst is None else int(enough[worst]["draw"])}
+
+
+def _forced(rows: Sequence[dict]) -> dict[str, Any]:
+    forced = [r for r in rows if str(r.get("forced_only")) == "True"]
+    flags = [_number(r.get("self_excited_flags")) for r in forced]
+    return {"draws": len(forced), "self_excited_flags": int(np.nansum(flags)) if forced else 0,
+            "draws_with_self_excited_flags": int(sum(1 for f in flags if f > 0))}
+
+
+def _block(rows: Sequence[dict]) -> dict[str, Any]:
+    return {"n_draws": len(rows), "method_errors": sum(1 for r in rows if r.get("error")),
+            "scores": {key: _distribution(rows, key, worse) for key, worse in SUMMARY_SCORES},
+            "promise": _promise(rows), "forced_only": _forced(rows)}
+
+
+def study_summary(config: dict[str, Any], rows: Sequence[dict], *, failed: Sequence[int] = ()) -> dict[str, Any]:
+    """The summary of a study (``summary.json``), from its table rows.
+
+    Parameters
+    ----------
+    config : the study's :meth:`~vivbench.validate.study.StudyConfig.to_dict`
+    rows : ``study.csv``'s rows as dicts (one per draw and method)
+    failed : draws whose task failed in this run (not scored)
+
+    Returns
+    -------
+    dict, JSON-ready (no NaN: missing values are None)
+    """
+    out: dict[str, Any] = {
+        "study": config, "capped": config.get("max_events") is not None or config.get("max_duration_s") is not None,
+        "promise": {"share": PROMISE_SHARE, "min_flags": PROMISE_MIN_FLAGS},
+        "draws_scored": sorted({int(r["draw"]) for r in rows}), "draws_failed": [int(d) for d in failed],
+        "methods": {},
+    }
+    for name in config["methods"]:
+        mine = [r for r in rows if r["method"] == name]
+        out["methods"][name] = {
+            subset: _block([r for r in mine if want is None or (r.get("yaw_effect") != "absent") == want])
+            for subset, want in _SUBSETS}
+    return out
+
+
+def _ranges(draws: Sequence[int]) -> str:
+    if not draws:
+        return "none"
+    parts, start, prev = [], draws[0], draws[0]
+    for d in list(draws[1:]) + [None]:
+        if d is not None and d == prev + 1:
+            prev = d
+            continue
+        parts.append(str(start) if start == prev else f"{start}-{prev}")
+        if d is not None:
+            start = prev = d
+    return ", ".join(parts)
+
+
+def _subset(subset: str, block: dict) -> str:
+    return f"{subset.replace('_', ' ')} ({block['n_draws']})"
+
+
+def _fmt(x, digits: int = 3) -> str:
+    return "–" if x is None else f"{x:.{digits}f}"
+
+
+def study_markdown(summary: dict[str, Any]) -> str:
+    """The results page ``study.md`` of a study summary."""
+    cfg = summary["study"]
+    split = cfg["split"]
+    lines = [f"# Study over the generator family: {split} draws", ""]
+    if summary["capped"]:
+        cap = []
+        if cfg.get("max_events") is not None:
+            cap.append(f"at most {cfg['max_events']} events")
+        if cfg.get("max_duration_s") is not None:
+            cap.append(f"events at most {cfg['max_duration_s'] / 60:g} min long")
+        lines += [f"**Capped campaigns: {' and '.join(cap)} per draw (`--max-events`, `--max-duration`). These "
+                  "campaigns are smaller than the family's draws: the figures below are not the family's.**", ""]
+    role = ("evaluation draws: reported only, never used to choose anything" if split == "evaluation" else
+            "development draws: any choice may be made on them, so their figures are not quoted as results")
+    lines += [f"- Split: {split} ({role}).",
+              f"- Draws requested: {_ranges(cfg['draws'])}; scored: {_ranges(summary['draws_scored'])}; "
+              f"failed in this run: {_ranges(summary['draws_failed'])}.",
+              f"- Methods: {', '.join(cfg['methods'])}.",
+              "- Errors are relative: the energy-weighted one is sqrt(sum of squared errors / sum of squared true "
+              "dA/dt) over every sample of a campaign, on the truth's own (A, U).",
+              f"- The verdict's promise: at least {PROMISE_SHARE:.0%} of the flagged window-equations carry the true "
+              f"regime, on every draw with at least {PROMISE_MIN_FLAGS} flags.", ""]
+    lines += ["## Scores over campaigns", "",
+              "Median, 90th percentile (10th for shares, where low is bad) and worst campaign over the draws; "
+              "n: draws with a value.", "",
+              "| method | draws | score | n | median | p90 / p10 | worst (draw) |", "|---|---|---|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        for subset, block in blocks.items():
+            for key, worse in SUMMARY_SCORES:
+                d = block["scores"][key]
+                tail = d["p90"] if worse == "high" else d["p10"]
+                worst = "–" if d["worst"] is None else f"{d['worst']:.3f} ({d['worst_draw']})"
+                lines.append(f"| {name} | {_subset(subset, block)} | {_LABELS[key]} | {d['n']} | "
+                             f"{_fmt(d['median'])} | {_fmt(tail)} | {worst} |")
+    lines += ["", "## The verdict's promise", "",
+              "| method | draws | draws with enough flags | promise kept | share kept | worst share right (draw) |",
+              "|---|---|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        for subset, block in blocks.items():
+            p = block["promise"]
+            worst = "–" if p["worst_draw"] is None else f"{p['worst_flagged_right_share']:.3f} ({p['worst_draw']})"
+            lines.append(f"| {name} | {_subset(subset, block)} | {p['draws_with_enough_flags']} | "
+                         f"{p['draws_kept']} | {_fmt(p['share_kept'])} | {worst} |")
+    lines += ["", "## Forced-only draws", "",
+              "Self-excited flags: flagged window-equations whose model regime is 2, 3 or 4 on a bridge whose "
+              "aerodynamic negative damping never exceeds its structural damping.", "",
+              "| method | draws | forced-only draws | self-excited flags | draws with any |", "|---|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        for subset, block in blocks.items():
+            f = block["forced_only"]
+            lines.append(f"| {name} | {_subset(subset, block)} | {f['draws']} | {f['self_excited_flags']} | "
+                         f"{f['draws_with_self_excited_flags']} |")
+    errors = {name: blocks["all"]["method_errors"] for name, blocks in summary["methods"].items()}
+    if any(errors.values()):
+        lines += ["", "Method failures (see the `error` column of study.csv): "
+                  + ", ".join(f"{k}: {v}" for k, v in errors.items() if v) + "."]
+    return "\n".join(lines) + "\n"
