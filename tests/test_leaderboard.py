@@ -256,3 +256,23 @@ def test_a_table_written_before_the_energy_weighted_scores_reads_with_nan_there(
     assert r["rhs_error_true_AU"] == 0.25 and math.isnan(r["rhs_error_true_AU_energy"])
     assert math.isnan(r["curve_error_energy"])
     assert "| realistic v1 | n/a |" in leaderboard_markdown([r])
+
+
+def test_family_draws_as_scenarios_are_the_family_campaigns(tmp_path, capsys):
+    from vivbench.synth import draw_bridge
+    from vivbench.synth.config import config_to_dict
+    from vivbench.validate import family_scenarios
+
+    scns = family_scenarios("evaluation", [0, 3])
+    assert [s.name for s in scns] == ["evaluation_000", "evaluation_003"]
+    for s, i in zip(scns, (0, 3)):
+        d = draw_bridge("evaluation", i)
+        assert (s.n_events, s.duration, s.seed) == (d.n_events, tuple(d.duration), d.campaign_seed)
+        assert s.generator == json.loads(json.dumps(config_to_dict(d.config)))
+        assert not s.in_class
+    # development and evaluation draws of one number are different bridges
+    assert family_scenarios("development", [0])[0].seed != scns[0].seed
+    assert main(["leaderboard", "--methods", "binned", "--family", "evaluation", "--out", str(tmp_path)]) == 2
+    assert "--family needs --draws" in capsys.readouterr().err
+    assert main(["leaderboard", "--methods", "binned", "--family", "evaluation", "--draws", "0",
+                 "--scenarios", "realistic", "--out", str(tmp_path)]) == 2

@@ -12,8 +12,19 @@ def run(args) -> int:
     from vivbench.validate import load_scenario_file, parse_methods, run_leaderboard, select_scenarios
 
     methods = parse_methods(args.methods)
-    extra = load_scenario_file(args.scenario_file) if args.scenario_file else None
-    scenarios = select_scenarios(args.scenarios, extra)
+    if args.family is not None:
+        from vivbench.core.errors import InputError
+        from vivbench.validate.scenarios import family_scenarios
+        from vivbench.validate.study import parse_draws
+
+        if args.scenarios or args.scenario_file:
+            raise InputError("--family replaces the scenarios: give it without --scenarios and --scenario-file")
+        if not args.draws:
+            raise InputError("--family needs --draws (e.g. 0-6)")
+        scenarios = family_scenarios(args.family, parse_draws(args.draws))
+    else:
+        extra = load_scenario_file(args.scenario_file) if args.scenario_file else None
+        scenarios = select_scenarios(args.scenarios, extra)
     bar = progress(len(scenarios) * (1 + len(methods)), "leaderboard", unit="task")
     try:
         result = run_leaderboard(methods, scenarios, args.out, workers=args.workers, scheduler=args.scheduler,
@@ -55,6 +66,11 @@ def register(sub) -> None:
     s.add_argument("--scenario-file", default=None, metavar="TOML",
                    help="user-defined scenarios ([scenario.NAME] tables: version, description, events, duration, "
                         "seed, in_class, [scenario.NAME.generator]); without --scenarios they replace the suite")
+    s.add_argument("--family", default=None, choices=("development", "evaluation"),
+                   help="rank on draws of the generator family instead of the suite: evaluation draws, which no "
+                        "one may tune on, so a method cannot be tuned on the campaigns it is ranked on (with "
+                        "--draws)")
+    s.add_argument("--draws", default=None, help="with --family: draw numbers, N, N-M or a comma-separated list")
     s.add_argument("--out", required=True,
                    help="output directory; rerunning into it resumes and reuses the scenarios' campaigns")
     s.add_argument("--rerun", default=None, metavar="METHODS",

@@ -53,7 +53,7 @@ from typing import Any
 from vivbench.core.errors import InputError
 from vivbench.core.toml import load_toml
 
-__all__ = ["Scenario", "SCENARIOS", "SCENARIO_FINGERPRINTS", "scenario", "select_scenarios",
+__all__ = ["Scenario", "SCENARIOS", "SCENARIO_FINGERPRINTS", "family_scenarios", "scenario", "select_scenarios",
            "load_scenario_file", "scenarios_from_dict"]
 
 _NAME_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789_")
@@ -225,6 +225,36 @@ SCENARIO_FINGERPRINTS: dict[tuple[str, int], str] = {
     ('high_noise', 1): "4c6a5e9c21f0223851843a097630d36e20d653c496b78c062eaab5db04448632",
     ('dropouts', 1): "ed48b896d8dcfaacebac546795c36db294e9bf4cf3e007ecb03cd2b34aa98594",
 }
+
+
+def family_scenarios(split: str, draws) -> list[Scenario]:
+    """Draws of the generator family (:func:`vivbench.synth.draw_bridge`) as scenarios of the leaderboard.
+
+    Ranking methods on evaluation draws, which no one may tune on, keeps a method's author from tuning
+    on the campaigns it is ranked on (the built-in suite is public and fixed).
+
+    Parameters
+    ----------
+    split : "development" or "evaluation"
+    draws : sequence of int, draw numbers
+
+    Returns
+    -------
+    list of Scenario, named ``<split>_<draw>`` (e.g. ``evaluation_003``), version 1, with the draw's
+    bridge, number of events, durations and campaign seed; the description lists what was drawn.
+    """
+    from vivbench.synth.config import config_to_dict
+    from vivbench.synth.family import draw_bridge
+
+    out = []
+    for index in draws:
+        d = draw_bridge(split, int(index))
+        labels = ", ".join(f"{k} {v}" for k, v in sorted(d.labels.items()) if not isinstance(v, (dict, list)))
+        out.append(Scenario(name=f"{split}_{int(index):03d}", version=1, generator=config_to_dict(d.config),
+                            n_events=int(d.n_events), duration=tuple(float(x) for x in d.duration),
+                            seed=int(d.campaign_seed), in_class=False,
+                            description=f"family draw {split} {int(index)}: {labels}"))
+    return out
 
 
 def scenario(name: str) -> Scenario:
