@@ -64,7 +64,8 @@ __all__ = ["METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "Study
 #: Short names of the study's methods that are not :func:`resolve_method` names.
 METHOD_ALIASES = {"pooled": "campaign"}
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
-_FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags")
+_FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set",
+                 "change_p_value", "change_detected", "change_index")
 _SCORES = tuple(k for k in SCORE_KEYS if k != "fit_time_s")
 #: Columns of ``study.csv``: one row per draw and method.
 STUDY_COLUMNS = ("split", "draw", "method", "campaign_seed", "n_events", "events_failed", *LABEL_COLUMNS,
@@ -220,8 +221,35 @@ def _score(name: str, records, truths, windows, tau: float) -> dict[str, Any]:
     n_flagged = 0 if math.isnan(scores["coverage"]) else int(round(scores["coverage"] * scores["n_scored"]))
     row = {k: scores[k] for k in _SCORES}
     row.update(n_flagged=n_flagged, flagged_right_share=scores["accuracy_identifiable"],
-               self_excited_flags=seen.self_excited_flags(), error="", fit_time_s=seconds)
+               self_excited_flags=seen.self_excited_flags(), error="", fit_time_s=seconds,
+               **_choice(fitted), **_change_scan(fitted, records))
     return row
+
+
+def _choice(fitted) -> dict[str, Any]:
+    """The candidate a model chose from the campaign's evidence and its confidence set ("" without)."""
+    evidence = getattr(fitted, "evidence", None)
+    if not callable(evidence):
+        return {"chosen": "", "confidence_set": ""}
+    ev = evidence()
+    return {"chosen": str(ev["chosen"]),
+            "confidence_set": ",".join(c["name"] for c in ev["candidates"] if c["in_set"])}
+
+
+def _change_scan(fitted, records) -> dict[str, Any]:
+    """``vivbench pool``'s change scan of the model (refits before and after each split) on the measured
+    records: its permutation p-value, whether it alarms and the first event after the located change
+    (NaN and -1 for a model without per-event statistics)."""
+    from vivbench.analysis.changes import statistics_change_scan
+    from vivbench.models.model_input import measured_input
+
+    stats_of = getattr(fitted, "event_statistics", None)
+    if not callable(stats_of):
+        return {"change_p_value": math.nan, "change_detected": 0, "change_index": -1}
+    scan = statistics_change_scan(stats_of([measured_input(fitted, r) for r in records]),
+                                  seed=int(getattr(fitted, "seed", 0)))
+    return {"change_p_value": float(scan["p_value"]), "change_detected": int(bool(scan["detected"])),
+            "change_index": int(scan["change_index"]) if scan["detected"] else -1}
 
 
 def run_study_task(task: StudyTask) -> dict[str, Any]:
