@@ -66,20 +66,31 @@ def test_least_penalty_is_the_smallest_plausible(fits):
         np.testing.assert_allclose(least.penalty_coef_[chosen, k], least.coef_[k], rtol=1e-9, atol=1e-12)
 
 
-def test_least_penalty_overshoots_when_no_penalty_is_rejected(fits):
-    # The known failure of "least" (README): here the wind's error is large (0.5 m/s) and the same at every
-    # section (the sections' spread does not show it), and ten events reject no small penalty, so "least"
-    # takes the smallest candidate, whose curve overshoots the bell's peak; the 5-fold penalty smooths it.
-    # On the realistic campaigns "least" did better (README table).
+def _a1_errors(models: dict) -> dict:
+    """RMS error of each model's a_1 curve against the bell over its peak, 1/s."""
     wind = np.linspace(8.5, 11.5, 31)
-    err = {}
-    for choice, m in fits.items():
-        a1 = m.curves(wind)["curves"].values[:, 1]
-        err[choice] = float(np.sqrt(np.mean((a1 - bell(wind)) ** 2)))
+    return {name: float(np.sqrt(np.mean((m.curves(wind)["curves"].values[:, 1] - bell(wind)) ** 2)))
+            for name, m in models.items()}
+
+
+def test_least_penalty_takes_the_smallest_candidate_when_none_is_rejected(fits):
+    # Here the wind's error is large (0.5 m/s) and the same at every section (the sections' spread does not
+    # show it), and ten events reject no small penalty, so "least" takes the smallest candidate.
     least = fits["least"]
     assert least.penalty_plausible_[0].all()  # the smallest candidate is plausible for every equation
     np.testing.assert_array_equal(least.penalty_, min(least.penalties))
-    assert err["least"] > 2.0 * err["cv"]
+
+
+@pytest.mark.xfail(strict=True, reason="known failure: an error in the wind that every section shares biases "
+                   "every held-out event alike, so neither the penalties' confidence set nor the held-out choice "
+                   "between cv and least sees that the least penalty's curve overshoots the bell's peak")
+def test_the_chosen_penalty_does_not_overshoot_a_bell_under_a_shared_wind_error(fits):
+    from vivbench.analysis.selection import varying_selection
+
+    chosen = varying_selection(criterion="derivative", options={"penalty_choice": ("cv", "least")},
+                               n_perturbations=0, **SETTINGS).fit(_noisy_wind_records())
+    err = _a1_errors({"cv": fits["cv"], "chosen": chosen})
+    assert err["chosen"] <= 1.5 * err["cv"]
 
 
 def test_choice_is_validated_saved_and_defaults_for_older_files(fits, tmp_path):
