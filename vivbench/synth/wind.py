@@ -123,8 +123,8 @@ def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.rando
     """Evaluate the scripted mean wind with its random wander at times ``t`` (s) at ``n_sections`` sections.
 
     The yaw is the script's mean yaw times ``wind.event_yaw_scale`` (or ``wind.shared_yaw_deg``
-    when set) plus the slow
-    random wander plus the shared swing ``wind.yaw_swing_deg sin(2 pi t / wind.yaw_swing_period)``.
+    when set) plus the slow random wander plus the shared swing
+    ``wind.yaw_swing_deg sin(2 pi t / wind.yaw_swing_period)``.
     """
     t = np.asarray(t, dtype=float)
     base = PchipInterpolator(script.times, script.speeds)(np.clip(t, 0.0, script.duration))
@@ -154,15 +154,17 @@ class WindField:
     Attributes
     ----------
     anemometer : ndarray, shape (n, S, 3), m/s
-        Turbulence at each section's anemometer, a single point. The anemometer
+        Turbulence at each section's anemometer, a single point (with
+        ``felt_wind = "smooth"``, its own :func:`point_turbulence`). The anemometer
         records are the mean wind plus this plus the sensor errors.
     deck : ndarray, shape (n, S, 3), m/s
         Turbulence the deck of section k feels: with ``felt_wind = "tributary"``
         the average of the field over the points of the section's tributary
         length; with ``"anemometer"`` (the ``in_library`` mode) the very array
-        ``anemometer``. Buffeting uses it whole; its slow part (below
-        ``felt_cutoff_hz``) enters the felt mean wind U_k of the aeroelastic
-        force and of the truth (:func:`felt_mean_wind`).
+        ``anemometer``; with ``"smooth"`` the field at the section. Buffeting uses
+        it whole; its slow part (below ``felt_cutoff_hz``) enters the felt mean
+        wind U_k of the aeroelastic force and of the truth (:func:`felt_mean_wind`),
+        except with ``"smooth"``.
     positions : ndarray, shape (n_points,), m
         Spanwise coordinates simulated: the S anemometers first, then the
         tributary points section by section (S * points_per_section); only the
