@@ -259,14 +259,23 @@ def _fit(model, records):
     return model if fitted is None else fitted
 
 
-def _fold_task(task: dict) -> dict:
-    """Fit one candidate without one fold's events and score it on them (a picklable top-level task)."""
-    model = _unfitted(task["model"], n_bootstrap=0)
-    records, fold, f = task["records"], task["fold"], task["fold_index"]
-    train = [r for r, g in zip(records, fold) if g != f]
-    fitted = _fit(model, train)
-    idx = [i for i, g in enumerate(fold) if g == f]
-    return {"events": idx, "loss": [held_out_loss(fitted, records[i], task["criterion"]) for i in idx]}
+def _candidate_task(task: dict) -> dict:
+    """Fit one candidate without each fold's events in turn and score it on them (a picklable top-level task).
+
+    One task per candidate, not per fold: the records travel to a worker once.
+    """
+    records, fold, criterion = task["records"], task["fold"], task["criterion"]
+    loss = np.zeros(len(records))
+    for f in range(int(fold.max()) + 1):
+        fitted = _fit(_unfitted(task["model"], n_bootstrap=0), [r for r, g in zip(records, fold) if g != f])
+        for i in np.flatnonzero(fold == f):
+            loss[i] = held_out_loss(fitted, records[i], criterion)
+    return {"loss": loss}
+
+
+def _fit_task(task: dict):
+    """Fit a fresh copy of a model (with ``params`` where it has them) to records (a picklable top-level task)."""
+    return _fit(_unfitted(task["model"], **task["params"]), task["records"])
 
 
 class ModelSelection:
@@ -378,15 +387,13 @@ class ModelSelection:
             self.in_set_, self.excess_, self.se_ = np.ones(C, dtype=bool), np.zeros(C), np.zeros(C)
         elif C > 1:
             fold = event_folds(E, self.n_folds, self.seed)
-            tasks = [{"model": c.model, "records": records, "fold": fold, "fold_index": f,
-                      "criterion": self.criterion}
-                     for c in self.candidates for f in range(int(fold.max()) + 1)]
-            n_f = int(fold.max()) + 1
-            for out in run_tasks(_fold_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
+            tasks = [{"model": c.model, "records": records, "fold": fold, "criterion": self.criterion}
+                     for c in self.candidates]
+            for out in run_tasks(_candidate_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
                 if out.error is not None:
-                    c = self.candidates[out.index // n_f]
-                    raise InputError(f"candidate {c.name!r} failed on a held-out fold: {out.error}")
-                self.losses_[out.index // n_f, out.value["events"]] = out.value["loss"]
+                    raise InputError(f"candidate {self.candidates[out.index].name!r} failed on a held-out fold: "
+                                     f"{out.error}")
+                self.losses_[out.index] = out.value["loss"]
             self.in_set_, self.excess_, self.se_ = one_se_set(self.losses_)
         else:
             self.in_set_, self.excess_, self.se_ = np.ones(1, dtype=bool), np.zeros(1), np.zeros(1)
@@ -396,15 +403,25 @@ class ModelSelection:
         chosen = int(min(members, key=lambda i: (complexity[i], total[i], i)))
         self.chosen_index_ = chosen
         self.chosen_ = self.names_[chosen]
-        self.model_ = _fit(_unfitted(self.candidates[chosen].model), records)
-        self.set_models_ = [_fit(_unfitted(self.candidates[i].model, n_bootstrap=0), records)
-                            for i in members if i != chosen]
         rng = np.random.default_rng([int(self.seed), 1])
         self.wind_error_ = np.stack([wind_error_scale(r, self.perturbation_timescale_s) for r in records])
-        self.perturbed_models_ = []
-        for _ in range(int(self.n_perturbations)):
-            pert = [perturbed_wind(r, s, self.perturbation_timescale_s, rng) for r, s in zip(records, self.wind_error_)]
-            self.perturbed_models_.append(_fit(_unfitted(self.candidates[chosen].model, n_bootstrap=0), pert))
+        perturbed = [[perturbed_wind(r, s, self.perturbation_timescale_s, rng)
+                      for r, s in zip(records, self.wind_error_)] for _ in range(int(self.n_perturbations))]
+        others = [i for i in members if i != chosen]
+        # The final fits, in parallel: the choice itself, the set's other members and the perturbed refits.
+        tasks = ([{"model": self.candidates[chosen].model, "params": {}, "records": records}]
+                 + [{"model": self.candidates[i].model, "params": {"n_bootstrap": 0}, "records": records}
+                    for i in others]
+                 + [{"model": self.candidates[chosen].model, "params": {"n_bootstrap": 0}, "records": p}
+                    for p in perturbed])
+        fitted = [None] * len(tasks)
+        for out in run_tasks(_fit_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
+            if out.error is not None:
+                raise InputError(f"the final fit {out.index} of the selection failed: {out.error}")
+            fitted[out.index] = out.value
+        self.model_ = fitted[0]
+        self.set_models_ = fitted[1:1 + len(others)]
+        self.perturbed_models_ = fitted[1 + len(others):]
         return self
 
     # -- the protocol, through the chosen model ------------------------------------------------------
