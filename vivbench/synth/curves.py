@@ -308,7 +308,7 @@ class YawFactor:
     (0 for wind perpendicular to the span), per section. The functions named in
     ``applies_to`` are multiplied by
 
-    - ``shape = "cosine"``: |cos psi|^exponent;
+    - ``shape = "cosine"``: ``|cos psi|^exponent``;
     - ``shape = "gaussian"``: exp(-psi^2 / (2 width_deg^2)).
 
     Vortex-induced vibration weakens as the wind turns away from the normal, so
