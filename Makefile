@@ -9,7 +9,7 @@ export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export MPLBACKEND := Agg
 
-.PHONY: demo test test-slow test-wheel bench install clean
+.PHONY: demo test test-slow test-wheel bench docs install clean
 
 $(VENV)/.installed-%: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -45,5 +45,10 @@ test-slow: $(VENV)/.installed-test
 bench: $(VENV)/.installed-test,bench
 	$(BIN)/python benchmarks/run_all.py
 
+# The documentation site (Sphinx): user guide, API reference from the docstrings, and the
+# examples of examples/gallery/ executed during the build. Warnings are errors.
+docs: $(VENV)/.installed-docs
+	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
+
 clean:
-	rm -rf $(VENV) demo .pytest_cache .hypothesis
+	rm -rf $(VENV) demo .pytest_cache .hypothesis docs/_build docs/generated docs/auto_examples docs/sg_execution_times.rst
