@@ -9,7 +9,7 @@ export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export MPLBACKEND := Agg
 
-.PHONY: demo test test-slow test-wheel bench docs install clean
+.PHONY: demo test test-slow test-wheel bench docs readme install clean
 
 $(VENV)/.installed-%: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -49,6 +49,11 @@ bench: $(VENV)/.installed-test,bench
 # examples of examples/gallery/ executed during the build. Warnings are errors.
 docs: $(VENV)/.installed-docs
 	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
+
+# The README's headline table, from the committed reference report (tests/test_readme.py
+# checks that the README holds what this writes).
+readme: $(VENV)/.installed-test
+	$(BIN)/python tools/update_readme.py README.md reports/default/report.md
 
 clean:
 	rm -rf $(VENV) demo .pytest_cache .hypothesis docs/_build docs/generated docs/auto_examples docs/sg_execution_times.rst
