@@ -9,7 +9,7 @@ export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export MPLBACKEND := Agg
 
-.PHONY: demo test test-slow test-wheel bench docs readme install clean
+.PHONY: demo test test-slow test-wheel bench bench-quick docs readme install clean
 
 $(VENV)/.installed-%: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -42,8 +42,14 @@ test-wheel: $(VENV)/.installed-test
 test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m slow -q
 
+# The benchmark suite: speed against the reference packages (pysindy, pynumdiff, pyconturb,
+# pydpc) and the chain's own timings; writes benchmarks/results.md (bench-quick: a reduced
+# set on small workloads, under 10 min on 2 cores, writes benchmarks/results_quick.md).
 bench: $(VENV)/.installed-test,bench
 	$(BIN)/python benchmarks/run_all.py
+
+bench-quick: $(VENV)/.installed-test,bench
+	$(BIN)/python benchmarks/run_all.py --quick
 
 # The documentation site (Sphinx): user guide, API reference from the docstrings, and the
 # examples of examples/gallery/ executed during the build. Warnings are errors.
