@@ -141,7 +141,7 @@ def speed_rows(results: dict) -> list[tuple[str, str, str, str, str]]:
     """(benchmark, workload, vivbench, reference, ratio) of every speed comparison that ran."""
     rows = []
     for label, fig in (("synthetic sparse-model windows", _get(results, "sindy")),
-                       ("the default campaign's own windows", _get(results, "identify", "engine_vs_pysindy"))):
+                       ("windows of a campaign of the default bridge", _get(results, "identify", "engine_vs_pysindy"))):
         if fig and "speedup_vs_sindy_loop" in fig:
             rows.append(("window SINDy engine vs pysindy `SINDy` loop",
                          f"{label}: {fig['n_events']} events, {fig['n_windows']} windows "
