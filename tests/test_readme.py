@@ -50,4 +50,4 @@ def test_headline_table_refuses_a_report_without_it():
     with pytest.raises(ValueError, match="needs the lines"):
         readme_with_headline("# no markers\n", table)
     replaced = readme_with_headline(f"a\n{HEADLINE_BEGIN}\nold\n{HEADLINE_END}\nb\n", table)
-    assert replaced == f"a\n{HEADLINE_BEGIN}\n{table}{HEADLINE_END}\nb\n"
+    assert replaced == f"a\n{HEADLINE_BEGIN}\n\n{table}\n{HEADLINE_END}\nb\n"

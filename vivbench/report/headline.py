@@ -80,7 +80,7 @@ def headline_table(report_text: str, rows=HEADLINE_ROWS) -> str:
 
 
 def readme_with_headline(readme_text: str, table: str) -> str:
-    """The README with ``table`` between :data:`HEADLINE_BEGIN` and :data:`HEADLINE_END`.
+    """The README with ``table`` between :data:`HEADLINE_BEGIN` and :data:`HEADLINE_END`, blank lines around it.
 
     Raises
     ------
@@ -91,4 +91,4 @@ def readme_with_headline(readme_text: str, table: str) -> str:
     if begin < 0 or end < begin:
         raise ValueError(f"the README needs the lines {HEADLINE_BEGIN!r} and then {HEADLINE_END!r}")
     head = readme_text[: begin + len(HEADLINE_BEGIN)]
-    return f"{head}\n{table}{readme_text[end:]}"
+    return f"{head}\n\n{table}\n{readme_text[end:]}"
