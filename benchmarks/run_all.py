@@ -82,7 +82,7 @@ def run_one(bench: Bench, kwargs: dict) -> dict:
     """Figures of one benchmark, or ``{"skipped": why}`` / ``{"error": what}``; ``wall_s`` beside them."""
     missing = [p for p in bench.needs if not (ROOT / p).exists()]
     if missing:
-        return {"skipped": f"needs {', '.join(missing)} (run `make demo` first)"}
+        return {"skipped": f"needs {', '.join(missing)} (run `make demo` first)", "wall_s": 0.0}
     argv, sys.argv = sys.argv, [str(HERE / f"bench_{bench.name}.py")]
     t0 = time.perf_counter()
     try:
