@@ -9,7 +9,7 @@ export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export MPLBACKEND := Agg
 
-.PHONY: demo test test-slow test-wheel bench install clean
+.PHONY: demo test test-slow test-wheel bench bench-quick docs readme install clean
 
 $(VENV)/.installed-%: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -42,8 +42,24 @@ test-wheel: $(VENV)/.installed-test
 test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m slow -q
 
+# The benchmark suite: speed against the reference packages (pysindy, pynumdiff, pyconturb,
+# pydpc) and the chain's own timings; writes benchmarks/results.md (bench-quick: a reduced
+# set on small workloads, under 10 min on 2 cores, writes benchmarks/results_quick.md).
 bench: $(VENV)/.installed-test,bench
 	$(BIN)/python benchmarks/run_all.py
 
+bench-quick: $(VENV)/.installed-test,bench
+	$(BIN)/python benchmarks/run_all.py --quick
+
+# The documentation site (Sphinx): user guide, API reference from the docstrings, and the
+# examples of examples/gallery/ executed during the build. Warnings are errors.
+docs: $(VENV)/.installed-docs
+	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
+
+# The README's headline table, from the committed reference report (tests/test_readme.py
+# checks that the README holds what this writes).
+readme: $(VENV)/.installed-test
+	$(BIN)/python tools/update_readme.py README.md reports/default/report.md
+
 clean:
-	rm -rf $(VENV) demo .pytest_cache .hypothesis
+	rm -rf $(VENV) demo .pytest_cache .hypothesis docs/_build docs/generated docs/auto_examples docs/sg_execution_times.rst

@@ -27,7 +27,7 @@ of a campaign is one point. Two feature sets describe it:
 Clustering is :class:`vivbench.analysis.clustering.DensityPeaks` (automatic
 centres by the largest log-gap of rho * delta among eligible points, or a
 given number of centres or centre indices). Each cluster is summarised by its
-size, its halo, its dominant terms (largest mean |standardised coefficient|),
+size, its halo, its dominant terms (largest mean ``|standardised coefficient|``),
 its mean order shares, and its make-up by identified regime and, when the
 campaign's truth is available, by true regime
 (:func:`vivbench.validate.truth_window_regimes`); the partition is scored
@@ -300,7 +300,7 @@ class ClusterResult:
     ----------
     feature_set : str
     model : DensityPeaks
-        The fitted estimator (labels_, halo_, rho_, delta_, centers_).
+        The fitted estimator (``labels_``, ``halo_``, ``rho_``, ``delta_``, ``centers_``).
     summary : list of dict
         One row per cluster (:func:`summarize_clusters`).
     scores : dict
@@ -353,7 +353,7 @@ def summarize_clusters(labels, halo, windows: CampaignWindows, n_top: int = 3) -
     -------
     list of dict
         Keys ``label``, ``size``, ``share``, ``halo``, ``dominant_terms``
-        (the ``n_top`` largest mean |standardised coefficient|, "name (value)"
+        (the ``n_top`` largest mean ``|standardised coefficient|``, "name (value)"
         joined by "; "), ``order_share_0..3`` (mean order shares),
         ``identified_regime_1..4`` and ``truth_regime_1..4`` (shares within
         the cluster; truth columns NaN without truth), ``truth_majority``.

@@ -1,19 +1,19 @@
 """The ``vivbench`` command line: parse, build the configuration, call the library.
 
 One module per subcommand, each with ``register(subparsers)`` that adds its
-parser and sets ``func``. Progress bars go to stderr. Exit statuses:
+parser and sets ``func``. Progress bars go to stderr. Exit statuses::
 
-0    success.
-1    some files or tasks failed (each reported on one line, the others
-     finished), or an internal error: a bug in vivbench. A bug prints its
-     traceback and then one line ``vivbench <cmd>: internal error (<Type>:
-     <message>); this is a bug in vivbench <version>: please report it ...``.
-2    bad input (:class:`vivbench.core.errors.InputError`: a file, a
-     configuration or command-line value, data that cannot be used) or an
-     ``OSError`` (missing file, permission, full disk): one line
-     ``vivbench <cmd>: <file>: <problem>`` on stderr. argparse's own usage
-     errors also exit 2.
-130  interrupted (Ctrl-C).
+    0    success.
+    1    some files or tasks failed (each reported on one line, the others
+         finished), or an internal error: a bug in vivbench. A bug prints its
+         traceback and then one line ``vivbench <cmd>: internal error (<Type>:
+         <message>); this is a bug in vivbench <version>: please report it ...``.
+    2    bad input (:class:`vivbench.core.errors.InputError`: a file, a
+         configuration or command-line value, data that cannot be used) or an
+         ``OSError`` (missing file, permission, full disk): one line
+         ``vivbench <cmd>: <file>: <problem>`` on stderr. argparse's own usage
+         errors also exit 2.
+    130  interrupted (Ctrl-C).
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ class Record:
         perpendicular), e.g. the identification result's ``yaw``
         (:func:`vivbench.preprocess.mean_yaw`); NaN where unknown, None: not
         measured. The realistic aerodynamics fall off with it, and
-        U = V |sin theta| does not carry it.
+        U = V ``|sin theta|`` does not carry it.
 
     Notes
     -----

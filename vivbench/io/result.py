@@ -96,7 +96,7 @@ VARIABLES: dict[str, VariableSpec] = {
     "aicc": VariableSpec(_WE, "float64", "1", "AICc of the selected model"),
     "rss": VariableSpec(_WE, "float64", "m^2/s^2", "residual sum of squares"),
     "n_terms": VariableSpec(_WE, "int64", "1", "number of terms in the regression basis"),
-    "regime": VariableSpec(_WE, "int8", "1", "regime of the selected model (DESIGN 2.5); 0: no model"),
+    "regime": VariableSpec(_WE, "int8", "1", "regime of the selected model by the regime rule; 0: no model"),
     "identifiable": VariableSpec(_WE, "int8", "1", "every equally good competing model has the same regime, and the "
                                  "amplitude is above the noise floor (min_snr)"),
     "regimes_seen": VariableSpec(_WE, "int8", "1", "bit mask of regimes among equally good models (bit k-1: regime k)"),

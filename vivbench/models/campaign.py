@@ -278,7 +278,9 @@ class PooledSINDy(ModelBase):
         Physical coefficients on ``vivbench.core.terms.evaluate_library``; dA_k/dt in m/s.
     coef_bootstrap_ : ndarray, shape (n_bootstrap, S, 23 S)
     support_, threshold_, n_terms_, rss_, aicc_ : the selected model per equation
-    n_samples_ : int; n_blocks_ : int; cond_ : float (of the scaled pooled library)
+    n_samples_, n_blocks_ : int
+    cond_ : float
+        Condition number of the scaled pooled library.
     feature_names_ : list of str
     n_sections_ : int
     amplitude_ratios_ : ndarray, shape (S, S)

@@ -245,7 +245,7 @@ class BridgeProperties:
         Structural damping ratio zeta (dimensionless, >= 0).
     air_density : float, kg/m^3
     mode_shape : tuple of float or None
-        phi_k at the instrumented sections; None: |phi| from the data's amplitude ratios.
+        phi_k at the instrumented sections; None: ``|phi|`` from the data's amplitude ratios.
     tributary_lengths : tuple of float or None, m
         L_k of the sections' strips; None: equal lengths.
     """
@@ -1022,7 +1022,7 @@ class GreyBoxRefit(ModelBase):
         return g
 
     def order_contributions(self, record: Record) -> np.ndarray:
-        """r_ki = |phi_k| g_i(U, yaw) (A_k / |phi_k|)^i, shape (n, S, 4), m/s (NaN where A or U is missing).
+        """r_ki = ``|phi_k|`` g_i(U, yaw) (A_k / ``|phi_k|``)^i, shape (n, S, 4), m/s (NaN where A or U is missing).
 
         The record's yaw (``Record.yaw``) enters through the yaw factor; none: yaw 0.
         """

@@ -241,9 +241,12 @@ class PySINDyCampaign(_PySINDyBase):
     ----------
     sindy_ : the fitted pysindy.SINDy
     coef_ : ndarray, shape (S, p), on the scaled variables
-    feature_names_ : list of str; term_orders_ : ndarray of int, shape (p,) (-1: no order)
+    feature_names_ : list of str
+    term_orders_ : ndarray of int, shape (p,)
+        Power of A of each term (-1: no order).
     a_scale_, u_center_, u_scale_ : float (m, m/s, m/s)
-    n_sections_ : int; n_trajectories_ : int; other_share_ : float
+    n_sections_, n_trajectories_ : int
+    other_share_ : float
         RMS of the terms without an order relative to the RMS of the whole fitted right-hand side.
     amplitude_ratios_ : ndarray, shape (S, S)
         Median A_l / A_k of the fitted data (:func:`vivbench.models.amplitude_ratios`), for ``curves``.

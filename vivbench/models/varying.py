@@ -581,7 +581,8 @@ class VaryingCoefficientSINDy(ModelBase):
         coefficient of B_km(U_s): a_ki = sum_s sum_m coef_[k, s M_k + m, i] B_km(U_s).
     coef_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4)
     knots_ : ndarray, shape (S, M_max + 4), m/s (NaN-padded)
-    n_basis_ : ndarray of int, shape (S,); penalty_ : ndarray, shape (S,) (relative)
+    n_basis_ : ndarray of int, shape (S,)
+    penalty_ : ndarray, shape (S,) (relative)
     orders_ : ndarray of bool, shape (S, 4)
         Orders kept in each equation.
     cv_error_ : ndarray, shape (S, len(n_basis), len(penalties))
@@ -592,7 +593,8 @@ class VaryingCoefficientSINDy(ModelBase):
         Range of U_k fitted; the curves are constant outside it.
     y_scale_, a_ref_ : ndarray, shape (S,), m/s and m
         RMS of dA_k/dt and of A_k over the fitted samples (the regression's scales).
-    rss_ : ndarray, shape (S,), m^2/s^2; n_samples_, n_blocks_, n_sections_ : int
+    rss_ : ndarray, shape (S,), m^2/s^2
+    n_samples_, n_blocks_, n_sections_ : int
     event_ids_ : list of str
     yaw_degree_ : int
         The fitted yaw degree J (``yaw_degree``, or its default from the records).

@@ -171,7 +171,7 @@ def displacement(acc, fs: float, f_mode: float, half_width: float, *, taper: flo
 
 
 def envelope(y) -> np.ndarray:
-    """Amplitude envelope |y + i H[y]| by the Hilbert transform.
+    """Amplitude envelope ``|y + i H[y]|`` by the Hilbert transform.
 
     Parameters
     ----------

@@ -43,7 +43,7 @@ def wind_speed_direction(u, v) -> tuple[np.ndarray, np.ndarray]:
 
 
 def perpendicular_speed(V, theta, span_azimuth_deg: float) -> np.ndarray:
-    """Wind speed perpendicular to the span, U~ = V |sin(theta - span azimuth)|.
+    """Wind speed perpendicular to the span, U~ = V ``|sin(theta - span azimuth)|``.
 
     Parameters
     ----------

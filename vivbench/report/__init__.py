@@ -17,6 +17,8 @@ from vivbench.report.figures import (
 )
 from vivbench.report.greybox import (greybox_curves_figure, greybox_functions_figure, greybox_section,
                                      greybox_simulation_figure, greybox_yaw_figure)
+from vivbench.report.headline import (HEADLINE_BEGIN, HEADLINE_END, HEADLINE_ROWS, HEADLINE_SECTION, headline_table,
+                                      readme_with_headline)
 from vivbench.report.leaderboard import LEADERBOARD_TITLE, leaderboard_section
 from vivbench.report.markdown import EXTRA_STEPS, write_report
 from vivbench.report.pair_figures import PAIR_COLOURS, recovery_pair_figure
@@ -27,5 +29,6 @@ __all__ = [
     "inverse_crime_paragraph", "leaderboard_section", "recovery_pair_figure", "REGIME_COLOURS", "coefficient_map_figure", "decision_graph_figure", "displacement_figure",
     "event_figure", "forecast_figure", "model_forecast_figure", "regime_timeline_figure", "sensor_layout_figure", "term_scale",
     "time_frequency_figure", "wind_figure", "write_report", "greybox_curves_figure", "greybox_functions_figure",
-    "greybox_section", "greybox_simulation_figure", "greybox_yaw_figure",
+    "greybox_section", "greybox_simulation_figure", "greybox_yaw_figure", "HEADLINE_BEGIN", "HEADLINE_END", "HEADLINE_ROWS",
+    "HEADLINE_SECTION", "headline_table", "readme_with_headline",
 ]

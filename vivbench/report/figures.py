@@ -206,7 +206,7 @@ def wind_figure(tree: xr.DataTree, path: str | Path, *, section: str | None = No
 
     Panels: (a) u, v, w; (b) horizontal speed V and direction theta with the
     directions perpendicular to the span; (c) the perpendicular component
-    U~ = V |sin(theta - azimuth)| and its zero-phase low-pass, the mean wind U
+    U~ = V ``|sin(theta - azimuth)|`` and its zero-phase low-pass, the mean wind U
     (with the true mean wind when the event is synthetic).
 
     Parameters
@@ -418,7 +418,7 @@ def coefficient_map_figure(result: xr.Dataset, path: str | Path, *, equation: st
     over the event, xi_j * rms(theta_j) in m/s: the size of that term's
     contribution to dA/dt, comparable across terms whose physical coefficients
     differ by many orders of magnitude. The scale is symmetric-logarithmic,
-    linear below 1 % of the largest |contribution|. Below the map: the window
+    linear below 1 % of the largest ``|contribution|``. Below the map: the window
     regime (hatched where not identifiable), the mean winds and the amplitudes.
 
     Parameters

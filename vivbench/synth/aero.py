@@ -72,7 +72,7 @@ def modal_coefficients(U: np.ndarray, structure: StructureConfig, aero: AeroConf
     """Coefficients of the aeroelastic terms of the modal equation.
 
     The modal equation is
-    q'' + 2 zeta w q' + w^2 q = c_lin q' - n1 |q| q' - n2 q^2 q' + k_aero q
+    q'' + 2 zeta w q' + w^2 q = c_lin q' - n1 ``|q|`` q' - n2 q^2 q' + k_aero q
     + f_lock q' / (w Q) + f_ext, where q'/(w Q) = -sin(phi) is the unit force
     shape locked in phase with the velocity.
 

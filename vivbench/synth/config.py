@@ -175,7 +175,7 @@ class AeroConfig:
       keep the averaged truth inside the A^i U^j library, so that an exact
       coefficient matrix exists when deg(U Y1 e) <= 5 and deg(U^2 C_L) <= 5.
       The nonlinear e1 and e2 are positive and linear in U (a Simiu-Scanlan
-      lambda with a gentle trend): the |y| term (regime 3) dominates the
+      lambda with a gentle trend): the ``|y|`` term (regime 3) dominates the
       plateaus below the centre of lock-in and the cubic term (regime 4) those
       above it. Outside lock-in, where Y1 < 0, the same terms slightly weaken
       the aerodynamic damping at large amplitude, as in the classical model.
@@ -184,7 +184,7 @@ class AeroConfig:
     Attributes
     ----------
     Y1 : aerodynamic damping derivative; bell-shaped over lock-in, negative outside
-    e1 : coefficient of the |y/D| term (gives A^2 in the amplitude equation)
+    e1 : coefficient of the ``|y/D|`` term (gives A^2 in the amplitude equation)
     e2 : Simiu-Scanlan lambda, coefficient of (y/D)^2 (gives A^3)
     Y2 : aerodynamic stiffness derivative (shifts the frequency only)
     C_L : lift coefficient of the shedding force locked to the motion (>= 0 over the wind range;
@@ -193,7 +193,7 @@ class AeroConfig:
     strouhal : Strouhal number St; unlocked shedding runs at St U / D
     cl_unlocked : amplitude of the unlocked (Strouhal-frequency) lift coefficient; it is
         faded out near resonance with the mode, so it averages out of the amplitude equation
-    lock_bandwidth : float, Hz; detuning |St U/D - f1| below which shedding counts as locked
+    lock_bandwidth : float, Hz; detuning ``|St U/D - f1|`` below which shedding counts as locked
     buffeting_u, buffeting_w : buffeting force F = rho U D (b_u u' + b_w w') per unit length
     """
 
@@ -247,7 +247,7 @@ class AeroConfig:
         Ur0 = 7.0 (about 1/St, i.e. 8 m/s) with width 1.1, over a baseline of -4:
         positive for Ur in about [4.9, 9.1] (lock-in 5.6-10.4 m/s), aerodynamic
         damping outside. e1 falls from 36 to 20 and e2 rises from 300 to 520
-        across lock-in (logistic steps, centre 7.0, width 1.5), so the |y| term
+        across lock-in (logistic steps, centre 7.0, width 1.5), so the ``|y|`` term
         leads below the centre and the cubic term above it, as in the
         ``in_library`` mode. C_L is a Gaussian bell (0.04 at Ur = 7.0, width 2.0)
         over a floor of 0.003, >= 0 everywhere. Y1 and C_L fall off with the yaw
@@ -520,7 +520,7 @@ class ChangesConfig:
 
     Attributes
     ----------
-    drift_amplitude : float, relative amplitude a of the damping drift, |a| < 1 (0: no drift)
+    drift_amplitude : float, relative amplitude a of the damping drift, ``|a|`` < 1 (0: no drift)
     drift_period : float, s; period P of the drift (default 86400 s, a daily temperature cycle)
     drift_phase_deg : float, degrees; phase of the drift at campaign time 0
     step_event : int, first event number with the step (0: no step)

@@ -359,12 +359,12 @@ class YawFactor:
     (0 for wind perpendicular to the span), per section. The functions named in
     ``applies_to`` are multiplied by
 
-    - ``shape = "cosine"``: |cos psi|^exponent;
+    - ``shape = "cosine"``: ``|cos psi|^exponent``;
     - ``shape = "gaussian"``: exp(-psi^2 / (2 width_deg^2));
     - ``shape = "sin2"``: 1 - strength sin^2 psi (a gentle fall-off that keeps
       1 - strength at 90 degrees);
     - ``shape = "logistic"``: a cut-off near ``cutoff_deg``,
-      (1 + exp(-cutoff_deg / width_deg)) / (1 + exp((|psi| - cutoff_deg) / width_deg)):
+      ``(1 + exp(-cutoff_deg / width_deg)) / (1 + exp((|psi| - cutoff_deg) / width_deg))``:
       nearly flat below the cut-off, falling to about zero over a few ``width_deg`` above it
       (exactly 1 at psi = 0).
 

@@ -194,7 +194,7 @@ def kaimal_psd(f, U, sigma, L) -> np.ndarray:
 
 
 def davenport_coherence(f, separation, U, decay) -> np.ndarray:
-    """Davenport root-coherence (real coherency) exp(-decay f |separation| / U).
+    """Davenport root-coherence (real coherency) exp(-decay f ``|separation|`` / U).
 
     Arguments broadcast.
 

@@ -1,8 +1,8 @@
 """Hypothesis strategies for users' property tests (DESIGN 7).
 
-In the style of ``xarray.testing.strategies`` and ``hypothesis.extra.numpy``:
-every argument is keyword-only and is either a strategy or a plain value
-(a plain value is used as it is). The strategies build on the generator's own
+As in ``hypothesis.extra.numpy`` (and unlike ``xarray.testing.strategies``,
+which accepts strategies only): every argument is keyword-only and is either a
+strategy or a plain value (a plain value is used as it is). The strategies build on the generator's own
 configuration classes and simulation (:mod:`vivbench.synth`), so what they draw
 is what ``vivbench synth`` would write: physically sensible bridges, lock-in
 curves and wind scripts, and events with their exact averaged truth.
