@@ -3,7 +3,7 @@
 from vivbench.synth import GeneratorConfig, SensorConfig, TurbulenceConfig
 
 #: The noise-free bridge: no sensor noise or quantisation, no anemometer error,
-#: turbulence, buffeting or unlocked vortex shedding. The in_library mode (DESIGN 2.8):
+#: turbulence, buffeting or unlocked vortex shedding. The in_library mode (docs/concepts.md (no inverse crime)):
 #: its recovery is scored against the truth's exact coefficient matrix.
 CLEAN = GeneratorConfig.in_library(
     aero=dict(cl_unlocked=0.0, buffeting_w=0.0),

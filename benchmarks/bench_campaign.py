@@ -1,7 +1,7 @@
 """Wall time of the default 31-event campaign (generation and writing), 1 and 2 workers.
 
 Run: ``.venv/bin/python benchmarks/bench_campaign.py`` (or ``make bench``).
-The DESIGN target is at most 30 s on a 2-core machine; this script reports the
+The target is at most 30 s on a 2-core machine; this script reports the
 figure, it asserts nothing.
 """
 

@@ -11,7 +11,7 @@ dt = 0.25 s (20 min), with independent noise of 1 % of each column's RMS of
 two kinds: white, and band-limited (white noise low-passed at 0.1 Hz, zero
 phase, the half-width of the chain's vibration band: the fluctuation that
 narrow-band displacement noise leaves in a Hilbert envelope is such a
-low-pass process, DESIGN 3.1).
+low-pass process, docs/field_workflow.md).
 
 1. Tuned: each method gets a two-parameter grid (ours: time_scale x huber,
    noise_scale = time_scale / 2, which includes exact TV at huber = 0;

@@ -10,7 +10,7 @@ Each event is preprocessed exactly as ``identify_event`` does (raw-input
 checks and despiking, band-limited integration, Hilbert envelope, 4 Hz grid),
 each segment of A is differentiated by each method, and the result is compared
 with the truth on the grid times the two grids share (the truth is on a 0.5 s
-grid, DESIGN 2.3: dA_k/dt is the sum over orders of ``r``). Score per event:
+grid, docs/concepts.md (the truth): dA_k/dt is the sum over orders of ``r``). Score per event:
 relative RMS error of dA/dt per section, RMS over the three sections.
 
 Methods: the band-limited setting ``Derivative.for_envelope()`` =

@@ -7,7 +7,7 @@ Run: ``.venv/bin/python benchmarks/bench_identify.py [n_events]`` (default 31).
    campaign with 1 and 2 workers; and the regressions alone against the loop a
    user would write with pysindy (``benchmarks/bench_sindy.py`` on the
    campaign's own windows and threshold path).
-2. Recovery (DESIGN 2.5, issue 3): regime accuracy on identifiable windows,
+2. Recovery (docs/concepts.md (regimes), issue 3): regime accuracy on identifiable windows,
    coverage, accuracy on the rest, and the median relative RMS error of the
    identified dA/dt against the true averaged dynamics, on a noise-free,
    defect-free campaign with slowly varying wind and on the default (realistic)

@@ -6,7 +6,7 @@ the same method, through ``vivbench.testing.assert_recovers``'s own figures, on 
 case (hypothesis's derandomized draws of ``vivbench.testing.events``, 4-6 min each) where it
 does not: three sections (the truth's dA_k/dt depends on every section's wind), realistic
 aerodynamics (not polynomials), or both. Per event: the median relative dA/dt error over
-windows with dynamics and the share of windows with the true regime (DESIGN 2.5).
+windows with dynamics and the share of windows with the true regime (docs/concepts.md (regimes)).
 
 Run: ``.venv/bin/python benchmarks/bench_testing_example.py``.
 """

@@ -4,7 +4,7 @@ Run::
 
     .venv/bin/python benchmarks/bench_tied_wind.py --campaign CAMP --results ID [--n-basis 15]
 
-The averaged truth (DESIGN 2.3) sums every section's force, each a function
+The averaged truth (docs/concepts.md (the truth)) sums every section's force, each a function
 of that section's own felt wind: Q' = sum_j w_j g(U_j) Q + ... with one
 aerodynamic function g for the whole deck. The varying model's mean wind
 evaluates one curve at the weighted mean, g(sum_j w_j U_j) ("mean"); the

@@ -28,7 +28,7 @@ def event1(default_campaign_specs):
 
 @pytest.fixture(scope="session")
 def event1_in_library(default_campaign_specs):
-    """The same event with the ``in_library`` generator (DESIGN 2.8): for exact-recovery tests,
+    """The same event with the ``in_library`` generator (docs/concepts.md (no inverse crime)): for exact-recovery tests,
     which need the truth inside the library (an exact coefficient matrix)."""
     from vivbench.synth import GeneratorConfig
 
@@ -58,7 +58,7 @@ def small_results(small_campaign, tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def small_campaign_in_library(tmp_path_factory):
-    """``small_campaign`` with the ``in_library`` generator (DESIGN 2.8).
+    """``small_campaign`` with the ``in_library`` generator (docs/concepts.md (no inverse crime)).
 
     For the tests that score coefficients or supports against the truth's exact
     coefficient matrix (``/truth/coef``), which exists only when the truth lies in the library.

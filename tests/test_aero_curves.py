@@ -89,7 +89,7 @@ def test_validation_messages(make, match):
 
 
 def test_modes_and_exactness():
-    # the default is the realistic mode (DESIGN 2.8); in_library is the named polynomial set
+    # the default is the realistic mode (docs/concepts.md (no inverse crime)); in_library is the named polynomial set
     assert AeroConfig.realistic() == AeroConfig() == GeneratorConfig().aero
     lib = AeroConfig.in_library()
     assert lib.exact_in_library and lib.yaw is None and AeroConfig.from_mode("in_library") == lib

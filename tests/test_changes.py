@@ -1,4 +1,4 @@
-"""Slow changes the wind does not carry (DESIGN 2.8): damping drift, steps between events, retrofit."""
+"""Slow changes the wind does not carry (docs/concepts.md (no inverse crime)): damping drift, steps between events, retrofit."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ from vivbench.synth.config import ChangesConfig
 def _quiet(changes: ChangesConfig = ChangesConfig(), **kw) -> GeneratorConfig:
     """No turbulence, no buffeting, no unlocked shedding: the averaging hypotheses hold.
 
-    The in_library mode (DESIGN 2.8): these tests check the truth's coefficient matrix under
+    The in_library mode (docs/concepts.md (no inverse crime)): these tests check the truth's coefficient matrix under
     the changes (scaled exactly, or absent when the damping drifts), which needs the truth in
     the library.
     """

@@ -1,4 +1,4 @@
-"""Tests of vivbench.preprocess.derivative (DESIGN 3.1: derivative of the envelopes)."""
+"""Tests of vivbench.preprocess.derivative (docs/field_workflow.md: derivative of the envelopes)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The wind the deck feels vs the wind the anemometers measure (WindConfig.felt_wind, DESIGN 2.8)."""
+"""The wind the deck feels vs the wind the anemometers measure (WindConfig.felt_wind, docs/concepts.md (no inverse crime))."""
 
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ PHI = np.array(StructureConfig().mode_shape)
 
 
 def _true_coef() -> np.ndarray:
-    # an exact coefficient matrix needs the truth in the library: the in_library mode (DESIGN 2.8)
+    # an exact coefficient matrix needs the truth in the library: the in_library mode (docs/concepts.md (no inverse crime))
     Xi = exact_coefficients(StructureConfig(), AeroConfig.in_library())
     assert Xi is not None, "the in_library aero configuration must have an exact library representation"
     return Xi

@@ -1,7 +1,7 @@
 """Event files written by other tools load (issue 13).
 
 A small writer below builds an event file with the netCDF4 library alone, in the layout of
-DESIGN 4 but with none of vivbench's own attributes: no ``config_json`` (the other tool keeps
+docs/formats.md but with none of vivbench's own attributes: no ``config_json`` (the other tool keeps
 its settings under another name), no units on the dimensionless regime, no order coordinate, no
 ``coef`` nor ``curves``, no long names. The arrays are physically sensible (vivbench.synth
 simulates them; nothing of vivbench writes them). Identification must not read ``/truth`` at
@@ -26,7 +26,7 @@ DURATION = 360.0
 
 
 def write_foreign_event(path, *, truth: str = "full", seed: int = 3, event_id: str = "OTHER01") -> None:
-    """Write an event as another tool would: netCDF4 calls only, DESIGN 4 layout, no extras.
+    """Write an event as another tool would: netCDF4 calls only, docs/formats.md layout, no extras.
 
     ``truth``: "full" (time, U, A, r, regime), "partial" (time and U only), "none".
     """

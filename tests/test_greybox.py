@@ -1,4 +1,4 @@
-"""The grey-box refit (DESIGN 3.6): recovery of drawn curves from noise-free envelopes, persistence, inputs."""
+"""The grey-box refit (docs/field_workflow.md (the grey-box reference)): recovery of drawn curves from noise-free envelopes, persistence, inputs."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The layout of DESIGN 1 stays true: import-linter's contracts, no import cycles, no private names across modules.
+"""The layout of docs/concepts.md stays true: import-linter's contracts, no import cycles, no private names across modules.
 
 Imports inside functions count as much as those at the top: a cycle broken only
 by a deferred import is still a cycle.

@@ -1,4 +1,4 @@
-"""Methods as plug-ins (DESIGN 7): resolution, pysindy adapters, the standard scores, and a known answer
+"""Methods as plug-ins (docs/methods.md): resolution, pysindy adapters, the standard scores, and a known answer
 for a method defined outside the package, run through `vivbench compare`."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The model protocol (DESIGN 7): both built-in models satisfy it and agree with known polynomial models."""
+"""The model protocol (docs/methods.md): both built-in models satisfy it and agree with known polynomial models."""
 
 from __future__ import annotations
 

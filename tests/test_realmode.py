@@ -1,4 +1,4 @@
-"""The named generator modes (DESIGN 2.8), the second realistic bridge, the forced-only bridge,
+"""The named generator modes (docs/concepts.md (no inverse crime)), the second realistic bridge, the forced-only bridge,
 and the realism factors of `vivbench compare` and `vivbench sweep`."""
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_named_modes_and_their_overrides():
-    # the default is the realistic mode (DESIGN 2.8), its fields their classes' defaults
+    # the default is the realistic mode (docs/concepts.md (no inverse crime)), its fields their classes' defaults
     assert GeneratorConfig.realistic() == GeneratorConfig() == CampaignConfig().generator
     assert GeneratorConfig() == GeneratorConfig(aero=AeroConfig(), wind=WindConfig())
     lib = GeneratorConfig.in_library()

@@ -38,7 +38,7 @@ from vivbench.core.terms import evaluate_library
 
 
 def _quiet_config(mode: str = "realistic", **aero) -> GeneratorConfig:
-    """No turbulence, no buffeting, no unlocked shedding: the averaging hypotheses hold (``mode``: DESIGN 2.8)."""
+    """No turbulence, no buffeting, no unlocked shedding: the averaging hypotheses hold (``mode``: docs/concepts.md (no inverse crime))."""
     return GeneratorConfig.from_mode(
         mode,
         aero=dict(cl_unlocked=0.0, buffeting_w=0.0, buffeting_u=0.0, **aero),

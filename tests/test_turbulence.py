@@ -1,4 +1,4 @@
-"""Tests of the turbulence field (vivbench.synth.turbulence, DESIGN 2.4)."""
+"""Tests of the turbulence field (vivbench.synth.turbulence, docs/concepts.md (the bridge and the wind))."""
 
 from __future__ import annotations
 

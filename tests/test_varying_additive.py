@@ -1,6 +1,6 @@
 """The varying-coefficient model with every section's wind summed (``wind_input="additive"``).
 
-The truth of DESIGN 2.3 sums the sections' aerodynamic forces, each at its own
+The truth of docs/concepts.md (the truth) sums the sections' aerodynamic forces, each at its own
 felt wind, so with winds that differ along the span a curve of the mean wind
 cannot represent it; the additive model can.
 """

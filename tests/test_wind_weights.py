@@ -1,6 +1,6 @@
 """The sections' weights in the varying model's one wind (``wind_weights``).
 
-Averaging (DESIGN 2.3) weights section j's aerodynamic force by L_j phi_j^2 in
+Averaging (docs/concepts.md (the truth)) weights section j's aerodynamic force by L_j phi_j^2 in
 the linear order: the mode's antinode drives it more than a quarter point.
 """
 

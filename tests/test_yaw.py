@@ -70,7 +70,7 @@ def test_yaw_covariate_recovers_what_the_wind_alone_cannot(yaw_model):
     without = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(15,), yaw_degree=0, wind_smoothing_s=0.0).fit(_records())
     assert _err(yaw_model, rec) < 5e-3
     assert _err(without, rec) > 10 * _err(yaw_model, rec)
-    # The curves of DESIGN 3.5 are those at yaw 0: the bell itself.
+    # The curves of docs/concepts.md (coefficient curves) are those at yaw 0: the bell itself.
     wind = np.linspace(8.0, 12.0, 9)
     np.testing.assert_allclose(yaw_model.curves(wind)["curves"].values[0, 1], bell(wind), atol=5e-4)
 

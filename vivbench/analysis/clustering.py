@@ -1,4 +1,4 @@
-"""Density-peaks clustering of window models (Rodriguez and Laio, Science 2014; DESIGN 3.3).
+"""Density-peaks clustering of window models (Rodriguez and Laio, Science 2014; docs/field_workflow.md).
 
 Each point i gets a local density rho_i and the distance delta_i to its nearest
 denser point. Cluster centres are the points with both large rho and large

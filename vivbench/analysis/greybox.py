@@ -1,4 +1,4 @@
-"""The grey-box reference refit of a campaign's identification results (DESIGN 3.6).
+"""The grey-box reference refit of a campaign's identification results (docs/field_workflow.md (the grey-box reference)).
 
 :func:`greybox_results` reads the results' envelopes and winds (never an
 event's ``/truth``), takes the campaign model that ``vivbench pool`` left in
@@ -70,7 +70,7 @@ def results_frequency(result_files: Sequence) -> float | None:
 
 
 def campaign_warm_start(results_dir, wind: np.ndarray):
-    """Curves (DESIGN 3.5) of the campaign model in ``results_dir`` on ``wind``, and a description.
+    """Curves (docs/concepts.md (coefficient curves)) of the campaign model in ``results_dir`` on ``wind``, and a description.
 
     Returns (None, reason) when there is no campaign model or it has no curves
     (a model rebuilt from an old ``campaign.pooled.nc``).

@@ -53,7 +53,7 @@ class IdentifyConfig:
     thresholds : STLSQ threshold path on standardised coefficients (None: the engine's default)
     alpha : ridge parameter of STLSQ
     scaling : library basis, "scaled" (centred and scaled U), "normalized" or "raw"
-    tau : regime threshold (DESIGN 2.5)
+    tau : regime threshold (docs/concepts.md (regimes))
     aicc_margin : models within this AICc of the best count as competitors
     fit_tolerance : relative RMS residual within which an order-restricted model fits equally well
     spike_mad : spike rule of the raw u, v and acc, robust standard deviations (1.4826 MAD) from the
@@ -131,7 +131,7 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
 
     Parameters
     ----------
-    tree : an event (DESIGN 4), synthetic or field
+    tree : an event (docs/formats.md), synthetic or field
     config : IdentifyConfig
     source : file name recorded in the result
 

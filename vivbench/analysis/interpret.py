@@ -1,4 +1,4 @@
-"""Cluster interpretation of a campaign's window models (DESIGN 3.3).
+"""Cluster interpretation of a campaign's window models (docs/field_workflow.md).
 
 Every (window, equation) model of every result file ``<event_id>.identify.nc``
 of a campaign is one point. Two feature sets describe it:
@@ -22,7 +22,7 @@ of a campaign is one point. Two feature sets describe it:
 ``"order"``
     How the model's RMS contribution to dA/dt splits between the orders
     A^0..A^3 (``order_rms`` of the result, divided by its sum): the regime's
-    signature (DESIGN 2.5), independent of the amplitude.
+    signature (docs/concepts.md (regimes)), independent of the amplitude.
 
 Clustering is :class:`vivbench.analysis.clustering.DensityPeaks` (automatic
 centres by the largest log-gap of rho * delta among eligible points, or a
@@ -53,7 +53,7 @@ What the automatic rule finds on the default campaign (31 events, seed 0,
   orders, not by the physics.
 
 The window models do not form clusters that match the regimes; this is the
-non-identifiability of regimes in 50 s windows (README, DESIGN 2.5), not a
+non-identifiability of regimes in 50 s windows (README, docs/concepts.md (regimes)), not a
 defect of the clustering, which recovers well-separated groups of unequal
 size exactly (tests) and agrees label for label with pydpc on these points.
 """
@@ -191,7 +191,7 @@ def campaign_windows(result_files: Sequence, campaign_dir=None, *, tau: float = 
         Directory of the event files (``<event_id>.nc``); their ``/truth``
         gives the true window regimes.
     tau : float
-        Regime threshold for the truth (DESIGN 2.5).
+        Regime threshold for the truth (docs/concepts.md (regimes)).
 
     Returns
     -------

@@ -89,7 +89,7 @@ def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
 
 def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None,
                          wind_smoothing_s: float = 0.0) -> list[Record]:
-    """The records of identification results, ready for any model of the protocol (DESIGN 7).
+    """The records of identification results, ready for any model of the protocol (docs/methods.md).
 
     Parameters
     ----------
@@ -173,7 +173,7 @@ def pool_results(result_files: Sequence, model=None, *,
         every event), ``wind`` and ``event``; per window ``event_id``,
         ``window``, ``window_start``, ``window_end``, ``regime``,
         ``identifiable``, ``agreement``, ``order_rms``; the coefficient curves
-        (DESIGN 3.5, the model's ``curves`` at its default 95 % level)
+        (docs/concepts.md (coefficient curves), the model's ``curves`` at its default 95 % level)
         ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind)
         in m^(1-i)/s on ``wind`` (m/s, :func:`curve_wind_grid` of the results'
         U) and ``curves_extrapolated`` (equation, wind; int8, 1 where the wind
@@ -284,7 +284,7 @@ def pool_results(result_files: Sequence, model=None, *,
         "window": (("window_all",), cat["window"].astype(np.int32), {"long_name": "window index in the event's result"}),
         "window_start": (("window_all",), cat["window_start"], {"units": "s"}),
         "window_end": (("window_all",), cat["window_end"], {"units": "s"}),
-        "regime": (("window_all", "equation"), cat["regime"].astype(np.int8), {"long_name": "regime of the pooled model (DESIGN 2.5)"}),
+        "regime": (("window_all", "equation"), cat["regime"].astype(np.int8), {"long_name": "regime of the pooled model (docs/concepts.md (regimes))"}),
     }
     agreement = (("window_all", "equation"), cat["agreement"], {"units": "1", "long_name": "share of bootstrap models with the same regime"})
     order_rms = (("window_all", "equation", "order"), cat["order_rms"], {"units": "m/s"})
@@ -500,7 +500,7 @@ def _file_model_name(path: Path) -> tuple[str | None, str | None]:
 
 
 def load_campaign_model(path):
-    """The campaign model of ``vivbench pool`` as a model of the protocol (DESIGN 7).
+    """The campaign model of ``vivbench pool`` as a model of the protocol (docs/methods.md).
 
     Parameters
     ----------

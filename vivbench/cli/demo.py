@@ -9,7 +9,7 @@ summary: where the report is, and the headline recovery figures.
 
 ``--baseline in_library`` runs the same chain (without the refit) on an
 ``in_library`` campaign of the same seed and durations (the truth inside the
-identification's model class: the inverse crime, DESIGN 2.8) into
+identification's model class: the inverse crime, docs/concepts.md (no inverse crime)) into
 ``OUT/baseline_in_library`` and passes it to ``vivbench report --baseline``,
 which shows both campaigns' recovery side by side. It is off by default: it
 roughly doubles the demo's time (README).
@@ -177,7 +177,7 @@ def run(args) -> int:
         return 1
     baseline = None
     if args.baseline != "none":
-        # The same bridge scripts and seed with the truth inside the model class (DESIGN 2.8): the report
+        # The same bridge scripts and seed with the truth inside the model class (docs/concepts.md (no inverse crime)): the report
         # shows every recovery figure of both side by side. No refit: the report does not pair it.
         baseline = out / BASELINE_DIR
         n_base = args.baseline_events or args.events
@@ -282,7 +282,7 @@ def register(sub) -> None:
     s.add_argument("--name", default="demo", help="report name (default demo)")
     s.add_argument("--report-root", default=None, help="parent directory of the report (default OUT/reports)")
     s.add_argument("--mode", choices=("realistic", "in_library"), default="realistic",
-                   help="generator mode of the main campaign (DESIGN 2.8; default realistic: the truth outside the "
+                   help="generator mode of the main campaign (docs/concepts.md (no inverse crime); default realistic: the truth outside the "
                         "identification's model class)")
     s.add_argument("--model", choices=("pooled", "varying"), default="varying",
                    help="campaign model of the pool step (vivbench pool --model; default varying, as pool's)")

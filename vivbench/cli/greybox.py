@@ -1,4 +1,4 @@
-"""``vivbench greybox``: the grey-box reference refit of Y1, e1, e2, C_L over a campaign (DESIGN 3.6)."""
+"""``vivbench greybox``: the grey-box reference refit of Y1, e1, e2, C_L over a campaign (docs/field_workflow.md (the grey-box reference))."""
 
 from __future__ import annotations
 
@@ -276,7 +276,7 @@ def register(sub) -> None:
                    help="Gaussian smoothing of the measured wind and yaw in time, standard deviation in s "
                         "(the deck feels the tributary-averaged wind, the anemometer is a point; default 30, "
                         "chosen on the default campaign; 0: none)")
-    s.add_argument("--tau", type=float, default=0.2, help="regime threshold (DESIGN 2.5)")
+    s.add_argument("--tau", type=float, default=0.2, help="regime threshold (docs/concepts.md (regimes))")
     s.add_argument("--agreement", type=float, default=0.95,
                    help="share of parameter draws that must agree on a window's regime (default 0.95)")
     s.add_argument("--draws", type=int, default=100, help="parameter draws for the verdicts (default 100)")

@@ -56,7 +56,7 @@ def register(sub) -> None:
     s.add_argument("--optimizer", default="stlsq", choices=("stlsq", "sr3", "ensemble"),
                    help="sparse regression per window (default stlsq: the fast engine; sr3, ensemble: pysindy)")
     s.add_argument("--seed", type=int, default=0, help="seed of the ensemble optimiser's bootstrap samples")
-    s.add_argument("--tau", type=float, default=0.2, help="regime threshold (DESIGN 2.5)")
+    s.add_argument("--tau", type=float, default=0.2, help="regime threshold (docs/concepts.md (regimes))")
     s.add_argument("--fit-tolerance", type=float, default=0.1,
                    help="relative RMS residual within which a competing model fits equally well (default 0.1)")
     s.add_argument("--spike-mad", type=float, default=8.0,

@@ -145,6 +145,6 @@ def register(sub) -> None:
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")
     s.add_argument("--agreement", type=float, default=0.9,
                    help="share of replicates that must agree on a window's regime for it to count as identifiable")
-    s.add_argument("--tau", type=float, default=0.2, help="regime threshold (DESIGN 2.5)")
+    s.add_argument("--tau", type=float, default=0.2, help="regime threshold (docs/concepts.md (regimes))")
     s.add_argument("--seed", type=int, default=0, help="bootstrap seed")
     s.set_defaults(func=run)

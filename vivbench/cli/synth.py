@@ -100,7 +100,7 @@ def register(sub) -> None:
                    help="event duration in minutes: N or MIN-MAX (default 20-60)")
     s.add_argument("--config", help="generator configuration (TOML); the --mode defaults otherwise")
     s.add_argument("--mode", choices=("realistic", "in_library"), default=None,
-                   help="generator mode (DESIGN 2.8): realistic (the default: non-polynomial functions of reduced "
+                   help="generator mode (docs/concepts.md (no inverse crime)): realistic (the default: non-polynomial functions of reduced "
                         "velocity with a yaw factor, the deck feels the tributary-averaged wind of a spatially "
                         "resolved field; the truth lies outside the identification's model class) or in_library "
                         "(polynomial aerodynamics in U, the deck feels the anemometer's wind; the truth has an exact "

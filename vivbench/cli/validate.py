@@ -55,7 +55,7 @@ def register(sub) -> None:
     s.add_argument("--clusters", default=None, metavar="CSV", help="cluster_labels.csv of vivbench cluster (optional)")
     s.add_argument("--forecasts", default=None, metavar="DIR",
                    help="directory of forecast_<event_id>.csv of vivbench forecast (optional; stopped runs counted apart)")
-    s.add_argument("--tau", type=float, default=0.2, help="regime threshold for the truth (DESIGN 2.5)")
+    s.add_argument("--tau", type=float, default=0.2, help="regime threshold for the truth (docs/concepts.md (regimes))")
     s.add_argument("--active-share", type=float, default=0.1,
                    help="a window has dynamics when its true dA/dt RMS is at least this share of the event's (default 0.1)")
     s.set_defaults(func=run)

@@ -1,4 +1,4 @@
-"""Definitions every stage shares: library terms, the regime rule (DESIGN 2.5), TOML and parallel helpers."""
+"""Definitions every stage shares: library terms, the regime rule (docs/concepts.md (regimes)), TOML and parallel helpers."""
 
 from vivbench.core.terms import (
     A_POWERS,

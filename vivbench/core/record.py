@@ -1,4 +1,4 @@
-"""One preprocessed record: the unit of data every model of the protocol (DESIGN 7) fits and evaluates."""
+"""One preprocessed record: the unit of data every model of the protocol (docs/methods.md) fits and evaluates."""
 
 from __future__ import annotations
 

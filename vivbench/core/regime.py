@@ -1,4 +1,4 @@
-"""The regime rule of DESIGN 2.5, one function for the truth and for models.
+"""The regime rule of docs/concepts.md (regimes), one function for the truth and for models.
 
 Regimes (the paper's Table 1): 1, no self-excited effect (damped, forced);
 2, slight self-excitation (net negative linear damping); 3, medium (the A^2
@@ -30,7 +30,7 @@ def order_rms(r: np.ndarray, axis: int = 0) -> np.ndarray:
 
 
 def classify_regime(r: np.ndarray, A: np.ndarray, tau: float = DEFAULT_TAU, axis: int = 0) -> np.ndarray:
-    """Regime 1..4 of a window by the rule of DESIGN 2.5.
+    """Regime 1..4 of a window by the rule of docs/concepts.md (regimes).
 
     Parameters
     ----------
@@ -71,7 +71,7 @@ def classify_regime(r: np.ndarray, A: np.ndarray, tau: float = DEFAULT_TAU, axis
 
 
 def regime_rule(R: np.ndarray, c1: np.ndarray, tau: float = DEFAULT_TAU) -> np.ndarray:
-    """The rule of DESIGN 2.5 from a window's statistics.
+    """The rule of docs/concepts.md (regimes) from a window's statistics.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The event file format (DESIGN 4): build, check, write and read one event.
+"""The event file format (docs/formats.md): build, check, write and read one event.
 
 An event is one NetCDF-4 (HDF5) file, the same for field and synthetic data,
 held in memory as an :class:`xarray.DataTree`::
@@ -15,7 +15,7 @@ held in memory as an :class:`xarray.DataTree`::
                       regime (time, section) int 1..4; optional coef
                       (equation, feature); optional coefficient curves
                       curves (equation, order, wind) m^(1-i)/s with
-                      wind (wind) m/s (DESIGN 3.5); optional slow changes
+                      wind (wind) m/s (docs/concepts.md (coefficient curves)); optional slow changes
                       damping_ratio, mass_factor (time) and aero_factor
                       (time, order), dimensionless; optional attributes
                       config_json (vivbench's generator configuration) and tau.
@@ -77,7 +77,7 @@ _UNIT_SPELLINGS = {
 }
 _TRUTH_KEYS = ("time", "U", "A", "r", "regime", "config", "coef", "feature", "tau",
                "damping_ratio", "mass_factor", "aero_factor", "curves", "wind")
-#: Optional /truth variables of the generator's slow changes (DESIGN 2.8): name -> (dims, long_name).
+#: Optional /truth variables of the generator's slow changes (docs/concepts.md (no inverse crime)): name -> (dims, long_name).
 _CHANGE_VARS = {
     "damping_ratio": (("time",), "structural damping ratio zeta of the mode"),
     "mass_factor": (("time",), "mass per unit length relative to the configured structure"),
@@ -86,7 +86,7 @@ _CHANGE_VARS = {
 
 
 class EventFormatError(InputError):
-    """An event file (or in-memory event) that breaks the format of DESIGN 4.
+    """An event file (or in-memory event) that breaks the format of docs/formats.md.
 
     Parameters
     ----------
@@ -156,7 +156,7 @@ def build_event(
         n_features term names; optional ``tau`` regime threshold; optional slow
         changes (all three or none), dimensionless: ``damping_ratio`` (n_t,),
         ``mass_factor`` (n_t,) and ``aero_factor`` (n_t, 4); optional exact
-        coefficient curves (DESIGN 3.5) ``curves`` (n_sec, 4, n_wind) in
+        coefficient curves (docs/concepts.md (coefficient curves)) ``curves`` (n_sec, 4, n_wind) in
         m^(1-i)/s with ``wind`` (n_wind,) m/s, finite, positive and
         increasing.
     attrs : mapping, optional
@@ -346,7 +346,7 @@ def _truth_dataset(truth: Mapping, sections: list[str]) -> xr.Dataset:
             ("equation", "order", "wind"),
             curves.astype(np.float64),
             {"units": CURVE_UNITS,
-             "long_name": "exact coefficient of A_k^order in dA_k/dt at mean wind U, yaw 0 (DESIGN 3.5)"},
+             "long_name": "exact coefficient of A_k^order in dA_k/dt at mean wind U, yaw 0 (docs/concepts.md (coefficient curves))"},
         )
         ds = ds.assign_coords(
             equation=("equation", np.array(sections, dtype=str), {"long_name": "section whose dA/dt the row gives"}),
@@ -548,7 +548,7 @@ def _check_truth(ds: xr.Dataset, sections: tuple) -> None:
         if order.dims != ("order",) or order.dtype.kind not in "iuf" or order.values.tolist() != [0, 1, 2, 3]:
             raise _Breach(f"/truth/order is {order.values.tolist()}, expected [0, 1, 2, 3]")
     elif ds.sizes.get("order", 4) != 4:
-        # Without a coordinate the dimension is read as the orders 0..3 of DESIGN 4.
+        # Without a coordinate the dimension is read as the orders 0..3 of docs/formats.md.
         raise _Breach(f"/truth has {ds.sizes['order']} orders, expected 4 (0..3)")
     _check_variable(ds, "truth", "U", ("time", "section"), "m/s")
     _check_variable(ds, "truth", "A", ("time", "section"), "m")
@@ -602,7 +602,7 @@ def _check_truth(ds: xr.Dataset, sections: tuple) -> None:
 
 
 def _check_truth_curves(ds: xr.Dataset, sections: tuple) -> None:
-    """The optional exact coefficient curves of /truth (DESIGN 3.5)."""
+    """The optional exact coefficient curves of /truth (docs/concepts.md (coefficient curves))."""
     curves = _check_variable(ds, "truth", "curves", ("equation", "order", "wind"), None)
     if curves.attrs.get("units") != CURVE_UNITS:
         raise _Breach(f"/truth/curves has units {curves.attrs.get('units')!r}, expected {CURVE_UNITS!r}")

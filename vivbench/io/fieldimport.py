@@ -1,4 +1,4 @@
-"""Field data import: CSV and MATLAB files to the event format (DESIGN 4), and back to CSV.
+"""Field data import: CSV and MATLAB files to the event format (docs/formats.md), and back to CSV.
 
 A mapping file (TOML) says where each channel is and in which unit::
 

@@ -6,7 +6,7 @@ saves it as :data:`GREYBOX_NAME`), read and checked by :func:`read_greybox`
 model needs (spline knots and coefficients, their covariance, the bridge's
 properties, mode shape and participation factors) and, on the wind grid of
 the fitted data, the physical curves Y1, e1, e2, C_L with their bands and
-the coefficient curves ``curves`` of DESIGN 3.5 with ``curves_lower`` and
+the coefficient curves ``curves`` of docs/concepts.md (coefficient curves) with ``curves_lower`` and
 ``curves_upper`` (all at yaw 0), and the yaw factor: ``yaw_coef`` c of
 1 - c sin^2(yaw) on Y1 and C_L with its band and ``yaw_factor`` against
 ``yaw`` (degrees); attribute ``yaw_used`` (0: not fitted, factor 1, and files

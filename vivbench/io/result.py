@@ -367,7 +367,7 @@ def read_result(path, variables: Iterable[str] | None = None, *, optional: Itera
 
 
 def result_record(ds: xr.Dataset) -> Record:
-    """The record of an identification result, for any model of the protocol (DESIGN 7).
+    """The record of an identification result, for any model of the protocol (docs/methods.md).
 
     Parameters
     ----------

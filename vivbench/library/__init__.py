@@ -1,4 +1,4 @@
-"""Candidate terms A_l^i U_l^j and the scaled regression basis (DESIGN 3.2)."""
+"""Candidate terms A_l^i U_l^j and the scaled regression basis (docs/concepts.md (identifiability))."""
 
 from vivbench.library.basis import (
     SCALINGS,

@@ -35,10 +35,10 @@ Bases (``scaling``)
     conditioned as the centred monomials. For i >= 1 the factor A^i already
     vanishes at A = 0, so centring U there changes the basis but not the span.
     A is scaled but not centred, so a scaled term's power of A equals the
-    physical one: the regime signature (the order of A, DESIGN 2.5) of every
+    physical one: the regime signature (the order of A, docs/concepts.md (regimes)) of every
     scaled term is that of the physical terms it maps to. Consequently the
     near-collinearity of A, A^2, A^3 on a plateau (A nearly constant) remains
-    (it is the non-identifiability of DESIGN 2.5, not an artefact of the
+    (it is the non-identifiability of docs/concepts.md (regimes), not an artefact of the
     basis) and shows in the condition number.
 
 Scaling by constants (a, s, u_ref) never changes the condition number after

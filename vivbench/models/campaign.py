@@ -1,13 +1,13 @@
 """One SINDy model for a whole campaign, and the regimes it gives every window.
 
-Why: inside a 50 s window the orders of A cannot be told apart (DESIGN 2.5;
+Why: inside a 50 s window the orders of A cannot be told apart (docs/concepts.md (regimes);
 ``identifiability.py`` finds no identifiable window on the default campaign),
 because U drifts smoothly and U^j then acts as a time basis. The aeroelastic
 truth is, however, time-invariant as a function of (A, U): the coefficients of
 A^i vary only through the wind, which the library's U^j already carries. Pooled
 over a campaign, A and U range widely and the same 69-term library becomes
 identifiable. The pooled model is fitted by the same STLSQ path and AICc as the
-windows; each window's regime is the rule of DESIGN 2.5 applied to the pooled
+windows; each window's regime is the rule of docs/concepts.md (regimes) applied to the pooled
 model's order contributions over that window's data.
 
 Identifiability of a window's regime is judged by a moving-block bootstrap:
@@ -238,7 +238,7 @@ class PooledSINDy(ModelBase):
 
     The campaign model of the model protocol (:mod:`vivbench.models.protocol`):
     ``fit(records)``, ``predict``, ``order_contributions``, ``simulate``,
-    ``curves`` (DESIGN 3.5), ``save``/``load`` (NetCDF), ``equations``/``print``.
+    ``curves`` (docs/concepts.md (coefficient curves)), ``save``/``load`` (NetCDF), ``equations``/``print``.
     ``CampaignSINDy`` is the same class.
 
     Parameters
@@ -266,7 +266,7 @@ class PooledSINDy(ModelBase):
         integrated correlation time); the near-null-space test asks whether
         any model in that region gives a window another regime.
     tau : float
-        Regime threshold of DESIGN 2.5.
+        Regime threshold of docs/concepts.md (regimes).
     seed : int
         Seed of the bootstrap.
     chunk_size : int
@@ -458,7 +458,7 @@ class PooledSINDy(ModelBase):
                                 t0=t0, t1=t1, A0=A0, **kwargs)
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:
-        """Coefficient curves a_ki(U) of DESIGN 3.5 with bootstrap bands.
+        """Coefficient curves a_ki(U) of docs/concepts.md (coefficient curves) with bootstrap bands.
 
         With every section at the mean wind U and A_l = rho_kl A_k
         (``amplitude_ratios_``), equation k reads dA_k/dt = sum_i a_ki(U) A_k^i with
@@ -495,7 +495,7 @@ class PooledSINDy(ModelBase):
         else:
             lower = upper = np.full_like(point, np.nan)
         dims = ("equation", "order", "wind")
-        attrs = {"units": "m^(1-order) s-1", "long_name": "coefficient of A_k^order at mean wind U (DESIGN 3.5)"}
+        attrs = {"units": "m^(1-order) s-1", "long_name": "coefficient of A_k^order at mean wind U (docs/concepts.md (coefficient curves))"}
         return xr.Dataset(
             {"curves": (dims, point, attrs),
              "curves_lower": (dims, lower, {"units": attrs["units"], "long_name": f"lower {level:g} bootstrap band"}),
@@ -630,7 +630,7 @@ class PooledSINDy(ModelBase):
         return model
 
 
-#: The campaign model of the model protocol (DESIGN 7); the same class as :class:`PooledSINDy`.
+#: The campaign model of the model protocol (docs/methods.md); the same class as :class:`PooledSINDy`.
 CampaignSINDy = PooledSINDy
 
 

@@ -1,6 +1,6 @@
 """Grey-box reference refit: the averaged Simiu-Scanlan amplitude equation with spline functions of the wind.
 
-The model is the amplitude equation of DESIGN 2.3 for the modal amplitude Q
+The model is the amplitude equation of docs/concepts.md (the truth) for the modal amplitude Q
 (section amplitudes A_k = |phi_k| Q):
 
     dQ/dt = sum_k beta_k rho U_k^2 D C_L / (4 m w)
@@ -27,7 +27,7 @@ any damping). The damping ratio is therefore *given*: measured from free
 decays at quiet wind, where the aerodynamic part rho U D Y1 / m vanishes with
 U, or from the design value. A wrong zeta moves Y1 by (delta zeta) 2 m w /
 (rho U D sum beta phi) and leaves the fitted dynamics (the curves a_k1 and
-dA/dt) unchanged, so the curves of DESIGN 3.5 do not depend on it.
+dA/dt) unchanged, so the curves of docs/concepts.md (coefficient curves) do not depend on it.
 
 Fit (output error, all events at once): multiple shooting of Q over
 intervals of ``shooting_interval`` seconds on a grid of step ``dt``, RK4 with
@@ -46,7 +46,7 @@ generator's Gaussian in psi). Every term of the amplitude equation holds Y1
 or C_L exactly once, so w_k scales all of section k's factors. Records
 without a yaw get w = 1; when none carries one, c is not fitted and the fit
 says so (``fit_info_["yaw"]``): Y1 and C_L are then averages over the
-events' yaw angles. The curves (DESIGN 3.5) and the physical functions are
+events' yaw angles. The curves (docs/concepts.md (coefficient curves)) and the physical functions are
 reported at yaw 0 (w = 1), as the truth's are.
 
 Starts (multi-start against wrong local minima). The candidates are the
@@ -406,7 +406,7 @@ def _g_function(B, a, B3, a3, s2, s2_3, use_yaw: bool, zw: float, M: int):
 
 
 class GreyBoxRefit(ModelBase):
-    """Grey-box output-error refit of Y1, e1, e2, C_L over a campaign (DESIGN 3.6).
+    """Grey-box output-error refit of Y1, e1, e2, C_L over a campaign (docs/field_workflow.md (the grey-box reference)).
 
     Parameters
     ----------
@@ -451,7 +451,7 @@ class GreyBoxRefit(ModelBase):
     continuity_weight : float
         Weight of a continuity defect relative to one grid sample.
     warm_start : xarray.Dataset or None
-        Curves of DESIGN 3.5 (``curves``, e.g. the campaign model's ``curves(wind)``)
+        Curves of docs/concepts.md (coefficient curves) (``curves``, e.g. the campaign model's ``curves(wind)``)
         to start from; None: an equation-error start.
     yaw_factor : bool
         Multiply Y1 and C_L by 1 - c sin^2(yaw) of the records' measured yaw
@@ -861,7 +861,7 @@ class GreyBoxRefit(ModelBase):
                 cur = np.asarray(ws["curves"].values, dtype=float)
                 w = np.asarray(ws["wind"].values, dtype=float)
             except (KeyError, TypeError) as exc:
-                raise InputError(f"warm_start must be a curves dataset of DESIGN 3.5 ({exc})") from None
+                raise InputError(f"warm_start must be a curves dataset of docs/concepts.md (coefficient curves) ({exc})") from None
             if cur.shape[0] != phi.size or cur.shape[1] != 4:
                 raise InputError(f"warm_start curves must have shape ({phi.size}, 4, n_wind); got {cur.shape}")
             ref = int(np.argmax(np.abs(phi)))
@@ -1215,7 +1215,7 @@ class GreyBoxRefit(ModelBase):
                     "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})})
 
     def curves(self, wind=None) -> xr.Dataset:
-        """Coefficient curves a_ki(U) of DESIGN 3.5 with delta-method bands.
+        """Coefficient curves a_ki(U) of docs/concepts.md (coefficient curves) with delta-method bands.
 
         a_ki = phi_k^(1-i) p_i(U), p_i the amplitude-equation coefficients with
         every section at wind U (p_1 includes -zeta w).
@@ -1239,7 +1239,7 @@ class GreyBoxRefit(ModelBase):
         dims = ("equation", "order", "wind")
         units = "m^(1-order) s-1"
         return xr.Dataset(
-            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (DESIGN 3.5)"}),
+            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (docs/concepts.md (coefficient curves))"}),
              "curves_lower": (dims, lower, {"units": units, "long_name": f"lower {self.level:g} delta-method band"}),
              "curves_upper": (dims, upper, {"units": units, "long_name": f"upper {self.level:g} delta-method band"})},
             coords={"equation": section_names(S), "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})},
@@ -1259,7 +1259,7 @@ class GreyBoxRefit(ModelBase):
     # ------------------------------------------------------------------ persistence
 
     def to_dataset(self, wind=None) -> xr.Dataset:
-        """Everything :meth:`load` needs plus the curves (physical and DESIGN 3.5) on ``wind``."""
+        """Everything :meth:`load` needs plus the curves (physical and docs/concepts.md (coefficient curves)) on ``wind``."""
         self._check_fitted()
         M = self.n_basis
         params = {k: v for k, v in self.get_params().items() if k not in ("bridge", "warm_start")}

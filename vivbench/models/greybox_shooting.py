@@ -1,7 +1,7 @@
 """Multiple shooting of the averaged amplitude equation over a whole campaign, with exact sensitivities.
 
 The grey-box model (:mod:`vivbench.models.greybox`) integrates the modal
-amplitude Q of DESIGN 2.3,
+amplitude Q of docs/concepts.md (the truth),
 
     dQ/dt = g_0(t) + g_1(t) Q + g_2(t) Q^2 + g_3(t) Q^3,
 

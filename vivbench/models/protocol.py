@@ -1,10 +1,10 @@
-"""The model protocol (DESIGN 7): one interface for everything that turns data into dynamics.
+"""The model protocol (docs/methods.md): one interface for everything that turns data into dynamics.
 
 A *method* has ``fit(records)`` and returns a *fitted model*; a fitted model
 gives at least ``order_contributions(record)``, the contributions r_0..r_3 of
 the powers of A to dA/dt (n_samples, n_sections, 4). It may also give
 ``predict(record)`` (dA/dt), ``simulate(record, t0, t1, A0)``,
-``curves(wind)`` (campaign-level models only, DESIGN 3.5), ``save``/``load``
+``curves(wind)`` (campaign-level models only, docs/concepts.md (coefficient curves)), ``save``/``load``
 (NetCDF) and pysindy-like ``equations()``. Regimes, forecasts, validation and
 the report use only these names, so a user's model works wherever a built-in
 one does.
@@ -75,7 +75,7 @@ class Simulator(Protocol):
 
 @runtime_checkable
 class CampaignLevel(Protocol):
-    """Optional, campaign-level models only: ``curves(wind)`` (DESIGN 3.5)."""
+    """Optional, campaign-level models only: ``curves(wind)`` (docs/concepts.md (coefficient curves))."""
 
     def curves(self, wind) -> xr.Dataset: ...
 

@@ -1,4 +1,4 @@
-"""Any ``pysindy.SINDy`` as a model of the protocol (DESIGN 7): per window or over a whole campaign.
+"""Any ``pysindy.SINDy`` as a model of the protocol (docs/methods.md): per window or over a whole campaign.
 
 :class:`PySINDyWindows` fits one copy of a user's ``pysindy.SINDy`` per
 sliding window of every record (the paper's time-varying SINDy, with any
@@ -24,7 +24,7 @@ with the names above, e.g. ``"A1^2 U1"`` or ``"U1 A1"``) is read as a product
 of factors ``name`` or ``name^k``; the power of A of the term is the sum of
 the exponents of the A factors (0 for ``"1"`` and pure-U terms). A term that
 is not such a monomial (``sin(A1)``, ``A1/U1``, a weak-form or PDE term), or
-whose power of A exceeds 3, has no order of DESIGN 2.5. With
+whose power of A exceeds 3, has no order of docs/concepts.md (regimes). With
 ``other_terms="refuse"`` (default) fitting raises ``ValueError`` naming the
 first such term with a nonzero coefficient (terms whose coefficients are all
 zero are ignored); with ``"aside"`` those terms are kept out of
@@ -197,7 +197,7 @@ class _PySINDyBase(ModelBase):
         other = (orders < 0) & np.any(coef != 0, axis=0)
         if other.any() and self.other_terms == "refuse":
             raise ValueError(f"the fitted term {names[int(np.flatnonzero(other)[0])]!r} is not a monomial in A of "
-                             "order <= 3, so its dynamics have no order (DESIGN 2.5); use a library of monomials in "
+                             "order <= 3, so its dynamics have no order (docs/concepts.md (regimes)); use a library of monomials in "
                              "A and U, or other_terms='aside' to keep such terms out of order_contributions")
         return names, coef, orders
 
@@ -397,7 +397,7 @@ class PySINDyCampaign(_PySINDyBase):
                           covered=float(covered), windows=np.zeros(0, dtype=int))
 
     def curves(self, wind) -> "xr.Dataset":
-        """Coefficient curves a_ki(U) of DESIGN 3.5 (no bands: a single fit has no replicates).
+        """Coefficient curves a_ki(U) of docs/concepts.md (coefficient curves) (no bands: a single fit has no replicates).
 
         With every section at the wind U and A_l = rho_kl A_k (``amplitude_ratios_``, the median
         ratios of the fitted data; a pair without data counts as rho = 0), a term of power i in A
@@ -556,7 +556,7 @@ class PySINDyCP(PySINDyCampaign):
     The feature library is ``PolynomialLibrary(a_degree, include_interaction=False)`` in A (terms
     1, A_k, ..., A_k^a_degree), the parameter library ``PolynomialLibrary(u_degree,
     include_interaction=False)`` in U (1, U_k, ..., U_k^u_degree); the model's terms are their
-    products (every equation may use every section's terms, like the library of DESIGN 3.2 but
+    products (every equation may use every section's terms, like the library of docs/concepts.md (identifiability) but
     with all sections' U powers on every A term), fitted with ``STLSQ(threshold)`` on the
     standardised variables to all records at once. pysindy 2 has no ``SINDyCP`` class any more:
     a ``SINDy`` with a ``ParameterizedLibrary`` and the parameters as control input is its
@@ -565,7 +565,7 @@ class PySINDyCP(PySINDyCampaign):
     Parameters
     ----------
     u_degree, a_degree : int
-        Degrees in U and in A (a_degree <= 3: the orders of DESIGN 2.5).
+        Degrees in U and in A (a_degree <= 3: the orders of docs/concepts.md (regimes)).
     threshold : float
         STLSQ threshold on the standardised coefficients (dx/dt in 1/s with x = A / a_s).
     standardize, use_record_derivative, other_terms, min_samples
@@ -591,7 +591,7 @@ class PySINDyCP(PySINDyCampaign):
         import pysindy as ps
 
         if not 1 <= self.a_degree <= 3:
-            raise ValueError(f"a_degree must be 1..3 (the orders of DESIGN 2.5); got {self.a_degree}")
+            raise ValueError(f"a_degree must be 1..3 (the orders of docs/concepts.md (regimes)); got {self.a_degree}")
         lib = ps.ParameterizedLibrary(
             parameter_library=ps.PolynomialLibrary(degree=self.u_degree, include_interaction=False),
             feature_library=ps.PolynomialLibrary(degree=self.a_degree, include_interaction=False),

@@ -1,4 +1,4 @@
-"""Output-error refit of the coefficients on a fixed support (DESIGN 3.4).
+"""Output-error refit of the coefficients on a fixed support (docs/field_workflow.md).
 
 SINDy fits dA/dt (an equation error), so its coefficients inherit the bias
 and noise of the numerical derivative. The refit here fits the *trajectory*

@@ -1,4 +1,4 @@
-"""Simulation and forecasting with identified time-varying models (DESIGN 3.4).
+"""Simulation and forecasting with identified time-varying models (docs/field_workflow.md).
 
 An identification result (:func:`vivbench.analysis.identify_event`) holds one
 coefficient matrix Xi_w per window, with dA/dt = Theta(A, U) Xi_w^T on the

@@ -1,9 +1,9 @@
 """A varying-coefficient campaign model: dA_k/dt = sum_i a_ki(U_k) A_k^i with spline curves a_ki(U).
 
-Why: on realistic bridges (DESIGN 2.8) the aerodynamic functions of the reduced
+Why: on realistic bridges (docs/concepts.md (no inverse crime)) the aerodynamic functions of the reduced
 velocity are not polynomials (a lock-in bell), so the campaign SINDy model,
 whose coefficients of A^i are polynomials of degree <= 5 in U, is outside the
-truth's class. This model keeps the physical structure of DESIGN 2.3 (the
+truth's class. This model keeps the physical structure of docs/concepts.md (the truth) (the
 dynamics are a cubic polynomial in A whose coefficients are functions of the
 wind) and gives the coefficient functions a flexible, smooth basis instead:
 
@@ -33,7 +33,7 @@ Only own-section amplitudes are used: in the averaged truth the mode shape makes
 the other sections' amplitudes proportional to A_k, so their terms are
 collinear with A_k's.
 
-The wind of the curves (``wind_input``): the truth (DESIGN 2.3) sums the
+The wind of the curves (``wind_input``): the truth (docs/concepts.md (the truth)) sums the
 aerodynamic forces of every section j, each a function of that section's own
 felt wind U_j and yaw psi_j, so with a wind that differs along the span
 dA_k/dt = sum_i sum_j a_kij(U_j, psi_j) A_k^i, which no curve of one wind
@@ -42,8 +42,8 @@ can represent when the curves are not linear (a lock-in bell).
 ``"additive"`` fits that sum: every column above repeated for each section's
 wind and yaw (p = 4 M (J + 1) S, the same penalty on every section's curve;
 the sections' winds are strongly correlated, and the penalty keeps the split
-between them smooth, only their sum being identifiable). The curve of DESIGN
-3.5 at wind U is then the model at the uniform wind U_j = U, i.e. the sum over
+between them smooth, only their sum being identifiable). The coefficient curve
+(docs/concepts.md) at wind U is then the model at the uniform wind U_j = U, i.e. the sum over
 the sections. Measured winds add each point anemometer's own slow turbulence
 to each input (no longer averaged over the sections); shrinking each
 section's departure from the mean wind before the fit (a regression
@@ -411,7 +411,7 @@ class VaryingCoefficientSINDy(ModelBase):
     dA_k/dt = sum_{i=0..3} a_ki(U_k) A_k^i, a_ki(U) = sum_m c_kim B_m(U)
     (module docstring). A model of the protocol (:mod:`vivbench.models.protocol`):
     ``fit(records)``, ``predict``, ``order_contributions``, ``simulate`` (RK4),
-    ``curves`` (DESIGN 3.5, with block-bootstrap bands), ``equations``,
+    ``curves`` (docs/concepts.md (coefficient curves), with block-bootstrap bands), ``equations``,
     ``save``/``load`` (NetCDF).
 
     Parameters
@@ -435,7 +435,7 @@ class VaryingCoefficientSINDy(ModelBase):
         Share of replicates that must give a window the model's regime for the
         window to count as identifiable (:func:`vivbench.regimes.varying_window_verdicts`).
     tau : float
-        Regime threshold of DESIGN 2.5.
+        Regime threshold of docs/concepts.md (regimes).
     seed : int
         Seed of the fold assignment and of the bootstrap.
     wind_input : {"mean", "section", "additive"}
@@ -455,7 +455,7 @@ class VaryingCoefficientSINDy(ModelBase):
         (``Record.yaw``, e.g. from the identification result), else 0 (the
         fitted value is ``yaw_degree_``). A degree > 0 needs records with yaw
         to fit; a record without one is evaluated at the fitted median yaw.
-        The curves of DESIGN 3.5 are those at yaw 0. Chosen on the seed-0
+        The curves of docs/concepts.md (coefficient curves) are those at yaw 0. Chosen on the seed-0
         realistic campaign (``benchmarks/bench_floor.py``): 1 (degree 2 did
         not help).
     wind_smoothing_s : float, s
@@ -1226,7 +1226,7 @@ class VaryingCoefficientSINDy(ModelBase):
         Notes
         -----
         ``yaw=None`` means yaw 0 (wind perpendicular to the span): the curves of
-        DESIGN 3.5 are defined there. :meth:`order_contributions` passes the
+        docs/concepts.md (coefficient curves) are defined there. :meth:`order_contributions` passes the
         record's yaw (or the fitted median without one).
         """
         self._check_fitted()
@@ -1432,7 +1432,7 @@ class VaryingCoefficientSINDy(ModelBase):
                           nmse=nmse(out, A_meas), covered=covered, windows=np.zeros(max(tt.size - 1, 0), dtype=int))
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:
-        """The fitted curves a_ki(U) of DESIGN 3.5 with block-bootstrap bands.
+        """The fitted curves a_ki(U) of docs/concepts.md (coefficient curves) with block-bootstrap bands.
 
         Parameters
         ----------
@@ -1465,7 +1465,7 @@ class VaryingCoefficientSINDy(ModelBase):
         dims = ("equation", "order", "wind")
         units = "m^(1-order) s-1"
         return xr.Dataset(
-            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (DESIGN 3.5)"}),
+            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (docs/concepts.md (coefficient curves))"}),
              "curves_lower": (dims, lower, {"units": units, "long_name": f"lower {level:g} bootstrap band"}),
              "curves_upper": (dims, upper, {"units": units, "long_name": f"upper {level:g} bootstrap band"})},
             coords={"equation": section_names(self.n_sections_), "order": np.arange(4),

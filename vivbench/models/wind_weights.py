@@ -1,6 +1,6 @@
 """The weights of the sections' winds in a campaign model's one wind.
 
-Averaging (DESIGN 2.3) gives the modal amplitude's equation a sum over the
+Averaging (docs/concepts.md (the truth)) gives the modal amplitude's equation a sum over the
 sections' aerodynamic forces, section j's weighted by beta_j phi_j, so its
 linear term is -zeta w1 + sum_j w_j c(U_j) / 2 with
 

@@ -1,4 +1,4 @@
-"""Time-varying SINDy: one sparse model per sliding window (DESIGN 3.2)."""
+"""Time-varying SINDy: one sparse model per sliding window (docs/concepts.md (identifiability))."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ class WindowProblem(NamedTuple):
 
 
 class WindowedSINDy(ModelBase):
-    """Time-varying SINDy: STLSQ with AICc selection on sliding windows (DESIGN 3.2).
+    """Time-varying SINDy: STLSQ with AICc selection on sliding windows (docs/concepts.md (identifiability)).
 
     Each window's library (:func:`vivbench.library.basis.window_library`,
     69 terms for three sections) is regressed against each section's dA/dt

@@ -1,4 +1,4 @@
-"""Window SINDy as a model of the protocol (DESIGN 7): per-event window models over records.
+"""Window SINDy as a model of the protocol (docs/methods.md): per-event window models over records.
 
 :class:`vivbench.models.window.WindowedSINDy` fits one record (the paper's
 time-varying SINDy); :class:`WindowSINDy` fits it to every record of a

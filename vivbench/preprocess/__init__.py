@@ -1,4 +1,4 @@
-"""Wind and vibration preprocessing, the envelope, its noise floor, sliding windows and differentiation (DESIGN 3.1)."""
+"""Wind and vibration preprocessing, the envelope, its noise floor, sliding windows and differentiation (docs/field_workflow.md)."""
 
 from vivbench.preprocess.band import band_gain
 from vivbench.preprocess.chain import Preprocessed, preprocess_arrays

@@ -1,4 +1,4 @@
-"""Preprocessing of the identification chain (DESIGN 3.1): raw arrays to A and U on one grid.
+"""Preprocessing of the identification chain (docs/field_workflow.md): raw arrays to A and U on one grid.
 
 The chain follows the paper's Section III. Wind: the horizontal speed V and
 direction theta come from the east and north components, the component
@@ -12,7 +12,7 @@ end of the record and near every gap.
 
 Conventions
 -----------
-- ``u`` points east, ``v`` north (the event file's axes, DESIGN 4).
+- ``u`` points east, ``v`` north (the event file's axes, docs/formats.md).
 - ``theta`` is meteorological: the direction the wind blows *from*, in degrees
   clockwise from north in [0, 360). A wind from the west (blowing east,
   ``u > 0, v = 0``) has theta = 270.
@@ -23,7 +23,7 @@ Conventions
 
 Gaps
 ----
-Gaps are NaN blocks (DESIGN 4), or jumps in the time stamps. Nothing is
+Gaps are NaN blocks (docs/formats.md), or jumps in the time stamps. Nothing is
 interpolated across a gap unless it is no longer than
 ``PreprocessConfig.max_gap_s`` (default 0: never). Every contiguous valid run
 of a stream is filtered on its own and loses ``edge_s`` at both ends; the

@@ -1,4 +1,4 @@
-"""Settings of the preprocessing chain (DESIGN 3.1)."""
+"""Settings of the preprocessing chain (docs/field_workflow.md)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ class PreprocessConfig:
     wind_cutoff_hz : float
         Cut-off of the low-pass that turns U~ into the mean wind U, Hz. The
         default 1/60 Hz keeps the dynamics of the 10-60 min mean wind
-        (DESIGN 2.4) and removes turbulence with periods shorter than about a
+        (docs/concepts.md (the bridge and the wind)) and removes turbulence with periods shorter than about a
         minute; a 50 s SINDy window then sees a nearly constant U, as the
         paper's amplitude equation assumes.
     wind_filter_order : int

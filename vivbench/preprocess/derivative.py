@@ -1,4 +1,4 @@
-"""Numerical differentiation of slowly varying envelopes (DESIGN 3.1).
+"""Numerical differentiation of slowly varying envelopes (docs/field_workflow.md).
 
 The identification regresses dA/dt on a library of A and U, so the derivative
 of a noisy envelope A(t) is the first quantity it needs. The default is a
@@ -390,7 +390,7 @@ class Derivative:
     ----------
     method : {"tv", "savgol", "spline", "finite_difference"}
         ``"tv"``: total-variation regularised (:func:`tv_derivative`, the
-        default of DESIGN 3.1). ``"savgol"``: Savitzky-Golay derivative
+        default of docs/field_workflow.md). ``"savgol"``: Savitzky-Golay derivative
         (``scipy.signal.savgol_filter`` with ``deriv=1``). ``"spline"``: cubic
         smoothing spline (``scipy.interpolate.make_smoothing_spline``),
         differentiated. ``"finite_difference"``: ``pysindy.FiniteDifference``.

@@ -1,6 +1,6 @@
 """The mean wind's yaw: its angle to the span's normal, from the anemometers' horizontal components.
 
-The realistic aerodynamics (DESIGN 2.2, 2.8) fall off as the wind turns away
+The realistic aerodynamics (docs/concepts.md (aeroelastic force), 2.8) fall off as the wind turns away
 from the span's normal; U = V |sin theta| carries only the perpendicular speed,
 not that angle. The components along and across the span are low-passed with
 the mean-wind filter (so the angle is that of the slowly varying mean wind,

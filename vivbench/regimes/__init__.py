@@ -1,4 +1,4 @@
-"""The regime rule applied to models and to the truth, and identifiability verdicts (DESIGN 2.5)."""
+"""The regime rule applied to models and to the truth, and identifiability verdicts (docs/concepts.md (regimes))."""
 
 from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.regimes.greybox import greybox_draws, greybox_window_verdicts

@@ -1,6 +1,6 @@
-"""Identifiability of the campaign model's regime in each window (DESIGN 2.5).
+"""Identifiability of the campaign model's regime in each window (docs/concepts.md (regimes)).
 
-A window's regime is the rule of DESIGN 2.5 applied to the campaign model's order
+A window's regime is the rule of docs/concepts.md (regimes) applied to the campaign model's order
 contributions over that window's data. It counts as identifiable when
 
 1. no model in the coefficients' joint confidence region gives it another regime

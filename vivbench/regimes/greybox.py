@@ -1,6 +1,6 @@
-"""Regimes of the grey-box refit per window and their identifiability (DESIGN 2.5).
+"""Regimes of the grey-box refit per window and their identifiability (docs/concepts.md (regimes)).
 
-A window's regime is the rule of DESIGN 2.5 applied to the grey-box model's
+A window's regime is the rule of docs/concepts.md (regimes) applied to the grey-box model's
 order contributions over the window's data. It counts as identifiable when at
 least ``agreement`` of ``n_draws`` parameter draws from the model's sandwich
 covariance (a Gaussian around the fitted spline and yaw coefficients) give the window
@@ -110,7 +110,7 @@ def greybox_window_verdicts(model: GreyBoxRefit, record: Record, window_start, w
     record : Record
     window_start, window_end : array_like, shape (W,), s (a window holds start <= t < end)
     tau : float
-        Regime threshold (DESIGN 2.5).
+        Regime threshold (docs/concepts.md (regimes)).
     agreement : float
         Share of the draws that must give the window's regime.
     n_draws : int

@@ -1,4 +1,4 @@
-"""The regime rule of DESIGN 2.5 applied to any model of the protocol, through its order contributions."""
+"""The regime rule of docs/concepts.md (regimes) applied to any model of the protocol, through its order contributions."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def model_window_regimes(model: FittedModel, record: Record, window_start, windo
     window_start, window_end : array_like, shape (W,), s
         A window holds the samples with start <= t < end.
     tau : float
-        Regime threshold of DESIGN 2.5.
+        Regime threshold of docs/concepts.md (regimes).
 
     Returns
     -------

@@ -1,4 +1,4 @@
-"""Regimes of the truth over windows (DESIGN 2.5 applied to the generator's order contributions)."""
+"""Regimes of the truth over windows (docs/concepts.md (regimes) applied to the generator's order contributions)."""
 
 from __future__ import annotations
 

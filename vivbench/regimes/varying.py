@@ -1,6 +1,6 @@
-"""Identifiability of the varying-coefficient model's regime in each window (DESIGN 2.5).
+"""Identifiability of the varying-coefficient model's regime in each window (docs/concepts.md (regimes)).
 
-A window's regime is the rule of DESIGN 2.5 applied to the model's order
+A window's regime is the rule of docs/concepts.md (regimes) applied to the model's order
 contributions over the window's data. It counts as identifiable when
 
 1. at least ``model.agreement`` of the block-bootstrap replicates of the spline

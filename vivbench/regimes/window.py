@@ -1,4 +1,4 @@
-"""Regimes of window models and whether the data can tell them apart (DESIGN 2.5).
+"""Regimes of window models and whether the data can tell them apart (docs/concepts.md (regimes)).
 
 Inside a 50 s window U is nearly constant and, on a plateau, so is A: the
 library's orders (A^0 ... A^3 times powers of U) then mimic one another, and
@@ -91,7 +91,7 @@ def window_regimes(
     valid : ndarray of bool, shape (W, n)
     path : StlsqPath of ``theta`` against ``y``
     settings : the path's settings (reused for the order-deletion refits)
-    tau : regime threshold of DESIGN 2.5
+    tau : regime threshold of docs/concepts.md (regimes)
     margin : AICc margin of "equally good"; None skips the test (all flagged identifiable)
     order_deletion : also try the best model without each present order
 
@@ -202,7 +202,7 @@ def label_windows(model: WindowedSINDy, t, A, U, dA, *, tau: float = 0.2, margin
         Fitted here (``model.fit(t, A, U, dA)``); its fitted attributes are set as usual.
     t : ndarray, shape (n,), s
     A, U, dA : ndarray, shape (n, S); m, m/s and m/s
-    tau : regime threshold of DESIGN 2.5
+    tau : regime threshold of docs/concepts.md (regimes)
     margin, order_deletion, fit_tolerance : see :func:`window_regimes`
 
     Returns

@@ -24,7 +24,7 @@ def event_figure(tree: xr.DataTree, path: str | Path, *, section: str | None = N
 
     Parameters
     ----------
-    tree : an event (DESIGN 4)
+    tree : an event (docs/formats.md)
     path : output PNG (written atomically)
     section : which section's acceleration and amplitude to show (default the middle one, S2 of three)
 

@@ -18,7 +18,7 @@ regime_timeline_figure     Fig. 6 and Table 1 (regimes of three events), with tr
 decision_graph_figure      Figs. 8-10 (decision graph, clusters)
 forecast_figure            Figs. 11-12 (simulation and forecasts)
 model_forecast_figure      Figs. 11-12 for any model of the protocol (``simulate``)
-curves_figure              coefficient curves a_i(U) against the truth (DESIGN 3.5),
+curves_figure              coefficient curves a_i(U) against the truth (docs/concepts.md (coefficient curves)),
                            drawn like aerodynamic derivatives
 =========================  =====================================================
 """
@@ -138,7 +138,7 @@ def sensor_layout_figure(tree: xr.DataTree, path: str | Path) -> Path:
     Parameters
     ----------
     tree : xarray.DataTree
-        An event (DESIGN 4). The span length and the mode shape phi_k come from
+        An event (docs/formats.md). The span length and the mode shape phi_k come from
         the generator configuration (``/truth`` attribute ``config_json``) when
         present; otherwise positions are drawn as fractions of the span and
         the mode shape is left out (field data do not carry it).
@@ -211,7 +211,7 @@ def wind_figure(tree: xr.DataTree, path: str | Path, *, section: str | None = No
 
     Parameters
     ----------
-    tree : an event (DESIGN 4)
+    tree : an event (docs/formats.md)
     path : output PNG
     section : section shown (default the middle one, S2 of three)
     config : preprocessing settings (low-pass cut-off), default PreprocessConfig()
@@ -279,7 +279,7 @@ def time_frequency_figure(tree: xr.DataTree, path: str | Path, *, section: str |
 
     Parameters
     ----------
-    tree : an event (DESIGN 4)
+    tree : an event (docs/formats.md)
     path : output PNG
     section : section shown (default the middle one, S2 of three)
     f_mode : modal frequency, Hz (None: from the Welch spectrum,
@@ -337,7 +337,7 @@ def displacement_figure(tree: xr.DataTree, result: xr.Dataset, path: str | Path,
 
     Parameters
     ----------
-    tree : an event (DESIGN 4)
+    tree : an event (docs/formats.md)
     result : its identification result (``vivbench identify``)
     path : output PNG
     section : section of panel (a) (default the middle one, S2 of three)
@@ -831,7 +831,7 @@ _CURVE_UNITS = ("m/s", "1/s", "1/(m s)", "1/(m$^2$ s)")
 def curves_figure(curves: xr.Dataset, path: str | Path, *, truth: tuple[np.ndarray, np.ndarray] | None = None,
                   equation: str | None = None, frequency: float | None = None, depth: float | None = None,
                   name: str = "campaign model") -> Path:
-    """Coefficient curves a_ki(U) of a campaign-level model against the truth's (DESIGN 3.5).
+    """Coefficient curves a_ki(U) of a campaign-level model against the truth's (docs/concepts.md (coefficient curves)).
 
     One panel per order i = 0..3 for one equation k, drawn the way
     aerodynamic derivatives are drawn against reduced velocity: the truth as

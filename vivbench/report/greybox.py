@@ -1,9 +1,9 @@
-"""Figures and the report section of the grey-box refit (``vivbench greybox``, DESIGN 3.6).
+"""Figures and the report section of the grey-box refit (``vivbench greybox``, docs/field_workflow.md (the grey-box reference)).
 
 - :func:`greybox_functions_figure`: Y1, e1, e2, C_L against reduced velocity
   with their bands, beside the truth's functions when known.
 - :func:`greybox_curves_figure`: the coefficient curves a_ki(U) of the
-  reference section (DESIGN 3.5) of the grey-box model, the campaign model
+  reference section (docs/concepts.md (coefficient curves)) of the grey-box model, the campaign model
   and the truth.
 - :func:`greybox_simulation_figure`: measured and simulated envelopes of a few events.
 - :func:`greybox_yaw_figure`: the fitted yaw factor on Y1 and C_L with its band,
@@ -214,7 +214,7 @@ def greybox_section(directory, out_dir, written: list, max_rows: int = 40) -> li
         return out + [f"**Not run**: `{directory}` holds no `summary.json` of `vivbench greybox`.", ""]
     summary = json.loads(summary_path.read_text())
     cmd = summary.get("command", f"vivbench greybox ... --out {directory}")
-    out += ["The averaged Simiu-Scanlan amplitude equation (DESIGN 2.3) with B-spline functions Y1, e1, e2, C_L of "
+    out += ["The averaged Simiu-Scanlan amplitude equation (docs/concepts.md (the truth)) with B-spline functions Y1, e1, e2, C_L of "
             "the reduced velocity, fitted by output error to the envelopes of all events at once (CasADi multiple "
             "shooting, Gauss-Newton). Bands (delta method): "
             f"{summary.get('band') or 'block-sandwich covariance (files written before the band choice)'}. "

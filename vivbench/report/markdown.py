@@ -390,7 +390,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         if varying:
             intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
                      "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
-                     "window's regime is the rule of DESIGN 2.5 applied to this model's order contributions over the "
+                     "window's regime is the rule of docs/concepts.md (regimes) applied to this model's order contributions over the "
                      "window's data; it counts as identifiable when at least "
                      f"{json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap replicates "
                      "of the spline coefficients agree, every order subset in the model's confidence set "
@@ -405,7 +405,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         md += ["## The campaign model (`vivbench pool`)", ""] + ([intro] if varying else [
                "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
                "AICc on all samples of all events (`vivbench.models.campaign`). A window's regime is the rule of "
-               "DESIGN 2.5 applied to this model's order contributions over the window's data; it counts as "
+               "docs/concepts.md (regimes) applied to this model's order contributions over the window's data; it counts as "
                "identifiable when (i) no model inside the coefficients' joint 95 % confidence region (residual "
                "variance inflated by the residuals' correlation time) gives the window another regime, and (ii) at "
                f"least {json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap "
@@ -444,7 +444,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
             structure = (_generator_config_of(tree0) or {}).get("structure", {})
             f_struct, d_struct = structure.get("frequency"), structure.get("depth")
             figure("fig12_curves.png", "Coefficient curves of the campaign model against the truth",
-                   f"DESIGN 3.5. The coefficients a_i(U) of dA/dt = sum_i a_i(U) A^i at {ref_name} when every section "
+                   f"docs/concepts.md (coefficient curves). The coefficients a_i(U) of dA/dt = sum_i a_i(U) A^i at {ref_name} when every section "
                    "sees the mean wind U (the other sections folded in through the mode's amplitude ratios), drawn "
                    "like aerodynamic derivatives: (a) order 0, the locked shedding force; (b) order 1, the net "
                    "linear coefficient (positive: negative net damping, self-excitation); (c, d) the amplitude "
@@ -501,7 +501,7 @@ def _report_command(name, campaign_dir, results_dir, out_root, extra_dirs, basel
 
 
 def _side_by_side_section(campaign_dir, results_dir, extra_dirs, baseline_run, out_dir, command, written, say):
-    """The baseline campaign beside this one (DESIGN 2.8; :mod:`vivbench.report.sidebyside`)."""
+    """The baseline campaign beside this one (docs/concepts.md (no inverse crime); :mod:`vivbench.report.sidebyside`)."""
 
     def step(name):
         d = extra_dirs.get(name)
@@ -700,7 +700,7 @@ def _recovery_section(info, command) -> list[str]:
                               for k in (1, 2, 3, 4)])
     out += [
         "Window by window (`vivbench.validate.campaign_recovery`): the true regime of each window and equation by "
-        "the rule of DESIGN 2.5 applied to the true order contributions, against the regime of the selected window "
+        "the rule of docs/concepts.md (regimes) applied to the true order contributions, against the regime of the selected window "
         "model; and the relative RMS error of the identified dA/dt against the true one evaluated on the same "
         "measured A and U with the exact coefficient matrix (in-library truths only; n/a otherwise), and on the "
         "true (A, U): each window's model evaluated on the truth's own A and U against the truth's dA/dt (any "
@@ -742,7 +742,7 @@ def _step_command(step: str, directory: Path, campaign_dir: Path, results_dir: P
 
 def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, max_rows) -> list[str]:
     if step == "greybox" and directory is not None and (Path(directory) / "summary.json").is_file():
-        from vivbench.report.greybox import greybox_section  # its own module (DESIGN 3.6)
+        from vivbench.report.greybox import greybox_section  # its own module (docs/field_workflow.md (the grey-box reference))
 
         return greybox_section(directory, out_dir, written, max_rows=max_rows)
     title = _STEP_TITLES.get(step, f"`{step}`")

@@ -1,4 +1,4 @@
-"""Figures that put two campaigns' recovery side by side (in-library against realistic, DESIGN 2.8).
+"""Figures that put two campaigns' recovery side by side (in-library against realistic, docs/concepts.md (no inverse crime)).
 
 Like :mod:`vivbench.report.figures`: data in, a PNG out, matplotlib's Agg
 backend at a fixed size and dpi, written atomically without a software tag or
@@ -124,7 +124,7 @@ def recovery_pair_figure(scores: Sequence[Mapping], labels: Sequence[str], path:
         ax_reg.set_ylim(0.0, 1.42)
         ax_reg.set_yticks(np.linspace(0.0, 1.0, 6))
         ax_reg.set_ylabel("share of window-equations (-)")
-        ax_reg.set_title("(a) regime recovery (DESIGN 2.5)", fontsize=10, loc="left")
+        ax_reg.set_title("(a) regime recovery (docs/concepts.md (regimes))", fontsize=10, loc="left")
         ax_reg.legend(loc="upper center", ncol=2, fontsize=7)
 
         # (b) dA/dt error on the true (A, U)

@@ -1,4 +1,4 @@
-"""In-library against realistic: the report's recovery figures of two campaigns side by side (DESIGN 2.8).
+"""In-library against realistic: the report's recovery figures of two campaigns side by side (docs/concepts.md (no inverse crime)).
 
 ``vivbench report --baseline DIR`` adds one section to the report: the chain's
 recovery on the report's campaign (normally the realistic default) beside its
@@ -35,7 +35,7 @@ from vivbench.io.netcdf import atomic_path
 
 __all__ = ["CampaignRun", "MODE_LABELS", "baseline_section", "campaign_run", "inverse_crime_paragraph"]
 
-#: How the report names each generator mode (DESIGN 2.8).
+#: How the report names each generator mode (docs/concepts.md (no inverse crime)).
 MODE_LABELS = {
     "in_library": "in-library (truth inside the model class: the inverse crime)",
     "realistic": "realistic (default: truth outside the model class)",
@@ -212,7 +212,7 @@ def inverse_crime_paragraph(labels: Sequence[str], summaries: Sequence[Mapping] 
             "the inverse crime. The generator's `in_library` mode commits it on purpose: its aerodynamic functions "
             "are polynomials in U chosen so that the averaged dynamics lie exactly in the A^i U^j library of the "
             "identification, and the deck feels exactly the anemometer's low-passed wind. The default `realistic` "
-            "mode (DESIGN 2.8) builds the truth outside that class: a lock-in bell and smooth non-polynomial "
+            "mode (docs/concepts.md (no inverse crime)) builds the truth outside that class: a lock-in bell and smooth non-polynomial "
             "functions of the reduced velocity U/(f D) with a yaw factor, a deck that feels the wind averaged over "
             "each section's tributary length of a spatially resolved turbulence field while each anemometer is one "
             "point (so the identification's U carries errors-in-variables), and optional slow changes the wind does "
@@ -358,7 +358,7 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     out += ["The two campaigns:" + (" **they differ in size** (the baseline is a smaller campaign; its figures are "
                                     "those of its own size)." if sizes_differ else ""), ""]
     out.append(_table(["", *headers], [
-        ["generator mode (DESIGN 2.8)"] + [f"`{m}`" for m in modes],
+        ["generator mode (docs/concepts.md (no inverse crime))"] + [f"`{m}`" for m in modes],
         ["campaign directory"] + [f"`{r.campaign}`" for r in runs],
         ["results directory"] + [f"`{r.results}`" for r in runs],
         ["events (with results); seed"] + [f"{i['n_events']} ({i['n_results']}); {i['seed']}" for i in info],
@@ -368,7 +368,7 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
 
     out += ["### Recovery side by side", "",
             "The same scores for both campaigns (`vivbench.validate.validate_campaign`, the numbers of `vivbench "
-            "validate`): regimes by the rule of DESIGN 2.5 against the truth's, coverage beside accuracy; the dA/dt "
+            "validate`): regimes by the rule of docs/concepts.md (regimes) against the truth's, coverage beside accuracy; the dA/dt "
             "error on the true (A, U), i.e. each model's `predict` on the truth's own A and U against the truth's "
             "dA/dt, the only dA/dt error a truth outside the library has; the campaign model's coefficient curves "
             "against the truth's over the lock-in range; the clusters' agreement with the true regimes "
@@ -424,7 +424,7 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
         written.append(fname)
         cells.append(f"![curves, {short[k]}]({quote(fname)})")
     out += ["### Coefficient curves side by side", "", pair_table(cells), "",
-            "DESIGN 3.5: the coefficients a_i(U) of dA/dt = sum_i a_i(U) A^i at the reference section, each campaign "
+            "docs/concepts.md (coefficient curves): the coefficients a_i(U) of dA/dt = sum_i a_i(U) A^i at the reference section, each campaign "
             "model (dashed, its 95 % block-bootstrap band shaded; grey dotted where the curve lies outside the winds "
             "of its fitted data: an extrapolation) against its own campaign's truth (black), as in "
             "the coefficient-curve figure above. In-library, the truth is a polynomial in U that the library holds; "

@@ -1,7 +1,7 @@
 """Aeroelastic force of the generalised Simiu-Scanlan model and its averaged truth.
 
-The full model (DESIGN 2.2) enters the modal equation through five slowly
-varying coefficients; first-order averaging of the same model (DESIGN 2.3)
+The full model (docs/concepts.md (aeroelastic force)) enters the modal equation through five slowly
+varying coefficients; first-order averaging of the same model (docs/concepts.md (the truth))
 gives the amplitude equation Q' = r0 + r1 + r2 + r3. First-order averaging
 holds for any smooth functions Y1, e1, e2, C_L of the wind (and of its angle to
 the span): the amplitude coefficients are computed from the curves' values at
@@ -203,7 +203,7 @@ def order_contributions(Q: np.ndarray, U: np.ndarray, structure: StructureConfig
 
 
 def truth_curves(structure: StructureConfig, aero: AeroConfig, wind_grid) -> xr.DataArray:
-    """The truth's coefficient curves a_ki(U) of DESIGN 3.5.
+    """The truth's coefficient curves a_ki(U) of docs/concepts.md (coefficient curves).
 
     With every section at the mean wind U and the wind perpendicular to the
     span (yaw 0), equation k reads dA_k/dt = sum_i a_ki(U) A_k^i. Since
@@ -232,7 +232,7 @@ def truth_curves(structure: StructureConfig, aero: AeroConfig, wind_grid) -> xr.
         a, dims=("equation", "order", "wind"), name="curves",
         coords={"equation": list(structure.sections), "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})},
         attrs={"units": "m^(1-order) s-1",
-               "long_name": "true coefficient of A_k^order at mean wind U, yaw 0 (DESIGN 3.5)"},
+               "long_name": "true coefficient of A_k^order at mean wind U, yaw 0 (docs/concepts.md (coefficient curves))"},
     )
 
 

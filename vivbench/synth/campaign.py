@@ -1,6 +1,6 @@
 """Campaigns: many events with one seed, written as event files plus a catalogue.
 
-Event seeds are ``SeedSequence(seed).spawn(n)`` (DESIGN 2.7), so the same seed
+Event seeds are ``SeedSequence(seed).spawn(n)`` (docs/concepts.md (the bridge and the wind)), so the same seed
 gives the same files whatever the number of worker processes.
 """
 
@@ -204,7 +204,7 @@ def _catalogue_row(spec: EventSpec, path: Path, tree) -> dict:
 
 
 def _changes_columns(truth) -> dict:
-    """Catalogue columns of the slow changes (DESIGN 2.8); none when the truth does not record them."""
+    """Catalogue columns of the slow changes (docs/concepts.md (no inverse crime)); none when the truth does not record them."""
     if "damping_ratio" not in truth.data_vars:
         return {}
     zeta = truth["damping_ratio"].values

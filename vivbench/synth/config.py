@@ -4,7 +4,7 @@ Every generated event stores the full configuration as JSON (``/truth``
 attribute ``config_json``), and a configuration can be read from TOML.
 Defaults describe a 1650 m twin-box suspension bridge whose first vertical
 mode (0.327 Hz) locks in with vortex shedding between about 5.5 and 10.5 m/s
-of wind perpendicular to the span (DESIGN.md 2.1-2.2).
+of wind perpendicular to the span (docs/concepts.md (the bridge and the wind)-2.2).
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def _linear(value: float, slope: float, center: float) -> Polynomial:
 
 @dataclass(frozen=True, kw_only=True)
 class StructureConfig:
-    """One vertical bending mode seen at n >= 1 deck sections (DESIGN 2.1).
+    """One vertical bending mode seen at n >= 1 deck sections (docs/concepts.md (the bridge and the wind)).
 
     The number of instrumented sections is ``len(mode_shape)``; the sections are
     named S1..Sn and sit at k / (n + 1) of the span (1/4, 1/2, 3/4 for the
@@ -155,7 +155,7 @@ AERO_MODES = ("in_library", "realistic")
 
 @dataclass(frozen=True, kw_only=True)
 class AeroConfig:
-    """Generalised Simiu-Scanlan force per section (DESIGN 2.2).
+    """Generalised Simiu-Scanlan force per section (docs/concepts.md (aeroelastic force)).
 
     ``Y1``, ``e1``, ``e2``, ``Y2`` and ``C_L`` are curves of the local mean
     perpendicular wind speed U (m/s) (:mod:`vivbench.synth.curves`): either
@@ -164,7 +164,7 @@ class AeroConfig:
     ``yaw``, when given, makes some of them depend on the wind's angle to the
     span as well.
 
-    Two named modes (DESIGN 2.8), each a constructor:
+    Two named modes (docs/concepts.md (no inverse crime)), each a constructor:
 
     - :meth:`realistic` (the defaults, ``AeroConfig()``): a box girder's functions
       of reduced velocity that are not polynomials (a Gaussian lock-in bell for Y1
@@ -287,7 +287,7 @@ FELT_WIND_MODES = ("anemometer", "tributary", "smooth")
 
 @dataclass(frozen=True, kw_only=True)
 class WindConfig:
-    """Mean wind scripts and anemometers (DESIGN 2.4).
+    """Mean wind scripts and anemometers (docs/concepts.md (the bridge and the wind)).
 
     Attributes
     ----------
@@ -305,7 +305,7 @@ class WindConfig:
         scale as the identification's mean-wind filter (1/60 Hz by default)
     turbulence : the turbulence field (spectral representation)
     anemometer_rate : Hz; resolution, m/s; noise : relative rms error
-    felt_wind : which wind the deck feels (DESIGN 2.8):
+    felt_wind : which wind the deck feels (docs/concepts.md (no inverse crime)):
 
         - ``"tributary"`` (the default, the ``realistic`` mode): the turbulence is simulated at
           ``points_per_section`` points spread evenly over each section's tributary length
@@ -426,7 +426,7 @@ class WindConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class DefectConfig:
-    """Sensor defects for robustness studies (DESIGN 2.6); all off by default.
+    """Sensor defects for robustness studies (docs/concepts.md (the bridge and the wind)); all off by default.
 
     Attributes
     ----------
@@ -462,7 +462,7 @@ class DefectConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class SensorConfig:
-    """Accelerometers (DESIGN 2.6).
+    """Accelerometers (docs/concepts.md (the bridge and the wind)).
 
     Attributes
     ----------
@@ -490,7 +490,7 @@ class SensorConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class ChangesConfig:
-    """Slow changes of the bridge that the wind does not carry (DESIGN 2.8); none by default.
+    """Slow changes of the bridge that the wind does not carry (docs/concepts.md (no inverse crime)); none by default.
 
     Campaign time ``t_c`` is the time in seconds since the campaign's start
     (``CampaignConfig.start``; an event records its own start as
@@ -599,7 +599,7 @@ class ChangesConfig:
 class GeneratorConfig:
     """Everything the generator needs besides the event script and the seed.
 
-    The defaults are the ``realistic`` mode (DESIGN 2.8): ``GeneratorConfig()`` equals
+    The defaults are the ``realistic`` mode (docs/concepts.md (no inverse crime)): ``GeneratorConfig()`` equals
     :meth:`realistic` and its fields are their classes' defaults (``AeroConfig()`` and
     ``WindConfig()`` are the realistic aerodynamics and the tributary-averaged felt wind).
     :meth:`in_library` gives the polynomial truth inside the identification's model class.
@@ -609,7 +609,7 @@ class GeneratorConfig:
     integration_step : s; RK4 step of the full modal simulation
     truth_step : s; time step of the saved truth grid
     initial_amplitude : m; modal amplitude at t = 0 (full and averaged models alike)
-    tau : regime threshold of DESIGN 2.5
+    tau : regime threshold of docs/concepts.md (regimes)
     changes : slow changes of the bridge that the wind does not carry (none by default)
     """
 
@@ -641,7 +641,7 @@ class GeneratorConfig:
 
     @classmethod
     def in_library(cls, **overrides) -> GeneratorConfig:
-        """The ``in_library`` mode (DESIGN 2.8): polynomial aerodynamics in U, the deck feels the anemometer's wind.
+        """The ``in_library`` mode (docs/concepts.md (no inverse crime)): polynomial aerodynamics in U, the deck feels the anemometer's wind.
 
         The truth lies in the identification's model class (an exact coefficient matrix
         exists); for exact-recovery tests. Keywords override fields: ``aero`` and ``wind``
@@ -653,7 +653,7 @@ class GeneratorConfig:
 
     @classmethod
     def realistic(cls, **overrides) -> GeneratorConfig:
-        """The ``realistic`` mode (DESIGN 2.8, the default): the truth lies outside the identification's model class.
+        """The ``realistic`` mode (docs/concepts.md (no inverse crime), the default): the truth lies outside the identification's model class.
 
         ``aero`` is :meth:`AeroConfig.realistic` (non-polynomial functions of the reduced
         velocity with a yaw factor) and ``wind`` is ``WindConfig(felt_wind="tributary")``
@@ -713,7 +713,7 @@ class GeneratorConfig:
 
 
 GENERATOR_MODES = AERO_MODES
-"""Named generator modes (DESIGN 2.8); ``GeneratorConfig()`` is the ``realistic`` mode."""
+"""Named generator modes (docs/concepts.md (no inverse crime)); ``GeneratorConfig()`` is the ``realistic`` mode."""
 DEFAULT_MODE = "realistic"
 """The mode of ``GeneratorConfig()``, of a configuration file without ``mode`` and of ``vivbench synth``."""
 _FELT_WIND_OF_MODE = {"in_library": "anemometer", "realistic": "tributary"}

@@ -1,11 +1,11 @@
 """Aerodynamic functions of the synthetic bridge: polynomials in U and shapes in reduced velocity.
 
 The functions Y1, e1, e2, Y2 and C_L of the generalised Simiu-Scanlan force
-(DESIGN 2.2) are curves of the local mean wind. Two families exist:
+(docs/concepts.md (aeroelastic force)) are curves of the local mean wind. Two families exist:
 
 - :class:`Polynomial`, a polynomial in the wind speed U (m/s) itself: the
   ``in_library`` mode, whose averaged truth is a combination of the library
-  terms A^i U^j (DESIGN 2.8);
+  terms A^i U^j (docs/concepts.md (no inverse crime));
 - shapes in the reduced velocity Ur = U / (f1 D) (dimensionless; f1 the
   mode's frequency in Hz, D the deck depth in m) that are not polynomials:
   :class:`GaussianBell`, :class:`LorentzianBell`, :class:`AsymmetricBell`,
@@ -353,7 +353,7 @@ YAW_SHAPES = ("cosine", "gaussian", "sin2", "logistic")
 
 @dataclass(frozen=True, kw_only=True)
 class YawFactor:
-    """Dependence of the aerodynamic functions on the wind's angle to the span (DESIGN 2.2).
+    """Dependence of the aerodynamic functions on the wind's angle to the span (docs/concepts.md (aeroelastic force)).
 
     The yaw psi is the angle between the mean wind and the span's normal
     (0 for wind perpendicular to the span), per section. The functions named in

@@ -1,4 +1,4 @@
-"""Monte-Carlo draws of the aerodynamic functions (DESIGN 2.2, 2.8).
+"""Monte-Carlo draws of the aerodynamic functions (docs/concepts.md (aeroelastic force), 2.8).
 
 :func:`draw_aero` draws shapes and parameters within ranges typical of
 streamlined box girders, for studies that want many bridges rather than one.

@@ -29,7 +29,7 @@ from vivbench.core.errors import InputError
 __all__ = ["EventSpec", "SimulatedEvent", "simulate_event", "generate_event", "event_truth_curves",
            "TRUTH_CURVE_WIND"]
 
-#: Wind grid of the truth's coefficient curves (DESIGN 3.5), m/s: 2 to 16 m/s in steps of 0.1 m/s.
+#: Wind grid of the truth's coefficient curves (docs/concepts.md (coefficient curves)), m/s: 2 to 16 m/s in steps of 0.1 m/s.
 TRUTH_CURVE_WIND = np.arange(20, 161) / 10.0
 
 
@@ -136,7 +136,7 @@ def _modal_params(t: np.ndarray, mw: MeanWind, turb, shedding_phase, config: Gen
     return np.stack([c["c_lin"], c["n1"], c["n2"], c["k_aero"], c["f_lock"], f_ext], axis=1)
 
 
-# ------------------------------------------------------------ slow changes (DESIGN 2.8)
+# ------------------------------------------------------------ slow changes (docs/concepts.md (no inverse crime))
 
 
 def _changed_structure(structure: StructureConfig, changes: ChangesConfig, number: int) -> StructureConfig:
@@ -198,7 +198,7 @@ def _changed_exact_coefficients(structure: StructureConfig, changes: ChangesConf
 
 
 def event_truth_curves(config: GeneratorConfig, number: int = 1, wind=TRUTH_CURVE_WIND) -> xr.DataArray | None:
-    """The exact coefficient curves a_ki(U) of one event (DESIGN 3.5), where they are well defined.
+    """The exact coefficient curves a_ki(U) of one event (docs/concepts.md (coefficient curves)), where they are well defined.
 
     Parameters
     ----------
@@ -377,7 +377,7 @@ def _script_dict(spec: EventSpec, with_place: bool) -> dict:
 
 def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.SeedSequence | int,
                    *, campaign_seed: int | None = None) -> xr.DataTree:
-    """Simulate one event and assemble it in the event file format (DESIGN 4).
+    """Simulate one event and assemble it in the event file format (docs/formats.md).
 
     The generator configuration, the event's script and its seed are stored as
     JSON in the ``/truth`` attribute ``config_json`` so that the file says how

@@ -1,4 +1,4 @@
-"""A family of synthetic bridges drawn from wide priors, with a held-out split (DESIGN 2.9).
+"""A family of synthetic bridges drawn from wide priors, with a held-out split (docs/concepts.md (no generator crime)).
 
 Tuning a method on campaigns of one generator configuration and reporting on the same
 configuration flatters the method. :func:`draw_bridge` therefore draws whole bridges and

@@ -1,4 +1,4 @@
-"""Accelerometer model and sensor defects (DESIGN 2.6)."""
+"""Accelerometer model and sensor defects (docs/concepts.md (the bridge and the wind))."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Stochastic wind turbulence along the span (DESIGN.md 2.4).
+"""Stochastic wind turbulence along the span (docs/concepts.md (the bridge and the wind)).
 
 Zero-mean fluctuations u' (along the mean wind), v' (lateral, horizontal) and
 w' (vertical) at points on a straight horizontal line (the deck), simulated by

@@ -1,4 +1,4 @@
-"""Scripted mean wind of an event and the anemometer records (DESIGN 2.4).
+"""Scripted mean wind of an event and the anemometer records (docs/concepts.md (the bridge and the wind)).
 
 An event's script gives the mean wind perpendicular to the span as a smooth
 curve through a few knots (so that the event passes into, through and out of
@@ -6,7 +6,7 @@ the lock-in range as intended); a slow random wander with time scales of 10 to
 60 min, small per-section offsets and a slowly turning direction make it
 realistic. Turbulence comes from the spectral representation method.
 
-Which signal is which (``WindConfig.felt_wind``, DESIGN 2.8):
+Which signal is which (``WindConfig.felt_wind``, docs/concepts.md (no inverse crime)):
 
 - anemometer records (``u, v, w`` of the event file): the section's mean wind
   plus the turbulence at ONE point, the anemometer (``WindField.anemometer``),

@@ -1,4 +1,4 @@
-"""Hypothesis strategies and assertion helpers for users' test suites (DESIGN 7).
+"""Hypothesis strategies and assertion helpers for users' test suites (docs/methods.md).
 
 ``from vivbench.testing import strategies as vst`` gives bridges, aerodynamic
 curves, wind scripts, events with their truth, campaigns and corruptions;

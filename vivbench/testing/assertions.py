@@ -1,4 +1,4 @@
-"""Assertion helpers for users' tests of their own methods (DESIGN 7).
+"""Assertion helpers for users' tests of their own methods (docs/methods.md).
 
 A *method* is any object with ``fit(records) -> fitted`` whose fitted model has
 ``order_contributions(record) -> (n_samples, n_sections, 4)`` in m/s (the
@@ -47,7 +47,7 @@ def event_records(events, *, source: str = "truth", config: IdentifyConfig | Non
     Parameters
     ----------
     events : xarray.DataTree or sequence of them
-        Events in the layout of DESIGN 4.
+        Events in the layout of docs/formats.md.
     source : {"truth", "measured"}
         ``truth``: the averaged truth's own time, A, U and exact dA/dt (the sum
         of ``/truth/r`` over the orders): noise-free, no preprocessing, for a
@@ -79,7 +79,7 @@ def event_records(events, *, source: str = "truth", config: IdentifyConfig | Non
 
 
 def assert_valid_event(event: xr.DataTree) -> None:
-    """Assert that an in-memory event follows the format of DESIGN 4 (AssertionError naming the breach)."""
+    """Assert that an in-memory event follows the format of docs/formats.md (AssertionError naming the breach)."""
     try:
         validate_event(event, name=f"event {event.attrs.get('event_id', '?')!r}")
     except InputError as exc:
@@ -127,7 +127,7 @@ def assert_recovers(method, event_or_records, *, source: str = "truth", rhs_tole
       windows where the truth has dynamics (RMS of the true dA/dt at least
       ``active_share`` of the event's); the median over those windows must
       not exceed ``rhs_tolerance``;
-    - regimes (DESIGN 2.5, threshold ``tau``): the model's regime of each
+    - regimes (docs/concepts.md (regimes), threshold ``tau``): the model's regime of each
       window from its order contributions against the truth's; the share of
       agreeing windows must reach ``regime_accuracy``. If the fitted model
       has ``identifiable`` and ``identifiable_only`` is true, only the windows
@@ -185,7 +185,7 @@ def assert_recovers(method, event_or_records, *, source: str = "truth", rhs_tole
     fitted = method.fit(records)
     if not hasattr(fitted, "order_contributions"):
         raise AssertionError(f"{type(method).__name__}.fit returned {type(fitted).__name__}, which has no "
-                             "order_contributions(record) (the model protocol, DESIGN 7)")
+                             "order_contributions(record) (the model protocol, docs/methods.md)")
     predictor = _Predicting(fitted)
     failures, lines = [], []
     for eid, truth, has_orders in truths:

@@ -1,4 +1,4 @@
-"""Hypothesis strategies for users' property tests (DESIGN 7).
+"""Hypothesis strategies for users' property tests (docs/methods.md).
 
 As in ``hypothesis.extra.numpy`` (and unlike ``xarray.testing.strategies``,
 which accepts strategies only): every argument is keyword-only and is either a
@@ -15,7 +15,7 @@ curves and wind scripts, and events with their exact averaged truth.
 :func:`wind_scripts`      :class:`~vivbench.synth.WindScript` of a scenario
 :func:`generators`        :class:`~vivbench.synth.GeneratorConfig`
 :func:`events`            an event in memory: an :class:`xarray.DataTree` in
-                          the layout of DESIGN 4 with its ``/truth``
+                          the layout of docs/formats.md with its ``/truth``
 :func:`campaign_configs`  :class:`~vivbench.synth.CampaignConfig`
 :func:`campaigns`         a tuple of events of one bridge, in memory
 :func:`corruptions`       a :class:`Corruption` (dropouts, spikes, clock
@@ -60,7 +60,7 @@ from vivbench.synth.campaign import script_lock_in
 __all__ = ["bridges", "aero_curves", "wind_scripts", "generators", "events", "campaign_configs", "campaigns",
            "corruptions", "Corruption", "CORRUPTION_KINDS", "SCENARIOS"]
 
-#: Kinds of :class:`Corruption` (the sensor defects of DESIGN 2.6, plus extra noise).
+#: Kinds of :class:`Corruption` (the sensor defects of docs/concepts.md (the bridge and the wind), plus extra noise).
 CORRUPTION_KINDS = ("dropouts", "spikes", "clock_offset", "clock_drift", "noise")
 _SEEDS = st.integers(0, 2**32 - 1)
 
@@ -111,7 +111,7 @@ def bridges(draw, *, n_sections=st.integers(1, 4), frequency=st.floats(0.2, 0.6)
 @st.composite
 def aero_curves(draw, *, kind=st.sampled_from(("realistic", "in_library")), yaw=st.booleans(),
                 seed=_SEEDS) -> AeroConfig:
-    """Aerodynamic functions Y1, e1, e2, Y2, C_L of a box girder (DESIGN 2.2, 2.8).
+    """Aerodynamic functions Y1, e1, e2, Y2, C_L of a box girder (docs/concepts.md (aeroelastic force), 2.8).
 
     Parameters
     ----------
@@ -136,7 +136,7 @@ def aero_curves(draw, *, kind=st.sampled_from(("realistic", "in_library")), yaw=
 @st.composite
 def wind_scripts(draw, *, kind=st.sampled_from(SCENARIOS), duration=st.floats(240.0, 360.0), lock_in=None,
                  seed=_SEEDS):
-    """Scripted mean wind of one event (DESIGN 2.4), as the campaign generator draws it.
+    """Scripted mean wind of one event (docs/concepts.md (the bridge and the wind)), as the campaign generator draws it.
 
     Parameters
     ----------
@@ -170,7 +170,7 @@ def generators(draw, *, bridge=bridges(), aero=aero_curves(), felt_wind=None, no
     bridge : StructureConfig or strategy (default :func:`bridges`)
     aero : AeroConfig or strategy (default :func:`aero_curves`)
     felt_wind : {"anemometer", "tributary"}, strategy, or None
-        Which wind the deck feels (DESIGN 2.8). None: the mode of ``aero``
+        Which wind the deck feels (docs/concepts.md (no inverse crime)). None: the mode of ``aero``
         (``anemometer`` for polynomial aerodynamics, the ``in_library`` mode;
         ``tributary`` otherwise).
     noise_density : float or strategy, micro-g per sqrt(Hz)
@@ -223,7 +223,7 @@ def events(draw, *, generator=generators(), kind=st.sampled_from(SCENARIOS), dur
     Returns
     -------
     strategy of xarray.DataTree
-        The layout of DESIGN 4 (``/wind`` at 32 Hz, ``/accel`` at 50 Hz,
+        The layout of docs/formats.md (``/wind`` at 32 Hz, ``/accel`` at 50 Hz,
         ``/truth`` with time, U, A, r, regime, the generator configuration and,
         when the aerodynamics are in the library, the exact coefficients);
         what :func:`vivbench.synth.generate_event` builds and
@@ -243,7 +243,7 @@ def events(draw, *, generator=generators(), kind=st.sampled_from(SCENARIOS), dur
 @st.composite
 def campaign_configs(draw, *, generator=generators(), n_events=st.integers(1, 3), duration=st.floats(240.0, 360.0),
                      seed=st.integers(0, 2**31 - 1)) -> CampaignConfig:
-    """Campaign configurations (DESIGN 2.7): events of one bridge, with a seed.
+    """Campaign configurations (docs/concepts.md (the bridge and the wind)): events of one bridge, with a seed.
 
     Parameters
     ----------
@@ -292,10 +292,10 @@ def campaigns(draw, *, config=None, generator=generators(), n_events=st.integers
 
 @dataclass(frozen=True, kw_only=True)
 class Corruption:
-    """A sensor defect (DESIGN 2.6) to apply to an event: ``corruption(event) -> event``.
+    """A sensor defect (docs/concepts.md (the bridge and the wind)) to apply to an event: ``corruption(event) -> event``.
 
     The truth is left as it is (the bridge did what it did; only the records
-    are wrong), and the corrupted event still follows the format of DESIGN 4.
+    are wrong), and the corrupted event still follows the format of docs/formats.md.
 
     Attributes
     ----------
@@ -344,7 +344,7 @@ class Corruption:
         Parameters
         ----------
         event : xarray.DataTree
-            A valid event (DESIGN 4).
+            A valid event (docs/formats.md).
 
         Returns
         -------

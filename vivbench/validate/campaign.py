@@ -165,7 +165,7 @@ def _cluster_tables(rows: list[dict], truth_regimes: dict) -> list[dict]:
 
 
 def event_truth_curves(truth) -> tuple[np.ndarray, np.ndarray] | None:
-    """The exact coefficient curves of an event's truth (DESIGN 3.5), stored or rebuilt.
+    """The exact coefficient curves of an event's truth (docs/concepts.md (coefficient curves)), stored or rebuilt.
 
     Parameters
     ----------
@@ -208,7 +208,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     clusters_csv : optional ``cluster_labels.csv`` of ``vivbench cluster``
     forecasts_dir : optional directory of ``forecast_<event_id>.csv`` (``vivbench forecast``);
         see :func:`read_forecast_tables`
-    tau : regime threshold for the truth's window regimes (DESIGN 2.5)
+    tau : regime threshold for the truth's window regimes (docs/concepts.md (regimes))
     active_share : see :func:`vivbench.validate.window_rhs_errors`
 
     Returns

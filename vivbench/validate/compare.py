@@ -15,7 +15,7 @@ accel_noise            accelerometer noise floor as a multiple of     1
                        the default 30 micro-g/sqrt(Hz)
 anemometer_noise       anemometer relative rms error                  0.01
 turbulence_intensity   sigma_u / U of the turbulence field            0.08
-aero                   realism: aerodynamic functions (DESIGN 2.8):   in_library
+aero                   realism: aerodynamic functions (docs/concepts.md (no inverse crime)):   in_library
                        in_library (polynomials in U) or realistic
                        (functions of reduced velocity, yaw factor)
 felt_wind              realism: the wind the deck feels: anemometer   anemometer
@@ -26,7 +26,7 @@ drift                  realism: relative amplitude of the daily       0
                        in [0, 1)
 ====================== ============================================= ==========================
 
-``method`` (DESIGN 7) names the method scored in the cell: ``"windows"`` (the
+``method`` (docs/methods.md) names the method scored in the cell: ``"windows"`` (the
 paper's window SINDy: the identification itself, the default), ``"campaign"``,
 ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"`` (a factory
 with no arguments returning any object with ``fit(records)``; see
@@ -134,7 +134,7 @@ _LABELS = {
     "felt_wind": "wind felt by the deck",
     "drift": "daily damping drift amplitude (-)",
 }
-#: The method factor (DESIGN 7): not in FACTORS, so that grids without it keep their table.
+#: The method factor (docs/methods.md): not in FACTORS, so that grids without it keep their table.
 METHOD_FACTOR = "method"
 _ALL_FACTORS = FACTORS + (METHOD_FACTOR,)
 _LABELS[METHOD_FACTOR] = "method"

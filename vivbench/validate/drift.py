@@ -1,4 +1,4 @@
-"""The campaign model's change flags scored against the truth's recorded slow changes (DESIGN 2.8).
+"""The campaign model's change flags scored against the truth's recorded slow changes (docs/concepts.md (no inverse crime)).
 
 The generator records, per event, the parameters its slow changes set: the
 step of damping or mass and the retrofit of the deck aerodynamics (from a

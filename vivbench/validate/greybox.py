@@ -1,7 +1,7 @@
 """The grey-box refit against the truth: curves, net linear growth rate, Y1, bands, regimes, NMSE.
 
 Validation may read an event's ``/truth`` (the fit never does). The truth's
-coefficient curves (DESIGN 3.5, ``/truth/curves`` or rebuilt from the
+coefficient curves (docs/concepts.md (coefficient curves), ``/truth/curves`` or rebuilt from the
 generator configuration) and its aerodynamic function Y1 (from the
 configuration, at yaw 0) are compared with the grey-box model's over the
 lock-in range: the winds of the truth samples in a self-excited regime (2..4).
@@ -85,7 +85,7 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
     windows : xarray.Dataset of :func:`vivbench.analysis.greybox_results` (regimes, verdicts)
     events : its per-event rows (``event_id``, ``nmse``)
     campaign_curves : xarray.Dataset or None
-        Curves (DESIGN 3.5) of another campaign-level model (the campaign
+        Curves (docs/concepts.md (coefficient curves)) of another campaign-level model (the campaign
         model) scored the same way, for comparison.
     tau : regime threshold of the truth's window regimes
     active_share : see :func:`vivbench.validate.model_window_rhs_errors_true_AU`

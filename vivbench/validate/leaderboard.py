@@ -1,4 +1,4 @@
-"""The leaderboard: every method scored on every scenario of the suite (DESIGN 7).
+"""The leaderboard: every method scored on every scenario of the suite (docs/methods.md).
 
 ``run_leaderboard(methods, scenarios, out_dir)`` runs in two stages, each
 through :func:`vivbench.core.parallel.run_tasks` (this process, local worker

@@ -7,14 +7,14 @@ score means and when it does not apply:
   A method without an identifiability verdict flags nothing: coverage 0 and
   no accuracy on flagged windows (``has_verdict`` false).
 - ``accuracy_flagged``, ``accuracy_all``: regime accuracy against the truth
-  (DESIGN 2.5) on the flagged windows and on all windows.
+  (docs/concepts.md (regimes)) on the flagged windows and on all windows.
 - ``rhs_error_true_AU``: median relative error of the method's dA/dt on the
   truth's own (A, U), over windows with dynamics; ``rhs_error_true_AU_energy``:
   the same error energy-weighted over every sample (sum of squared errors over
   sum of squared true dA/dt), which the large amplitudes dominate and the
   median hides.
 - ``curve_error``: relative RMS error of the coefficient curves a_ki(U)
-  (DESIGN 3.5) over lock-in; ``curve_error_energy``: the dA/dt the curves
+  (docs/concepts.md (coefficient curves)) over lock-in; ``curve_error_energy``: the dA/dt the curves
   give at the truth's (A, U) of every sample against the truth's curves',
   energy-weighted; only for methods with ``curves`` and truths that store
   curves (not with a damping drift), and only at winds inside the fitted data.

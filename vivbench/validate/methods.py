@@ -1,4 +1,4 @@
-"""Methods as plug-ins (DESIGN 7): resolve a method by name, fit it, score it against the truth.
+"""Methods as plug-ins (docs/methods.md): resolve a method by name, fit it, score it against the truth.
 
 A *method* is any object with ``fit(records) -> fitted``; the fitted model
 gives ``order_contributions(record)`` (n_samples, n_sections, 4) in m/s and
@@ -32,7 +32,7 @@ plug-in methods:
 - ``coverage``: share of window-equations flagged identifiable (0 for a model
   without ``identifiable``); ``accuracy_identifiable`` (NaN if none flagged),
   ``accuracy_not_identifiable``, ``accuracy_all``: regime accuracy by the rule
-  of DESIGN 2.5 applied to the model's order contributions over the window's
+  of docs/concepts.md (regimes) applied to the model's order contributions over the window's
   record samples (:func:`vivbench.regimes.model_window_regimes`) against the
   truth's over its own samples (:func:`vivbench.regimes.truth.truth_window_regimes`),
   with :func:`vivbench.validate.regime_scores` (window-equations where both
@@ -138,7 +138,7 @@ class VerdictModel:
         return getattr(self.__dict__["model"], name)
 
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
-        """Bool (W, S): the model's regime of the window is identifiable (its verdict of DESIGN 2.5).
+        """Bool (W, S): the model's regime of the window is identifiable (its verdict of docs/concepts.md (regimes)).
 
         Also needs the window's mean amplitude above the record's noise floor
         (:func:`above_noise_floor`), as ``vivbench pool`` does.
@@ -647,7 +647,7 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
     truths : sequence of xarray.Dataset, each record's event ``/truth``, same order
     windows : sequence of (window_start, window_end), one per record, optional
         Default :func:`default_windows` with ``window`` and ``step`` (s).
-    tau : regime threshold of DESIGN 2.5 (model and truth)
+    tau : regime threshold of docs/concepts.md (regimes) (model and truth)
     active_share : see :func:`vivbench.validate.model_window_rhs_errors_true_AU`
     fit_time_s : reported as is
     simulate : False skips ``simulation_nmse`` (NaN)

@@ -9,7 +9,7 @@ feeds them.
 
 Support and the synthetic bridge
 --------------------------------
-In the synthetic bridge the averaged amplitudes are A_k = phi_k Q (DESIGN 2.3),
+In the synthetic bridge the averaged amplitudes are A_k = phi_k Q (docs/concepts.md (the truth)),
 so the columns A_1^i U_1^j, A_2^i U_2^j and A_3^i U_3^j of the library are
 proportional up to the small per-section offsets of U. The truth matrix
 ``coef`` (equation, feature) is therefore only one representative of a family
@@ -55,7 +55,7 @@ REGIMES = (1, 2, 3, 4)
 SUPPORT_NOTES = (
     "In the synthetic bridge A_k = phi_k Q, so the columns A_1^i U_1^j, A_2^i U_2^j and A_3^i U_3^j are nearly "
     "proportional and the truth coefficient matrix is one representative of a family with the same dynamics "
-    "(DESIGN 2.3): term-level support scores count a term placed on another section's column as wrong although "
+    "(docs/concepts.md (the truth)): term-level support scores count a term placed on another section's column as wrong although "
     "the data cannot tell them apart.",
     "pooled_terms: a term A^i U^j is present in an equation when it is nonzero for any section; this is what "
     "the data can determine across sections.",
@@ -472,7 +472,7 @@ def curve_energy_error(curves: np.ndarray, wind: np.ndarray, U: np.ndarray, A: n
 
 def curve_errors(curves: np.ndarray, wind: np.ndarray, true_curves: np.ndarray, true_wind: np.ndarray,
                  U: np.ndarray, A: np.ndarray, self_excited: np.ndarray) -> dict:
-    """Errors of a campaign-level model's coefficient curves (DESIGN 3.5) over the lock-in range.
+    """Errors of a campaign-level model's coefficient curves (docs/concepts.md (coefficient curves)) over the lock-in range.
 
     Parameters
     ----------
@@ -485,7 +485,7 @@ def curve_errors(curves: np.ndarray, wind: np.ndarray, true_curves: np.ndarray, 
     U, A : ndarray, shape (n, S), m/s and m
         The truth's samples (all events of the campaign).
     self_excited : ndarray of bool, shape (n, S)
-        Samples whose true regime is self-excited (2..4, DESIGN 2.5).
+        Samples whose true regime is self-excited (2..4, docs/concepts.md (regimes)).
 
     Returns
     -------

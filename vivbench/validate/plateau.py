@@ -5,7 +5,7 @@ by a strong self-excited effect and a large vibration amplitude". Here that
 stretch is chosen by a rule, from the truth when there is one:
 
 - truth (:func:`truth_plateau`): the longest contiguous run of true regime 4
-  (DESIGN 2.5: the A^3 order matters, a VIV plateau) at the middle section
+  (docs/concepts.md (regimes): the A^3 order matters, a VIV plateau) at the middle section
   (S2 of three, :func:`vivbench.core.terms.reference_section`; the antinode
   of the mode); ties go to the run with the larger mean true amplitude. The campaign's clearest plateau (:func:`clearest_plateau`) is the
   longest such run over all events (ties: larger amplitude, then event id).

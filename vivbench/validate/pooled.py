@@ -1,6 +1,6 @@
 """Recovery of the truth by the campaign model of ``vivbench pool`` (``vivbench.models.campaign``).
 
-The model is used through the model protocol (DESIGN 7): regimes by
+The model is used through the model protocol (docs/methods.md): regimes by
 :func:`vivbench.regimes.model_window_regimes` on its order contributions,
 right-hand sides by its ``predict`` (on the results' measured A and U against
 the exact matrix where the truth has one, and on the truth's own A and U
@@ -46,7 +46,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     result_files : the ``<event_id>.identify.nc`` the campaign model was fitted on
         (their A and U are where the right-hand sides are compared)
     active_share : as in :func:`vivbench.validate.campaign_recovery`
-    tau : regime threshold of the truth's window regimes (DESIGN 2.5)
+    tau : regime threshold of the truth's window regimes (docs/concepts.md (regimes))
     model : fitted model of the protocol, optional
         Default: ``campaign.model.nc`` beside ``pooled_file``, or, for outputs
         without it, the model rebuilt from ``pooled_file``'s ``coef``
@@ -107,7 +107,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         if "coef" in truth.data_vars:
             e, act = model_window_rhs_errors(model, record, truth["coef"].values, truth["r"].values, start, end,
                                              active_share=active_share)
-        else:  # a truth outside the library (DESIGN 2.8): no error on the measured (A, U)
+        else:  # a truth outside the library (docs/concepts.md (no inverse crime)): no error on the measured (A, U)
             act = truth_window_activity(truth, start, end, active_share=active_share)
             e = np.full(act.shape, np.nan)
         errs.append(e.ravel())

@@ -2,14 +2,14 @@
 
 The truth of a synthetic event (``/truth``) is compared with the windows of an
 identification result (``<event_id>.identify.nc``): the true regime of each
-window and equation by the same rule as the models (DESIGN 2.5), and the
+window and equation by the same rule as the models (docs/concepts.md (regimes)), and the
 right-hand side dA/dt, in two ways:
 
 - on the true (A, U) (``rhs_error_true_AU``, any truth): the model's
   ``predict`` on a record of the truth's own time, A and U
   (:func:`truth_record`) against the truth's dA_k/dt, the sum over orders of
   ``/truth/r``. No coefficient matrix is needed, so realistic truths (aero
-  functions outside the library, DESIGN 2.8) are scored too; the error is that
+  functions outside the library, docs/concepts.md (no inverse crime)) are scored too; the error is that
   of the dynamics where the truth is, free of the measurement's errors in A and
   U (errors-in-variables).
 - on the measured (A, U) with the exact matrix (``rhs_median_rel_error``,
@@ -409,7 +409,7 @@ def truth_window_activity(truth: xr.Dataset, window_start, window_end, *, active
 
 def truth_rhs_errors(result: xr.Dataset, truth: xr.Dataset, *, active_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     """:func:`window_rhs_errors` when the truth has an exact coefficient matrix (``coef``); otherwise
-    (a truth outside the library, DESIGN 2.8) the errors are NaN (not scored) and the activity comes
+    (a truth outside the library, docs/concepts.md (no inverse crime)) the errors are NaN (not scored) and the activity comes
     from :func:`truth_window_activity`."""
     if "coef" in truth.data_vars:
         return window_rhs_errors(result, truth["coef"].values, truth["r"].values, active_share=active_share)

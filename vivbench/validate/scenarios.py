@@ -1,4 +1,4 @@
-"""The scenario suite (DESIGN 7): named, versioned synthetic campaigns on which every method is scored.
+"""The scenario suite (docs/methods.md): named, versioned synthetic campaigns on which every method is scored.
 
 A scenario is data, not a code path: a generator configuration in the layout
 of ``vivbench synth --config`` (a TOML-like dict read by
@@ -14,7 +14,7 @@ The built-in suite (:data:`SCENARIOS`, in this order):
 
 ==============  ===========================================================================
 in_library      the truth inside the identification's model class (polynomial aerodynamics
-                in U, the deck feels the anemometer's wind; DESIGN 2.8): an *in-class*
+                in U, the deck feels the anemometer's wind; docs/concepts.md (no inverse crime)): an *in-class*
                 check for library-based methods, not field performance
 realistic       the default bridge of ``vivbench synth`` (realistic mode: functions of
                 reduced velocity with a yaw factor, tributary-averaged felt wind)

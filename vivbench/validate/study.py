@@ -109,7 +109,7 @@ class StudyConfig:
     max_events : cap on each campaign's events (None: the draw's)
     max_duration : s; cap on each event's duration (None: the draw's)
     identify : the identification's configuration
-    tau : regime threshold (DESIGN 2.5)
+    tau : regime threshold (docs/concepts.md (regimes))
     """
 
     split: str

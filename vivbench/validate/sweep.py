@@ -1,7 +1,7 @@
 """Monte-Carlo recovery sweeps: many synthetic campaigns, each generated, identified and scored.
 
 A sweep varies the measurement noise, the turbulence, structural or
-aerodynamic parameters and the realism switches of DESIGN 2.8 (aerodynamic
+aerodynamic parameters and the realism switches of docs/concepts.md (no inverse crime) (aerodynamic
 functions, felt wind, damping drift) of the synthetic bridge over a grid (every combination)
 and/or ranges (drawn per campaign), and records for every campaign how well
 the identification chain recovers the truth (:func:`campaign_recovery`).

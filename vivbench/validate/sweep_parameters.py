@@ -122,12 +122,12 @@ PARAMETERS: dict[str, Parameter] = {
         "peak of Y1(U) (-)",
         _y1_peak, _set_y1_peak),
     "aero_realistic": Parameter(
-        "realism of the aerodynamic functions (DESIGN 2.8): 0 = in_library (polynomials in U), "
+        "realism of the aerodynamic functions (docs/concepts.md (no inverse crime)): 0 = in_library (polynomials in U), "
         "1 = realistic (AeroConfig.realistic(): functions of reduced velocity with a yaw factor); grid only",
         "aerodynamic functions (0 in_library, 1 realistic)",
         _aero_realistic, _set_aero_realistic, switch=True),
     "felt_wind_tributary": Parameter(
-        "wind the deck feels (DESIGN 2.8): 0 = its anemometer's low-passed wind, "
+        "wind the deck feels (docs/concepts.md (no inverse crime)): 0 = its anemometer's low-passed wind, "
         "1 = the tributary-averaged wind of a spatially resolved field (wind.felt_wind); grid only",
         "felt wind (0 anemometer, 1 tributary)",
         lambda g: float(g.wind.felt_wind == "tributary"), _set_felt_wind, switch=True),
