@@ -68,6 +68,10 @@ def test_tiny_study_writes_a_row_per_draw_and_method(tiny_study):
                          reason="the table rounds to 6 significant digits")
         else:
             assert 0 <= int(r["self_excited_flags"]) and 0 <= int(r["n_flagged"]) <= int(r["n_scored"])
+        if r["method"] == "varying":  # the candidate chosen from the campaign's evidence, a member of its set
+            assert r["chosen"].startswith("yaw") and r["chosen"] in r["confidence_set"].split(";")
+        else:
+            assert r["chosen"] == "" and r["change_index"] == "-1"
     summary = json.loads((out / "summary.json").read_text())
     assert summary["capped"] and summary["draws_scored"] == [0, 1]
     block = summary["methods"]["varying"]["all"]

@@ -233,7 +233,7 @@ def _choice(fitted) -> dict[str, Any]:
         return {"chosen": "", "confidence_set": ""}
     ev = evidence()
     return {"chosen": str(ev["chosen"]),
-            "confidence_set": ",".join(c["name"] for c in ev["candidates"] if c["in_set"])}
+            "confidence_set": ";".join(c["name"] for c in ev["candidates"] if c["in_set"])}
 
 
 def _change_scan(fitted, records) -> dict[str, Any]:
