@@ -65,6 +65,9 @@ SUITE = (
     Bench(name="greybox", full={"argv": []}, needs=("demo/identify", "demo/campaign")),
 )
 
+#: Lists of rows longer than this are left out of the results page (they stay in the JSON file).
+LIST_ROWS = 12
+
 #: Accuracy studies: separate commands on a given campaign and its results (``--help`` of each).
 STUDIES = ("campaign_simulation", "change_calibration", "change_flags", "floor", "greybox_substitution",
            "greybox_verdict_bounds", "misspecification", "refit", "tied_wind", "wind_input_cv")
@@ -123,6 +126,9 @@ def _flatten(d, prefix: str = ""):
         if isinstance(value, dict):
             yield from _flatten(value, name + ".")
         elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            if len(value) > LIST_ROWS:  # per-event rows: in the JSON file, not on the page
+                yield name, f"{len(value)} rows (in the JSON results file)"
+                continue
             for i, v in enumerate(value):
                 yield from _flatten(v, f"{name}[{i}].")
         else:
