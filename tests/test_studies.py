@@ -1,8 +1,7 @@
 """Campaign-scale studies (slow: ``make test-slow``).
 
 They run the whole identification chain on full default-size campaigns and
-check the recovery figures that the README quotes, so that a change which
-degrades them is seen.
+check recovery targets on them, so that a change which degrades them is seen.
 """
 
 from __future__ import annotations
@@ -43,8 +42,7 @@ def clean_recovery(clean_campaign):
 
 
 def test_clean_campaign_model_recovers_the_regimes(clean_campaign):
-    # issue 3: regimes match the truth on >= 90 % of identifiable windows, with a coverage
-    # that is not vacuous (the README quotes 0.99 coverage and 1.000 accuracy)
+    # regimes match the truth on >= 90 % of identifiable windows, with a coverage that is not vacuous
     tmp, camp, results = clean_campaign
     pooled = write_pooled(pool_results(results, PooledSINDy()), tmp / "results")
     scores = pooled_recovery(camp.files, pooled, results)
