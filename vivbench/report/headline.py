@@ -20,10 +20,12 @@ HEADLINE_ROWS = (
     "window models: coverage (flagged identifiable)",
     "window models: regime accuracy, all windows",
     "window models: median rel. error of dA/dt on the true (A, U), windows with dynamics",
+    "window models: rel. error of dA/dt on the true (A, U), energy-weighted over every window sample",
     "campaign model: coverage (flagged identifiable)",
     "campaign model: regime accuracy, flagged windows",
     "campaign model: regime accuracy, all windows",
     "campaign model: median rel. error of dA/dt on the true (A, U), windows with dynamics",
+    "campaign model: rel. error of dA/dt on the true (A, U), energy-weighted over every sample",
     "campaign model: curve error over lock-in, net linear a_k1(U) (rel. RMS)",
 )
 
