@@ -155,3 +155,34 @@ def test_cli_study_refuses_unknown_methods(tmp_path, capsys):
     assert main(["study", "--split", "development", "--draws", "0", "--methods", "varying,nope",
                  "--out", str(tmp_path)]) == 2
     assert "nope" in capsys.readouterr().err
+
+
+def test_summary_counts_wins_choices_and_change_alarms():
+    from vivbench.validate.study_report import study_markdown, study_summary
+
+    def row(draw, method, err, **kw):
+        base = {"draw": str(draw), "method": method, "rhs_error_true_AU_energy": str(err), "yaw_effect": "absent",
+                "change": "none", "step_event": "0", "chosen": "", "change_p_value": "nan",
+                "change_detected": "0", "change_index": "-1", "error": ""}
+        base.update({k: str(v) for k, v in kw.items()})
+        return base
+
+    rows = [row(0, "a", 0.1, chosen="yaw0-cv", change_p_value=0.5, yaw_effect="gaussian"),
+            row(0, "b", 0.2),
+            row(1, "a", 0.3, chosen="yaw1-least", change_p_value=0.01, change_detected=1, change_index=1,
+                yaw_effect="gaussian"),
+            row(1, "b", 0.2),
+            row(2, "a", 0.1, chosen="yaw0-cv", change="damping_step", step_event=4, change_p_value=0.02,
+                change_detected=1, change_index=2),     # first changed event E004: index 3, found at 2
+            row(2, "b", "nan"),
+            row(3, "a", 0.1, chosen="yaw1-cv", change="damping_step", step_event=2, change_p_value=0.4)]
+    summary = study_summary({"split": "development", "draws": [0, 1, 2, 3], "methods": ["a", "b"]}, rows)
+    assert summary["versus"]["a vs b"] == {"draws": 2, "lower": 1, "share_lower": 0.5}
+    a = summary["methods"]["a"]
+    assert a["yaw_present"]["choices"] == {"draws": 2, "yaw_chosen": 1}
+    assert a["yaw_absent"]["choices"] == {"draws": 2, "yaw_chosen": 1}
+    assert a["all"]["changes"] == {"draws_without_change": 2, "false_alarms": 1, "draws_with_step": 2,
+                                   "detected": 1, "located_within_one_event": 1}
+    assert summary["methods"]["b"]["all"]["changes"]["draws_without_change"] == 0  # never scanned
+    page = study_markdown(summary)
+    assert "| a vs b | 2 | 1 | 0.500 |" in page and "## Changes the wind does not carry" in page

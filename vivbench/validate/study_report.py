@@ -29,12 +29,13 @@ PROMISE_SHARE = 0.95
 PROMISE_MIN_FLAGS = 20
 #: Scores summarised over draws, each with the direction in which it gets worse.
 SUMMARY_SCORES = (("rhs_error_true_AU_energy", "high"), ("rhs_error_true_AU_median_active", "high"),
-                  ("curve_error_total", "high"), ("curve_error_linear", "high"), ("flagged_right_share", "low"),
+                  ("curve_error_energy", "high"), ("curve_error_total", "high"), ("curve_error_linear", "high"),
+                  ("flagged_right_share", "low"),
                   ("coverage", "low"), ("accuracy_all", "low"))
 _SUBSETS = (("all", None), ("yaw_present", True), ("yaw_absent", False))
 _LABELS = {"rhs_error_true_AU_energy": "dA/dt error on the true (A, U), energy-weighted",
            "rhs_error_true_AU_median_active": "dA/dt error on the true (A, U), median over active windows",
-           "curve_error_total": "curve error (total)", "curve_error_linear": "curve error (linear order)",
+           "curve_error_energy": "curve error, energy-weighted", "curve_error_total": "curve error (total)", "curve_error_linear": "curve error (linear order)",
            "flagged_right_share": "share of flags right", "coverage": "coverage (share flagged)",
            "accuracy_all": "regime accuracy, all windows"}
 
@@ -80,10 +81,51 @@ def _forced(rows: Sequence[dict]) -> dict[str, Any]:
             "draws_with_self_excited_flags": int(sum(1 for f in flags if f > 0))}
 
 
+def _choices(rows: Sequence[dict]) -> dict[str, Any]:
+    """How often a model that chooses from the campaign's evidence took a yaw covariate (``chosen`` "yawN-...")."""
+    chosen = [r for r in rows if str(r.get("chosen") or "").startswith("yaw")]
+    with_yaw = [r for r in chosen if not str(r["chosen"]).startswith("yaw0")]
+    return {"draws": len(chosen), "yaw_chosen": len(with_yaw)}
+
+
+def _changes(rows: Sequence[dict]) -> dict[str, Any]:
+    """The change scan's alarms on draws without a change, and its detections of the damping steps.
+
+    A step is located when the first event after the scan's split is within one event of the first
+    event with the step (``step_event``, counted from 1).
+    """
+    scanned = [r for r in rows if math.isfinite(_number(r.get("change_p_value")))]
+    none = [r for r in scanned if r.get("change") == "none"]
+    steps = [r for r in scanned if r.get("change") not in (None, "", "none")]
+    found = [r for r in steps if int(_number(r.get("change_detected")) or 0)]
+    located = [r for r in found
+               if abs(int(_number(r.get("change_index"))) - (int(_number(r.get("step_event"))) - 1)) <= 1]
+    return {"draws_without_change": len(none),
+            "false_alarms": sum(1 for r in none if int(_number(r.get("change_detected")) or 0)),
+            "draws_with_step": len(steps), "detected": len(found), "located_within_one_event": len(located)}
+
+
 def _block(rows: Sequence[dict]) -> dict[str, Any]:
     return {"n_draws": len(rows), "method_errors": sum(1 for r in rows if r.get("error")),
             "scores": {key: _distribution(rows, key, worse) for key, worse in SUMMARY_SCORES},
-            "promise": _promise(rows), "forced_only": _forced(rows)}
+            "promise": _promise(rows), "forced_only": _forced(rows), "choices": _choices(rows),
+            "changes": _changes(rows)}
+
+
+def _versus(rows: Sequence[dict], methods: Sequence[str], key: str = "rhs_error_true_AU_energy") -> dict[str, Any]:
+    """For every ordered pair of methods, on how many draws (with both scores) the first's error is the lower."""
+    by = {(int(r["draw"]), r["method"]): _number(r.get(key)) for r in rows}
+    draws = sorted({int(r["draw"]) for r in rows})
+    out: dict[str, Any] = {}
+    for a in methods:
+        for b in methods:
+            if a == b:
+                continue
+            both = [d for d in draws if math.isfinite(by.get((d, a), math.nan)) and math.isfinite(by.get((d, b), math.nan))]
+            better = sum(1 for d in both if by[(d, a)] < by[(d, b)])
+            out[f"{a} vs {b}"] = {"draws": len(both), "lower": better,
+                                  "share_lower": _plain(better / len(both)) if both else None}
+    return out
 
 
 def study_summary(config: dict[str, Any], rows: Sequence[dict], *, failed: Sequence[int] = ()) -> dict[str, Any]:
@@ -110,6 +152,7 @@ def study_summary(config: dict[str, Any], rows: Sequence[dict], *, failed: Seque
         out["methods"][name] = {
             subset: _block([r for r in mine if want is None or (r.get("yaw_effect") != "absent") == want])
             for subset, want in _SUBSETS}
+    out["versus"] = _versus(rows, config["methods"])
     return out
 
 
@@ -188,6 +231,30 @@ def study_markdown(summary: dict[str, Any]) -> str:
             f = block["forced_only"]
             lines.append(f"| {name} | {_subset(subset, block)} | {f['draws']} | {f['self_excited_flags']} | "
                          f"{f['draws_with_self_excited_flags']} |")
+    lines += ["", "## Against each other", "",
+              "Draws on which the first method's energy-weighted dA/dt error on the true (A, U) is below the "
+              "second's.", "", "| methods | draws with both | first lower | share |", "|---|---|---|---|"]
+    for pair, v in summary.get("versus", {}).items():
+        lines.append(f"| {pair} | {v['draws']} | {v['lower']} | {_fmt(v['share_lower'])} |")
+    lines += ["", "## Covariates chosen from the campaign's evidence", "",
+              "Draws on which a method that chooses its options from held-out events took a yaw covariate.", "",
+              "| method | draws | draws with a choice | yaw chosen |", "|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        for subset, block in blocks.items():
+            c = block["choices"]
+            if c["draws"]:
+                lines.append(f"| {name} | {_subset(subset, block)} | {c['draws']} | {c['yaw_chosen']} |")
+    lines += ["", "## Changes the wind does not carry", "",
+              "The model's change scan (refits before and after every split of the events, permutation p-value "
+              "below 0.05): alarms on draws without a change, and damping steps detected and located within one "
+              "event.", "",
+              "| method | draws without change | false alarms | draws with a step | detected | located |",
+              "|---|---|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        ch = blocks["all"]["changes"]
+        if ch["draws_without_change"] or ch["draws_with_step"]:
+            lines.append(f"| {name} | {ch['draws_without_change']} | {ch['false_alarms']} | {ch['draws_with_step']} | "
+                         f"{ch['detected']} | {ch['located_within_one_event']} |")
     errors = {name: blocks["all"]["method_errors"] for name, blocks in summary["methods"].items()}
     if any(errors.values()):
         lines += ["", "Method failures (see the `error` column of study.csv): "
