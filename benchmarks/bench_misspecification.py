@@ -44,7 +44,7 @@ name contains TEXT, ``--no-truth-fits`` skips the fits on the truth, ``--n-basis
 sets the varying models' candidate numbers of B-splines, ``--model-set-level L`` their
 ``model_set_level``, ``--no-eiv-weights`` their ``eiv_weights=False``, ``--wind-weights`` and
 ``--penalty-choice`` their ``wind_weights`` and ``penalty_choice`` (default: equal and cv, the settings of every
-figure this benchmark gave before the model's defaults became "auto"; ``auto`` follows the model's).
+figure this benchmark gave).
 ``--substitute U,A,dA,U+A+dA`` adds, for the varying models, fits on
 the measured records with some inputs replaced by the truth's (interpolated to the
 measured grid, the measured gaps kept): which errors-in-variables cost most
@@ -304,9 +304,9 @@ def main(argv=None) -> dict:
                              "weights against the wind error)")
     parser.add_argument("--wind-weights", default="equal", choices=("equal", "modal"),
                         help="the varying models' wind_weights: the sections' weights in the mean wind (default: "
-                             "equal, the model's default before 'auto')")
+                             "equal, the setting of this benchmark's earlier figures)")
     parser.add_argument("--penalty-choice", default="cv", choices=("cv", "least", "loeo"),
-                        help="the varying models' penalty_choice (default: cv, the model's default before 'auto')")
+                        help="the varying models' penalty_choice (default: cv)")
     parser.add_argument("--substitute", default="",
                         help="comma-separated truth substitutions for the varying models, each a '+'-joined "
                              "subset of U, A, dA (e.g. 'U,A,dA'): fits on the measured records with those inputs "
