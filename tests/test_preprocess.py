@@ -392,3 +392,18 @@ def test_edge_covers_the_filters():
     assert config.settling_s(F_MODE) >= 3.0 / (2.0 * np.pi * config.wind_cutoff_hz)
     assert config.settling_s(0.05) > PreprocessConfig().edge_s, "a slow mode's narrow band needs a longer edge"
     assert PreprocessConfig().settling_s(F_MODE) == 60.0
+
+
+@given(mask=st.lists(st.booleans(), max_size=60))
+@settings(max_examples=80, deadline=None)
+def test_mask_runs_are_the_maximal_runs_of_true(mask):
+    from vivbench.preprocess import mask_runs
+
+    expected, start = [], None
+    for i, v in enumerate(mask + [False]):  # a plain loop over the samples, for reference
+        if v and start is None:
+            start = i
+        elif not v and start is not None:
+            expected.append((start, i))
+            start = None
+    assert [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool))] == expected

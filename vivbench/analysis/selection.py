@@ -50,6 +50,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record
+from vivbench.preprocess.runs import mask_runs
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regimes.model import model_window_regimes
 
@@ -110,12 +111,6 @@ def event_folds(n_events: int, n_folds: int, seed: int = 0) -> np.ndarray:
     return fold
 
 
-def _runs(ok: np.ndarray) -> list[slice]:
-    """Contiguous runs of True in ``ok`` (n,), as slices."""
-    edges = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
-    return [slice(int(a), int(b)) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
-
-
 def _decimated(record: Record, step_s: float) -> Record:
     """Every k-th sample of the record, k = round(step_s / its median step) (the record itself when k <= 1)."""
     if record.n_samples < 2:
@@ -152,16 +147,15 @@ def held_out_loss(model, record: Record, criterion: str = "output", min_samples:
     ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
     if criterion == "derivative":
         f = np.asarray(model.predict(rec), dtype=float)
-        err = np.where(ok[:, None], f - rec.dA, 0.0)
         good = ok[:, None] & np.isfinite(rec.dA)
-        miss = good & ~np.isfinite(err)
-        err = np.where(miss, rec.dA, np.where(good, err, 0.0))
+        # a sample the model does not predict counts as missed by the whole measured dA/dt
+        err = np.where(good, np.where(np.isfinite(f), f - rec.dA, rec.dA), 0.0)
         return float(np.sum(err**2))
     rec = _decimated(rec, step_s)
     ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
     total = 0.0
     peak = float(np.nanmax(np.abs(rec.A))) if np.isfinite(rec.A).any() else 0.0
-    for run in _runs(ok):
+    for run in mask_runs(ok):
         if run.stop - run.start < min_samples:
             continue
         sim = model.simulate(rec, float(rec.t[run.start]), float(rec.t[run.stop - 1]))
@@ -232,14 +226,11 @@ def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: n
     The noise is white noise smoothed by a Gaussian of standard deviation ``timescale_s``
     and rescaled to unit variance; NaN samples stay NaN.
     """
-    n, S = record.U.shape
-    dt = float(np.median(np.diff(record.t))) if n > 1 else 1.0
-    noise = rng.standard_normal((n, S))
+    noise = rng.standard_normal(record.U.shape)
     probe = Record(event_id=record.event_id, t=record.t, A=record.A, U=noise, dA=record.dA)
     smooth = smooth_wind(probe, float(timescale_s)).U
     sd = smooth.std(axis=0)
     smooth = smooth / np.where(sd > 0, sd, 1.0)
-    del dt
     U = record.U + smooth * np.asarray(scale, dtype=float)[None, :]
     return Record(event_id=record.event_id, t=record.t, A=record.A, U=U, dA=record.dA, yaw=record.yaw,
                   noise_std=record.noise_std)

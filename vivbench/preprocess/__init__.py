@@ -17,6 +17,7 @@ from vivbench.preprocess.runs import (
     as_2d,
     run_rate,
     valid_runs,
+    mask_runs,
     trusted_intervals,
     intersect_intervals,
     segments,
@@ -39,7 +40,7 @@ from vivbench.preprocess.yaw import event_yaw, mean_yaw
 __all__ = [
     "band_gain", "Preprocessed", "preprocess_arrays", "PreprocessConfig", "DERIVATIVE_METHODS", "Derivative",
     "TVDerivativeResult", "estimate_noise_std", "tv_derivative", "band_noise_std", "window_amplitude_snr",
-    "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "trusted_intervals",
+    "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "mask_runs", "trusted_intervals",
     "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid", "welch_psd",
     "spectral_peak", "modal_frequency", "displacement", "envelope", "wind_speed_direction",
     "perpendicular_speed", "mean_wind", "perpendicular_wind", "mean_wind_runs", "window_bounds", "mean_yaw",

@@ -8,7 +8,7 @@ import numpy as np
 
 from vivbench.core.errors import InputError
 
-__all__ = ["check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "trusted_intervals", "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid"]
+__all__ = ["mask_runs", "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "trusted_intervals", "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid"]
 
 
 # A step between time stamps larger than this multiple of the nominal step is a
@@ -35,6 +35,12 @@ def _run_bounds(mask: np.ndarray, breaks: np.ndarray | None = None) -> tuple[np.
     end = mask.copy()
     end[:-1] &= cut
     return np.flatnonzero(start), np.flatnonzero(end) + 1
+
+
+def mask_runs(mask) -> list[slice]:
+    """The runs of True in a boolean mask, shape (n,), as slices in order (none for an all-False mask)."""
+    starts, ends = _run_bounds(mask)
+    return [slice(int(a), int(b)) for a, b in zip(starts, ends)]
 
 
 def _positions(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:

@@ -94,6 +94,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.model_input import measured_input
+from vivbench.preprocess.runs import mask_runs
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import curve_energy_error, curve_errors, curves_rhs, energy_relative_error
@@ -373,7 +374,7 @@ class WindowMethod:
         for k, rec in enumerate(records):
             ids.append(rec.event_id)
             reg_e, ok_e, s_e, e_e = [], [], [], []
-            for run in _runs(rec.valid(need_dA=True)):
+            for run in mask_runs(rec.valid(need_dA=True)):
                 t = rec.t[run]
                 if t.size < 2 or t[-1] - t[0] < cfg.window:
                     continue
@@ -404,11 +405,6 @@ class WindowMethod:
         model.n_sections_ = S
         model.feature_names_ = est.feature_names_
         return FittedWindows(model, regimes, flags, bounds)
-
-
-def _runs(ok: np.ndarray) -> list[slice]:
-    edges = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
-    return [slice(a, b) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
 
 
 def check_method_spec(spec) -> str:
@@ -494,7 +490,7 @@ def default_windows(record: Record, window: float = 50.0, step: float = 25.0) ->
 
     ok = record.valid(need_dA=record.dA is not None)
     starts, ends = [], []
-    for run in _runs(ok):
+    for run in mask_runs(ok):
         t = record.t[run]
         if t.size < 2 or t[-1] - t[0] < window:
             continue
@@ -517,7 +513,7 @@ class _SumPredict:
 
 
 def _longest_run(record: Record) -> slice | None:
-    runs = _runs(record.valid())
+    runs = mask_runs(record.valid())
     if not runs:
         return None
     return max(runs, key=lambda s: s.stop - s.start)
