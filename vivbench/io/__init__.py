@@ -17,6 +17,7 @@ from vivbench.io.event import (
     read_event_summary,
     peek_event_id,
 )
+from vivbench.io.event_schema import CHANGE_VARIABLES, CURVE_UNITS, EVENT_ID_PATTERN, validate_root_attributes
 from vivbench.io.result import (
     FEATURES_PER_SECTION,
     VariableSpec,
@@ -80,6 +81,7 @@ __all__ = [
     "NETCDF_ENGINE", "atomic_path", "write_netcdf_atomic", "EventFormatError", "FORMAT", "FORMAT_VERSION",
     "NOMINAL_RATES", "COEF_UNITS", "build_event", "validate_event", "write_event", "read_event",
     "event_arrays", "list_events", "EventSummary", "read_event_summary", "peek_event_id",
+    "CHANGE_VARIABLES", "CURVE_UNITS", "EVENT_ID_PATTERN", "validate_root_attributes",
     "FEATURES_PER_SECTION", "VariableSpec", "VARIABLES", "COORDINATES", "ATTRIBUTES", "WINDOW_FIT_VARIABLES",
     "ResultFormatError", "build_result", "write_result", "read_result", "list_results", "result_path",
     "result_record", "result_noise_std", "markdown_table", "markdown_attributes", "ModelFileError", "read_model_dataset",
