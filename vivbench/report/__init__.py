@@ -15,6 +15,8 @@ from vivbench.report.figures import (
     time_frequency_figure,
     wind_figure,
 )
+from vivbench.report.figure_style import SECTION_COLOURS, count_word, figure_file, section_index
+from vivbench.report.forecast_figures import curves_figure
 from vivbench.report.greybox import (greybox_curves_figure, greybox_functions_figure, greybox_section,
                                      greybox_simulation_figure, greybox_yaw_figure)
 from vivbench.report.headline import (HEADLINE_BEGIN, HEADLINE_END, HEADLINE_ROWS, HEADLINE_SECTION, headline_table,
@@ -30,5 +32,6 @@ __all__ = [
     "event_figure", "forecast_figure", "model_forecast_figure", "regime_timeline_figure", "sensor_layout_figure", "term_scale",
     "time_frequency_figure", "wind_figure", "write_report", "greybox_curves_figure", "greybox_functions_figure",
     "greybox_section", "greybox_simulation_figure", "greybox_yaw_figure", "HEADLINE_BEGIN", "HEADLINE_END", "HEADLINE_ROWS",
-    "HEADLINE_SECTION", "headline_table", "readme_with_headline",
+    "HEADLINE_SECTION", "headline_table", "readme_with_headline", "SECTION_COLOURS", "count_word", "figure_file",
+    "section_index", "curves_figure",
 ]

@@ -16,40 +16,27 @@ from __future__ import annotations
 
 import json
 import shutil
-from contextlib import contextmanager
 from pathlib import Path
 from urllib.parse import quote
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
 from vivbench.core.terms import reference_section  # noqa: E402
 from vivbench.io.netcdf import atomic_path  # noqa: E402
+from vivbench.report.figure_style import figure_file  # noqa: E402
 
 __all__ = ["greybox_functions_figure", "greybox_curves_figure", "greybox_simulation_figure", "greybox_yaw_figure",
            "greybox_section", "GREYBOX_FIGURES"]
 
-DPI = 100
 _UNITS = ("m/s", "1/s", "1/(m s)", "1/(m$^2$ s)")
 _COLOURS = {"greybox": "#d95f02", "campaign": "#7570b3", "truth": "k"}
 #: The figures ``vivbench greybox`` writes, in report order.
 GREYBOX_FIGURES = ("greybox_functions.png", "greybox_yaw.png", "greybox_curves.png", "greybox_simulations.png",
                    "greybox_benchmark.png")
-
-
-@contextmanager
-def _figure(path, nrows, ncols, *, figsize, **kwargs):
-    fig, axes = plt.subplots(nrows, ncols, figsize=figsize, **kwargs)
-    try:
-        yield fig, axes
-        with atomic_path(Path(path), suffix=".png") as tmp:
-            fig.savefig(tmp, dpi=DPI, format="png", metadata={"Software": None})
-    finally:
-        plt.close(fig)
 
 
 def greybox_functions_figure(phys: xr.Dataset, path, *, truth: dict | None = None) -> Path:
@@ -63,7 +50,7 @@ def greybox_functions_figure(phys: xr.Dataset, path, *, truth: dict | None = Non
         ``{"Ur": (n,), "Y1": (n,), ...}`` the truth's functions (yaw 0), drawn in black.
     """
     ur = phys["reduced_velocity"].values
-    with _figure(path, 2, 2, figsize=(10, 7), constrained_layout=True, sharex=True) as (fig, axes):
+    with figure_file(path, 2, 2, figsize=(10, 7), constrained_layout=True, sharex=True) as (fig, axes):
         for ax, name in zip(axes.ravel(), ("Y1", "e1", "e2", "C_L")):
             if truth is not None and name in truth:
                 sel = (truth["Ur"] >= ur.min()) & (truth["Ur"] <= ur.max())
@@ -94,7 +81,7 @@ def greybox_yaw_figure(yaw: xr.Dataset, path, *, truth: np.ndarray | None = None
         Measured yaw angles of the fitted records (their range is shaded).
     """
     psi = yaw["yaw"].values
-    with _figure(path, 1, 1, figsize=(6, 4), constrained_layout=True) as (fig, ax):
+    with figure_file(path, 1, 1, figsize=(6, 4), constrained_layout=True) as (fig, ax):
         if measured is not None and np.isfinite(measured).any():
             ax.axvspan(np.nanmin(measured), np.nanmax(measured), color="0.9", label="measured yaw range")
         if truth is not None:
@@ -117,7 +104,7 @@ def greybox_curves_figure(curves: xr.Dataset, path, *, campaign: xr.Dataset | No
     sections = [str(s) for s in curves["equation"].values]
     k = reference_section(len(sections))
     wind = curves["wind"].values
-    with _figure(path, 2, 2, figsize=(10, 7), constrained_layout=True, sharex=True) as (fig, axes):
+    with figure_file(path, 2, 2, figsize=(10, 7), constrained_layout=True, sharex=True) as (fig, axes):
         for i, ax in enumerate(axes.ravel()):
             vals = [curves["curves"].values[k, i]]
             if truth is not None:
@@ -152,7 +139,7 @@ def greybox_curves_figure(curves: xr.Dataset, path, *, campaign: xr.Dataset | No
 def greybox_simulation_figure(sims: list, path) -> Path:
     """Measured and simulated envelopes of the reference section: ``sims`` is a list of (event_id, Simulation)."""
     n = max(len(sims), 1)
-    with _figure(path, n, 1, figsize=(10, 2.4 * n), constrained_layout=True, squeeze=False) as (fig, axes):
+    with figure_file(path, n, 1, figsize=(10, 2.4 * n), constrained_layout=True, squeeze=False) as (fig, axes):
         for ax, (eid, sim) in zip(axes[:, 0], sims):
             k = reference_section(sim.A_sim.shape[1])
             ax.plot(sim.t / 60.0, sim.A_meas[:, k], color="0.4", lw=1.0, label="measured A")

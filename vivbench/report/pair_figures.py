@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 
 from vivbench.core.errors import InputError  # noqa: E402
 from vivbench.io.netcdf import atomic_path  # noqa: E402
-from vivbench.report.figures import DPI  # noqa: E402
+from vivbench.report.figure_style import DPI  # noqa: E402
 
 __all__ = ["PAIR_COLOURS", "recovery_pair_figure"]
 
