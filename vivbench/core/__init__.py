@@ -12,7 +12,7 @@ from vivbench.core.terms import (
 )
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU, classify_regime, order_rms, regime_rule
-from vivbench.core.errors import InputError, error_line
+from vivbench.core.errors import InputError, error_line, require
 from vivbench.core.toml import load_toml
 from vivbench.core.parallel import Outcome, run_tasks, parse_scheduler
 from vivbench.core.lock import exclusive_directory
@@ -22,5 +22,5 @@ __all__ = [
     "exclusive_directory", "EXTRA_STEPS",
     "A_POWERS", "U_POWERS", "SECTIONS", "reference_section", "section_exponents", "feature_exponents",
     "feature_names", "evaluate_library", "Record", "DEFAULT_TAU", "classify_regime", "order_rms",
-    "regime_rule", "InputError", "error_line", "load_toml", "Outcome", "run_tasks", "parse_scheduler",
+    "regime_rule", "InputError", "error_line", "require", "load_toml", "Outcome", "run_tasks", "parse_scheduler",
 ]

@@ -6,7 +6,7 @@ line and exits 2; any other exception is a bug and shows its traceback.
 
 from __future__ import annotations
 
-__all__ = ["InputError", "error_line"]
+__all__ = ["InputError", "error_line", "require"]
 
 
 class InputError(ValueError):
@@ -27,3 +27,9 @@ def error_line(exc: BaseException) -> str:
     if not isinstance(exc, (InputError, OSError)):
         text = f"internal error ({text})"
     return " ".join(text.split())
+
+
+def require(condition: bool, message: str) -> None:
+    """Raise :class:`InputError` with ``message`` (what is wrong and what is allowed) unless ``condition`` holds."""
+    if not condition:
+        raise InputError(message)

@@ -28,8 +28,10 @@ from vivbench.synth.curves import (
     YawFactor,
     curve_from_data,
 )
+from vivbench.core.errors import require
+from vivbench.synth.changes_config import ChangesConfig
+from vivbench.synth.sensor_config import DefectConfig, SensorConfig
 from vivbench.synth.turbulence import TurbulenceConfig
-from vivbench.core.errors import InputError
 
 __all__ = [
     "Polynomial",
@@ -52,14 +54,9 @@ __all__ = [
 ]
 
 
-def _check(cond: bool, msg: str) -> None:
-    if not cond:
-        raise InputError(msg)
-
-
 def bell_polynomial(peak: float, center: float, half_width: float) -> Polynomial:
     """peak * (1 - ((U - center) / half_width)^2): positive on center +- half_width, negative outside."""
-    _check(half_width > 0, f"half_width must be positive; got {half_width}")
+    require(half_width > 0, f"half_width must be positive; got {half_width}")
     a = peak / half_width**2
     return Polynomial(coefficients=(peak - a * center**2, 2 * a * center, -a))
 
@@ -108,18 +105,18 @@ class StructureConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "mode_shape", tuple(float(x) for x in self.mode_shape))
         object.__setattr__(self, "tributary_lengths", tuple(float(x) for x in self.tributary_lengths))
-        _check(0.01 <= self.frequency <= 20.0, f"frequency must be in [0.01, 20] Hz; got {self.frequency}")
-        _check(0.0 <= self.damping_ratio < 0.2, f"damping_ratio must be in [0, 0.2); got {self.damping_ratio}")
-        _check(len(self.mode_shape) >= 1, "mode_shape needs one value per section (at least one); got none")
-        _check(all(x > 0 for x in self.mode_shape),
+        require(0.01 <= self.frequency <= 20.0, f"frequency must be in [0.01, 20] Hz; got {self.frequency}")
+        require(0.0 <= self.damping_ratio < 0.2, f"damping_ratio must be in [0, 0.2); got {self.damping_ratio}")
+        require(len(self.mode_shape) >= 1, "mode_shape needs one value per section (at least one); got none")
+        require(all(x > 0 for x in self.mode_shape),
                f"mode_shape values must be positive (sections in phase, as the truth formulas assume); got {self.mode_shape}")
         n = len(self.mode_shape)
-        _check(len(self.tributary_lengths) == n,
+        require(len(self.tributary_lengths) == n,
                f"tributary_lengths needs one value per section ({n}, as mode_shape); got {len(self.tributary_lengths)}")
-        _check(all(x > 0 for x in self.tributary_lengths),
+        require(all(x > 0 for x in self.tributary_lengths),
                f"tributary_lengths must be positive (m); got {self.tributary_lengths}")
         for name in ("span_length", "depth", "mass", "air_density"):
-            _check(getattr(self, name) > 0, f"{name} must be positive; got {getattr(self, name)}")
+            require(getattr(self, name) > 0, f"{name} must be positive; got {getattr(self, name)}")
 
     @property
     def omega(self) -> float:
@@ -214,15 +211,15 @@ class AeroConfig:
             object.__setattr__(self, name, curve_from_data(getattr(self, name), name))
         if isinstance(self.yaw, dict):
             object.__setattr__(self, "yaw", YawFactor(**_tuples(self.yaw)))
-        _check(self.yaw is None or isinstance(self.yaw, YawFactor),
+        require(self.yaw is None or isinstance(self.yaw, YawFactor),
                f"yaw must be a YawFactor table (shape, exponent, width_deg, applies_to) or absent; got {self.yaw!r}")
         if not isinstance(self.C_L, Polynomial):
-            _check(self.C_L.lower_bound >= 0,
+            require(self.C_L.lower_bound >= 0,
                    f"C_L must be >= 0 at every wind speed; {self.C_L.kind} C_L reaches {self.C_L.lower_bound}")
-        _check(0.01 <= self.strouhal <= 1.0, f"strouhal must be in [0.01, 1]; got {self.strouhal}")
-        _check(self.cl_unlocked >= 0, f"cl_unlocked must be >= 0; got {self.cl_unlocked}")
-        _check(self.lock_bandwidth > 0, f"lock_bandwidth must be positive (Hz); got {self.lock_bandwidth}")
-        _check(self.buffeting_u >= 0 and self.buffeting_w >= 0, "buffeting coefficients must be >= 0")
+        require(0.01 <= self.strouhal <= 1.0, f"strouhal must be in [0.01, 1]; got {self.strouhal}")
+        require(self.cl_unlocked >= 0, f"cl_unlocked must be >= 0; got {self.cl_unlocked}")
+        require(self.lock_bandwidth > 0, f"lock_bandwidth must be positive (Hz); got {self.lock_bandwidth}")
+        require(self.buffeting_u >= 0 and self.buffeting_w >= 0, "buffeting coefficients must be >= 0")
 
     @classmethod
     def in_library(cls, **overrides) -> AeroConfig:
@@ -258,7 +255,7 @@ class AeroConfig:
     @classmethod
     def from_mode(cls, mode: str, **overrides) -> AeroConfig:
         """The named mode ``"in_library"`` or ``"realistic"`` with keyword overrides."""
-        _check(mode in AERO_MODES, f"aero mode must be one of {list(AERO_MODES)}; got {mode!r}")
+        require(mode in AERO_MODES, f"aero mode must be one of {list(AERO_MODES)}; got {mode!r}")
         return cls.in_library(**overrides) if mode == "in_library" else cls.realistic(**overrides)
 
     def polynomials(self) -> dict[str, Polynomial] | None:
@@ -379,220 +376,49 @@ class WindConfig:
             object.__setattr__(self, "turbulence", TurbulenceConfig(**_tuples(self.turbulence)))
         object.__setattr__(self, "slow_timescales", tuple(float(x) for x in self.slow_timescales))
         object.__setattr__(self, "direction_offset_deg", tuple(float(x) for x in self.direction_offset_deg))
-        _check(0 <= self.span_azimuth_deg < 360, f"span_azimuth_deg must be in [0, 360); got {self.span_azimuth_deg}")
+        require(0 <= self.span_azimuth_deg < 360, f"span_azimuth_deg must be in [0, 360); got {self.span_azimuth_deg}")
         lo, hi = self.slow_timescales
-        _check(0 < lo <= hi, f"slow_timescales must be (min, max) with 0 < min <= max seconds; got {self.slow_timescales}")
+        require(0 < lo <= hi, f"slow_timescales must be (min, max) with 0 < min <= max seconds; got {self.slow_timescales}")
         dlo, dhi = self.direction_offset_deg
-        _check(-60 <= dlo <= dhi <= 60, f"direction_offset_deg must be (min, max) within [-60, 60]; got {self.direction_offset_deg}")
+        require(-60 <= dlo <= dhi <= 60, f"direction_offset_deg must be (min, max) within [-60, 60]; got {self.direction_offset_deg}")
         for name in ("section_offset", "section_wander", "speed_wander", "direction_wander_deg", "noise"):
-            _check(getattr(self, name) >= 0, f"{name} must be >= 0; got {getattr(self, name)}")
-        _check(self.min_speed > 0, f"min_speed must be positive; got {self.min_speed}")
-        _check(self.anemometer_rate > 0, f"anemometer_rate must be positive; got {self.anemometer_rate}")
-        _check(0 < self.felt_cutoff_hz < self.anemometer_rate / 2,
+            require(getattr(self, name) >= 0, f"{name} must be >= 0; got {getattr(self, name)}")
+        require(self.min_speed > 0, f"min_speed must be positive; got {self.min_speed}")
+        require(self.anemometer_rate > 0, f"anemometer_rate must be positive; got {self.anemometer_rate}")
+        require(0 < self.felt_cutoff_hz < self.anemometer_rate / 2,
                f"felt_cutoff_hz must be in (0, anemometer_rate/2) Hz; got {self.felt_cutoff_hz}")
-        _check(self.resolution >= 0, f"resolution must be >= 0; got {self.resolution}")
-        _check(self.felt_wind in FELT_WIND_MODES,
+        require(self.resolution >= 0, f"resolution must be >= 0; got {self.resolution}")
+        require(self.felt_wind in FELT_WIND_MODES,
                f"felt_wind must be one of {', '.join(repr(m) for m in FELT_WIND_MODES)}; got {self.felt_wind!r}")
         pps = self.points_per_section
-        _check(not isinstance(pps, (bool, np.bool_)) and isinstance(pps, (int, np.integer)) and 1 <= pps <= 64,
+        require(not isinstance(pps, (bool, np.bool_)) and isinstance(pps, (int, np.integer)) and 1 <= pps <= 64,
                f"points_per_section must be an integer from 1 to 64; got {pps!r}")
         object.__setattr__(self, "points_per_section", int(pps))
         try:
             offset = float(self.anemometer_offset)
         except (TypeError, ValueError):
             offset = float("nan")
-        _check(math.isfinite(offset) and not isinstance(self.anemometer_offset, (bool, np.bool_)),
+        require(math.isfinite(offset) and not isinstance(self.anemometer_offset, (bool, np.bool_)),
                f"anemometer_offset must be a finite distance (m); got {self.anemometer_offset!r}")
         object.__setattr__(self, "anemometer_offset", offset)
         for name in ("point_intensity", "point_timescale", "yaw_swing_deg", "yaw_swing_period", "event_yaw_scale"):
             value = getattr(self, name)
-            _check(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
+            require(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
                    f"{name} must be a finite number; got {value!r}")
             object.__setattr__(self, name, float(value))
-        _check(0 <= self.point_intensity <= 0.5,
+        require(0 <= self.point_intensity <= 0.5,
                f"point_intensity must be in [0, 0.5] (a turbulence intensity); got {self.point_intensity}")
-        _check(0.5 <= self.point_timescale <= 3600,
+        require(0.5 <= self.point_timescale <= 3600,
                f"point_timescale must be in [0.5, 3600] s; got {self.point_timescale}")
-        _check(0 <= self.yaw_swing_deg <= 20, f"yaw_swing_deg must be in [0, 20] degrees; got {self.yaw_swing_deg}")
-        _check(0 <= self.event_yaw_scale <= 3, f"event_yaw_scale must be in [0, 3]; got {self.event_yaw_scale}")
-        _check(self.yaw_swing_period >= 60, f"yaw_swing_period must be >= 60 s; got {self.yaw_swing_period}")
+        require(0 <= self.yaw_swing_deg <= 20, f"yaw_swing_deg must be in [0, 20] degrees; got {self.yaw_swing_deg}")
+        require(0 <= self.event_yaw_scale <= 3, f"event_yaw_scale must be in [0, 3]; got {self.event_yaw_scale}")
+        require(self.yaw_swing_period >= 60, f"yaw_swing_period must be >= 60 s; got {self.yaw_swing_period}")
         if self.shared_yaw_deg is not None:
             value = self.shared_yaw_deg
-            _check(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            require(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
                    and abs(value) <= 45,
                    f"shared_yaw_deg must be None or a number of degrees within +-45; got {value!r}")
             object.__setattr__(self, "shared_yaw_deg", float(value))
-
-
-@dataclass(frozen=True, kw_only=True)
-class DefectConfig:
-    """Sensor defects for robustness studies (docs/concepts.md (the bridge and the wind)); all off by default.
-
-    Attributes
-    ----------
-    dropouts_per_hour : mean number of NaN blocks per hour in each stream
-    dropout_duration : (min, max) length of a block, s
-    spikes_per_hour : mean number of single-sample spikes per hour per channel
-    spike_amplitude : spike size in units of the channel's rms
-    clock_offset : s, accelerometer clock minus anemometer clock
-    clock_drift_ppm : accelerometer clock rate error, parts per million
-    """
-
-    dropouts_per_hour: float = 0.0
-    dropout_duration: tuple[float, float] = (1.0, 30.0)
-    spikes_per_hour: float = 0.0
-    spike_amplitude: float = 20.0
-    clock_offset: float = 0.0
-    clock_drift_ppm: float = 0.0
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "dropout_duration", tuple(float(x) for x in self.dropout_duration))
-        _check(self.dropouts_per_hour >= 0, f"dropouts_per_hour must be >= 0; got {self.dropouts_per_hour}")
-        lo, hi = self.dropout_duration
-        _check(0 < lo <= hi, f"dropout_duration must be (min, max) seconds with 0 < min <= max; got {self.dropout_duration}")
-        _check(self.spikes_per_hour >= 0, f"spikes_per_hour must be >= 0; got {self.spikes_per_hour}")
-        _check(self.spike_amplitude > 0, f"spike_amplitude must be positive; got {self.spike_amplitude}")
-        _check(abs(self.clock_offset) <= 60, f"clock_offset must be within +-60 s; got {self.clock_offset}")
-        _check(abs(self.clock_drift_ppm) <= 1e4, f"clock_drift_ppm must be within +-1e4; got {self.clock_drift_ppm}")
-
-    @property
-    def any(self) -> bool:
-        return bool(self.dropouts_per_hour or self.spikes_per_hour or self.clock_offset or self.clock_drift_ppm)
-
-
-@dataclass(frozen=True, kw_only=True)
-class SensorConfig:
-    """Accelerometers (docs/concepts.md (the bridge and the wind)).
-
-    Attributes
-    ----------
-    rate : Hz
-    noise_density : micro-g per sqrt(Hz), white noise floor
-    full_scale : g; the 16-bit converter spans +-full_scale
-    bits : converter resolution
-    defects : optional defects, off by default
-    """
-
-    rate: float = 50.0
-    noise_density: float = 30.0
-    full_scale: float = 1.0
-    bits: int = 16
-    defects: DefectConfig = field(default_factory=DefectConfig)
-
-    def __post_init__(self) -> None:
-        if isinstance(self.defects, dict):
-            object.__setattr__(self, "defects", DefectConfig(**_tuples(self.defects)))
-        _check(self.rate > 0, f"rate must be positive; got {self.rate}")
-        _check(self.noise_density >= 0, f"noise_density must be >= 0; got {self.noise_density}")
-        _check(self.full_scale > 0, f"full_scale must be positive (g); got {self.full_scale}")
-        _check(self.bits == 0 or 8 <= self.bits <= 32, f"bits must be 0 (no quantisation) or 8..32; got {self.bits}")
-
-
-@dataclass(frozen=True, kw_only=True)
-class ChangesConfig:
-    """Slow changes of the bridge that the wind does not carry (docs/concepts.md (no inverse crime)); none by default.
-
-    Campaign time ``t_c`` is the time in seconds since the campaign's start
-    (``CampaignConfig.start``; an event records its own start as
-    ``EventSpec.campaign_time``), so a drift runs on continuously from one
-    event to the next. Event numbers count from 1, as the event ids E001, E002, ...
-
-    - Damping drift (temperature-like, deterministic so that it is continuous
-      across events and the same for any worker count): the structural damping
-      ratio is ``zeta(t_c) = zeta_e (1 + drift_amplitude sin(2 pi t_c / drift_period
-      + drift_phase))``, where ``zeta_e`` is the event's damping ratio (the
-      structure's, times ``step_damping_factor`` from the step on). With the
-      default 24 h period and events that start at random hours, each event sees
-      a different part of the cycle and the damping changes within an event.
-    - Step between events: from event ``step_event`` on, the damping ratio is
-      multiplied by ``step_damping_factor`` and the mass per unit length by
-      ``step_mass_factor`` (the stiffness is unchanged, so the modal frequency
-      is divided by sqrt(step_mass_factor)).
-    - Retrofit of the deck aerodynamics: from event ``retrofit_event`` on, Y1,
-      e1, e2 and C_L are multiplied by their ``retrofit_*_factor``; this scales the
-      aerodynamic parts of the four orders r0..r3 by C_L, Y1, Y1 e1 and Y1 e2
-      factors (the unlocked shedding and the buffeting are unchanged).
-
-    The full simulation and the averaged truth use the same time-varying
-    parameters, so the truth stays exact; the event file's ``/truth`` records
-    them (``damping_ratio``, ``mass_factor``, ``aero_factor``) whenever
-    :attr:`any` is true.
-
-    Attributes
-    ----------
-    drift_amplitude : float, relative amplitude a of the damping drift, ``|a|`` < 1 (0: no drift)
-    drift_period : float, s; period P of the drift (default 86400 s, a daily temperature cycle)
-    drift_phase_deg : float, degrees; phase of the drift at campaign time 0
-    step_event : int, first event number with the step (0: no step)
-    step_damping_factor : float, > 0; damping ratio multiplier from the step on
-    step_mass_factor : float, in [0.5, 2]; mass multiplier from the step on
-    retrofit_event : int, first event number with the retrofit (0: no retrofit)
-    retrofit_Y1_factor, retrofit_e1_factor, retrofit_e2_factor, retrofit_CL_factor : float, >= 0;
-        multipliers of Y1, e1, e2 and C_L from the retrofit on
-    """
-
-    drift_amplitude: float = 0.0
-    drift_period: float = 86400.0
-    drift_phase_deg: float = 0.0
-    step_event: int = 0
-    step_damping_factor: float = 1.0
-    step_mass_factor: float = 1.0
-    retrofit_event: int = 0
-    retrofit_Y1_factor: float = 1.0
-    retrofit_e1_factor: float = 1.0
-    retrofit_e2_factor: float = 1.0
-    retrofit_CL_factor: float = 1.0
-
-    def __post_init__(self) -> None:
-        for name in ("drift_amplitude", "drift_period", "drift_phase_deg", "step_damping_factor", "step_mass_factor",
-                     *self._RETROFIT):
-            _check(isinstance(getattr(self, name), (int, float)) and not isinstance(getattr(self, name), bool)
-                   and math.isfinite(getattr(self, name)), f"{name} must be a finite number; got {getattr(self, name)!r}")
-            object.__setattr__(self, name, float(getattr(self, name)))
-        for name in ("step_event", "retrofit_event"):
-            value = getattr(self, name)
-            _check(isinstance(value, int) and not isinstance(value, bool) and value >= 0,
-                   f"{name} must be an event number >= 1 (0: none); got {value!r}")
-        _check(abs(self.drift_amplitude) < 1.0, f"drift_amplitude must be in (-1, 1); got {self.drift_amplitude}")
-        _check(self.drift_period >= 600.0, f"drift_period must be >= 600 s (a slow change); got {self.drift_period}")
-        _check(self.step_damping_factor > 0, f"step_damping_factor must be positive; got {self.step_damping_factor}")
-        _check(0.5 <= self.step_mass_factor <= 2.0, f"step_mass_factor must be in [0.5, 2]; got {self.step_mass_factor}")
-        for name in self._RETROFIT:
-            _check(getattr(self, name) >= 0, f"{name} must be >= 0; got {getattr(self, name)}")
-        _check(self.step_event > 0 or (self.step_damping_factor == 1.0 and self.step_mass_factor == 1.0),
-               "step_damping_factor and step_mass_factor need step_event >= 1 (the first event with the step)")
-        _check(self.retrofit_event > 0 or all(getattr(self, n) == 1.0 for n in self._RETROFIT),
-               "retrofit_*_factor need retrofit_event >= 1 (the first event with the retrofit)")
-
-    _RETROFIT = ("retrofit_Y1_factor", "retrofit_e1_factor", "retrofit_e2_factor", "retrofit_CL_factor")
-
-    @property
-    def any(self) -> bool:
-        """True when some slow change is configured (the truth then records the parameters)."""
-        return self != ChangesConfig()
-
-    def damping_factor(self, number: int) -> float:
-        """Multiplier of the structure's damping ratio for event ``number`` (before the drift)."""
-        return self.step_damping_factor if self.step_event and number >= self.step_event else 1.0
-
-    def mass_factor(self, number: int) -> float:
-        """Multiplier of the mass per unit length for event ``number``."""
-        return self.step_mass_factor if self.step_event and number >= self.step_event else 1.0
-
-    def aero_factors(self, number: int) -> np.ndarray:
-        """Multipliers of the aerodynamic parts of the orders 0..3 for event ``number``, shape (4,).
-
-        (C_L, Y1, Y1 e1, Y1 e2) factors from the retrofit on, ones before it.
-        """
-        if not (self.retrofit_event and number >= self.retrofit_event):
-            return np.ones(4)
-        y1 = self.retrofit_Y1_factor
-        return np.array([self.retrofit_CL_factor, y1, y1 * self.retrofit_e1_factor, y1 * self.retrofit_e2_factor])
-
-    def drift(self, campaign_time) -> np.ndarray:
-        """Relative damping drift 1 + a sin(2 pi t_c / P + phase) at campaign times t_c (s), same shape."""
-        t = np.asarray(campaign_time, dtype=float)
-        return 1.0 + self.drift_amplitude * np.sin(2.0 * np.pi * t / self.drift_period + np.deg2rad(self.drift_phase_deg))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -631,13 +457,13 @@ class GeneratorConfig:
                 object.__setattr__(self, name, _aero_from_dict(value) if name == "aero" else cls(**_tuples(value)))
         # a lighter deck after a mass step vibrates faster: the step must resolve that mode too
         period = math.sqrt(min(1.0, self.changes.step_mass_factor)) / self.structure.frequency
-        _check(0 < self.integration_step <= period / 20,
+        require(0 < self.integration_step <= period / 20,
                f"integration_step must be in (0, T/20] = (0, {period / 20:.4g}] s for the mode; got {self.integration_step}")
-        _check(0 < self.truth_step <= 5.0, f"truth_step must be in (0, 5] s; got {self.truth_step}")
-        _check(self.initial_amplitude > 0, f"initial_amplitude must be positive (m); got {self.initial_amplitude}")
-        _check(0 < self.tau < 1, f"tau must be in (0, 1); got {self.tau}")
+        require(0 < self.truth_step <= 5.0, f"truth_step must be in (0, 5] s; got {self.truth_step}")
+        require(self.initial_amplitude > 0, f"initial_amplitude must be positive (m); got {self.initial_amplitude}")
+        require(0 < self.tau < 1, f"tau must be in (0, 1); got {self.tau}")
         zeta_max = self.structure.damping_ratio * max(1.0, self.changes.step_damping_factor) * (1 + abs(self.changes.drift_amplitude))
-        _check(zeta_max < 0.2, f"the changed damping ratio must stay below 0.2; it reaches {zeta_max:.4g}")
+        require(zeta_max < 0.2, f"the changed damping ratio must stay below 0.2; it reaches {zeta_max:.4g}")
 
     @classmethod
     def in_library(cls, **overrides) -> GeneratorConfig:
@@ -669,7 +495,7 @@ class GeneratorConfig:
     @classmethod
     def from_mode(cls, mode: str, **overrides) -> GeneratorConfig:
         """The named mode ``"in_library"`` or ``"realistic"`` with keyword overrides (see :meth:`realistic`)."""
-        _check(mode in GENERATOR_MODES, f"mode must be one of {list(GENERATOR_MODES)}; got {mode!r}")
+        require(mode in GENERATOR_MODES, f"mode must be one of {list(GENERATOR_MODES)}; got {mode!r}")
         aero, wind = overrides.pop("aero", {}), overrides.pop("wind", {})
         if isinstance(aero, dict):
             aero = _aero_from_dict(aero, default_mode=mode)
@@ -823,19 +649,19 @@ def config_from_dict(data: dict[str, Any]) -> GeneratorConfig:
     """
     allowed = {f.name for f in dataclasses.fields(GeneratorConfig)} | {"mode"}
     unknown = set(data) - allowed
-    _check(not unknown, f"unknown configuration keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+    require(not unknown, f"unknown configuration keys {sorted(unknown)}; allowed: {sorted(allowed)}")
     data = _restore_legacy(data)
     mode = data.get("mode", DEFAULT_MODE)
-    _check(mode in GENERATOR_MODES, f"mode must be one of {list(GENERATOR_MODES)}; got {mode!r}")
+    require(mode in GENERATOR_MODES, f"mode must be one of {list(GENERATOR_MODES)}; got {mode!r}")
     kwargs = {}
     for key, value in data.items():
         if key == "mode":
             continue
         if key in _SECTIONS:
-            _check(isinstance(value, dict), f"[{key}] must be a table; got {value!r}")
+            require(isinstance(value, dict), f"[{key}] must be a table; got {value!r}")
             sub_allowed = {f.name for f in dataclasses.fields(_SECTIONS[key])} | ({"mode"} if key == "aero" else set())
             sub_unknown = set(value) - sub_allowed
-            _check(not sub_unknown, f"unknown keys {sorted(sub_unknown)} in [{key}]; allowed: {sorted(sub_allowed)}")
+            require(not sub_unknown, f"unknown keys {sorted(sub_unknown)} in [{key}]; allowed: {sorted(sub_allowed)}")
         kwargs[key] = value
     return GeneratorConfig.from_mode(mode, **kwargs)
 
