@@ -24,20 +24,16 @@ from urllib.parse import quote
 import numpy as np
 
 import vivbench
-from vivbench.io.campaign_model import POOLED_NAME, read_pooled
-from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
-from vivbench.models.model_input import measured_input
 from vivbench.io.netcdf import atomic_path
-from vivbench.regimes.model import model_window_regimes
 from vivbench.io.event import list_events, read_event
-from vivbench.core.regime import DEFAULT_TAU
 from vivbench.core.steps import EXTRA_STEPS
-from vivbench.core.terms import reference_section, section_exponents
 from vivbench.io.event import read_event_summary
-from vivbench.io.result import read_result, result_record
+from vivbench.io.result import read_result
 from vivbench.core.errors import InputError
 from vivbench.report.leaderboard import leaderboard_section
+from vivbench.report.figure_sections import ReportFigures, campaign_model_figures, paper_figures
 from vivbench.report.sidebyside import CampaignRun, baseline_section, campaign_run
+from vivbench.report.tables import md_table, produced_by
 
 __all__ = ["EXTRA_STEPS", "write_report"]
 
@@ -62,7 +58,6 @@ _STEP_TITLES = {
     "sweep": "Monte-Carlo sweep (`vivbench sweep`)",
 }
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
-_MAX_CLUSTER_POINTS = 3000
 
 
 # ------------------------------------------------------------------ formatting
@@ -83,20 +78,6 @@ def _fmt(x, digits: int = 3) -> str:
         return f"{x:.{digits}g}" if abs(x) < 1e-3 or abs(x) >= 1e4 else f"{x:.{digits}f}"
     return str(x)
 
-
-def _cell(text) -> str:
-    return str(text).replace("|", "\\|").replace("\n", " ")
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
-    lines = ["| " + " | ".join(_cell(h) for h in header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines)
-
-
-def _produced_by(command: str, note: str = "") -> str:
-    extra = f" {note}" if note else ""
-    return f"*Produced by:* `{command}`{extra}"
 
 
 # ------------------------------------------------------------------- the data
@@ -214,9 +195,6 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
     report.md shows. report.md itself carries no date: the same inputs give
     the same report.
     """
-    from vivbench.report import figures as F
-    from vivbench.report.event_figure import event_figure
-
     if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise InputError(f"report name {name!r} must be letters, digits, '_', '.' or '-' (it names a directory)")
     if not (isinstance(max_rows, int) and max_rows >= 1):
@@ -255,218 +233,16 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         "events are synthetic. Every figure and table below was produced from the files named here; the "
         "command under each reproduces it.",
         "",
-        _produced_by(command, "(this whole report, its figures and the recovery tables)"),
+        produced_by(command, "(this whole report, its figures and the recovery tables)"),
         "",
     ]
     md += _what_was_run(campaign_dir, results_dir, info, missing, command)
     say("summary")
 
     written: list[str] = []
-
-    def figure(fname: str, title: str, caption: str, make: Callable[[Path], object], func: str) -> None:
-        md.append(f"### {title}")
-        md.append("")
-        try:
-            make(out_dir / fname)
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            md.append(f"**Figure not made:** {' '.join(str(exc).split())}")
-            md.append("")
-            return
-        written.append(fname)
-        md.append(f"![{title}]({quote(fname)})")
-        md.append("")
-        md.append(caption)
-        md.append("")
-        md.append(_produced_by(command, f"(`vivbench.report.{func}`)"))
-        md.append("")
-        say(fname)
-
-    e0 = events[0]
-    tree0, res0 = trees[e0], results[e0]
-    # Any number of sections: captions name them; single-section panels show the middle one (S2 of three).
-    sec_names = [str(s) for s in res0["equation"].values.tolist()]
-    n_sec = len(sec_names)
-    ref_name = sec_names[reference_section(n_sec)]
-    n_feat = section_exponents().shape[0] * n_sec
-    the_sections = "the section" if n_sec == 1 else f"the {F.count_word(n_sec)} sections"
-    md += ["## Figures", "",
-           f"Single-event figures show event {e0}"
-           + (f"; the regime timeline shows {', '.join(events)}." if len(events) > 1 else "."), ""]
-    figure("fig00_event.png", f"Event {e0}: overview",
-           "Wind perpendicular to the span (grey) and the true mean wind (black), the deck acceleration, the true "
-           "amplitude and the true regime over time (synthetic events only have the last two). Look for the "
-           "amplitude growing while the wind is in the lock-in band and decaying after it leaves.",
-           lambda p: event_figure(tree0, p), "event_figure")
-    figure("fig01_sensor_layout.png", "Fig. 1: sensor layout and mode shape",
-           f"Paper Fig. 1 and Fig. 3(a). {_layout_phrase(sec_names)} of the main span, each with one "
-           "3-D anemometer and one vertical accelerometer. The mode shape values are those of the generator "
-           f"configuration stored in the event (only "
-           + ("the section value enters" if n_sec == 1 else f"the {F.count_word(n_sec)} section values enter")
-           + " the model; the dashed line "
-           "between them is a guide)."
-           + (f" Sections in phase with phi({sec_names[0]}) = phi({sec_names[-1]}) give identical amplitudes at "
-              f"{sec_names[0]} and {sec_names[-1]} in the figures below." if n_sec > 1 else ""),
-           lambda p: F.sensor_layout_figure(tree0, p), "sensor_layout_figure")
-    figure("fig02_wind.png", "Fig. 2: wind preprocessing",
-           "Paper Fig. 2. (a) the measured components; (b) horizontal speed V and direction theta, with the two "
-           "directions perpendicular to the span dashed; (c) the perpendicular component U~ = V |sin(theta - "
-           "azimuth)| and its zero-phase low-pass U, the mean wind used by the identification. On synthetic events "
-           "the true mean wind is dashed red: U should lie on it except near the ends of the record, which the "
-           "identification drops.",
-           lambda p: F.wind_figure(tree0, p), "wind_figure")
-    figure("fig03_time_frequency.png", "Fig. 3: time-frequency analysis of the acceleration",
-           "Paper Fig. 3(b, c), with a short-time Fourier spectrogram instead of the paper's wavelet transform. "
-           f"The energy should stay at the modal frequency ({float(res0.attrs['f_mode_hz']):.4f} Hz found from the "
-           "Welch spectrum, dashed) while the amplitude changes: the frequency does not shift, so only the "
-           "amplitude A(t) needs a model.",
-           lambda p: F.time_frequency_figure(tree0, p, f_mode=float(res0.attrs["f_mode_hz"])),
-           "time_frequency_figure")
-    figure("fig04_displacement.png", "Fig. 4: displacement, envelope and derivative",
-           "Paper Fig. 4. (a) displacement from band-limited frequency-domain integration of the acceleration, "
-           "and its Hilbert envelope A; the shaded edges are dropped by the identification. (b) A at "
-           f"{the_sections} on the identification grid; (c) dA/dt by the configured differentiation. Dashed lines are "
-           "the truth of the averaged model (synthetic events): compare A and dA/dt with them.",
-           lambda p: F.displacement_figure(tree0, res0, p), "displacement_figure")
-    figure("fig05_coefficients.png", "Fig. 5-7: the time-varying model of an event",
-           f"Paper Figs. 5(c) and 7. (a) each column is one window's model of dA/dt at {ref_name}, each row one of the {n_feat} "
-           "library terms A_l^i U_l^j. Colour: coefficient times the RMS of its library term over the event "
-           "(m/s, the size of that term's contribution to dA/dt), on a symmetric log scale, linear below 1 % of "
-           "the RMS of dA/dt. Contributions many decades larger than dA/dt itself that change sign between "
-           "neighbouring terms cancel each other: they are the near-collinear library columns inside a 50 s "
-           "window, not physics. (b) the window's regime, hatched where it is not identifiable. (c, d) the mean "
-           "wind against the generator's default lock-in range and the amplitudes.",
-           lambda p: F.coefficient_map_figure(res0, p), "coefficient_map_figure")
-
-    timeline_truth = None
-    if has_truth:
-        from vivbench.regimes.truth import truth_window_regimes
-
-        timeline_truth = [truth_window_regimes(trees[e]["truth"].ds, results[e]["window_start"].values,
-                                               results[e]["window_end"].values,
-                                               tau=json.loads(results[e].attrs["identify_config_json"])["tau"])
-                          for e in events]
-    figure("fig06_regimes.png", "Fig. 6: regimes of three events against the truth",
-           f"Paper Fig. 6 and Table 1. For each event, the regime of the selected window model of dA/dt at {ref_name} "
-           "(top row; hatched: not identifiable, i.e. an equally good sparse model has another regime) and the "
-           "true regime of the same window by the same rule (bottom row). The titles give the share of "
-           "identifiable windows and the agreement with the truth; agreement on unflagged windows is not a "
-           "finding (see the recovery tables for the chance level).",
-           lambda p: F.regime_timeline_figure([results[e] for e in events],
-                                              timeline_truth or [None] * len(events), p),
-           "regime_timeline_figure")
-
-    cluster_inputs = _cluster_inputs(info, with_truth=has_truth)
-    for kind, label in (("coef", f"standardised coefficients ({n_sec * n_feat} per window)"),
-                        ("order", f"shares of the order contributions ({4 * n_sec} per window)")):
-        figure(f"fig08_decision_graph_{kind}.png", f"Fig. 8-10: decision graph and clusters ({kind} features)",
-               "Paper Figs. 8-10. Density-peaks clustering (Rodriguez and Laio 2014; "
-               "`vivbench.analysis.DensityPeaks` with its defaults) of the window models of all events, one point "
-               f"per window, features: {label}. (a) decision graph: centres are points with both a high density "
-               "and a large distance to any denser point; (b) the clusters on the first two principal components; "
-               f"(c) how each cluster's windows split between the true regimes (of {ref_name}) - a cluster that matches a "
-               "regime has one dark cell. "
-               + cluster_inputs.get("note", ""),
-               lambda p, kind=kind: _cluster_figure(cluster_inputs, kind, p),
-               "decision_graph_figure")
-
-    figure("fig11_forecast.png", "Fig. 11-12: simulation and forecasts",
-           "Paper Figs. 11-12. (a) the whole event simulated with the time-varying window models from the measured "
-           "A at the first window and the measured wind, against the measured A; (b) forecasts from t0 with "
-           "coefficients fixed at t0 or averaged over the windows starting in [t0, t0 + d]. NMSE (0: perfect, "
-           "1: as good as the mean) is over the valid part of each run; a run whose A left the plausible range "
-           "(non-finite, above 10x the largest measured A, or below -5 % of it) is stopped, drawn only up to "
-           "there and marked x.",
-           lambda p: F.forecast_figure(res0, p), "forecast_figure")
-
-    pooled_path = results_dir / POOLED_NAME
-    if pooled_path.is_file():
-        # The campaign model through the model protocol (campaign.model.nc, or rebuilt from the pooled
-        # result's coef for older outputs); the windows' identifiability verdicts from the pooled result.
-        pooled = read_pooled(pooled_path)
-        model_path = campaign_model_file(results_dir)
-        model = load_campaign_model(model_path)
-        varying = pooled.attrs.get("model") == "VaryingCoefficientSINDy"
-        smoothing = pooled_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
-        if varying:
-            intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
-                     "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
-                     "window's regime is the rule of docs/concepts.md (regimes) applied to this model's order contributions over the "
-                     "window's data; it counts as identifiable when at least "
-                     f"{json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap replicates "
-                     "of the spline coefficients agree, every order subset in the model's confidence set "
-                     "(leave-one-event-out) gives the same regime, and the amplitude is above the noise floor. "
-                     f"The measured wind (and its yaw, a second covariate when the results store it: "
-                     f"{'yes' if int(pooled.attrs.get('wind_yaw', 0)) else 'no'}) is smoothed over "
-                     f"{smoothing:g} s (Gaussian sigma) before the fit and every evaluation on measured records; "
-                     "the truth's felt wind is used as it is. "
-                     f"B-splines per curve: {', '.join(str(int(k)) for k in pooled['n_basis'].values)}; "
-                     f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
-                     f"coverage {float(pooled.attrs['coverage']):.3f}.")
-        md += ["## The campaign model (`vivbench pool`)", ""] + ([intro] if varying else [
-               "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
-               "AICc on all samples of all events (`vivbench.models.campaign`). A window's regime is the rule of "
-               "docs/concepts.md (regimes) applied to this model's order contributions over the window's data; it counts as "
-               "identifiable when (i) no model inside the coefficients' joint 95 % confidence region (residual "
-               "variance inflated by the residuals' correlation time) gives the window another regime, and (ii) at "
-               f"least {json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap "
-               "replicates of the whole selection agree. "
-               f"Terms per equation: {', '.join(str(int(k)) for k in pooled['n_terms'].values)}; "
-               f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
-               f"coverage {float(pooled.attrs['coverage']):.3f}."
-               + (f" **{pooled.attrs['note']}**" if pooled.attrs.get("note") else "")]) + ["",
-               f"Model file: `{model_path.name}`"
-               + ("" if model_path.name != POOLED_NAME else
-                  " (no campaign.model.nc: the model is rebuilt from the pooled result's coefficients)") + ".", "",
-               _produced_by(f"vivbench pool {results_dir}" + (" --model varying" if varying else "")), ""]
-        ev_of = pooled["event_id"].values.astype(str)
-        pres = []
-        for e in events:
-            r = results[e].copy()
-            sel = ev_of == e
-            start, end = r["window_start"].values, r["window_end"].values
-            if sel.sum() != start.size or not np.array_equal(pooled["window_start"].values[sel], start):
-                raise InputError(f"{pooled_path}: its windows of {e} differ from the result's; re-run vivbench pool")
-            reg = model_window_regimes(model, measured_input(model, result_record(r), wind_smoothing_s=smoothing),
-                                       start, end, tau=float(getattr(model, "tau", DEFAULT_TAU)))
-            r["regime"] = (r["regime"].dims, reg["regime"])
-            r["identifiable"] = (r["identifiable"].dims, pooled["identifiable"].values[sel])
-            pres.append(r)
-        figure("fig06b_regimes_campaign_model.png", "Fig. 6b: regimes of the campaign model against the truth",
-               "As Fig. 6, with the regimes of the campaign model (hatched: not identifiable by the confidence-region "
-               "and bootstrap tests) instead of the window models'.",
-               lambda p: F.regime_timeline_figure(pres, timeline_truth or [None] * len(events), p),
-               "regime_timeline_figure")
-        curves_ds = _campaign_curves(pooled, model, results)
-        if curves_ds is not None:
-            from vivbench.validate.campaign import event_truth_curves
-
-            truth0 = event_truth_curves(tree0["truth"].ds) if "truth" in tree0.children else None
-            structure = (_generator_config_of(tree0) or {}).get("structure", {})
-            f_struct, d_struct = structure.get("frequency"), structure.get("depth")
-            figure("fig12_curves.png", "Coefficient curves of the campaign model against the truth",
-                   f"docs/concepts.md (coefficient curves). The coefficients a_i(U) of dA/dt = sum_i a_i(U) A^i at {ref_name} when every section "
-                   "sees the mean wind U (the other sections folded in through the mode's amplitude ratios), drawn "
-                   "like aerodynamic derivatives: (a) order 0, the locked shedding force; (b) order 1, the net "
-                   "linear coefficient (positive: negative net damping, self-excitation); (c, d) the amplitude "
-                   "limiting orders. Black: the truth of the generator (`/truth/curves`"
-                   + ("" if truth0 is not None else ", not available for this campaign") + "); dashed: the campaign "
-                   "model over its data's wind range, shaded: its 95 % block-bootstrap band (widened to contain the "
-                   "model); grey dotted: where the curve lies outside the winds of the equation's fitted data "
-                   "(`curves_extrapolated`), an extrapolation of the model, not a finding."
-                   + (" The top axis gives the reduced velocity U/(f D) with the generator's f and D."
-                      if f_struct and d_struct else ""),
-                   lambda p: F.curves_figure(curves_ds, p, truth=truth0, frequency=f_struct, depth=d_struct),
-                   "curves_figure")
-        starts0 = res0["window_start"].values
-        span0 = (float(starts0.min()), float(res0["window_end"].values.max()))
-        t0_cm = float(starts0[np.argmin(np.abs(starts0 - (span0[0] + 0.4 * (span0[1] - span0[0]))))])
-        figure("fig11b_forecast_campaign_model.png", "Fig. 11b: simulation and forecast with the campaign model",
-               "As Fig. 11, with the campaign model (`model.simulate(record, t0, t1)`) over the span of the "
-               "windows and from the same t0: one fixed model, so there is one forecast (d plays no role).",
-               lambda p: F.model_forecast_figure(model, measured_input(model, result_record(res0),
-                                                                       wind_smoothing_s=smoothing), p, t0=t0_cm, span=span0,
-                                                 name="campaign model"),
-               "model_forecast_figure")
+    fig = ReportFigures(md=md, written=written, out_dir=out_dir, command=command, say=say)
+    timeline_truth = paper_figures(fig, info, events, trees, results, has_truth)
+    campaign_model_figures(fig, results_dir, events, trees, results, timeline_truth)
 
     md += _recovery_section(info, command)
     say("recovery")
@@ -550,10 +326,10 @@ def _what_was_run(campaign_dir, results_dir, info, missing, command) -> list[str
     out.append("Events (scenario, wind and peak amplitude from `catalogue.csv`; modal frequency and windows from the "
                "result files):")
     out.append("")
-    out.append(_table(["event", "source", "scenario", "duration (min)", "U min (m/s)", "U max (m/s)", "A max true (m)",
+    out.append(md_table(["event", "source", "scenario", "duration (min)", "U min (m/s)", "U max (m/s)", "A max true (m)",
                        "modal frequency (Hz)", "windows"], rows))
     out.append("")
-    out.append(_produced_by(command, "(from `catalogue.csv`, the event files and the result attributes)"))
+    out.append(produced_by(command, "(from `catalogue.csv`, the event files and the result attributes)"))
     out.append("")
     return out
 
@@ -577,88 +353,7 @@ def _settings_table(cfg: dict) -> str:
         ["modal frequency", "from the spectrum" if pre.get("modal_frequency_hz") is None
          else f"given, {pre.get('modal_frequency_hz')} Hz"],
     ]
-    return "\n".join("  " + line for line in _table(["setting", "value"], rows).splitlines())
-
-
-def _layout_phrase(names: Sequence[str]) -> str:
-    """'Sections S1, S2, S3 at 1/4, 1/2 and 3/4': section k of n sits at k / (n + 1) of the span."""
-    from fractions import Fraction
-
-    n = len(names)
-    where = [str(Fraction(k, n + 1)) for k in range(1, n + 1)]
-    if n == 1:
-        return f"Section {names[0]} at {where[0]}"
-    return f"Sections {', '.join(names)} at {', '.join(where[:-1])} and {where[-1]}"
-
-
-# ------------------------------------------------------------------- clusters
-
-
-def _cluster_inputs(info: Sequence[dict], *, with_truth: bool) -> dict:
-    """Window features, true regimes (middle section, S2 of three) and a deterministic subsample for the decision graphs."""
-    from vivbench.regimes.truth import truth_window_regimes
-
-    coefs, orders, truths = [], [], []
-    for item in info:
-        res = item["res"]
-        coef = res["coef"].values
-        fitted = np.all(np.isfinite(coef), axis=(1, 2))
-        coefs.append(coef[fitted])
-        orders.append(res["order_rms"].values[fitted])
-        if with_truth:
-            truth = item["truth"]
-            tau = json.loads(res.attrs["identify_config_json"])["tau"]
-            tw = truth_window_regimes(truth, res["window_start"].values, res["window_end"].values, tau=tau)
-            names = [str(s) for s in res["equation"].values.tolist()]
-            truths.append(tw[fitted, reference_section(len(names))])
-    coef = np.concatenate(coefs)
-    order = np.concatenate(orders)
-    truth = np.concatenate(truths) if truths else None
-    n = coef.shape[0]
-    note = ""
-    keep = np.arange(n)
-    if n > _MAX_CLUSTER_POINTS:
-        # Memory of density peaks is O(n^2): an evenly spaced subsample keeps it bounded.
-        keep = np.unique(np.linspace(0, n - 1, _MAX_CLUSTER_POINTS).round().astype(int))
-        note = f"Every {n / keep.size:.1f}-th window is used ({keep.size} of {n}) to bound the O(n^2) memory."
-    return {"coef": coef[keep], "order": order[keep], "truth": None if truth is None else truth[keep], "note": note}
-
-
-def _cluster_figure(inputs: dict, kind: str, path: Path) -> None:
-    from sklearn.decomposition import PCA
-
-    from vivbench.analysis.clustering import DensityPeaks, coefficient_features, order_features
-    from vivbench.report.figures import decision_graph_figure
-
-    X = coefficient_features(inputs["coef"]) if kind == "coef" else order_features(inputs["order"])
-    if X.shape[0] < 3 or X.shape[1] < 2:
-        raise InputError(f"too few windows or varying features to cluster ({X.shape[0]} windows, {X.shape[1]} features)")
-    dp = DensityPeaks().fit(X)
-    emb = PCA(n_components=2, svd_solver="full").fit_transform(X)
-    decision_graph_figure(dp.rho_, dp.delta_, dp.labels_, dp.centers_, path, embedding=emb, truth=inputs["truth"],
-                          title=f"{X.shape[0]} windows, {X.shape[1]} {kind} features, d_c = {dp.dc_:.3g}")
-
-
-# ------------------------------------------------------------------- recovery
-
-
-def _generator_config_of(tree) -> dict | None:
-    """The generator configuration stored in an event's ``/truth`` (None for field data)."""
-    if "truth" not in tree.children or "config_json" not in tree["truth"].attrs:
-        return None
-    cfg = json.loads(tree["truth"].attrs["config_json"])
-    return cfg.get("generator", cfg)
-
-
-def _campaign_curves(pooled, model, results):
-    """The campaign model's curves: those of ``campaign.pooled.nc``, or drawn by the model; None if it has none."""
-    if "curves" in pooled.data_vars:
-        return pooled
-    if getattr(model, "amplitude_ratios_", None) is None:
-        return None
-    from vivbench.analysis.pool import curve_wind_grid
-
-    return model.curves(curve_wind_grid(np.concatenate([r["U"].values.ravel() for r in results.values()])))
+    return "\n".join("  " + line for line in md_table(["setting", "value"], rows).splitlines())
 
 
 def _recovery_section(info, command) -> list[str]:
@@ -711,16 +406,16 @@ def _recovery_section(info, command) -> list[str]:
         "sqrt(sum of squared errors / sum of squared true dA/dt) over every window sample, which the "
         "large-amplitude phases dominate where the median over windows hides them.",
         "",
-        _table(header, rows),
+        md_table(header, rows),
         "",
-        _produced_by(command, "(`vivbench.validate.campaign_recovery` per event and over all events)"),
+        produced_by(command, "(`vivbench.validate.campaign_recovery` per event and over all events)"),
         "",
         "Regime shares: truth (all windows), identified (all windows), identified (identifiable windows only).",
         "",
-        _table(["events"] + [f"true {k}" for k in (1, 2, 3, 4)] + [f"identified {k}" for k in (1, 2, 3, 4)]
+        md_table(["events"] + [f"true {k}" for k in (1, 2, 3, 4)] + [f"identified {k}" for k in (1, 2, 3, 4)]
                + [f"identifiable {k}" for k in (1, 2, 3, 4)], shares_rows),
         "",
-        _produced_by(command, "(regime shares from `truth_window_regimes` and the result files)"),
+        produced_by(command, "(regime shares from `truth_window_regimes` and the result files)"),
         "",
     ]
     return out
@@ -770,18 +465,18 @@ def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, 
     if summary is not None:
         rows = [[k, _fmt(v) if isinstance(v, (int, float, bool)) or v is None else json.dumps(v)]
                 for k, v in summary.items() if k != "command"]
-        out += ["Headline numbers (`summary.json`):", "", _table(["quantity", "value"], rows), "",
-                _produced_by(cmd, how), ""]
+        out += ["Headline numbers (`summary.json`):", "", md_table(["quantity", "value"], rows), "",
+                produced_by(cmd, how), ""]
     for path in csvs:
         header, rows = _read_csv(path)
         out.append(f"**{path.name}**" + (f" (first {max_rows} of {len(rows)} rows; full table in `{path}`)"
                                          if len(rows) > max_rows else f" ({len(rows)} rows)")
                    + "; decimals shown to 4 significant digits")
         out.append("")
-        out.append(_table(header, [[_short(c) for c in row] for row in rows[:max_rows]]) if header
+        out.append(md_table(header, [[_short(c) for c in row] for row in rows[:max_rows]]) if header
                    else "(empty file)")
         out.append("")
-        out.append(_produced_by(cmd, how))
+        out.append(produced_by(cmd, how))
         out.append("")
     for path in pngs:
         fname = f"{step}_{path.name}"
@@ -789,7 +484,7 @@ def _step_section(step, directory, campaign_dir, results_dir, out_dir, written, 
             shutil.copyfile(path, tmp)
         written.append(fname)
         out += [f"![{step}: {path.stem}]({quote(fname)})", "", f"*{path.name}* from `{directory}`. "
-                + _produced_by(cmd, how), ""]
+                + produced_by(cmd, how), ""]
     others = sorted(p.name for p in directory.iterdir() if p.is_file() and p.suffix not in (".csv", ".png")
                     and p.name not in ("summary.json", "command.txt") and not p.name.startswith("."))
     if others:

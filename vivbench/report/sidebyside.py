@@ -32,6 +32,7 @@ import numpy as np
 from vivbench.core.errors import InputError
 from vivbench.io.event import list_events, read_event_summary
 from vivbench.io.netcdf import atomic_path
+from vivbench.report.tables import md_table, produced_by
 
 __all__ = ["CampaignRun", "MODE_LABELS", "baseline_section", "campaign_run", "inverse_crime_paragraph"]
 
@@ -239,20 +240,6 @@ def inverse_crime_paragraph(labels: Sequence[str], summaries: Sequence[Mapping] 
                    + ". The in-library figures are what the inverse crime would have let us claim.")
 
 
-def _cell(text) -> str:
-    return str(text).replace("|", "\\|").replace("\n", " ")
-
-
-def _table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
-    lines = ["| " + " | ".join(_cell(h) for h in header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
-    return "\n".join(lines)
-
-
-def _produced_by(command: str, note: str = "") -> str:
-    return f"*Produced by:* `{command}`" + (f" {note}" if note else "")
-
-
 def _recovery_rows(vs: Sequence[Mapping], clusters: Sequence[dict | None], forecasts: Sequence[dict | None]) -> list:
     s = [v["summary"] for v in vs]
 
@@ -357,14 +344,14 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     out += [inverse_crime_paragraph(modes, [v["summary"] for v in validations], campaigns=which), ""]
     out += ["The two campaigns:" + (" **they differ in size** (the baseline is a smaller campaign; its figures are "
                                     "those of its own size)." if sizes_differ else ""), ""]
-    out.append(_table(["", *headers], [
+    out.append(md_table(["", *headers], [
         ["generator mode (docs/concepts.md (no inverse crime))"] + [f"`{m}`" for m in modes],
         ["campaign directory"] + [f"`{r.campaign}`" for r in runs],
         ["results directory"] + [f"`{r.results}`" for r in runs],
         ["events (with results); seed"] + [f"{i['n_events']} ({i['n_results']}); {i['seed']}" for i in info],
         ["durations (min)"] + [f"{i['duration_min'][0]:.1f}-{i['duration_min'][1]:.1f}" for i in info],
     ]))
-    out += ["", _produced_by(command, "(from the event files' generator configuration)"), ""]
+    out += ["", produced_by(command, "(from the event files' generator configuration)"), ""]
 
     out += ["### Recovery side by side", "",
             "The same scores for both campaigns (`vivbench.validate.validate_campaign`, the numbers of `vivbench "
@@ -374,12 +361,12 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
             "against the truth's over the lock-in range; the clusters' agreement with the true regimes "
             "(`vivbench cluster`) and the simulations and forecasts of `vivbench forecast` on each campaign's "
             "clearest plateau. n/a: undefined (no window flagged, no exact coefficient matrix) or not computed.", ""]
-    out.append(_table(["quantity", *short], _recovery_rows(validations, clusters, forecasts)))
-    out += ["", _produced_by(command, "(scores of " + "; ".join(f"`{c}`" for c in validate_cmds)
+    out.append(md_table(["quantity", *short], _recovery_rows(validations, clusters, forecasts)))
+    out += ["", produced_by(command, "(scores of " + "; ".join(f"`{c}`" for c in validate_cmds)
                              + "; clusters and forecasts from each run's `summary.json`)"), ""]
 
     def pair_table(cells: Sequence[str]) -> str:
-        return _table(short, [cells])
+        return md_table(short, [cells])
 
     name = "sbs_recovery.png"
     try:
@@ -393,7 +380,7 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
                 "(dashed: each campaign's chance level); (b) the per-window relative error of dA/dt on the true "
                 "(A, U), windows with dynamics; (c, d) the campaign model's regimes against the truth's, all "
                 "windows (counts; shading: share of each true regime's windows).", "",
-                _produced_by(command, "(`vivbench.report.recovery_pair_figure`)"), ""]
+                produced_by(command, "(`vivbench.report.recovery_pair_figure`)"), ""]
     say(name)
 
     # Coefficient curves of each campaign model against its own truth.
@@ -429,7 +416,7 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
             "of its fitted data: an extrapolation) against its own campaign's truth (black), as in "
             "the coefficient-curve figure above. In-library, the truth is a polynomial in U that the library holds; "
             "realistic, a bell in reduced velocity that a degree-5 polynomial can only approximate, seen through "
-            "a point anemometer's wind.", "", _produced_by(command, "(`vivbench.report.curves_figure` per campaign)"), ""]
+            "a point anemometer's wind.", "", produced_by(command, "(`vivbench.report.curves_figure` per campaign)"), ""]
     say("curves")
 
     # Clusters: the decision graphs `vivbench cluster` drew for each campaign.
@@ -451,7 +438,7 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
                 "Density-peaks clustering of all window models of each campaign (`vivbench cluster`, its decision "
                 "graph, the clusters on the first two principal components and their split between the true "
                 "regimes); ARI and purity in the table above.", "",
-                _produced_by(cmds[0], "(baseline) and `" + cmds[1] + "` (this report's campaign)"), ""]
+                produced_by(cmds[0], "(baseline) and `" + cmds[1] + "` (this report's campaign)"), ""]
     say("clusters")
 
     # Forecasts: each campaign model on its campaign's clearest plateau.
@@ -489,6 +476,6 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
             "Each campaign model simulates its campaign's forecast event (the clearest true plateau, as "
             "`vivbench forecast` chose it; else the first event) from the measured A and wind, and forecasts "
             "300 s from the same t0 (`model.simulate`), as in Fig. 11b.", "",
-            _produced_by(command, "(`vivbench.report.model_forecast_figure` per campaign)"), ""]
+            produced_by(command, "(`vivbench.report.model_forecast_figure` per campaign)"), ""]
     say("forecasts")
     return out
