@@ -14,9 +14,44 @@ DEFAULT_ATOL = 0.0
 
 def assert_close(actual, desired, *, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL, reason: str | None = None, what: str = "") -> None:
     """``numpy.testing.assert_allclose`` with a mandatory reason for loose tolerances."""
+    _check_reason(rtol, atol, reason)
+    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=atol, err_msg=f"{what} (tolerance: {reason or 'default'})")
+
+
+def _check_reason(rtol: float, atol: float, reason: str | None) -> None:
     if (rtol > DEFAULT_RTOL or atol > DEFAULT_ATOL) and not reason:
         raise AssertionError("a tolerance looser than the default needs a reason")
-    np.testing.assert_allclose(actual, desired, rtol=rtol, atol=atol, err_msg=f"{what} (tolerance: {reason or 'default'})")
+
+
+def is_close(actual, desired, *, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL, reason: str | None = None) -> bool:
+    """True where every element of ``actual`` is within ``atol + rtol |desired|`` of ``desired`` (NaN equal to NaN).
+
+    For a closeness test inside an expression (say, "one of these"); a bare check is :func:`assert_close`.
+    """
+    _check_reason(rtol, atol, reason)
+    return bool(np.all(close_mask(actual, desired, rtol=rtol, atol=atol, reason=reason)))
+
+
+def close_mask(actual, desired, *, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL, reason: str | None = None):
+    """Elementwise closeness of broadcast ``actual`` and ``desired`` (bool array; NaN equal to NaN)."""
+    _check_reason(rtol, atol, reason)
+    a = np.asarray(actual, dtype=float)
+    d = np.asarray(desired, dtype=float)
+    with np.errstate(invalid="ignore"):
+        near = np.abs(a - d) <= atol + rtol * np.abs(d)
+    return near | (np.isnan(a) & np.isnan(d)) | ((a == d) & np.isinf(a))
+
+
+def assert_not_close(actual, desired, *, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL,
+                     reason: str | None = None, what: str = "") -> None:
+    """Fail unless some element of ``actual`` differs from ``desired`` by more than ``atol + rtol |desired|``.
+
+    NaN at the same place in both counts as equal. A tolerance looser than the defaults needs a
+    ``reason``, as in :func:`assert_close` (a loose tolerance makes this check stricter).
+    """
+    if is_close(actual, desired, rtol=rtol, atol=atol, reason=reason):
+        raise AssertionError(f"{what}: expected a difference beyond rtol={rtol}, atol={atol}; the two agree "
+                             f"(tolerance: {reason or 'default'})")
 
 
 def relative_rms(actual, desired) -> float:

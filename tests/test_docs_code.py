@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from vivbench.testing import event_records
 from vivbench.testing import strategies as vst
 from vivbench.validate import score_method
+from tests.helpers import assert_close
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "methods.md"
 
@@ -37,7 +38,7 @@ def test_plugin_and_verdict_of_the_methods_page(event):
     plain = score_method(ns["make"](), [record], [truth], simulate=False)
     assert plain["coverage"] == 0.0  # no verdict: every window scored, none flagged
     # Regime 1 everywhere: its accuracy is the share of truly regime-1 windows.
-    assert np.isclose(plain["accuracy_all"], plain["truth_share_regime1"])
+    assert_close(plain["accuracy_all"], plain["truth_share_regime1"])
     fitted = ns["DampedWithVerdict"]().fit([record])
     start = np.arange(record.t[0], record.t[-1] - 50.0, 25.0)
     flags = fitted.identifiable(record, start, start + 50.0)

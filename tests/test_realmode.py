@@ -29,6 +29,7 @@ from vivbench.synth.config import DEFAULT_LOCK_IN
 from vivbench.validate import CompareConfig, compare_cells, compare_config_from_dict, plan, run_comparison
 from vivbench.validate import sweep_config_from_dict, sweep_tasks
 from vivbench.validate.compare import _campaign_config
+from tests.helpers import assert_close
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -102,7 +103,7 @@ def test_realistic_campaign_visits_all_four_regimes():
 
 
 def test_default_and_realistic_scripts_are_unchanged():
-    assert np.allclose(GeneratorConfig.in_library().lock_in, DEFAULT_LOCK_IN)
+    assert_close(GeneratorConfig.in_library().lock_in, DEFAULT_LOCK_IN)
     assert script_lock_in(GeneratorConfig.in_library()) is None and script_lock_in(GeneratorConfig()) is None
     specs = campaign_specs(CampaignConfig(n_events=8, duration=(1200.0, 1200.0)))
     plateaus = [spec.script.speeds[2] for spec, _ in specs if spec.kind == "pass_high"]
@@ -113,7 +114,7 @@ def test_scripts_follow_another_bridges_lock_in():
     rng = lambda: np.random.default_rng(3)  # noqa: E731
     plain = draw_script("pass_high", 1200.0, rng())
     moved = draw_script("pass_high", 1200.0, rng(), lock_in=(7.0, 12.0))
-    np.testing.assert_allclose(np.array(moved.speeds) - np.array(plain.speeds), 1.5)
+    assert_close(np.array(moved.speeds) - np.array(plain.speeds), 1.5)
     assert moved.times == plain.times
     with pytest.raises(ValueError, match="lock_in must be"):
         draw_script("pass_low", 1200.0, rng(), lock_in=(9.0, 8.0))

@@ -22,6 +22,7 @@ import xarray as xr
 from vivbench.cli import main
 from vivbench.core.terms import reference_section
 from vivbench.synth import AeroConfig, GeneratorConfig, StructureConfig, config_from_dict, exact_coefficients
+from tests.helpers import assert_close
 
 # Mode shapes of a half-sine (odd number of half-waves) at k / (n + 1) of the span, tributary lengths span / n.
 _SPAN = 1650.0
@@ -159,8 +160,8 @@ def test_structure_config_any_section_count(n):
     cfg = config_from_dict({"structure": {"mode_shape": [1.0] * n, "tributary_lengths": [100.0] * n}})
     s = cfg.structure
     assert s.n_sections == n and s.sections == tuple(_sections(n))
-    np.testing.assert_allclose(s.positions, s.span_length * np.arange(1, n + 1) / (n + 1))
-    np.testing.assert_allclose(s.participation, np.full(n, 1.0 / n))  # beta_k = L_k phi_k / sum L phi^2
+    assert_close(s.positions, s.span_length * np.arange(1, n + 1) / (n + 1))
+    assert_close(s.participation, np.full(n, 1.0 / n))  # beta_k = L_k phi_k / sum L phi^2
 
 
 def test_example_configuration_has_four_sections():

@@ -155,7 +155,7 @@ def test_validate_realistic_campaign_scores_dAdt_for_both_models(realistic_campa
     assert all(row["support"] == NO_TRUE_SUPPORT for row in v["per_event"])
     for key in ("median_rhs_error_true_AU_active", "pooled_median_rhs_error_true_AU_active",
                 "pooled_curve_error_linear", "pooled_curve_error_total"):
-        assert np.isfinite(s[key]) and s[key] >= 0, key
+        assert np.isfinite(s[key]) and s[key] > 0, key  # the truth lies outside the model class: never exact
     assert main(["validate", str(camp), str(res_dir), "--out", str(tmp_path / "val")]) == 0
     assert (tmp_path / "val" / "summary.json").is_file()
 

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate, signal
 
-from tests.helpers import assert_close
+from tests.helpers import assert_close, assert_not_close
 from vivbench.synth.turbulence import (
     KAIMAL_LENGTH_FACTORS,
     TurbulenceConfig,
@@ -136,7 +136,7 @@ def test_shape_zero_mean_and_single_point():
 def test_same_seed_same_bytes_different_seed_differs():
     a, b, c = _simulate(3), _simulate(3), _simulate(4)
     assert a.tobytes() == b.tobytes(), "same rng state must give identical bytes"
-    assert not np.allclose(a, c), "different seeds must give different records"
+    assert_not_close(a, c, what="different seeds must give different records")
 
 
 def test_zero_intensity_returns_zeros_and_advances_rng_alike():

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tests.helpers import bell, bell_records
+from tests.helpers import assert_close, assert_not_close, bell, bell_records
 from vivbench.core import Record
 from vivbench.core.errors import InputError
 from vivbench.models import (CampaignLevel, FittedModel, HasEquations, Method, NotFittedError, Persistent, Predictor,
@@ -37,9 +37,9 @@ def test_recovers_bell_and_constant(fitted):
     c = fitted.curves(wind)
     assert c["curves"].shape == (2, 4, wind.size)
     for k in range(2):
-        np.testing.assert_allclose(c["curves"].values[k, 1], bell(wind), atol=2e-4)
-        np.testing.assert_allclose(c["curves"].values[k, 3], A3, rtol=5e-3)  # the bell is not exactly a spline
-        np.testing.assert_allclose(c["curves"].values[k, 0], 0.0, atol=1e-5)
+        assert_close(c["curves"].values[k, 1], bell(wind), atol=2e-4, reason="a spline fit of the bell, 0.4 % of its height")
+        assert_close(c["curves"].values[k, 3], A3, rtol=5e-3, reason="the bell is not exactly a spline")
+        assert_close(c["curves"].values[k, 0], 0.0, atol=1e-5, reason="no constant in the truth: a fitted zero")
     assert np.all(c["curves_lower"].values <= c["curves"].values)
     assert np.all(c["curves_upper"].values >= c["curves"].values)
     rec = _records(2, seed=5)[1]
@@ -57,7 +57,7 @@ def test_protocol(fitted):
     rec = _records(1, seed=3)[0]
     r = fitted.order_contributions(rec)
     assert r.shape == (rec.n_samples, 2, 4)
-    np.testing.assert_allclose(fitted.predict(rec), r.sum(axis=-1))
+    assert_close(fitted.predict(rec), r.sum(axis=-1), rtol=1e-7, reason="a sum of four terms")
     assert len(fitted.equations()) == 2 and fitted.equations()[0].startswith("dA1/dt = a10(U1)")
     reg = model_window_regimes(fitted, rec, np.array([0.0, 600.0]), np.array([50.0, 650.0]))
     assert reg["regime"].shape == (2, 2)
@@ -107,10 +107,10 @@ def test_bad_parameters():
 def test_basis_partition_of_unity():
     knots = uniform_knots(5.0, 15.0, 9)
     B = bspline_basis(np.array([4.0, 5.0, 9.3, 15.0, 20.0, np.nan]), knots)
-    np.testing.assert_allclose(B[:5].sum(axis=1), 1.0)
+    assert_close(B[:5].sum(axis=1), 1.0)
     assert np.isnan(B[5]).all()
     P = difference_penalty(9)
-    np.testing.assert_allclose(P @ np.linspace(0, 1, 9), 0.0, atol=1e-12)  # straight lines are not penalised
+    assert_close(P @ np.linspace(0, 1, 9), 0.0, atol=1e-12, reason="straight lines are not penalised: zero up to rounding")
 
 
 def _roughness(model):
@@ -216,7 +216,7 @@ def test_eiv_weights():
     plain = VaryingCoefficientSINDy(**params, eiv_weights=False).fit(recs)
     weighted = VaryingCoefficientSINDy(**params, eiv_weights=True).fit(recs)
     assert np.all(weighted.wind_error_share_ < 1e-12)  # the anemometers agree up to rounding
-    np.testing.assert_allclose(weighted.coef_, plain.coef_, rtol=1e-6, atol=1e-12)  # reason: weights 1 up to rounding
+    assert_close(weighted.coef_, plain.coef_, rtol=1e-6, atol=1e-12, reason="weights 1 up to rounding")
     # Independent anemometers: the wind error carries a share of the residual variance, and the
     # refit keeps the chosen basis and penalty.
     noisy = _anemometers(recs)
@@ -225,4 +225,4 @@ def test_eiv_weights():
     assert np.all(w.wind_error_share_ <= 1.0)
     p = VaryingCoefficientSINDy(**params, eiv_weights=False).fit(noisy)
     np.testing.assert_array_equal(w.penalty_, p.penalty_)
-    assert not np.allclose(w.coef_, p.coef_)
+    assert_not_close(w.coef_, p.coef_, rtol=1e-5, atol=1e-8, reason="a clear difference, not rounding")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.helpers import bell, bell_records
+from tests.helpers import assert_close, bell, bell_records
 from vivbench.analysis.changes import statistics_change_scan, wind_strata
 from vivbench.core import Record
 from vivbench.models import VaryingCoefficientSINDy
@@ -57,19 +57,19 @@ def test_curves_at_uniform_wind_are_the_sum(additive):
     wind = np.linspace(8.0, 12.0, 9)
     c = additive.curves(wind)
     Uw = np.repeat(wind[:, None], 3, axis=1)
-    np.testing.assert_allclose(c["curves"].values, np.moveaxis(additive.coefficient_values(Uw), 0, -1))
+    assert_close(c["curves"].values, np.moveaxis(additive.coefficient_values(Uw), 0, -1), rtol=1e-7, reason="sums in another order")
     # The sum over the sections at a uniform wind is the truth's curve (each section's share separately is not
     # identifiable: constants can move between them).
-    np.testing.assert_allclose(c["curves"].values[:, 1], np.broadcast_to(bell(wind), (3, wind.size)), atol=2e-3)
+    assert_close(c["curves"].values[:, 1], np.broadcast_to(bell(wind), (3, wind.size)), atol=2e-3, reason="a fit from noisy records")
     # Looser on A^3: with three winds each order's curve has three times the coefficients, and the smaller
     # amplitudes of equations 2-3 (0.8 and 0.6 of the first) excite the cubic order less.
-    np.testing.assert_allclose(c["curves"].values[:, 3], A3, rtol=0.06)
+    assert_close(c["curves"].values[:, 3], A3, rtol=0.06, reason="see above")
     # The sum written out: each section's block of B-splines evaluated at the same wind.
     M = int(additive.n_basis_[0])
     coef_one = additive.coef_[:, :M] + additive.coef_[:, M:2 * M] + additive.coef_[:, 2 * M:3 * M]
     from vivbench.models.varying import DEGREE, bspline_basis
     B = bspline_basis(wind, additive.knots_[0, :M + DEGREE + 1])
-    np.testing.assert_allclose(B @ coef_one[0], c["curves"].values[0].T, atol=1e-12)
+    assert_close(B @ coef_one[0], c["curves"].values[0].T, atol=1e-12, reason="rounding near zero")
 
 
 def test_evaluation_paths_agree(additive):
@@ -77,7 +77,7 @@ def test_evaluation_paths_agree(additive):
     cols, vals = additive.basis_rows(rec)
     theta = additive.stacked_coefficients()
     a = np.einsum("nkq,nkqi->nki", vals, theta[np.arange(3)[None, :, None], cols])
-    np.testing.assert_allclose(a, additive.coefficient_values(rec.U), atol=1e-12)
+    assert_close(a, additive.coefficient_values(rec.U), atol=1e-12, reason="rounding near zero")
     sim = additive.simulate(rec, t0=0.0, t1=200.0)
     assert np.isfinite(sim.A_sim).all() and sim.covered == 1.0
     v = varying_window_verdicts(additive, rec, np.array([0.0, 600.0]), np.array([60.0, 660.0]))

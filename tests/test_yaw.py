@@ -12,6 +12,7 @@ from vivbench.core import Record
 from vivbench.core.errors import InputError
 from vivbench.models import VaryingCoefficientSINDy
 from vivbench.preprocess import mean_yaw
+from tests.helpers import assert_close
 
 
 @pytest.mark.parametrize("azimuth", [0.0, 30.0, 75.0])
@@ -29,9 +30,9 @@ def test_mean_yaw_of_a_steady_wind(azimuth, psi):
     yaw = mean_yaw(t, u, v, azimuth)
     mid = slice(t.size // 4, 3 * t.size // 4)
     # 0.5 m/s white turbulence low-passed at 1/60 Hz leaves about 0.02 m/s: well under 1 degree at 8 m/s.
-    np.testing.assert_allclose(yaw[mid], psi, atol=0.5)
+    assert_close(yaw[mid], psi, atol=0.5, reason="the low-passed turbulence moves the yaw by well under a degree")
     # the opposite wind direction has the same yaw's magnitude
-    np.testing.assert_allclose(np.abs(mean_yaw(t, -u, -v, azimuth)[mid]), abs(psi), atol=0.5)
+    assert_close(np.abs(mean_yaw(t, -u, -v, azimuth)[mid]), abs(psi), atol=0.5, reason="as above: turbulence")
 
 
 def bell(U):
@@ -72,7 +73,8 @@ def test_yaw_covariate_recovers_what_the_wind_alone_cannot(yaw_model):
     assert _err(without, rec) > 10 * _err(yaw_model, rec)
     # The curves of docs/concepts.md (coefficient curves) are those at yaw 0: the bell itself.
     wind = np.linspace(8.0, 12.0, 9)
-    np.testing.assert_allclose(yaw_model.curves(wind)["curves"].values[0, 1], bell(wind), atol=5e-4)
+    assert_close(yaw_model.curves(wind)["curves"].values[0, 1], bell(wind), atol=5e-4,
+                 reason="a spline fit of the bell from noisy records, 1 % of its 0.05 1/s height")
 
 
 def test_yaw_model_save_load_and_records_without_yaw(yaw_model, tmp_path):
@@ -102,10 +104,10 @@ def test_yaw_and_smoothing_defaults_follow_the_records():
     rec = _records(1, seed=5)[0]
     pre = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,), wind_smoothing_s=0.0)
     pre.fit([smooth_wind(r, 30.0) for r in _records(3)])
-    np.testing.assert_allclose(pre.coef_, with_yaw.coef_, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(with_yaw.predict(with_yaw.measured_wind(rec)), pre.predict(smooth_wind(rec, 30.0)),
-                               rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(with_yaw.predict(rec), pre.predict(rec), rtol=1e-9, atol=1e-12)
+    assert_close(pre.coef_, with_yaw.coef_, atol=1e-12, reason="coefficients near zero: the same solve up to rounding")
+    assert_close(with_yaw.predict(with_yaw.measured_wind(rec)), pre.predict(smooth_wind(rec, 30.0)), atol=1e-12,
+                 reason="the same model, rounding near zero")
+    assert_close(with_yaw.predict(rec), pre.predict(rec), atol=1e-12, reason="the same model, rounding near zero")
 
 
 def test_identify_stores_the_yaw_and_records_carry_it(small_results, tmp_path):
@@ -128,9 +130,9 @@ def test_identify_stores_the_yaw_and_records_carry_it(small_results, tmp_path):
     measured = with_yaw(plain, campaign.files[0])
     ok = np.isfinite(rec.U).all(axis=1)
     # identify's wind is despiked first; the small campaign has no spikes, so the two agree closely.
-    np.testing.assert_allclose(measured.yaw[ok], rec.yaw[ok], atol=1e-6)
+    assert_close(measured.yaw[ok], rec.yaw[ok], atol=1e-6, reason="the result stores the yaw in float32-rounded degrees")
     old = tmp_path / files[0].name
     xr.load_dataset(files[0]).drop_vars("yaw").to_netcdf(old)
     assert records_from_results([old])[0].yaw is None
     back = records_from_results([old], campaign=Path(campaign.files[0]).parent)[0]
-    np.testing.assert_allclose(back.yaw[ok], rec.yaw[ok], atol=1e-6)
+    assert_close(back.yaw[ok], rec.yaw[ok], atol=1e-6, reason="as above")
