@@ -91,3 +91,18 @@ def short_event():
     campaign = CampaignConfig(n_events=1, seed=3, duration=(240.0, 240.0))
     spec, seed = campaign_specs(campaign)[0]
     return generate_event(spec, campaign.generator, seed)
+
+
+@pytest.fixture(scope="session")
+def bell_campaign():
+    """Four two-section records (600 s at 1 s, noise 1e-4 m/s) of a lock-in bell a_1(U): a small campaign in memory.
+
+    The records of :func:`tests.helpers.bell_records` (dA/dt = a_1(U) A - 2 A^3 with a_1 a bell
+    centred at 10 m/s), for checks every campaign model must pass (tests/test_conformance.py).
+    """
+    import numpy as np
+
+    from tests.helpers import bell_records
+
+    return bell_records(4, seed=7, duration_s=600.0, dt_s=1.0, mode_shape=np.array([1.0, 0.8]),
+                        wind_period_s=(400.0, 50.0), amplitude_period_s=250.0, noise_m_s=1e-4)
