@@ -113,7 +113,7 @@ def test_truth_curves_written_read_back_and_exact(short_event, tmp_path):
 
 def test_truth_curves_bad_input():
     from vivbench.core.errors import InputError
-    from vivbench.io.event import _truth_dataset
+    from vivbench.io.event_build import _truth_dataset
 
     base = {"time": [0.0, 1.0], "U": np.ones((2, 1)), "A": np.ones((2, 1)), "r": np.zeros((2, 1, 4)),
             "regime": np.ones((2, 1), int), "config": "{}"}
