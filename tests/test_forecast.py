@@ -211,7 +211,7 @@ def test_simulated_sparse_model_is_reidentified():
 
     Each section's equation uses its own section's terms only (U, A, A U, A^3),
     so one section's 23-term library holds the model; the engine runs without
-    ridge and with a plain least-squares refit (as in tests/test_engine.py),
+    ridge and with a plain least-squares refit (as in tests/test_window_stlsq.py),
     on one window spanning the record so that U and A both vary.
     """
     t = np.arange(0.0, 600.0 + 1e-9, 1.0 / FS)
