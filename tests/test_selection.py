@@ -230,3 +230,46 @@ def test_curve_bands_span_the_confidence_set_and_yaw_zero_outside_the_data_is_ma
     free = varying_selection(criterion="derivative", options={"yaw_degree": (0,)}, n_perturbations=0,
                              n_basis=(8,), n_bootstrap=0, wind_smoothing_s=0.0).fit(recs)
     assert not free.curves(wind)["curves_extrapolated"].values.any()
+
+
+def _always_flag(model, record, window_start, window_end):
+    """A verdict that flags every window regime 1 (the null model's test alone then decides)."""
+    shape = (np.size(window_start), record.n_sections)
+    return {"regime": np.ones(shape, dtype=int), "identifiable": np.ones(shape, dtype=bool)}
+
+
+def _quasi_steady_records(n_events: int) -> list[Record]:
+    """One section whose amplitude follows the wind with no lag: A = 0.01 (U - 6) / 4, dA/dt its derivative."""
+    rng = np.random.default_rng(5)
+    out = []
+    for e in range(n_events):
+        t = np.arange(0.0, 600.0, 1.0)
+        U = 8.0 + 2.0 * np.sin(2 * np.pi * t / 400.0 + rng.uniform(0, 2 * np.pi))
+        A = 0.01 * (U - 6.0) / 4.0 + 1e-4 * rng.standard_normal(t.size)
+        out.append(Record(event_id=f"E{e:03d}", t=t, A=A[:, None], U=U[:, None],
+                          dA=np.gradient(A, t)[:, None]))
+    return out
+
+
+@pytest.mark.parametrize("slaved", [True, False])
+def test_the_verdict_flags_only_campaigns_whose_dynamics_beat_the_quasi_steady_map(slaved):
+    from vivbench.models import QuasiSteadyAmplitude
+
+    recs = _quasi_steady_records(8) if slaved else _linear_records(8, slope=0.02)
+    sel = ModelSelection(candidates=[Candidate(name="linear", model=_Poly(2))], n_perturbations=0,
+                         verdict=_always_flag, null_model=QuasiSteadyAmplitude(wind_smoothing_s=0.0)).fit(recs)
+    flags = sel.identifiable(recs[0], np.array([0.0, 100.0]), np.array([50.0, 150.0]))
+    ev = sel.evidence()
+    assert ev["dynamics_shown"] is (not slaved) and ev["null"]["in_set"] is slaved
+    assert bool(flags.all()) is (not slaved) and bool(flags.any()) is (not slaved)
+    assert ("no window is flagged" in sel.evidence_text()) is slaved
+
+
+def test_too_few_events_for_the_null_test_flag_nothing():
+    from vivbench.models import QuasiSteadyAmplitude
+
+    recs = _linear_records(2, slope=0.02)
+    sel = ModelSelection(candidates=[Candidate(name="linear", model=_Poly(2))], n_perturbations=0,
+                         verdict=_always_flag, null_model=QuasiSteadyAmplitude(wind_smoothing_s=0.0)).fit(recs)
+    assert not sel.identifiable(recs[0], np.array([0.0]), np.array([50.0])).any()
+    assert "no window is flagged" in sel.evidence_text()

@@ -236,6 +236,16 @@ def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: n
                   noise_std=record.noise_std)
 
 
+class _Contributions:
+    """Fixed order contributions (n, S, 4) seen through the protocol's ``order_contributions``."""
+
+    def __init__(self, r: np.ndarray):
+        self._r = r
+
+    def order_contributions(self, record: Record) -> np.ndarray:
+        return self._r
+
+
 def _unfitted(model, **params):
     """A fresh copy of an unfitted model with ``params`` set where it has them (e.g. n_bootstrap)."""
     m = copy.deepcopy(model)
@@ -322,8 +332,11 @@ class ModelSelection:
 
     def __init__(self, *, candidates: Sequence[Candidate], n_folds: int = 5, criterion: str = "output",
                  n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, tau: float = DEFAULT_TAU,
-                 verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None):
+                 verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None,
+                 null_model=None, extrapolate_error: bool = False):
         self.candidates = tuple(candidates)
+        self.null_model = null_model
+        self.extrapolate_error = extrapolate_error
         self.n_folds = n_folds
         self.criterion = criterion
         self.n_perturbations = n_perturbations
@@ -370,24 +383,42 @@ class ModelSelection:
         self.event_ids_ = [r.event_id for r in records]
         self.losses_ = np.zeros((C, E))
         self.note_ = ""
-        if C > 1 and E < MIN_EVENTS:
+        null = self.null_model
+        self.null_loss_ = np.full(E, np.nan)
+        self.null_in_set_ = None
+        if (C > 1 or null is not None) and E < MIN_EVENTS:
             # Leaving events out would leave a single event to fit: no evidence, the simplest candidate.
             self.losses_[:] = np.nan
             self.note_ = (f"{E} events: too few for a held-out choice (at least {MIN_EVENTS}); "
-                          "the simplest candidate is used")
+                          "the simplest candidate is used"
+                          + ("" if null is None else ", and with no held-out evidence of the dynamics "
+                             "no window is flagged"))
             self.in_set_, self.excess_, self.se_ = np.ones(C, dtype=bool), np.zeros(C), np.zeros(C)
-        elif C > 1:
+        elif C > 1 or null is not None:
             fold = event_folds(E, self.n_folds, self.seed)
-            tasks = [{"model": c.model, "records": records, "fold": fold, "criterion": self.criterion}
-                     for c in self.candidates]
+            models = [c.model for c in self.candidates] + ([] if null is None else [null])
+            tasks = [{"model": m, "records": records, "fold": fold, "criterion": self.criterion} for m in models]
             for out in run_tasks(_candidate_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
+                name = self.candidates[out.index].name if out.index < C else "the quasi-steady null model"
                 if out.error is not None:
-                    raise InputError(f"candidate {self.candidates[out.index].name!r} failed on a held-out fold: "
-                                     f"{out.error}")
-                self.losses_[out.index] = out.value["loss"]
+                    raise InputError(f"{name!r} failed on a held-out fold: {out.error}")
+                if out.index < C:
+                    self.losses_[out.index] = out.value["loss"]
+                else:
+                    self.null_loss_ = out.value["loss"]
             self.in_set_, self.excess_, self.se_ = one_se_set(self.losses_)
+            if null is not None:
+                with_null = one_se_set(np.vstack([self.losses_, self.null_loss_[None]]))
+                self.null_in_set_ = bool(with_null[0][-1])
+                self.null_excess_, self.null_se_ = float(with_null[1][-1]), float(with_null[2][-1])
         else:
             self.in_set_, self.excess_, self.se_ = np.ones(1, dtype=bool), np.zeros(1), np.zeros(1)
+        # The dynamics are shown only when the dynamic models predict held-out events significantly better
+        # than the null model (the quasi-steady map); with too few events for held-out evidence, they are not.
+        if null is None:
+            self.dynamics_shown_ = True
+        else:
+            self.dynamics_shown_ = self.null_in_set_ is False
         members = np.flatnonzero(self.in_set_)
         complexity = np.array([c.complexity for c in self.candidates])
         total = np.nan_to_num(self.losses_.sum(axis=1))
@@ -471,13 +502,30 @@ class ModelSelection:
         ok = np.ones(ref.shape, dtype=bool)
         for m in list(self.set_models_) + list(self.perturbed_models_):
             ok &= self._regimes(m, record, window_start, window_end) == ref
+        if self.extrapolate_error and self.perturbed_models_:
+            ok &= self._extrapolated_regimes(record, window_start, window_end) == ref
         return ok
+
+    def _extrapolated_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
+        """Regimes (W, S) of the order contributions extrapolated to an error-free wind.
+
+        The perturbed refits add the wind's estimated error once more (error variance doubled); the
+        contributions r_i of every sample are extrapolated linearly in the error variance back to
+        none, 2 r(chosen) - mean r(perturbed) (simulation-extrapolation, Cook & Stefanski 1994).
+        """
+        r0 = np.asarray(self.model_.order_contributions(measured_input(self.model_, record)), dtype=float)
+        rp = np.mean([np.asarray(m.order_contributions(measured_input(m, record)), dtype=float)
+                      for m in self.perturbed_models_], axis=0)
+        return model_window_regimes(_Contributions(2.0 * r0 - rp), record, window_start, window_end,
+                                    tau=self.tau)["regime"].astype(int)
 
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
         """The chosen model's verdict (W, S) narrowed to :meth:`agreement`'s windows."""
         self._check_fitted()
         own = self._own_verdict(record, window_start, window_end)
         flag = np.asarray(own["identifiable"], dtype=bool)
+        if not getattr(self, "dynamics_shown_", True):
+            return np.zeros(flag.shape, dtype=bool)
         return flag & self.agreement(record, window_start, window_end, own["regime"])
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:
@@ -529,6 +577,13 @@ class ModelSelection:
             "perturbation_timescale_s": float(self.perturbation_timescale_s),
             "wind_error_rms": float(np.sqrt(np.mean(self.wind_error_**2))),
             "note": self.note_,
+            "null": (None if self.null_model is None else
+                     {"name": type(self.null_model).__name__,
+                      "held_out_loss": float(np.sum(self.null_loss_)),
+                      "excess": float(getattr(self, "null_excess_", np.nan)),
+                      "se": float(getattr(self, "null_se_", np.nan)),
+                      "in_set": self.null_in_set_}),
+            "dynamics_shown": bool(getattr(self, "dynamics_shown_", True)),
         }
 
     def evidence_text(self) -> str:
@@ -545,6 +600,15 @@ class ModelSelection:
             mark = "chosen" if c["name"] == ev["chosen"] else ("in the confidence set" if c["in_set"] else "")
             lines.append(f"  {c['name']:<22} {c['held_out_loss']:.4g} ({rel:.3f} x best; +{c['excess']:.3g} "
                          f"+- {c['se']:.3g}) {mark}".rstrip())
+        null = ev["null"]
+        if null is not None:
+            rel = null["held_out_loss"] / best if best > 0 else float("nan")
+            lines.append(f"  {'null: ' + null['name']:<22} {null['held_out_loss']:.4g} ({rel:.3f} x best; "
+                         f"+{null['excess']:.3g} +- {null['se']:.3g})")
+            lines.append("  the dynamic models predict held-out events significantly better than the null model: "
+                         "regimes may be flagged" if ev["dynamics_shown"] else
+                         "  the null model predicts held-out events as well as the dynamic models: the dynamics, "
+                         "and so the regimes, are not identified from this campaign; no window is flagged")
         return "\n".join(lines)
 
     def to_dataset(self) -> xr.Dataset:
@@ -579,7 +643,8 @@ VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0}
 
 def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterion: str = "output",
                       n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, seed: int = 0,
-                      workers: int = 1, scheduler: str | None = None, **params) -> ModelSelection:
+                      workers: int = 1, scheduler: str | None = None, null: bool = True,
+                      extrapolate_error: bool = False, **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -600,6 +665,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     """
     import itertools
 
+    from vivbench.models.quasi_steady import QuasiSteadyAmplitude
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes.varying import varying_window_verdicts
 
@@ -619,7 +685,9 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     return ModelSelection(candidates=candidates, n_folds=n_folds, criterion=criterion,
                           n_perturbations=n_perturbations, perturbation_timescale_s=perturbation_timescale_s,
                           tau=fixed.get("tau", DEFAULT_TAU), verdict=varying_window_verdicts, seed=seed,
-                          workers=workers, scheduler=scheduler)
+                          workers=workers, scheduler=scheduler, extrapolate_error=extrapolate_error,
+                          null_model=(QuasiSteadyAmplitude(wind_smoothing_s=fixed.get("wind_smoothing_s", 30.0))
+                                      if null else None))
 
 
 def _option_label(name: str, value) -> str:

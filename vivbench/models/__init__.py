@@ -57,10 +57,12 @@ from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySIND
 from vivbench.models.varying import VaryingCoefficientSINDy
 from vivbench.models.wind_weights import modal_wind_weights, weighted_section_mean
 from vivbench.models.model_input import measured_input
+from vivbench.models.quasi_steady import QuasiSteadyAmplitude
 from vivbench.models.window import WindowProblem, WindowedSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
+    "QuasiSteadyAmplitude",
     "BridgeProperties", "GreyBoxRefit", "curves_to_functions", "BinnedPolynomial",
     "EXTRAPOLATED", "curves_inside_data", "data_wind_range", "extrapolated_mask", "mark_extrapolated",
     "PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
