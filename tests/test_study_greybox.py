@@ -55,7 +55,7 @@ def test_a_tiny_draw_runs_with_the_greybox_and_records_its_scores(greybox_study)
     page = (out / "study.md").read_text()
     assert "| greybox | all (1) | dA/dt error on the true (A, U), energy-weighted | 1 |" in page
     assert "| greybox | all (1) | 0 | 0 | – | – |" in page  # the promise table (no draw with 20 flags)
-    assert "| greybox vs varying | 1 |" in page
+    assert "| greybox vs varying | 1 |" in page and "- greybox: the grey-box refit given each draw" in page
 
 
 def test_the_greybox_gets_the_draws_structure_and_no_aerodynamic_truth():
