@@ -27,6 +27,7 @@ draws and the ``sandwich_bias_wind`` band (:class:`vivbench.models.GreyBoxRefit`
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Sequence
@@ -41,7 +42,7 @@ from vivbench.models.model_input import measured_input
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regimes.greybox import greybox_window_verdicts
 from vivbench.synth.config import StructureConfig
-from vivbench.validate.methods import CampaignMethod, above_noise_floor
+from vivbench.validate.methods import CampaignMethod, MeasuredWindVerdictModel
 
 __all__ = ["STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties"]
 
@@ -82,10 +83,21 @@ def _chosen_model(fitted):
     return getattr(model, "model_", model)
 
 
-class GreyBoxVerdictModel:
+def _greybox_verdict(model: GreyBoxRefit, record: Record, window_start, window_end, *, reference,
+                     wind_smoothing_s: float, tau: float, agreement: float, n_draws: int) -> dict:
+    """:func:`greybox_window_verdicts` of a measured record: its wind smoothed as at fit, the reference's
+    record as the reference saw it at its own fit."""
+    ref_rec = None if reference is None else measured_input(reference, record)
+    return greybox_window_verdicts(model, smooth_wind(record, wind_smoothing_s), window_start, window_end, tau=tau,
+                                   agreement=agreement, n_draws=n_draws, reference=reference, reference_record=ref_rec)
+
+
+class GreyBoxVerdictModel(MeasuredWindVerdictModel):
     """A fitted grey-box model with the verdict of ``vivbench greybox`` on measured records.
 
-    Every attribute but the verdict's (``predict``, ``order_contributions``, ``curves``,
+    ``identifiable`` (the verdict and the noise floor) and ``window_regimes`` see a measured
+    record's wind smoothed as at fit (:func:`greybox_window_verdicts`, with the reference);
+    every other attribute (``predict``, ``order_contributions``, ``curves``,
     ``physical_curves``, ...) is the wrapped :class:`GreyBoxRefit`'s, on a record as given.
 
     Parameters
@@ -100,39 +112,12 @@ class GreyBoxVerdictModel:
     def __init__(self, model: GreyBoxRefit, reference=None, *, wind_smoothing_s: float = 30.0,
                  tau: float = DEFAULT_TAU, agreement: float = 0.95, n_draws: int = 100,
                  reference_seconds: float = math.nan):
-        self.model = model
+        super().__init__(model, functools.partial(_greybox_verdict, reference=reference,
+                                                  wind_smoothing_s=wind_smoothing_s, tau=tau, agreement=agreement,
+                                                  n_draws=n_draws))
         self.reference = reference
         self.wind_smoothing_s = wind_smoothing_s
-        self.tau, self.agreement, self.n_draws = tau, agreement, n_draws
         self.reference_seconds = reference_seconds
-        self._last = None  # (record, windows, verdict): identifiable and window_regimes ask for the same in turn
-
-    def __getattr__(self, name):
-        if name == "model" or "model" not in self.__dict__:  # unpickling: no wrapped model yet
-            raise AttributeError(name)
-        return getattr(self.__dict__["model"], name)
-
-    def verdict(self, record: Record, window_start, window_end) -> dict:
-        """:func:`greybox_window_verdicts` of a measured record's windows (its wind as at fit)."""
-        start = np.atleast_1d(np.asarray(window_start, dtype=float))
-        end = np.atleast_1d(np.asarray(window_end, dtype=float))
-        key = (start.tobytes(), end.tobytes())
-        if self._last is None or self._last[0] is not record or self._last[1] != key:
-            ref_rec = None if self.reference is None else measured_input(self.reference, record)
-            v = greybox_window_verdicts(self.model, smooth_wind(record, self.wind_smoothing_s), start, end,
-                                        tau=self.tau, agreement=self.agreement, n_draws=self.n_draws,
-                                        reference=self.reference, reference_record=ref_rec)
-            self._last = (record, key, v)
-        return self._last[2]
-
-    def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
-        """Bool (W, S): the grey-box verdict on the measured record, and the window above the noise floor."""
-        ok = np.asarray(self.verdict(record, window_start, window_end)["identifiable"], dtype=bool)
-        return ok & above_noise_floor(record, window_start, window_end)
-
-    def window_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
-        """Int (W, S): the grey-box model's regime of each window of the measured record."""
-        return np.asarray(self.verdict(record, window_start, window_end)["regime"], dtype=int)
 
     def simulate(self, record: Record, *args, **kwargs):
         """The grey-box ``simulate`` on the measured record's wind smoothed as at fit."""
