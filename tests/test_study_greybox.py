@@ -89,3 +89,18 @@ def test_greybox_method_checks_its_arguments():
         GreyBoxMethod(bridge, warm_start=None)
     with pytest.raises(InputError, match="wind_smoothing_s"):
         GreyBoxMethod(bridge, wind_smoothing_s=-1.0)
+
+
+def test_the_leaderboard_scores_the_greybox_on_a_tiny_scenario(tmp_path):
+    from vivbench.validate import run_leaderboard
+    from vivbench.validate.scenarios import load_scenario_file
+
+    (tmp_path / "tiny.toml").write_text(
+        '[scenario.tiny]\nversion = 1\ndescription = "two 10-min events of the default bridge (test size)"\n'
+        'events = 2\nduration = 600.0\nseed = 1\n[scenario.tiny.generator]\nmode = "realistic"\n')
+    scenarios = list(load_scenario_file(tmp_path / "tiny.toml").values())
+    result = run_leaderboard(["greybox"], scenarios, tmp_path / "out")
+    (row,) = result.rows
+    assert row["method"] == "greybox" and row["error"] == "" and row["has_verdict"]
+    assert 0.0 < row["rhs_error_true_AU"] < 100.0 and 0.0 <= row["accuracy_all"] <= 1.0
+    assert 0.0 <= row["coverage"] <= 1.0
