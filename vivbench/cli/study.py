@@ -48,7 +48,8 @@ def register(sub) -> None:
     s.add_argument("--draws", required=True, help="draw numbers: N, N-M or a comma-separated list (e.g. 0-29)")
     s.add_argument("--methods", default="varying,pooled",
                    help="comma-separated methods (default varying,pooled; pooled is the built-in campaign model, "
-                        "other names as in vivbench compare, or package.module:factory)")
+                        "greybox is the grey-box refit given each draw's structural properties, other names "
+                        "as in vivbench compare, or package.module:factory)")
     s.add_argument("--out", required=True, help="output directory; rerunning with the same options resumes")
     s.add_argument("--max-events", type=int, default=None,
                    help="cap each campaign at this many events (quick checks; recorded on the results page)")

@@ -13,6 +13,12 @@ from vivbench.validate.compare import (
     run_comparison,
 )
 from vivbench.validate.greybox import greybox_recovery, truth_y1, truth_yaw_factor
+from vivbench.validate.greybox_method import (
+    STRUCTURAL_FIELDS,
+    GreyBoxMethod,
+    GreyBoxVerdictModel,
+    structural_properties,
+)
 from vivbench.validate.leaderboard import LeaderboardResult, method_slug, parse_methods, run_leaderboard
 from vivbench.validate.leaderboard_table import (
     LEADERBOARD_COLUMNS,
@@ -108,6 +114,7 @@ from vivbench.validate.sweep import (
 )
 from vivbench.validate.sweep_figures import plot_recovery, sweep_summary
 from vivbench.validate.study import (
+    DRAW_METHODS,
     METHOD_ALIASES,
     STUDY_COLUMNS,
     StudyConfig,
@@ -117,6 +124,7 @@ from vivbench.validate.study import (
     parse_draws,
     run_study,
     run_study_task,
+    study_method,
     study_tasks,
 )
 from vivbench.validate.study_report import (
@@ -130,6 +138,7 @@ from vivbench.validate.study_report import (
 
 __all__ = [
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
+    "STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",
     "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
     "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
@@ -178,7 +187,7 @@ __all__ = [
     "truth_record",
     "record_yaw_on",
     "write_validation",
-    "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "method_spec", "parse_draws",
-    "run_study", "run_study_task", "study_tasks",
+    "DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "method_spec",
+    "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks",
     "LABEL_COLUMNS", "PROMISE_MIN_FLAGS", "PROMISE_SHARE", "SUMMARY_SCORES", "study_markdown", "study_summary",
 ]

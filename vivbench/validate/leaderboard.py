@@ -168,7 +168,12 @@ def _score_cell(task: dict) -> dict:
     from vivbench.validate.methods import fit_method, resolve_method, score_fitted, scoring_inputs
 
     records, truths, windows = scoring_inputs(task["events"], task["results"])
-    method = resolve_method(task["method"])
+    if task["method"] == "greybox":  # given the scenario bridge's structural properties, never its aerodynamics
+        from vivbench.validate.greybox_method import GreyBoxMethod, structural_properties
+
+        method = GreyBoxMethod(structural_properties(task["scenario"].generator_config().structure))
+    else:
+        method = resolve_method(task["method"])
     fitted, seconds = fit_method(method, records)
     scores = score_fitted(fitted, records, truths, windows=windows, fit_time_s=seconds)
     # Adapter (the scoring API has no such key): whether the fitted model gives a verdict, which
@@ -254,7 +259,9 @@ def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_d
     Parameters
     ----------
     methods : method specs, as :func:`vivbench.validate.methods.resolve_method` takes them:
-        ``"windows"``, ``"campaign"``, ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"``
+        ``"windows"``, ``"campaign"``, ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"``;
+        or ``"greybox"``: :class:`vivbench.validate.greybox_method.GreyBoxMethod` given each scenario bridge's
+        structural properties (:func:`vivbench.validate.greybox_method.structural_properties`)
     scenarios : the scenarios (e.g. :func:`vivbench.validate.select_scenarios`)
     out_dir : output directory (created); rerunning into it resumes
     workers, scheduler : see :func:`vivbench.core.parallel.run_tasks`
@@ -338,7 +345,8 @@ def _run(methods, scenarios, out, workers, scheduler, identify, rerun, progress)
                     progress("cell", s.name, m)
             else:
                 pending.append((s.name, m))
-    cell_tasks = [{"method": m, "events": files[sn]["events"], "results": files[sn]["results"]} for sn, m in pending]
+    cell_tasks = [{"method": m, "events": files[sn]["events"], "results": files[sn]["results"], "scenario": by_name[sn]}
+                  for sn, m in pending]
     computed = []
     with closing(run_tasks(_score_cell, cell_tasks, workers=workers, scheduler=scheduler)) as outcomes:
         for o in outcomes:

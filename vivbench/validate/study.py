@@ -20,6 +20,14 @@ study stopped part-way keeps them, and running it again resumes; a failed draw i
 journal alone, so the same draws give the same bytes. Wall times are kept in the journal
 only (they change from run to run).
 
+The ``greybox`` method (:class:`vivbench.validate.greybox_method.GreyBoxMethod`) is fitted on
+each draw with that draw's structural properties
+(:func:`~vivbench.validate.greybox_method.structural_properties`: mass, deck depth, frequency,
+structural damping, air density, mode shape, tributary lengths; never the aerodynamics), as an
+engineer takes them from design documents, and with the default campaign model (``varying``)
+as its warm start and verdict reference; when ``varying`` is also studied, its fitted model is
+used (the methods are fitted in an order that puts ``varying`` first).
+
 ``max_events`` and ``max_duration`` shrink every campaign (for quick checks); a capped
 study's outputs say so on their first lines.
 """
@@ -58,11 +66,13 @@ from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_
 from vivbench.validate.methods import score_fitted, scoring_inputs
 from vivbench.validate.study_report import LABEL_COLUMNS, study_markdown, study_summary
 
-__all__ = ["METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "StudyResult", "method_spec",
-           "parse_draws", "run_study", "run_study_task", "study_tasks"]
+__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "StudyResult", "method_spec",
+           "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks"]
 
 #: Short names of the study's methods that are not :func:`resolve_method` names.
 METHOD_ALIASES = {"pooled": "campaign"}
+#: Study methods built from each draw's structural properties (not :func:`resolve_method` names).
+DRAW_METHODS = ("greybox",)
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
 _FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set",
                  "change_p_value", "change_detected", "change_index")
@@ -75,7 +85,10 @@ _MAX_DRAW = 2**31
 
 
 def method_spec(name: str) -> str:
-    """The :func:`resolve_method` spec of a study method name (``pooled`` is ``campaign``)."""
+    """The :func:`resolve_method` spec of a study method name (``pooled`` is ``campaign``; a
+    :data:`DRAW_METHODS` name is its own)."""
+    if name in DRAW_METHODS:
+        return name
     spec = name if name in BUILTIN_METHODS else METHOD_ALIASES.get(name, name)
     return check_method_spec(spec)
 
@@ -104,8 +117,9 @@ class StudyConfig:
     ----------
     split : "development" or "evaluation"
     draws : draw numbers, sorted, without repeats
-    methods : study method names (``pooled`` is the built-in ``campaign``; any other name or
-        ``package.module:factory`` that :func:`resolve_method` knows)
+    methods : study method names (``pooled`` is the built-in ``campaign``; ``greybox`` the grey-box
+        refit given the draw's structural properties; any other name or ``package.module:factory``
+        that :func:`resolve_method` knows)
     max_events : cap on each campaign's events (None: the draw's)
     max_duration : s; cap on each event's duration (None: the draw's)
     identify : the identification's configuration
@@ -213,8 +227,37 @@ class _FlagRecorder:
         return int(sum(int(np.sum(ok & (r >= 2))) for r, ok in zip(self.regimes, self.flags)))
 
 
-def _score(name: str, records, truths, windows, tau: float) -> dict[str, Any]:
-    method = resolve_method(method_spec(name))
+def study_method(name: str, draw, fitted: dict | None = None, *, tau: float = DEFAULT_TAU):
+    """The method a study fits on one draw's campaign.
+
+    Parameters
+    ----------
+    name : study method name (:class:`StudyConfig` ``methods``)
+    draw : vivbench.synth.family.FamilyDraw
+        Only its structure is read, by ``greybox``
+        (:func:`~vivbench.validate.greybox_method.structural_properties`).
+    fitted : method name -> its fitted model on this draw, so far (``greybox`` takes ``varying``'s
+        as its reference when there)
+    tau : regime threshold of the grey-box verdict
+
+    Returns
+    -------
+    method : an object with ``fit(records)``
+    """
+    if name == "greybox":
+        from vivbench.validate.greybox_method import GreyBoxMethod, structural_properties
+
+        reference = (fitted or {}).get("varying", "varying")
+        return GreyBoxMethod(structural_properties(draw.config.structure), reference=reference, tau=tau)
+    return resolve_method(method_spec(name))
+
+
+def _fit_order(methods: Sequence[str]) -> list[str]:
+    """The methods in the order they are fitted on a draw: those another one reuses first."""
+    return sorted(methods, key=lambda m: 0 if m == "varying" else 1)
+
+
+def _score(method, records, truths, windows, tau: float) -> tuple[dict[str, Any], Any]:
     fitted, seconds = fit_method(method, records)
     seen = _FlagRecorder(fitted, tau)
     scores = score_fitted(seen, records, truths, windows=windows, tau=tau, simulate=False, fit_time_s=seconds)
@@ -223,7 +266,10 @@ def _score(name: str, records, truths, windows, tau: float) -> dict[str, Any]:
     row.update(n_flagged=n_flagged, flagged_right_share=scores["accuracy_identifiable"],
                self_excited_flags=seen.self_excited_flags(), error="", fit_time_s=seconds,
                **_choice(fitted), **_change_scan(fitted, records))
-    return row
+    reference_seconds = getattr(fitted, "reference_seconds", None)
+    if reference_seconds is not None:  # the grey-box's own fit of its reference (NaN: reused)
+        row["reference_fit_time_s"] = float(reference_seconds)
+    return row, fitted
 
 
 def _choice(fitted) -> dict[str, Any]:
@@ -282,10 +328,11 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
         identified = {p.name.removesuffix(".identify.nc") for p in results}
         events = sorted((f for f in made.files if f.stem in identified), key=lambda p: p.name)
         records, truths, windows = scoring_inputs(events, results)
-        methods = {}
-        for name in task.methods:
+        methods, fitted = {}, {}
+        for name in _fit_order(task.methods):
             try:
-                methods[name] = _score(name, records, truths, windows, task.tau)
+                method = study_method(name, draw, fitted, tau=task.tau)
+                methods[name], fitted[name] = _score(method, records, truths, windows, task.tau)
             except Exception as exc:  # one method failing must not lose the others' scores
                 methods[name] = {**{k: math.nan for k in (*_SCORES, *_FLAG_COLUMNS)},
                                  "error": error_line(exc).replace(str(root), "<draw>")}

@@ -40,6 +40,13 @@ _LABELS = {"rhs_error_true_AU_energy": "dA/dt error on the true (A, U), energy-w
            "accuracy_all": "regime accuracy, all windows"}
 
 
+_GREYBOX_NOTE = ("- greybox: the grey-box refit given each draw's structural properties (modal mass, deck depth, "
+                 "frequency, structural damping before any step, mode shape, tributary lengths; never the "
+                 "aerodynamics), warm-started from the varying model, whose regime its flags must also carry. Its "
+                 "30 s wind smoothing, penalty grid and verdict settings were chosen on the default campaign, not on "
+                 "the family.")
+
+
 def _number(value) -> float:
     try:
         return float(value)
@@ -197,6 +204,7 @@ def study_markdown(summary: dict[str, Any]) -> str:
               f"- Draws requested: {_ranges(cfg['draws'])}; scored: {_ranges(summary['draws_scored'])}; "
               f"failed in this run: {_ranges(summary['draws_failed'])}.",
               f"- Methods: {', '.join(cfg['methods'])}.",
+              *([_GREYBOX_NOTE] if "greybox" in cfg["methods"] else []),
               "- Errors are relative: the energy-weighted one is sqrt(sum of squared errors / sum of squared true "
               "dA/dt) over every sample of a campaign, on the truth's own (A, U).",
               f"- The verdict's promise: at least {PROMISE_SHARE:.0%} of the flagged window-equations carry the true "
