@@ -34,7 +34,7 @@ from pathlib import Path  # noqa: E402
 from vivbench.models.campaign import PooledSINDy
 from vivbench.analysis.identify import identify_files
 from vivbench.analysis.pool import pool_results
-from vivbench.io.campaign_model import write_pooled
+from vivbench.io.campaign_model import write_campaign_regimes
 from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_campaigns.py
@@ -72,7 +72,7 @@ def main(n_events: int = 31) -> dict:
                   f"{rec['rhs_median_rel_error_active']:.4f}")
             # The campaign model (vivbench pool) on the same windows.
             t0 = time.perf_counter()
-            pooled = write_pooled(pool_results(results, PooledSINDy()), tmp / name / "results2")
+            pooled = write_campaign_regimes(pool_results(results, PooledSINDy()), tmp / name / "results2")
             t_pool = time.perf_counter() - t0
             prec = pooled_recovery(camp.files, pooled, results)
             out[name]["pooled"] = {"time_s": t_pool, **prec}

@@ -138,7 +138,7 @@ def test_cli_pool_and_validation_of_the_campaign_model(small_results_in_library,
     import shutil
 
     from vivbench.cli import main
-    from vivbench.io.campaign_model import POOLED_NAME
+    from vivbench.io.campaign_model import REGIMES_NAME
     from vivbench.validate import pooled_recovery, validate_campaign
 
     # pooled_recovery scores dA/dt against the exact coefficient matrix: the in_library mode
@@ -146,9 +146,9 @@ def test_cli_pool_and_validation_of_the_campaign_model(small_results_in_library,
     res = tmp_path / "res"
     shutil.copytree(res_dir, res)
     assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "10", "--block", "20"]) == 0
-    assert (res / POOLED_NAME).is_file() and not list(res.glob("*.tmp*"))
+    assert (res / REGIMES_NAME).is_file() and not list(res.glob("*.tmp*"))
     v = validate_campaign(camp.files[0].parent, res)
-    direct = pooled_recovery(camp.files[:2], res / POOLED_NAME, sorted(res.glob("*.identify.nc")))
+    direct = pooled_recovery(camp.files[:2], res / REGIMES_NAME, sorted(res.glob("*.identify.nc")))
     assert v["pooled"]["regime"]["n"] == direct["n"]
     assert_close(v["summary"]["pooled_regime_accuracy_all"], direct["accuracy_all"])
     assert_close(v["summary"]["pooled_regime_coverage"], direct["coverage"])
@@ -160,11 +160,11 @@ def test_cli_pool_and_validation_of_the_campaign_model(small_results_in_library,
     assert 0 < v["summary"]["energy_rhs_error_true_AU"] < math.inf
     assert {r["group"] for r in v["regime_confusion"]} >= {"pooled_identifiable", "pooled_all"}
     # the curves are marked where they extrapolate beyond each section's fitted winds
-    from vivbench.io.campaign_model import read_pooled
+    from vivbench.io.campaign_model import read_campaign_regimes
     from vivbench.models import data_wind_range
     from vivbench.analysis import records_from_results
 
-    pooled = read_pooled(res / POOLED_NAME)
+    pooled = read_campaign_regimes(res / REGIMES_NAME)
     ext = pooled["curves_extrapolated"].values.astype(bool)
     assert ext.shape == (pooled.sizes["equation"], pooled.sizes["wind"])
     rng = data_wind_range(records_from_results(sorted(res.glob("*.identify.nc")), derivative=None))
@@ -182,9 +182,8 @@ def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_u
     from vivbench.analysis import campaign_model_file, load_campaign_model, with_campaign_model
     from vivbench.cli import main
     from vivbench.core.errors import InputError
-    from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, read_pooled
+    from vivbench.io.campaign_model import MODEL_NAME, REGIMES_NAME, read_campaign_regimes, regimes_file
     from vivbench.io.result import read_result, result_record
-    from vivbench.models import CampaignSINDy
     from vivbench.models.simulate import forecast, simulate_identified
     from vivbench.validate import validate_campaign
 
@@ -193,9 +192,9 @@ def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_u
     shutil.copytree(res_dir, res)
     before = {f.name for f in res.iterdir()}
     assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
-    assert {f.name for f in res.iterdir()} - before == {POOLED_NAME, MODEL_NAME}
-    pooled = read_pooled(res / POOLED_NAME)
-    model = CampaignSINDy.load(res / MODEL_NAME)
+    assert {f.name for f in res.iterdir()} - before == {REGIMES_NAME, MODEL_NAME}
+    pooled = read_campaign_regimes(res / REGIMES_NAME)
+    model = PooledSINDy.load(res / MODEL_NAME)
     assert campaign_model_file(res) == res / MODEL_NAME
     assert np.array_equal(model.coef_, pooled["coef"].values)
     result = read_result(sorted(res.glob("*.identify.nc"))[0])
@@ -226,26 +225,63 @@ def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_u
     v_model = validate_campaign(camp.files[0].parent, res)
     assert v_model["pooled"]["model_file"] == str(res / MODEL_NAME)
 
-    # Older outputs (no campaign.model.nc): the model is rebuilt from the pooled result's coef.
+    # Older outputs (no campaign.model.nc): the model is rebuilt from the regimes file's coef.
     (res / MODEL_NAME).unlink()
     fallback = load_campaign_model(res)
     assert np.array_equal(fallback.predict(record), expected, equal_nan=True)
     assert fallback.equations() == model.equations()
-    with pytest.raises(InputError, match=f"{POOLED_NAME}.*re-run vivbench pool"):
+    with pytest.raises(InputError, match=f"{REGIMES_NAME}.*re-run vivbench pool"):
         fallback.curves([8.0, 10.0])
     assert model.curves([8.0, 10.0])["curves"].shape == (3, 4, 2)
     without = run_forecast(tmp_path / "fc_pooled")
     keys = [k for k in with_model if k.startswith("campaign_model_")]
     assert len(keys) == 3 and all(with_model[k] == without[k] for k in keys)
     v_pooled = validate_campaign(camp.files[0].parent, res)
-    assert v_pooled["pooled"]["model_file"] == str(res / POOLED_NAME)
+    assert v_pooled["pooled"]["model_file"] == str(res / REGIMES_NAME)
     assert json.dumps(v_pooled["summary"], sort_keys=True) == json.dumps(v_model["summary"], sort_keys=True)
+    # A directory written by an earlier version (campaign.pooled.nc, format "vivbench-pooled", the settings in
+    # pooled_config_json) still loads and scores the same.
+    legacy = _as_written_by_earlier_versions(res)
+    assert regimes_file(res) == legacy and campaign_model_file(res) == legacy
+    assert read_campaign_regimes(legacy).attrs["model_config_json"] == pooled.attrs["model_config_json"]
+    assert load_campaign_model(res).equations() == model.equations()
+    v_legacy = validate_campaign(camp.files[0].parent, res)
+    assert v_legacy["pooled"]["model_file"] == str(legacy)
+    assert json.dumps(v_legacy["summary"], sort_keys=True) == json.dumps(v_model["summary"], sort_keys=True)
     # Neither file: load_campaign_model refuses in one line naming the directory.
-    (res / POOLED_NAME).unlink()
+    legacy.unlink()
     with pytest.raises(InputError, match="no campaign model"):
         load_campaign_model(res)
     with pytest.raises(InputError, match="not a campaign model"):
         load_campaign_model(sorted(res.glob("*.identify.nc"))[0])
+
+
+def _as_written_by_earlier_versions(res):
+    """Turn res's campaign.regimes.nc into the campaign.pooled.nc an earlier version wrote; its path."""
+    import xarray as xr
+
+    from vivbench.io.campaign_model import LEGACY_REGIMES_FORMAT, LEGACY_REGIMES_NAME, REGIMES_NAME
+
+    with xr.open_dataset(res / REGIMES_NAME) as ds:
+        old = ds.load()
+    old.attrs.update(format=LEGACY_REGIMES_FORMAT, pooled_config_json=old.attrs.pop("model_config_json"))
+    old.to_netcdf(res / LEGACY_REGIMES_NAME)
+    (res / REGIMES_NAME).unlink()
+    return res / LEGACY_REGIMES_NAME
+
+
+def test_rerunning_pool_on_an_old_directory_leaves_one_regimes_file(small_results, tmp_path):
+    import shutil
+
+    from vivbench.cli import main
+    from vivbench.io.campaign_model import LEGACY_REGIMES_NAME, REGIMES_NAME
+
+    res = tmp_path / "res"
+    shutil.copytree(small_results[1], res)
+    assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
+    _as_written_by_earlier_versions(res)
+    assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
+    assert (res / REGIMES_NAME).is_file() and not (res / LEGACY_REGIMES_NAME).exists()
 
 
 def test_cli_pool_bad_input(tmp_path, capsys):

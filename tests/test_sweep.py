@@ -175,7 +175,7 @@ def test_dask_cluster_and_this_process_agree(tiny_config, reference, dask_addres
     ref_out, ref = reference
     table = ref.table.read_bytes()
     files = _files(ref_out)
-    # one event, its result, the pooled result and the campaign model's file per campaign
+    # one event, its result, the campaign regimes and the campaign model's file per campaign
     assert len(files) == 8 and sum(name.endswith("campaign.model.nc") for name in files) == 2
     result = run_sweep(tiny_config, tmp_path / "dask", keep_files=True, scheduler=dask_address)
     assert result.table.read_bytes() == table, "dask: table differs from the single-process run"

@@ -18,7 +18,7 @@ def realistic_campaign(tmp_path_factory):
     """Two 6 min realistic events (aero outside the library), identified and pooled: (campaign dir, results dir)."""
     from vivbench.analysis.identify import identify_files
     from vivbench.analysis.pool import pool_results
-    from vivbench.io.campaign_model import write_pooled
+    from vivbench.io.campaign_model import write_campaign_regimes
     from vivbench.models.campaign import PooledSINDy
     from vivbench.synth import CampaignConfig, generate_campaign, load_config
 
@@ -31,7 +31,7 @@ def realistic_campaign(tmp_path_factory):
     results, failures = identify_files(camp.files, root / "id", workers=1)
     assert not failures, failures
     model = PooledSINDy(n_bootstrap=10, block_s=30.0, seed=0)
-    write_pooled(pool_results(results, model), root / "id")
+    write_campaign_regimes(pool_results(results, model), root / "id")
     model.save(root / "id" / "campaign.model.nc")
     return root / "camp", root / "id"
 
@@ -128,10 +128,10 @@ def test_truth_curves_bad_input():
 
 
 def test_pooled_curves_and_bands(realistic_campaign):
-    from vivbench.io.campaign_model import read_pooled
+    from vivbench.io.campaign_model import read_campaign_regimes
 
     _camp, res_dir = realistic_campaign
-    pooled = read_pooled(res_dir / "campaign.pooled.nc")
+    pooled = read_campaign_regimes(res_dir / "campaign.regimes.nc")
     S = pooled.sizes["equation"]
     for name in ("curves", "curves_lower", "curves_upper"):
         assert pooled[name].dims == ("equation", "order", "wind")

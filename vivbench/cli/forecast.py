@@ -129,8 +129,8 @@ def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None, ref=1, section
 def run(args) -> int:
     from vivbench.models.simulate import CLIP_MODES, forecast, simulate_identified
     from vivbench.io.result import read_result, result_record
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
-    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, campaign_wind_smoothing
+    from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
     from vivbench.models.model_input import measured_input
     from vivbench.models.simulate import model_jacobian
     from vivbench.io.netcdf import atomic_path
@@ -189,8 +189,8 @@ def run(args) -> int:
             raise InputError(f"{model_path}: the campaign model has {model.n_sections_} sections, "
                              f"{args.result} {len(sections)}")
         # The measured record on the wind as the model saw it at fit (the varying model's smoothing).
-        beside = model_path.parent / POOLED_NAME
-        smoothing = pooled_wind_smoothing(read_pooled(beside) if beside.is_file() else None)
+        beside = regimes_file(model_path.parent)
+        smoothing = campaign_wind_smoothing(read_campaign_regimes(beside) if beside.is_file() else None)
         record = measured_input(model, result_record(result), wind_smoothing_s=smoothing)
         span = (float(result["window_start"].values.min()), float(result["window_end"].values.max()))
         csim = model.simulate(record, *span)
@@ -250,7 +250,7 @@ def register(sub) -> None:
     s.add_argument("--d", type=_ds, default=(0.0, 50.0, 150.0, 300.0),
                    help="averaging durations, s, comma-separated (default 0,50,150,300)")
     s.add_argument("--pooled", default=None,
-                   help="campaign model of vivbench pool: campaign.model.nc, or campaign.pooled.nc of older outputs "
+                   help="campaign model of vivbench pool: campaign.model.nc, or campaign.regimes.nc of older outputs "
                         "(default: whichever lies beside the result, the model file first)")
     s.add_argument("--campaign", default=None, help="campaign directory with the event file (truth: t0, growth rate)")
     s.set_defaults(func=run)

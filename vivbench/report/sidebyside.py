@@ -54,7 +54,7 @@ class CampaignRun:
     campaign : path
         Directory of the event files (``<event_id>.nc``, ``catalogue.csv``).
     results : path
-        Identification results (``<event_id>.identify.nc``; ``campaign.pooled.nc``
+        Identification results (``<event_id>.identify.nc``; ``campaign.regimes.nc``
         and ``campaign.model.nc`` of ``vivbench pool`` when fitted).
     cluster, forecast, validate : path, optional
         Output directories of ``vivbench cluster``, ``forecast`` and
@@ -326,8 +326,8 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     list of str
         Markdown lines; the baseline column comes first.
     """
-    from vivbench.analysis.pool import campaign_model_file, curve_wind_grid, load_campaign_model, pooled_wind_smoothing
-    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+    from vivbench.analysis.pool import campaign_model_file, curve_wind_grid, load_campaign_model, campaign_wind_smoothing
+    from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
     from vivbench.models.model_input import measured_input
     from vivbench.io.result import read_result, result_record
     from vivbench.report.figures import curves_figure, model_forecast_figure
@@ -399,11 +399,11 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     # Coefficient curves of each campaign model against its own truth.
     cells = []
     for k, (r, i) in enumerate(zip(runs, info)):
-        pooled_path = r.results / POOLED_NAME
+        pooled_path = regimes_file(r.results)
         if not pooled_path.is_file():
             cells.append("campaign model not fitted (`vivbench pool` not run)")
             continue
-        pooled = read_pooled(pooled_path)
+        pooled = read_campaign_regimes(pooled_path)
         model = load_campaign_model(campaign_model_file(r.results))
         curves = pooled if "curves" in pooled.data_vars else None
         if curves is None and getattr(model, "amplitude_ratios_", None) is not None:
@@ -475,8 +475,8 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
         fname = f"sbs_forecast_{k + 1}_{modes[k]}.png"
         try:
             model = load_campaign_model(model_path)
-            pooled_path = r.results / POOLED_NAME
-            smoothing = pooled_wind_smoothing(read_pooled(pooled_path) if pooled_path.is_file() else None)
+            pooled_path = regimes_file(r.results)
+            smoothing = campaign_wind_smoothing(read_campaign_regimes(pooled_path) if pooled_path.is_file() else None)
             record = measured_input(model, result_record(res), wind_smoothing_s=smoothing)
             model_forecast_figure(model, record, out_dir / fname,
                                   t0=float(t0), span=span, name=f"campaign model ({_SHORT.get(modes[k], modes[k])})")

@@ -36,6 +36,7 @@ from vivbench.validate.scenarios import (
 )
 from vivbench.validate.methods import (
     BUILTIN_METHODS,
+    RENAMED_METHODS,
     SCORE_KEYS,
     CampaignMethod,
     SelectedVerdictModel,
@@ -134,7 +135,7 @@ __all__ = [
     "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
     "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
     "select_scenarios", "family_scenarios",
-    "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "SelectedVerdictModel", "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel", "WindowMethod", "above_noise_floor",
+    "BUILTIN_METHODS", "RENAMED_METHODS", "SCORE_KEYS", "CampaignMethod", "SelectedVerdictModel", "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel", "WindowMethod", "above_noise_floor",
     "check_method_spec", "default_windows", "fit_method", "resolve_method", "score_fitted", "score_method",
     "scoring_inputs",
     "simulation_nmse",

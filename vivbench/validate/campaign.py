@@ -65,7 +65,7 @@ _NOTES = (
     "'active' as above with the truth's dA/dt. Beside the median over windows, the same error energy-weighted "
     "(energy_rhs_error_true_AU, rhs_true_AU.energy): sqrt(sum of squared errors / sum of squared true dA/dt) over "
     "every sample (the window models: over their windows' samples), which the large amplitudes dominate.",
-    "Curve errors (pooled.curves): the campaign model's coefficient curves a_ki(U) (campaign.pooled.nc) against "
+    "Curve errors (pooled.curves): the campaign model's coefficient curves a_ki(U) (campaign.regimes.nc) against "
     "the truth's (/truth/curves), over the lock-in range (winds of the truth samples whose regime is "
     "self-excited, 2..4): relative RMS of the net linear coefficient a_k1 on the model's wind grid, and of "
     "sum_i a_ki(U) A^i on those samples; and energy-weighted (pooled_curve_error_energy): sum_i a_ki(U_k) A_k^i "
@@ -230,11 +230,11 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         ``pooled`` (regime report, ``rhs`` and ``rhs_true_AU`` errors and
         ``curves`` (:func:`curve_errors` of its coefficient curves against the
         truth's, or ``scored`` False with the reason) of the campaign model when
-        ``results_dir/campaign.pooled.nc`` is present, else None: regimes and
+        ``results_dir/campaign.regimes.nc`` is present, else None: regimes and
         dA/dt of the model object of ``campaign.model.nc`` through the model
-        protocol, or of the model rebuilt from the pooled result's ``coef``
+        protocol, or of the model rebuilt from the regimes file's ``coef``
         for outputs without that file; identifiability verdicts from the
-        pooled result),
+        campaign regimes),
         ``skipped`` (event file -> reason), ``notes``, ``settings``, ``summary``
         (flat headline numbers).
 
@@ -271,19 +271,19 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     sup_all, sup_ok = [], []
     skipped, truth_by_key, change_states = {}, {}, {}
     # The campaign model of ``vivbench pool``, scored beside the window models when present: the
-    # model object (campaign.model.nc, or rebuilt from the pooled result's coef for older outputs)
-    # through the protocol, the windows' identifiability verdicts from the pooled result.
-    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
+    # model object (campaign.model.nc, or rebuilt from the regimes file's coef for older outputs)
+    # through the protocol, the windows' identifiability verdicts from the campaign regimes.
+    from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, campaign_wind_smoothing
 
-    pooled_path = results_dir / POOLED_NAME
+    pooled_path = regimes_file(results_dir)
     pooled = model = model_path = None
     if pooled_path.is_file():
-        pooled = read_pooled(pooled_path)
+        pooled = read_campaign_regimes(pooled_path)
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)
         model_tau = float(getattr(model, "tau", DEFAULT_TAU))
-        smoothing = pooled_wind_smoothing(pooled)
+        smoothing = campaign_wind_smoothing(pooled)
     p_reg, p_ok, p_errs, p_act, p_errs_true, p_act_true = [], [], [], [], [], []
     for event_id, ep, rp in pairs:
         tree = read_event(ep)

@@ -75,7 +75,7 @@ def parse_methods(methods: str | Sequence[str]) -> list[str]:
     methods = list(methods)
     if not methods:
         raise InputError("no method named: give e.g. "
-                         "--methods windows,campaign,varying,pysindy-cp,binned,pkg.mod:factory")
+                         "--methods windows,pooled,varying,pysindy-cp,binned,pkg.mod:factory")
     if len(set(methods)) != len(methods):
         raise InputError(f"methods named twice: {', '.join(methods)}")
     return methods
@@ -254,7 +254,7 @@ def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_d
     Parameters
     ----------
     methods : method specs, as :func:`vivbench.validate.methods.resolve_method` takes them:
-        ``"windows"``, ``"campaign"``, ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"``
+        ``"windows"``, ``"pooled"``, ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"``
     scenarios : the scenarios (e.g. :func:`vivbench.validate.select_scenarios`)
     out_dir : output directory (created); rerunning into it resumes
     workers, scheduler : see :func:`vivbench.core.parallel.run_tasks`

@@ -8,7 +8,7 @@ against its dA/dt for any truth). Measured records reach the model through
 :func:`vivbench.models.measured_input` (the wind as at fit: the varying
 model's smoothing); the truth's felt wind is used as it is. The identifiability verdict of each
 window (bootstrap agreement, confidence-region margins) is the one written in
-the pooled result ``campaign.pooled.nc``.
+the campaign regimes ``campaign.regimes.nc``.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     Parameters
     ----------
     event_files : synthetic event files (with ``/truth``)
-    pooled_file : ``campaign.pooled.nc`` (windows and their identifiability verdicts)
+    pooled_file : ``campaign.regimes.nc`` (windows and their identifiability verdicts)
     result_files : the ``<event_id>.identify.nc`` the campaign model was fitted on
         (their A and U are where the right-hand sides are compared)
     active_share : as in :func:`vivbench.validate.campaign_recovery`
@@ -66,16 +66,16 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         ``rhs_error_true_AU_energy``, the same error energy-weighted over every
         truth sample (:func:`vivbench.validate.metrics.energy_relative_error`).
     """
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
-    from vivbench.io.campaign_model import read_pooled
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, campaign_wind_smoothing
+    from vivbench.io.campaign_model import read_campaign_regimes
     from vivbench.io.event import read_event
     from vivbench.io.result import read_result, result_record
 
-    pooled = read_pooled(pooled_file)
+    pooled = read_campaign_regimes(pooled_file)
     if model is None:
         model = load_campaign_model(campaign_model_file(Path(pooled_file).parent) or pooled_file)
     model_tau = float(getattr(model, "tau", DEFAULT_TAU))
-    smoothing = pooled_wind_smoothing(pooled)
+    smoothing = campaign_wind_smoothing(pooled)
     truths = {}
     for path in event_files:
         tree = read_event(path)

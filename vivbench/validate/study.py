@@ -62,7 +62,7 @@ __all__ = ["METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "Study
            "parse_draws", "run_study", "run_study_task", "study_tasks"]
 
 #: Short names of the study's methods that are not :func:`resolve_method` names.
-METHOD_ALIASES = {"pooled": "campaign"}
+METHOD_ALIASES: dict[str, str] = {}
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
 _FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set",
                  "change_p_value", "change_detected", "change_index")
@@ -75,7 +75,7 @@ _MAX_DRAW = 2**31
 
 
 def method_spec(name: str) -> str:
-    """The :func:`resolve_method` spec of a study method name (``pooled`` is ``campaign``)."""
+    """The :func:`resolve_method` spec of a study method name (the same name: study names are method names)."""
     spec = name if name in BUILTIN_METHODS else METHOD_ALIASES.get(name, name)
     return check_method_spec(spec)
 

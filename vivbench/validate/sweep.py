@@ -490,13 +490,13 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         from vivbench.models.campaign import PooledSINDy
         from vivbench.models.varying import VaryingCoefficientSINDy
         from vivbench.analysis.pool import pool_results
-        from vivbench.io.campaign_model import write_pooled
+        from vivbench.io.campaign_model import write_campaign_regimes
         from vivbench.validate.pooled import pooled_recovery
 
         from vivbench.io.campaign_model import MODEL_NAME
 
         model = (VaryingCoefficientSINDy if task.campaign_model == "varying" else PooledSINDy)(seed=task.campaign_seed)
-        pooled = write_pooled(pool_results(results, model), root / "identify")
+        pooled = write_campaign_regimes(pool_results(results, model), root / "identify")
         # the verdicts of a varying model are evaluated by the model itself, which validate loads from its file
         model.save(root / "identify" / MODEL_NAME)
         ps = pooled_recovery(events, pooled, results)
