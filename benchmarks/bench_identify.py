@@ -39,7 +39,7 @@ from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign  #
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_campaigns.py
 from _campaigns import CLEAN  # noqa: E402
-from vivbench.validate import campaign_recovery, pooled_recovery  # noqa: E402
+from vivbench.validate import campaign_recovery, campaign_model_recovery  # noqa: E402
 
 
 
@@ -74,7 +74,7 @@ def main(n_events: int = 31) -> dict:
             t0 = time.perf_counter()
             pooled = write_campaign_regimes(pool_results(results, PooledSINDy()), tmp / name / "results2")
             t_pool = time.perf_counter() - t0
-            prec = pooled_recovery(camp.files, pooled, results)
+            prec = campaign_model_recovery(camp.files, pooled, results)
             out[name]["pooled"] = {"time_s": t_pool, **prec}
             print(f"  campaign model (vivbench pool, {t_pool:.1f} s): coverage {prec['coverage']:.3f}; regime accuracy "
                   f"{prec['accuracy_identifiable']:.3f} identifiable, {prec['accuracy_not_identifiable']:.3f} not, "

@@ -61,5 +61,5 @@ def test_python_quickstart_runs_as_written(tmp_path, monkeypatch):
     exec(compile(block, "README.md (Python quickstart)", "exec"), namespace)  # noqa: S102 - our own README
     assert sorted(p.name for p in (tmp_path / "identify").glob("*.identify.nc")) == [f"E00{i}.identify.nc"
                                                                                      for i in range(1, 7)]
-    assert 0.0 <= namespace["pooled"].attrs["coverage"] <= 1.0
+    assert 0.0 <= namespace["regimes"].attrs["coverage"] <= 1.0
     assert namespace["model"].curves([7.0])["curves"].shape == (3, 4, 1)

@@ -152,8 +152,8 @@ def test_varying_campaign_model_scores_a_campaign(tmp_path):
     assert not result.failures, result.failures
     header, row = (line.split(",") for line in result.table.read_text().splitlines())
     row = dict(zip(header, row))
-    assert np.isfinite(float(row["pooled_rhs_error_true_AU_median_active"])), row
-    assert 0.0 <= float(row["pooled_coverage"]) <= 1.0
+    assert np.isfinite(float(row["campaign_model_rhs_error_true_AU_median_active"])), row
+    assert 0.0 <= float(row["campaign_model_coverage"]) <= 1.0
     assert any(p.name == "campaign.model.nc" for p in (tmp_path / "v" / "files").rglob("*.nc"))
 
 

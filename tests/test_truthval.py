@@ -153,8 +153,8 @@ def test_validate_realistic_campaign_scores_dAdt_for_both_models(realistic_campa
     assert not v["skipped"]
     assert v["rhs"] is None and v["support"] is None and v["support_note"] == NO_TRUE_SUPPORT
     assert all(row["support"] == NO_TRUE_SUPPORT for row in v["per_event"])
-    for key in ("median_rhs_error_true_AU_active", "pooled_median_rhs_error_true_AU_active",
-                "pooled_curve_error_linear", "pooled_curve_error_total"):
+    for key in ("median_rhs_error_true_AU_active", "campaign_model_median_rhs_error_true_AU_active",
+                "campaign_model_curve_error_linear", "campaign_model_curve_error_total"):
         assert np.isfinite(s[key]) and s[key] >= 0, key
     assert main(["validate", str(camp), str(res_dir), "--out", str(tmp_path / "val")]) == 0
     assert (tmp_path / "val" / "summary.json").is_file()

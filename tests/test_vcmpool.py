@@ -44,9 +44,9 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
     regimes = model_window_regimes(model, model.measured_wind(result_record(result)), start, end, tau=model.tau)["regime"]
     assert np.array_equal(regimes, pooled["regime"].values[sel])
     v = validate_campaign(camp.files[0].parent, res)
-    assert v["pooled"]["model_file"] == str(res / MODEL_NAME)
+    assert v["campaign_model"]["model_file"] == str(res / MODEL_NAME)
     # Two events without recorded slow changes: every flag scored, none may be a hit.
-    ch = v["pooled"]["changes"]
+    ch = v["campaign_model"]["changes"]
     assert ch["changed_events"] == [] and all(sc["hits"] == 0 for sc in ch["flags"].values())
     t0 = float(start[start.size // 2])
     assert main(["forecast", str(sorted(res.glob("*.identify.nc"))[0]), "--out", str(tmp_path / "fc"),
@@ -104,11 +104,16 @@ def test_change_point_scan_finds_a_step_and_not_noise():
     assert nan["change_index"] == -1 and np.isnan(nan["p_value"])
 
 
-def test_a_former_model_name_is_refused_with_the_current_one(tmp_path, capsys):
+@pytest.mark.parametrize("argv, message", [
+    (["pool", "{tmp}", "--model", "sindy"], "argument --model: 'sindy' is now named 'pooled'"),
+    (["forecast", "{tmp}/E001.identify.nc", "--out", "{tmp}/o", "--pooled", "{tmp}/campaign.pooled.nc"],
+     "--pooled is now named --campaign-model"),
+])
+def test_a_former_name_is_refused_with_the_current_one(argv, message, tmp_path, capsys):
     from vivbench.cli import main
 
     with pytest.raises(SystemExit) as info:
-        main(["pool", str(tmp_path), "--model", "sindy"])
+        main([a.format(tmp=tmp_path) for a in argv])
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].endswith("argument --model: 'sindy' is now named 'pooled'"), err
+    assert err[-1].endswith(message), err

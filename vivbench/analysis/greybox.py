@@ -106,9 +106,7 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
         Gaussian smoothing of the measured wind (and yaw) in time before the
         fit, the verdicts and the simulations (:func:`records_from_results`;
         0: none): the deck feels the wind averaged over its tributary
-        length, the anemometer is one point. The default 30 s was chosen on
-        the default campaign A (a_k1 error 0.151 without, 0.107 with 30 s,
-        0.120 with 60 s; penalty 1).
+        length, the anemometer is one point. Default 30 s.
     verdict_reference : "auto" or None
         "auto": a window is identifiable only if the campaign model beside the
         first result (when there is one) gives it the same regime

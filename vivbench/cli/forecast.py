@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from vivbench.cli.common import renamed_option
 from vivbench.core.errors import InputError
 
 _COLUMNS = ("kind", "clip", "d_s", "section", "nmse", "stopped", "stopped_at_s", "covered", "n_windows",
@@ -178,8 +179,8 @@ def run(args) -> int:
                 summary[f"growth_rate_per_s_d{d:g}"] = growth
                 paper.append((d, fc))
     campaign = None
-    model_path = Path(args.pooled) if args.pooled else campaign_model_file(Path(args.result).parent)
-    if args.pooled and not model_path.is_file():
+    model_path = Path(args.campaign_model) if args.campaign_model else campaign_model_file(Path(args.result).parent)
+    if args.campaign_model and not model_path.is_file():
         raise InputError(f"{model_path}: no such campaign model file")
     if model_path is not None:
         # The campaign model of ``vivbench pool`` through the model protocol: one model for the
@@ -249,8 +250,9 @@ def register(sub) -> None:
     s.add_argument("--horizon", type=float, default=300.0, help="forecast length, s (default 300, as the paper)")
     s.add_argument("--d", type=_ds, default=(0.0, 50.0, 150.0, 300.0),
                    help="averaging durations, s, comma-separated (default 0,50,150,300)")
-    s.add_argument("--pooled", default=None,
-                   help="campaign model of vivbench pool: campaign.model.nc, or campaign.regimes.nc of older outputs "
-                        "(default: whichever lies beside the result, the model file first)")
+    s.add_argument("--campaign-model", default=None, metavar="FILE",
+                   help="campaign model of vivbench pool: campaign.model.nc, or the campaign.regimes.nc of outputs "
+                        "without it (default: whichever lies beside the result, the model file first)")
+    renamed_option(s, "--pooled", "--campaign-model")
     s.add_argument("--campaign", default=None, help="campaign directory with the event file (truth: t0, growth rate)")
     s.set_defaults(func=run)

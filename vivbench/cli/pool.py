@@ -113,7 +113,7 @@ def register(sub) -> None:
     s.add_argument("--out", default=None, help="output directory (default: the results directory)")
     s.add_argument("--model", type=_model_name, choices=MODELS, default="varying",
                    help="campaign model: varying (VaryingCoefficientSINDy, penalised spline curves in U with the "
-                        "wind's yaw; default: it follows a lock-in bell that no polynomial in U does, README) or "
+                        "wind's yaw; default: it follows a lock-in bell that no polynomial in U does) or "
                         "pooled (PooledSINDy, sparse regression on the 69-term library, the paper's class)")
     s.add_argument("--campaign", default=None,
                    help="directory of the results' event files, only for results identified before the result "

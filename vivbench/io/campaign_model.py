@@ -13,7 +13,7 @@ Two schemas, one owner:
   campaign model, its curves and, for ``PooledSINDy``, its coefficients.
   Written by :func:`write_campaign_regimes`, read by
   :func:`read_campaign_regimes`. Its ``model`` attribute names the campaign
-  model (:data:`CAMPAIGN_MODELS`; absent in files of the pooled model written
+  model (:data:`CAMPAIGN_MODEL_CLASSES`; absent in files of the pooled model written
   before it existed): only ``"PooledSINDy"`` files hold
   the 69 library coefficients (``coef``, ``coef_bootstrap``); a
   ``"VaryingCoefficientSINDy"`` file holds the windows' verdicts, the curves and
@@ -38,7 +38,7 @@ from vivbench.io.netcdf import write_netcdf_atomic
 __all__ = [
     "REGIMES_NAME", "LEGACY_REGIMES_NAME", "MODEL_NAME", "REGIMES_FORMAT", "LEGACY_REGIMES_FORMAT",
     "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "regimes_file", "write_campaign_regimes",
-    "read_campaign_regimes", "write_campaign_model", "read_campaign_model", "CAMPAIGN_MODELS", "regimes_model_name",
+    "read_campaign_regimes", "write_campaign_model", "read_campaign_model", "CAMPAIGN_MODEL_CLASSES", "regimes_model_name",
 ]
 
 #: File name of the campaign model's regimes (every window's regime and verdict, the curves).
@@ -71,7 +71,7 @@ _MODEL_VARIABLES = {
 }
 
 #: Campaign models a regimes file can come from (its ``model`` attribute; absent means the first).
-CAMPAIGN_MODELS = ("PooledSINDy", "VaryingCoefficientSINDy")
+CAMPAIGN_MODEL_CLASSES = ("PooledSINDy", "VaryingCoefficientSINDy")
 
 #: Variables of a regimes file of the pooled model beyond :data:`_POOLED_VARIABLES`.
 _POOLED_SINDY_VARIABLES = {
@@ -145,10 +145,10 @@ def read_campaign_regimes(path) -> xr.Dataset:
     if "model_config_json" not in ds.attrs and "pooled_config_json" in ds.attrs:
         ds.attrs["model_config_json"] = ds.attrs.pop("pooled_config_json")
     ds.attrs["format"] = REGIMES_FORMAT
-    name = ds.attrs.get("model", CAMPAIGN_MODELS[0])
-    if name not in CAMPAIGN_MODELS:
+    name = ds.attrs.get("model", CAMPAIGN_MODEL_CLASSES[0])
+    if name not in CAMPAIGN_MODEL_CLASSES:
         raise ModelFileError(f"{path}: campaign regimes of an unknown campaign model {name!r} "
-                             f"(known: {', '.join(CAMPAIGN_MODELS)})")
+                             f"(known: {', '.join(CAMPAIGN_MODEL_CLASSES)})")
     if name == "PooledSINDy":
         missing = [v for v in _POOLED_SINDY_VARIABLES if v not in ds.variables]
         if missing:
@@ -159,7 +159,7 @@ def read_campaign_regimes(path) -> xr.Dataset:
 
 def regimes_model_name(ds: xr.Dataset) -> str:
     """The campaign model a regimes file comes from: its ``model`` attribute, ``"PooledSINDy"`` when absent."""
-    return str(ds.attrs.get("model", CAMPAIGN_MODELS[0]))
+    return str(ds.attrs.get("model", CAMPAIGN_MODEL_CLASSES[0]))
 
 
 def _check_library(ds: xr.Dataset, path) -> None:

@@ -1,7 +1,6 @@
 """One SINDy model for a whole campaign, and the regimes it gives every window.
 
-Why: inside a 50 s window the orders of A cannot be told apart (docs/concepts.md (regimes);
-``identifiability.py`` finds no identifiable window on the default campaign),
+Why: inside a 50 s window the orders of A cannot be told apart (docs/concepts.md (regimes)),
 because U drifts smoothly and U^j then acts as a time basis. The aeroelastic
 truth is, however, time-invariant as a function of (A, U): the coefficients of
 A^i vary only through the wind, which the library's U^j already carries. Pooled

@@ -32,6 +32,7 @@ import numpy as np
 from vivbench.core.errors import InputError
 from vivbench.io.event import list_events, read_event_summary
 from vivbench.io.netcdf import atomic_path
+from vivbench.validate.campaign import upgrade_metrics
 
 __all__ = ["CampaignRun", "MODE_LABELS", "baseline_section", "campaign_run", "inverse_crime_paragraph"]
 
@@ -165,7 +166,7 @@ def _same_dir(a, b) -> bool:
 def _validation(run: CampaignRun) -> tuple[dict, str]:
     """validate_campaign's scores of a run and where they come from."""
     if run.validate is not None:
-        metrics = _read_json(run.validate / "metrics.json")
+        metrics = upgrade_metrics(_read_json(run.validate / "metrics.json"))
         settings = (metrics or {}).get("settings", {})
         if metrics and _same_dir(settings.get("campaign_dir"), run.campaign) and _same_dir(
                 settings.get("results_dir"), run.results):
@@ -188,7 +189,7 @@ def _model_scores(regime: Mapping | None, rhs_true: Mapping | None) -> dict | No
 
 
 def _figure_scores(v: Mapping) -> dict:
-    pooled = v.get("pooled")
+    pooled = v.get("campaign_model")
     return {"chance": v["summary"].get("truth_most_common_regime_share"),
             "window": _model_scores(v["regime"], v.get("rhs_true_AU")),
             "campaign": None if pooled is None else _model_scores(pooled["regime"], pooled.get("rhs_true_AU"))}
@@ -226,12 +227,12 @@ def inverse_crime_paragraph(labels: Sequence[str], summaries: Sequence[Mapping] 
         return f"{_f(lib.get(key))} in-library against {_f(real.get(key))} realistic"
 
     parts = []
-    if "pooled_median_rhs_error_true_AU_active" in lib and "pooled_median_rhs_error_true_AU_active" in real:
+    if "campaign_model_median_rhs_error_true_AU_active" in lib and "campaign_model_median_rhs_error_true_AU_active" in real:
         parts.append(f"the campaign model's median dA/dt error on the true (A, U) is "
-                     f"{pair('pooled_median_rhs_error_true_AU_active')} (energy-weighted "
-                     f"{pair('pooled_energy_rhs_error_true_AU')}), its coverage "
-                     f"{pair('pooled_regime_coverage')} (accuracy on the windows it flags "
-                     f"{pair('pooled_regime_accuracy_identifiable')}; n/a: none flagged)")
+                     f"{pair('campaign_model_median_rhs_error_true_AU_active')} (energy-weighted "
+                     f"{pair('campaign_model_energy_rhs_error_true_AU')}), its coverage "
+                     f"{pair('campaign_model_regime_coverage')} (accuracy on the windows it flags "
+                     f"{pair('campaign_model_regime_accuracy_identifiable')}; n/a: none flagged)")
     parts.append(f"the window models' (the paper's method) error is {pair('median_rhs_error_true_AU_active')} "
                  f"(energy-weighted {pair('energy_rhs_error_true_AU')}) and "
                  f"their coverage {pair('regime_coverage')}")
@@ -272,20 +273,20 @@ def _recovery_rows(vs: Sequence[Mapping], clusters: Sequence[dict | None], forec
                 "energy_rhs_error_true_AU"),
             row("window models: median rel. error of dA/dt on the measured (A, U), exact matrix (in-library only)",
                 "median_rhs_rel_error_active")]
-    if any("pooled_regime_coverage" in x for x in s):
-        rows += [row("campaign model: coverage (flagged identifiable)", "pooled_regime_coverage"),
-                 row("campaign model: regime accuracy, flagged windows", "pooled_regime_accuracy_identifiable"),
-                 row("campaign model: regime accuracy, all windows", "pooled_regime_accuracy_all"),
+    if any("campaign_model_regime_coverage" in x for x in s):
+        rows += [row("campaign model: coverage (flagged identifiable)", "campaign_model_regime_coverage"),
+                 row("campaign model: regime accuracy, flagged windows", "campaign_model_regime_accuracy_identifiable"),
+                 row("campaign model: regime accuracy, all windows", "campaign_model_regime_accuracy_all"),
                  row("campaign model: median rel. error of dA/dt on the true (A, U), windows with dynamics",
-                     "pooled_median_rhs_error_true_AU_active"),
+                     "campaign_model_median_rhs_error_true_AU_active"),
                  row("campaign model: rel. error of dA/dt on the true (A, U), energy-weighted over every sample",
-                     "pooled_energy_rhs_error_true_AU"),
+                     "campaign_model_energy_rhs_error_true_AU"),
                  row("campaign model: curve error over lock-in, net linear a_k1(U) (rel. RMS)",
-                     "pooled_curve_error_linear"),
+                     "campaign_model_curve_error_linear"),
                  row("campaign model: curve error over lock-in, sum_i a_ki(U) A^i (rel. RMS)",
-                     "pooled_curve_error_total"),
+                     "campaign_model_curve_error_total"),
                  row("campaign model: curve error, sum_i a_ki(U) A^i at the true (A, U), energy-weighted over every "
-                     "sample", "pooled_curve_error_energy")]
+                     "sample", "campaign_model_curve_error_energy")]
     for kind in ("coef", "order"):
         rows.append([f"clusters ({kind} features): number, ARI, purity"]
                     + [("not run" if c is None else f"{c.get(f'n_clusters_{kind}', 'n/a')}, "

@@ -54,7 +54,8 @@ from vivbench.validate.methods import (
     scoring_inputs,
     simulation_nmse,
 )
-from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
+from vivbench.validate.campaign import (read_cluster_labels, read_forecast_tables, upgrade_metrics, validate_campaign,
+                                        write_validation)
 from vivbench.validate.metrics import (
     REGIMES,
     SUPPORT_NOTES,
@@ -76,7 +77,7 @@ from vivbench.validate.metrics import (
     support_scores,
 )
 from vivbench.validate.plateau import Plateau, clearest_plateau, measured_plateau, truth_plateau
-from vivbench.validate.pooled import pooled_recovery
+from vivbench.validate.campaign_model import campaign_model_recovery
 from vivbench.validate.drift import FLAG_VARIABLES, event_structural_state, score_change_flags
 from vivbench.validate.recovery import (
     campaign_recovery,
@@ -157,7 +158,7 @@ __all__ = [
     "forecast_summary",
     "merge_support_scores",
     "order_support",
-    "pooled_recovery",
+    "campaign_model_recovery",
     "FLAG_VARIABLES", "event_structural_state", "score_change_flags",
     "pooled_support",
     "read_cluster_labels",
@@ -179,6 +180,7 @@ __all__ = [
     "truth_record",
     "record_yaw_on",
     "write_validation",
+    "upgrade_metrics",
     "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "method_spec", "parse_draws",
     "run_study", "run_study_task", "study_tasks",
     "LABEL_COLUMNS", "PROMISE_MIN_FLAGS", "PROMISE_SHARE", "SUMMARY_SCORES", "study_markdown", "study_summary",

@@ -58,8 +58,7 @@ plug-in methods:
   (:func:`vivbench.validate.metrics.curve_energy_error`; NaN where the other
   two are). Against the truth's dA/dt itself the curves would also be charged
   with what no curve of one wind carries (sections at different winds, the
-  yaw): on the demo campaign the truth's own curves are 0.59 off its dA/dt by
-  that measure. All three use the curves only at winds inside each
+  yaw), an error the truth's own curves would score too. All three use the curves only at winds inside each
   equation's fitted data (:func:`vivbench.models.data_wind_range`): the
   extrapolated parts are not scored.
 - ``simulation_nmse``: median over records and sections of the NMSE of
@@ -73,7 +72,7 @@ window SINDy's scores those of the identification chain: a fitted model may
 give ``window_regimes(record, window_start, window_end)`` -> int (W, S), its
 own regime of each window (window SINDy: the regime of the window's own
 model; otherwise the rule on the order contributions, in which overlapping
-windows' models mix, see README), and ``identifiable``. The identification's
+windows' models mix), and ``identifiable``. The identification's
 noise-floor test (``min_snr``) needs the preprocessing's noise level: records
 read from identification results carry it (``Record.noise_std``), and the
 built-in verdicts apply it (:func:`above_noise_floor`); records without it are
