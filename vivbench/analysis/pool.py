@@ -513,7 +513,7 @@ def load_campaign_model(path):
     -------
     PooledSINDy or VaryingCoefficientSINDy
         A ``PooledSINDy`` file is loaded with :meth:`PooledSINDy.load`; from a
-        campaign regimes (older outputs) rebuilt with :meth:`PooledSINDy.from_pooled`,
+        regimes file (older outputs) rebuilt with :meth:`PooledSINDy.from_regimes`,
         which predicts, gives order contributions, simulates and prints
         equations but has no ``curves``. A file whose ``model`` attribute is
         ``"VaryingCoefficientSINDy"`` is loaded with
@@ -524,7 +524,7 @@ def load_campaign_model(path):
     InputError
         One line naming the file or directory: nothing of ``vivbench pool``
         there, a file that is neither a campaign model nor a campaign regimes file, a
-        campaign regimes of the varying model without its model file, or (for a
+        regimes file of the varying model without its model file, or (for a
         directory) a model file of another model than the regimes file's.
     """
     from vivbench.io.campaign_model import regimes_model_name
@@ -559,7 +559,7 @@ def load_campaign_model(path):
     if regimes_model_name(pooled) != "PooledSINDy":
         raise InputError(f"{path}: a campaign regimes file of {regimes_model_name(pooled)} holds no model; its {MODEL_NAME} "
                          "is needed (re-run vivbench pool)")
-    return PooledSINDy.from_pooled(pooled)
+    return PooledSINDy.from_regimes(pooled)
 
 
 def with_campaign_model(result, pooled):

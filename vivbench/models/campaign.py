@@ -572,12 +572,12 @@ class PooledSINDy(ModelBase):
         return model
 
     @classmethod
-    def from_pooled(cls, ds: xr.Dataset) -> "PooledSINDy":
+    def from_regimes(cls, ds: xr.Dataset) -> "PooledSINDy":
         """The campaign model of a campaign regimes file (``campaign.regimes.nc``), for outputs without a model file.
 
         ``vivbench pool`` saves the fitted model as ``campaign.model.nc``
-        (:meth:`save`); directories written before it hold only the pooled
-        result, whose ``coef`` is the same model. This rebuilds what
+        (:meth:`save`); directories written before it hold only the regimes
+        file, whose ``coef`` is the same model. This rebuilds what
         :meth:`predict`, :meth:`order_contributions`, :meth:`simulate` and
         :meth:`equations` need (and the selection summaries: ``coef_bootstrap_``,
         ``n_terms_``, ``threshold_``, ``rss_``, ``aicc_``, ``n_samples_``,

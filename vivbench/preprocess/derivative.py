@@ -56,7 +56,8 @@ The dual variable of the problem is the twice-integrated residual; over a
 stretch of ``L`` samples white noise makes it grow like ``sigma * dt * L**1.5``,
 so this ``alpha`` is the level that noise reaches over about ``tau``: noise
 alone cannot put kinks in ``g`` (steps in the derivative) much closer than
-``tau``: on white noise around a line they come a few ``tau`` apart. The Huber threshold on the change of the derivative per sample is
+``tau``: on white noise around a line they come a few ``tau`` apart. The
+Huber threshold on the change of the derivative per sample is
 ``delta = huber * sigma * dt / tau**2``. Both scale with the data, so scaling
 ``x`` by ``c`` scales the derivative by exactly ``c`` when ``alpha`` is
 automatic (an explicit ``alpha`` must be scaled by the caller).
