@@ -134,7 +134,7 @@ def _chain(out: Path, *, mode: str, events: int, seed: int, minutes: str, worker
 
 
 def _after_pool(out: Path, campaign: Path, identify: Path, refit: bool, failures: list[str]) -> None:
-    """Cluster, forecast, (refit) and validate one pooled campaign."""
+    """Cluster, forecast, (refit) and validate one campaign after vivbench pool."""
     from vivbench.validate import clearest_plateau
 
     _step(["cluster", str(identify), "--out", str(out / "cluster"), "--campaign", str(campaign)], out / "cluster", failures)

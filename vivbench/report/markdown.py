@@ -380,8 +380,8 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
 
     pooled_path = regimes_file(results_dir)
     if pooled_path.is_file():
-        # The campaign model through the model protocol (campaign.model.nc, or rebuilt from the pooled
-        # result's coef for older outputs); the windows' identifiability verdicts from the campaign regimes.
+        # The campaign model through the model protocol (campaign.model.nc, or rebuilt from the regimes
+        # file's coef for older outputs); the windows' identifiability verdicts from the campaign regimes.
         pooled = read_campaign_regimes(pooled_path)
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)

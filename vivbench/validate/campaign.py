@@ -227,7 +227,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         (rows; events without ``coef`` have ``support`` = :data:`NO_TRUE_SUPPORT`
         instead of support scores), ``clusters`` (rows, or None), ``forecast`` (rows of
         :func:`forecast_summary` per d, or None), ``truth_regime_shares``,
-        ``pooled`` (regime report, ``rhs`` and ``rhs_true_AU`` errors and
+        ``campaign_model`` (regime report, ``rhs`` and ``rhs_true_AU`` errors and
         ``curves`` (:func:`curve_errors` of its coefficient curves against the
         truth's, or ``scored`` False with the reason) of the campaign model when
         ``results_dir/campaign.regimes.nc`` is present, else None: regimes and

@@ -104,7 +104,7 @@ class StudyConfig:
     ----------
     split : "development" or "evaluation"
     draws : draw numbers, sorted, without repeats
-    methods : study method names (``pooled`` is the built-in ``campaign``; any other name or
+    methods : study method names (built-in method names such as ``pooled`` and ``varying``, or
         ``package.module:factory`` that :func:`resolve_method` knows)
     max_events : cap on each campaign's events (None: the draw's)
     max_duration : s; cap on each event's duration (None: the draw's)
