@@ -26,9 +26,9 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from vivbench.analysis import load_campaign_model, pooled_wind_smoothing  # noqa: E402
+from vivbench.analysis import load_campaign_model, campaign_wind_smoothing  # noqa: E402
 from vivbench.core.terms import reference_section  # noqa: E402
-from vivbench.io.campaign_model import POOLED_NAME, read_pooled  # noqa: E402
+from vivbench.io.campaign_model import read_campaign_regimes, regimes_file  # noqa: E402
 from vivbench.io.result import list_results, read_result, result_record  # noqa: E402
 from vivbench.models import measured_input  # noqa: E402
 
@@ -39,8 +39,8 @@ def simulation_scores(results_dir) -> dict:
 
     results_dir = Path(results_dir)
     model = load_campaign_model(results_dir)
-    pooled = results_dir / POOLED_NAME
-    smoothing = pooled_wind_smoothing(read_pooled(pooled) if pooled.is_file() else None)
+    pooled = regimes_file(results_dir)
+    smoothing = campaign_wind_smoothing(read_campaign_regimes(pooled) if pooled.is_file() else None)
     nmse, stopped = [], 0
     for path in list_results(results_dir):
         res = read_result(path)

@@ -34,12 +34,12 @@ from pathlib import Path  # noqa: E402
 from vivbench.models.campaign import PooledSINDy
 from vivbench.analysis.identify import identify_files
 from vivbench.analysis.pool import pool_results
-from vivbench.io.campaign_model import write_pooled
+from vivbench.io.campaign_model import write_campaign_regimes
 from vivbench.synth import CampaignConfig, GeneratorConfig, generate_campaign  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # benchmarks/_campaigns.py
 from _campaigns import CLEAN  # noqa: E402
-from vivbench.validate import campaign_recovery, pooled_recovery  # noqa: E402
+from vivbench.validate import campaign_recovery, campaign_model_recovery  # noqa: E402
 
 
 
@@ -72,9 +72,9 @@ def main(n_events: int = 31) -> dict:
                   f"{rec['rhs_median_rel_error_active']:.4f}")
             # The campaign model (vivbench pool) on the same windows.
             t0 = time.perf_counter()
-            pooled = write_pooled(pool_results(results, PooledSINDy()), tmp / name / "results2")
+            pooled = write_campaign_regimes(pool_results(results, PooledSINDy()), tmp / name / "results2")
             t_pool = time.perf_counter() - t0
-            prec = pooled_recovery(camp.files, pooled, results)
+            prec = campaign_model_recovery(camp.files, pooled, results)
             out[name]["pooled"] = {"time_s": t_pool, **prec}
             print(f"  campaign model (vivbench pool, {t_pool:.1f} s): coverage {prec['coverage']:.3f}; regime accuracy "
                   f"{prec['accuracy_identifiable']:.3f} identifiable, {prec['accuracy_not_identifiable']:.3f} not, "

@@ -8,7 +8,7 @@ another campaign (for instance the truth of ``vivbench.synth`` events: U, A on
 the truth grid and a derivative of A), pass ``events=[(t, A, U, dA), ...]``
 to :func:`main`.
 
-Ours: ``WindowedSINDy(...).fit(t, A, U, dA)`` per event, end to end (window
+Ours: ``EventWindowSINDy(...).fit(t, A, U, dA)`` per event, end to end (window
 libraries included), on every window. Reference, on a subset of windows:
 per window and threshold ``ps.SINDy(optimizer=ps.STLSQ(threshold=th, alpha=...,
 max_iter=...), feature_library=ps.IdentityLibrary()).fit(Theta, t=dt,
@@ -34,7 +34,7 @@ from scipy.ndimage import gaussian_filter1d  # noqa: E402
 from vivbench.regression import lstsq as _engine  # noqa: E402
 from vivbench.regression.settings import DEFAULT_THRESHOLDS
 from vivbench.regression.stlsq import aicc
-from vivbench.models.window import WindowedSINDy
+from vivbench.models.window import EventWindowSINDy
 from vivbench.preprocess.windows import window_bounds
 from vivbench.library.basis import condition_number, window_library
 from vivbench.core.terms import evaluate_library, feature_exponents
@@ -117,7 +117,7 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
     # Regression and AICc only, like the pysindy loop: no identifiability competitors.
     est = dict(alpha=alpha, max_iter=max_iter, thresholds=thresholds, unbias=unbias)
 
-    WindowedSINDy(**est).fit(*events[0])  # warm-up (imports, LAPACK workspaces)
+    EventWindowSINDy(**est).fit(*events[0])  # warm-up (imports, LAPACK workspaces)
     models = []
     # Time spent in the truncated-SVD refits that pysindy's unbiased refit
     # (lstsq with a singular-value cut) forces on ill-conditioned supports:
@@ -136,7 +136,7 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
     try:
         t0 = time.perf_counter()
         for ev in events:
-            models.append(WindowedSINDy(**est).fit(*ev))
+            models.append(EventWindowSINDy(**est).fit(*ev))
         ours_time = time.perf_counter() - t0
     finally:
         _engine.NestedFactors.truncated_lstsq = plain
@@ -217,7 +217,7 @@ def main(events=None, *, n_reference: int = 100, alpha: float = 0.05, max_iter: 
         )
         print(f"{'method':<24}{'windows':>9}{'ms/window':>12}{'windows/s':>12}{'ratio':>9}")
         ms = 1e3 * ours_per_window
-        print(f"{'ours (WindowedSINDy)':<24}{n_windows:>9}{ms:>12.2f}{1 / ours_per_window:>12.1f}{1.0:>9.1f}")
+        print(f"{'ours (EventWindowSINDy)':<24}{n_windows:>9}{ms:>12.2f}{1 / ours_per_window:>12.1f}{1.0:>9.1f}")
         for name in ("pysindy SINDy loop", "pysindy STLSQ loop"):
             tw = timings[name]
             print(f"{name:<24}{len(subset):>9}{1e3 * tw:>12.1f}{1 / tw:>12.2f}{tw / ours_per_window:>9.1f}")

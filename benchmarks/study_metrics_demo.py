@@ -3,7 +3,7 @@
 Run (from the repository root, after ``make demo`` or on any synthetic campaign with its identification)::
 
     python benchmarks/study_metrics_demo.py --campaign demo/campaign --results demo/identify \\
-        [--methods binned,campaign,varying] [--out benchmarks/out/study_metrics_demo]
+        [--methods binned,pooled,varying] [--out benchmarks/out/study_metrics_demo]
 
 Each method (a spec of :func:`vivbench.validate.resolve_method`) is fitted on
 the identification's records, dA/dt recomputed by the campaign model's
@@ -66,7 +66,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--campaign", type=Path, required=True, help="directory of the events (<event_id>.nc, with /truth)")
     ap.add_argument("--results", type=Path, required=True, help="directory of their <event_id>.identify.nc")
-    ap.add_argument("--methods", default="binned,campaign,varying", help="comma-separated method specs")
+    ap.add_argument("--methods", default="binned,pooled,varying", help="comma-separated method specs")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/out/study_metrics_demo"),
                     help="output stem: <out>.md and <out>.json")
     args = ap.parse_args(argv)

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from tests.helpers import assert_close
-from vivbench.models.window import WindowedSINDy
+from vivbench.models.window import EventWindowSINDy
 from vivbench.models.simulate import forecast, forecast_coefficients, forecast_table, nmse, simulate_identified, window_in_force
 from vivbench.synth import AeroConfig, StructureConfig, exact_coefficients
 from vivbench.core.terms import evaluate_library, feature_exponents, feature_names
@@ -169,7 +169,7 @@ def test_averaging_picks_the_right_windows(event):
 def test_reidentified_windows_reproduce_the_trajectory(event):
     t, A, U, Xi = event["t"], event["A"], event["U"], event["Xi"]
     dA = evaluate_library(A, U) @ Xi.T  # exact derivative of the true model
-    est = WindowedSINDy(window=WINDOW, step=STEP, keep_path=False).fit(t, A, U, dA)
+    est = EventWindowSINDy(window=WINDOW, step=STEP, keep_path=False).fit(t, A, U, dA)
     res = _result(t, A, U, est.coef_, est.window_start_, est.window_end_)
     sim = simulate_identified(res)
     assert not sim.stopped, sim.reason
@@ -234,7 +234,7 @@ def test_simulated_sparse_model_is_reidentified():
     assert_close(fd, dA[1:-1], rtol=0, atol=2e-3 * np.abs(dA).max(), reason="central differences, O(h^2)",
                  what="simulated trajectory vs its model")
     for s in range(3):
-        est = WindowedSINDy(window=t[-1] + 0.25, step=t[-1] + 0.25, alpha=0.0, refit_rcond=None, keep_path=False)
+        est = EventWindowSINDy(window=t[-1] + 0.25, step=t[-1] + 0.25, alpha=0.0, refit_rcond=None, keep_path=False)
         est.fit(t, A[:, s:s + 1], U[:, s:s + 1], dA[:, s:s + 1])
         got = est.coef_[0, 0]
         want = Xi[s, 23 * s:23 * (s + 1)]

@@ -69,7 +69,7 @@ def test_doc_lists_the_event_and_campaign_model_variables(short_event):
     for name in ("format", "format_version", "event_id", "start_time", "source", "span_azimuth_deg"):
         assert name in documented
     for name in ("coef_bootstrap", "agreement", "robust", "window_all", "bootstrap", "events", "enough_data",
-                 "pooled_config_json", "derivative_json"):
+                 "model_config_json", "derivative_json"):
         assert name in documented, f"campaign model: {name!r} is not in docs/formats.md"
 
 

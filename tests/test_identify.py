@@ -12,7 +12,7 @@ import xarray as xr
 from scipy.integrate import solve_ivp
 
 from vivbench.analysis.identify import IdentifyConfig, identify_event, identify_files
-from vivbench.models.window import WindowedSINDy
+from vivbench.models.window import EventWindowSINDy
 from vivbench.io.netcdf import NETCDF_ENGINE
 from vivbench.io.event import read_event, write_event
 from vivbench.synth import (
@@ -39,7 +39,7 @@ A1, A3 = 0.006, 0.006 / 0.15**2
 def _fit_window(Q, dQ, U, noise=0.0, seed=0):
     rng = np.random.default_rng(seed)
     dA = dQ[:, None] * PHI + noise * rng.standard_normal((Q.size, 3))
-    v = label_windows(WindowedSINDy(window=50.0, step=25.0), T_WIN, Q[:, None] * PHI, U, dA)
+    v = label_windows(EventWindowSINDy(window=50.0, step=25.0), T_WIN, Q[:, None] * PHI, U, dA)
     return SimpleNamespace(**{f"{k}_": x for k, x in v.items()})
 
 
@@ -224,7 +224,7 @@ def test_cli_demo_small(tmp_path):
     assert "(beside the next steps)" in run.stderr and "wrote " + str(tmp_path / "greybox") in run.stderr
     assert (tmp_path / "greybox" / "greybox.nc").is_file()
     assert sorted(p.name for p in (tmp_path / "identify").iterdir()) == [
-        "E001.identify.nc", "E002.identify.nc", "campaign.model.nc", "campaign.pooled.nc"]
+        "E001.identify.nc", "E002.identify.nc", "campaign.model.nc", "campaign.regimes.nc"]
     report = tmp_path / "reports" / "demo" / "report.md"
     text = report.read_text()
     links = re.findall(r"\]\(([^)\s]+)\)", text)

@@ -12,7 +12,7 @@ import xarray as xr
 from tests.helpers import assert_close
 from vivbench.cli import main
 from vivbench.analysis.interpret import ClusterConfig, campaign_windows, cluster_scores, cluster_windows, standardized_coefficients
-from vivbench.models.window import WindowedSINDy
+from vivbench.models.window import EventWindowSINDy
 from vivbench.analysis.identify import identify_files
 from vivbench.analysis.clustering import DensityPeaks
 from vivbench.core.terms import evaluate_library, feature_names
@@ -46,7 +46,7 @@ def fitted_event():
         xi[k, _index(k, 1, 1)] = 2e-3
         xi[k, _index(k, 3, 0)] = -1.0
     dA = evaluate_library(A, U) @ xi.T
-    est = WindowedSINDy(keep_path=False).fit(t, A, U, dA)
+    est = EventWindowSINDy(keep_path=False).fit(t, A, U, dA)
     sections = ["S1", "S2", "S3"]
     ds = xr.Dataset(
         {"coef": (("window", "equation", "feature"), est.coef_),

@@ -190,8 +190,8 @@ def test_a_new_scenario_version_regenerates_its_campaign_and_cells(reference, pl
     assert "other words" in (out / "scenarios" / "tiny" / "scenario.json").read_text()
     again = run_leaderboard(METHODS.split(","), scenarios, out, rerun=["lbplug:linear_damping"])
     assert again.computed == (("tiny", "lbplug:linear_damping"),) and again.resumed == (("tiny", "windows"),)
-    with pytest.raises(InputError, match="rerun names methods that are not run: campaign"):
-        run_leaderboard(METHODS.split(","), scenarios, out, rerun=["campaign"])
+    with pytest.raises(InputError, match="rerun names methods that are not run: pooled"):
+        run_leaderboard(METHODS.split(","), scenarios, out, rerun=["pooled"])
     bumped = list(load_scenario_file(_scenario_file(tmp_path / "v2.toml", 2)).values())
     new = run_leaderboard(METHODS.split(","), bumped, out)
     assert new.prepared == ("tiny",) and new.resumed == () and len(new.computed) == 2

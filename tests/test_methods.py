@@ -65,7 +65,7 @@ def test_pysindy_campaign_and_windows_reproduce_a_known_model(known):
         assert "SINDy(" in repr(model)
     assert isinstance(camp, Simulator) and isinstance(camp, CampaignLevel) and not isinstance(win, CampaignLevel)
     for rec, r in known:
-        for name, model in (("campaign", camp), ("windows", win), ("pysindy-cp", cp)):
+        for name, model in (("pooled", camp), ("windows", win), ("pysindy-cp", cp)):
             got = model.order_contributions(rec)
             assert got.shape == r.shape
             # noise-free, exact dA/dt: least squares on the true library, rounding only
@@ -84,13 +84,14 @@ def test_terms_without_an_order_are_refused_or_set_aside(known):
 
 
 def test_resolve_method_names_the_spec_and_the_problem(tmp_path, monkeypatch):
-    for spec in ("windows", "campaign", "varying", "pysindy-cp"):
+    for spec in ("windows", "pooled", "varying", "pysindy-cp"):
         assert callable(resolve_method(spec).fit)
     (tmp_path / "plug_bad.py").write_text("def nofit():\n    return 3\n\ndef boom():\n    raise RuntimeError('no')\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     cases = [("not a spec", "is not one of windows"), ("no_such_module_xyz:make", "cannot import module"),
              ("plug_bad:missing", "has no callable 'missing'"), ("plug_bad:nofit", "returned a int, which has no fit"),
-             ("plug_bad:boom", "boom\\(\\) failed: RuntimeError: no")]
+             ("plug_bad:boom", "boom\\(\\) failed: RuntimeError: no"),
+             ("campaign", "method 'campaign' is now named 'pooled'")]
     for spec, message in cases:
         with pytest.raises(InputError, match=message) as info:
             resolve_method(spec)
@@ -227,8 +228,8 @@ def test_campaign_adapter_simulates_the_known_model(known):
 def test_method_levels_are_checked_before_any_campaign_is_made(tmp_path):
     from vivbench.validate import compare_config_from_dict, compare_cells
 
-    cfg = compare_config_from_dict({"grid": {"method": ["campaign", "pysindy-cp"]}, "campaign": {"duration": 600}})
-    assert [c["method"] for c in compare_cells(cfg)] == ["windows", "campaign", "pysindy-cp"]
+    cfg = compare_config_from_dict({"grid": {"method": ["pooled", "pysindy-cp"]}, "campaign": {"duration": 600}})
+    assert [c["method"] for c in compare_cells(cfg)] == ["windows", "pooled", "pysindy-cp"]
     for levels, message in ((["nope"], "method 'nope' is not one of"),
                             (["no_such_module_xyz:make"], "cannot import module 'no_such_module_xyz'")):
         with pytest.raises(InputError, match=message):
@@ -268,7 +269,7 @@ def test_builtin_verdicts_refuse_windows_below_the_noise_floor(small_results):
     assert not above_noise_floor(loud, start, end).any()
     assert above_noise_floor(dataclasses.replace(rec, noise_std=None), start, end).all()
     assert above_noise_floor(dataclasses.replace(rec, noise_std=np.full(rec.n_sections, np.nan)), start, end).all()
-    fitted = resolve_method("campaign").fit(records)
+    fitted = resolve_method("pooled").fit(records)
     assert not fitted.identifiable(loud, start, end).any()
     with pytest.raises(ValueError, match="noise_std"):
         dataclasses.replace(rec, noise_std=np.ones(rec.n_sections + 1))

@@ -81,7 +81,7 @@ def test_validate_scores_the_varying_model_on_its_measured_input(varying_pooled)
     from vivbench.regimes import model_window_regimes, truth_window_regimes
     from vivbench.validate import validate_campaign
     from vivbench.validate.metrics import regime_report, rhs_error_summary
-    from vivbench.validate.pooled import pooled_recovery
+    from vivbench.validate.campaign_model import campaign_model_recovery
     from vivbench.validate.recovery import model_window_rhs_errors_true_AU, record_yaw_on
     from vivbench.preprocess import smooth_wind
 
@@ -110,16 +110,16 @@ def test_validate_scores_the_varying_model_on_its_measured_input(varying_pooled)
     direct = {k: regime_report(np.concatenate(r), truth_all, flags)["groups"]["all"] for k, r in reg.items()}
     # Precondition: the raw wind gives other regimes, so a site that skips measured_input is caught.
     assert direct["raw"]["confusion"] != direct["smoothed"]["confusion"]
-    assert v["pooled"]["regime"]["groups"]["all"]["confusion"] == direct["smoothed"]["confusion"]
+    assert v["campaign_model"]["regime"]["groups"]["all"]["confusion"] == direct["smoothed"]["confusion"]
     summary = rhs_error_summary(np.concatenate(err), np.concatenate(act))
-    assert_close(v["pooled"]["rhs_true_AU"]["active"]["median"], summary["active"]["median"],
+    assert_close(v["campaign_model"]["rhs_true_AU"]["active"]["median"], summary["active"]["median"],
                  what="validate's dA/dt error on the true (A, U): the truth's felt wind unsmoothed")
     wrong = rhs_error_summary(np.concatenate(err_smoothed_truth), np.concatenate(act))["active"]["median"]
     assert abs(wrong - summary["active"]["median"]) > 1e-6
-    # The sweep's scorer (pooled_recovery) agrees with validate.
-    ps = pooled_recovery(sorted(camp_dir.glob("E*.nc"))[:2], res / "campaign.pooled.nc", sorted(res.glob("*.identify.nc")))
-    assert_close(ps["accuracy_all"], v["pooled"]["regime"]["groups"]["all"]["accuracy"], what="pooled_recovery")
-    assert_close(ps["rhs_error_true_AU_median_active"], summary["active"]["median"], what="pooled_recovery dA/dt")
+    # The sweep's scorer (campaign_model_recovery) agrees with validate.
+    ps = campaign_model_recovery(sorted(camp_dir.glob("E*.nc"))[:2], res / "campaign.regimes.nc", sorted(res.glob("*.identify.nc")))
+    assert_close(ps["accuracy_all"], v["campaign_model"]["regime"]["groups"]["all"]["accuracy"], what="campaign_model_recovery")
+    assert_close(ps["rhs_error_true_AU_median_active"], summary["active"]["median"], what="campaign_model_recovery dA/dt")
 
 
 def test_forecast_simulates_the_varying_model_on_its_measured_input(varying_pooled, tmp_path):
@@ -147,7 +147,7 @@ def test_validate_applies_pools_smoothing_to_a_pooled_sindy(small_results, tmp_p
     """``pool --model sindy --wind-smoothing S``: validate's regimes are the pooled file's own (same input)."""
     from vivbench.analysis import load_campaign_model
     from vivbench.cli import main
-    from vivbench.io.campaign_model import read_pooled
+    from vivbench.io.campaign_model import read_campaign_regimes
     from vivbench.preprocess import smooth_wind
     from vivbench.regimes import model_window_regimes, truth_window_regimes
     from vivbench.validate import validate_campaign
@@ -156,9 +156,9 @@ def test_validate_applies_pools_smoothing_to_a_pooled_sindy(small_results, tmp_p
     camp, res_dir, _ = small_results
     res = tmp_path / "res"
     shutil.copytree(res_dir, res)
-    assert main(["pool", str(res), "--model", "sindy", "--bootstrap", "4", "--block", "20",
+    assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20",
                  "--wind-smoothing", str(SMOOTHING_S)]) == 0
-    pooled = read_pooled(res / "campaign.pooled.nc")
+    pooled = read_campaign_regimes(res / "campaign.regimes.nc")
     assert float(pooled.attrs["wind_smoothing_s"]) == SMOOTHING_S
     model = load_campaign_model(res)
     v = validate_campaign(camp.files[0].parent, res)
@@ -173,4 +173,4 @@ def test_validate_applies_pools_smoothing_to_a_pooled_sindy(small_results, tmp_p
     assert not np.array_equal(np.concatenate(raw), pooled["regime"].values)
     truth_all = np.concatenate(tru)
     own = regime_report(pooled["regime"].values.astype(int), truth_all, np.zeros(truth_all.shape, bool))
-    assert v["pooled"]["regime"]["groups"]["all"]["confusion"] == own["groups"]["all"]["confusion"]
+    assert v["campaign_model"]["regime"]["groups"]["all"]["confusion"] == own["groups"]["all"]["confusion"]

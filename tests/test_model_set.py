@@ -102,7 +102,7 @@ def test_forced_only_campaign_through_the_chain_gets_no_self_excited_flag(tmp_pa
                  str(root / "examples" / "forced_only.toml"), "--out", str(camp)]) == 0
     assert main(["identify", str(camp), "--out", str(ident)]) == 0
     assert main(["pool", str(ident), "--model", "varying", "--campaign", str(camp)]) == 0
-    with xr.open_dataset(ident / "campaign.pooled.nc") as ds:
+    with xr.open_dataset(ident / "campaign.regimes.nc") as ds:
         flagged = ds["identifiable"].values.astype(bool)
         regime = ds["regime"].values
     assert (regime >= 2).sum() > 0  # the point regimes are wrong somewhere: the verdict has something to refuse

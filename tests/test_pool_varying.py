@@ -18,7 +18,7 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
     from vivbench.analysis import campaign_model_file, load_campaign_model
     from vivbench.cli import main
     from vivbench.core.errors import InputError
-    from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, pooled_model_name, read_pooled
+    from vivbench.io.campaign_model import MODEL_NAME, REGIMES_NAME, regimes_model_name, read_campaign_regimes
     from vivbench.io.result import read_result, result_record
     from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes import model_window_regimes
@@ -29,8 +29,8 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
     shutil.copytree(res_dir, res)
     assert main(["pool", str(res), "--model", "varying", "--bootstrap", "8", "--block", "20"]) == 0
     assert not list(res.glob("*.tmp*"))
-    pooled = read_pooled(res / POOLED_NAME)
-    assert pooled_model_name(pooled) == "VaryingCoefficientSINDy" and "coef" not in pooled
+    pooled = read_campaign_regimes(res / REGIMES_NAME)
+    assert regimes_model_name(pooled) == "VaryingCoefficientSINDy" and "coef" not in pooled
     assert {"n_basis", "penalty", "edf", "curves", "event_linear_offset", "event_residual_ratio", "event_offset_flag",
             "event_after_change", "event_change_flag", "event_change_p"} <= set(pooled.data_vars)
     assert "offset_flagged_events" in pooled.attrs and "change_flagged_events" in pooled.attrs
@@ -44,9 +44,9 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
     regimes = model_window_regimes(model, model.measured_wind(result_record(result)), start, end, tau=model.tau)["regime"]
     assert np.array_equal(regimes, pooled["regime"].values[sel])
     v = validate_campaign(camp.files[0].parent, res)
-    assert v["pooled"]["model_file"] == str(res / MODEL_NAME)
+    assert v["campaign_model"]["model_file"] == str(res / MODEL_NAME)
     # Two events without recorded slow changes: every flag scored, none may be a hit.
-    ch = v["pooled"]["changes"]
+    ch = v["campaign_model"]["changes"]
     assert ch["changed_events"] == [] and all(sc["hits"] == 0 for sc in ch["flags"].values())
     t0 = float(start[start.size // 2])
     assert main(["forecast", str(sorted(res.glob("*.identify.nc"))[0]), "--out", str(tmp_path / "fc"),
@@ -55,15 +55,15 @@ def test_pool_varying_writes_the_pooled_layout_and_the_model_file(small_results,
     assert any(k.startswith("campaign_model_simulation_nmse") for k in summary)
     # The pooled file alone holds no varying model; a model file of another kind is refused.
     with pytest.raises(InputError, match="holds no model"):
-        load_campaign_model(res / POOLED_NAME)
+        load_campaign_model(res / REGIMES_NAME)
     other = tmp_path / "other"
     shutil.copytree(res_dir, other)
     assert main(["pool", str(other), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
     shutil.copy(other / MODEL_NAME, res / MODEL_NAME)
     with pytest.raises(InputError, match="re-run vivbench pool"):
         load_campaign_model(res)
-    sindy = read_pooled(other / POOLED_NAME)
-    assert "model" not in sindy.attrs and pooled_model_name(sindy) == "PooledSINDy" and "coef" in sindy
+    sindy = read_campaign_regimes(other / REGIMES_NAME)
+    assert "model" not in sindy.attrs and regimes_model_name(sindy) == "PooledSINDy" and "coef" in sindy
 
 
 class _Offset:
@@ -102,3 +102,18 @@ def test_change_point_scan_finds_a_step_and_not_noise():
     assert not none["detected"] and none["p_value"] > 0.05
     nan = change_point_scan(np.array([np.nan, 1.0]), np.ones(2), np.ones(2))
     assert nan["change_index"] == -1 and np.isnan(nan["p_value"])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["pool", "{tmp}", "--model", "sindy"], "argument --model: 'sindy' is now named 'pooled'"),
+    (["forecast", "{tmp}/E001.identify.nc", "--out", "{tmp}/o", "--pooled", "{tmp}/campaign.pooled.nc"],
+     "--pooled is now named --campaign-model"),
+])
+def test_a_former_name_is_refused_with_the_current_one(argv, message, tmp_path, capsys):
+    from vivbench.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main([a.format(tmp=tmp_path) for a in argv])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith(message), err

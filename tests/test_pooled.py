@@ -134,44 +134,44 @@ def test_same_seed_same_model_and_validation():
 
 
 def test_cli_pool_and_validation_of_the_campaign_model(small_results_in_library, tmp_path):
-    """`vivbench pool` writes the campaign model; `vivbench validate` scores it beside the windows, as pooled_recovery does."""
+    """`vivbench pool` writes the campaign model; `vivbench validate` scores it beside the windows, as campaign_model_recovery does."""
     import shutil
 
     from vivbench.cli import main
-    from vivbench.io.campaign_model import POOLED_NAME
-    from vivbench.validate import pooled_recovery, validate_campaign
+    from vivbench.io.campaign_model import REGIMES_NAME
+    from vivbench.validate import campaign_model_recovery, validate_campaign
 
-    # pooled_recovery scores dA/dt against the exact coefficient matrix: the in_library mode
+    # campaign_model_recovery scores dA/dt against the exact coefficient matrix: the in_library mode
     camp, res_dir, results = small_results_in_library
     res = tmp_path / "res"
     shutil.copytree(res_dir, res)
     assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "10", "--block", "20"]) == 0
-    assert (res / POOLED_NAME).is_file() and not list(res.glob("*.tmp*"))
+    assert (res / REGIMES_NAME).is_file() and not list(res.glob("*.tmp*"))
     v = validate_campaign(camp.files[0].parent, res)
-    direct = pooled_recovery(camp.files[:2], res / POOLED_NAME, sorted(res.glob("*.identify.nc")))
-    assert v["pooled"]["regime"]["n"] == direct["n"]
-    assert_close(v["summary"]["pooled_regime_accuracy_all"], direct["accuracy_all"])
-    assert_close(v["summary"]["pooled_regime_coverage"], direct["coverage"])
-    assert_close(v["summary"]["pooled_median_rhs_rel_error_active"], direct["rhs_median_rel_error_active"])
+    direct = campaign_model_recovery(camp.files[:2], res / REGIMES_NAME, sorted(res.glob("*.identify.nc")))
+    assert v["campaign_model"]["regime"]["n"] == direct["n"]
+    assert_close(v["summary"]["campaign_model_regime_accuracy_all"], direct["accuracy_all"])
+    assert_close(v["summary"]["campaign_model_regime_coverage"], direct["coverage"])
+    assert_close(v["summary"]["campaign_model_median_rhs_rel_error_active"], direct["rhs_median_rel_error_active"])
     # the energy-weighted error on the true (A, U), beside the median, by the same function
-    assert_close(v["summary"]["pooled_energy_rhs_error_true_AU"], direct["rhs_error_true_AU_energy"])
+    assert_close(v["summary"]["campaign_model_energy_rhs_error_true_AU"], direct["rhs_error_true_AU_energy"])
     # (a 69-term model of two short events: its largest errors at a few truth samples dominate this figure)
-    assert 0 < v["summary"]["pooled_energy_rhs_error_true_AU"] < math.inf
+    assert 0 < v["summary"]["campaign_model_energy_rhs_error_true_AU"] < math.inf
     assert 0 < v["summary"]["energy_rhs_error_true_AU"] < math.inf
-    assert {r["group"] for r in v["regime_confusion"]} >= {"pooled_identifiable", "pooled_all"}
+    assert {r["group"] for r in v["regime_confusion"]} >= {"campaign_model_identifiable", "campaign_model_all"}
     # the curves are marked where they extrapolate beyond each section's fitted winds
-    from vivbench.io.campaign_model import read_pooled
+    from vivbench.io.campaign_model import read_campaign_regimes
     from vivbench.models import data_wind_range
     from vivbench.analysis import records_from_results
 
-    pooled = read_pooled(res / POOLED_NAME)
+    pooled = read_campaign_regimes(res / REGIMES_NAME)
     ext = pooled["curves_extrapolated"].values.astype(bool)
     assert ext.shape == (pooled.sizes["equation"], pooled.sizes["wind"])
     rng = data_wind_range(records_from_results(sorted(res.glob("*.identify.nc")), derivative=None))
     wind = pooled["wind"].values
     np.testing.assert_array_equal(ext, (wind[None] < rng[:, :1]) | (wind[None] > rng[:, 1:]))
     assert ext[:, 0].all() and not ext.all()  # the grid's first point lies below the data, the middle inside
-    assert math.isfinite(v["summary"]["pooled_curve_error_energy"]) or not v["pooled"]["curves"]["scored"]
+    assert math.isfinite(v["summary"]["campaign_model_curve_error_energy"]) or not v["campaign_model"]["curves"]["scored"]
 
 
 def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_use(small_results, tmp_path):
@@ -182,20 +182,19 @@ def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_u
     from vivbench.analysis import campaign_model_file, load_campaign_model, with_campaign_model
     from vivbench.cli import main
     from vivbench.core.errors import InputError
-    from vivbench.io.campaign_model import MODEL_NAME, POOLED_NAME, read_pooled
+    from vivbench.io.campaign_model import MODEL_NAME, REGIMES_NAME, read_campaign_regimes, regimes_file
     from vivbench.io.result import read_result, result_record
-    from vivbench.models import CampaignSINDy
     from vivbench.models.simulate import forecast, simulate_identified
-    from vivbench.validate import validate_campaign
+    from vivbench.validate import upgrade_metrics, validate_campaign, write_validation
 
     camp, res_dir, _results = small_results
     res = tmp_path / "res"
     shutil.copytree(res_dir, res)
     before = {f.name for f in res.iterdir()}
     assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
-    assert {f.name for f in res.iterdir()} - before == {POOLED_NAME, MODEL_NAME}
-    pooled = read_pooled(res / POOLED_NAME)
-    model = CampaignSINDy.load(res / MODEL_NAME)
+    assert {f.name for f in res.iterdir()} - before == {REGIMES_NAME, MODEL_NAME}
+    pooled = read_campaign_regimes(res / REGIMES_NAME)
+    model = PooledSINDy.load(res / MODEL_NAME)
     assert campaign_model_file(res) == res / MODEL_NAME
     assert np.array_equal(model.coef_, pooled["coef"].values)
     result = read_result(sorted(res.glob("*.identify.nc"))[0])
@@ -224,28 +223,71 @@ def test_pool_saves_the_campaign_model_that_forecast_validate_and_the_fallback_u
     with pytest.raises(InputError, match="lacks dA"):
         result_record(result.drop_vars("dA"))
     v_model = validate_campaign(camp.files[0].parent, res)
-    assert v_model["pooled"]["model_file"] == str(res / MODEL_NAME)
+    assert v_model["campaign_model"]["model_file"] == str(res / MODEL_NAME)
 
-    # Older outputs (no campaign.model.nc): the model is rebuilt from the pooled result's coef.
+    # Older outputs (no campaign.model.nc): the model is rebuilt from the regimes file's coef.
     (res / MODEL_NAME).unlink()
     fallback = load_campaign_model(res)
     assert np.array_equal(fallback.predict(record), expected, equal_nan=True)
     assert fallback.equations() == model.equations()
-    with pytest.raises(InputError, match=f"{POOLED_NAME}.*re-run vivbench pool"):
+    with pytest.raises(InputError, match=f"{REGIMES_NAME}.*re-run vivbench pool"):
         fallback.curves([8.0, 10.0])
     assert model.curves([8.0, 10.0])["curves"].shape == (3, 4, 2)
     without = run_forecast(tmp_path / "fc_pooled")
     keys = [k for k in with_model if k.startswith("campaign_model_")]
     assert len(keys) == 3 and all(with_model[k] == without[k] for k in keys)
     v_pooled = validate_campaign(camp.files[0].parent, res)
-    assert v_pooled["pooled"]["model_file"] == str(res / POOLED_NAME)
+    assert v_pooled["campaign_model"]["model_file"] == str(res / REGIMES_NAME)
     assert json.dumps(v_pooled["summary"], sort_keys=True) == json.dumps(v_model["summary"], sort_keys=True)
+    # A directory written by an earlier version (campaign.pooled.nc, format "vivbench-pooled", the settings in
+    # pooled_config_json) still loads and scores the same.
+    legacy = _as_written_by_earlier_versions(res)
+    assert regimes_file(res) == legacy and campaign_model_file(res) == legacy
+    assert read_campaign_regimes(legacy).attrs["model_config_json"] == pooled.attrs["model_config_json"]
+    assert load_campaign_model(res).equations() == model.equations()
+    v_legacy = validate_campaign(camp.files[0].parent, res)
+    assert v_legacy["campaign_model"]["model_file"] == str(legacy)
+    assert json.dumps(v_legacy["summary"], sort_keys=True) == json.dumps(v_model["summary"], sort_keys=True)
+    # ... and so does a metrics.json of vivbench validate written with the earlier names (pooled, pooled_*).
+    write_validation(v_model, tmp_path / "val")
+    current = json.loads((tmp_path / "val" / "metrics.json").read_text())
+    old = json.loads(json.dumps(current).replace('"campaign_model_', '"pooled_').replace('"campaign_model"', '"pooled"'))
+    assert "pooled" in old and "pooled_regime_coverage" in old["summary"]
+    assert upgrade_metrics(old) == current
     # Neither file: load_campaign_model refuses in one line naming the directory.
-    (res / POOLED_NAME).unlink()
+    legacy.unlink()
     with pytest.raises(InputError, match="no campaign model"):
         load_campaign_model(res)
     with pytest.raises(InputError, match="not a campaign model"):
         load_campaign_model(sorted(res.glob("*.identify.nc"))[0])
+
+
+def _as_written_by_earlier_versions(res):
+    """Turn res's campaign.regimes.nc into the campaign.pooled.nc an earlier version wrote; its path."""
+    import xarray as xr
+
+    from vivbench.io.campaign_model import LEGACY_REGIMES_FORMAT, LEGACY_REGIMES_NAME, REGIMES_NAME
+
+    with xr.open_dataset(res / REGIMES_NAME) as ds:
+        old = ds.load()
+    old.attrs.update(format=LEGACY_REGIMES_FORMAT, pooled_config_json=old.attrs.pop("model_config_json"))
+    old.to_netcdf(res / LEGACY_REGIMES_NAME)
+    (res / REGIMES_NAME).unlink()
+    return res / LEGACY_REGIMES_NAME
+
+
+def test_rerunning_pool_on_an_old_directory_leaves_one_regimes_file(small_results, tmp_path):
+    import shutil
+
+    from vivbench.cli import main
+    from vivbench.io.campaign_model import LEGACY_REGIMES_NAME, REGIMES_NAME
+
+    res = tmp_path / "res"
+    shutil.copytree(small_results[1], res)
+    assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
+    _as_written_by_earlier_versions(res)
+    assert main(["pool", str(res), "--model", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
+    assert (res / REGIMES_NAME).is_file() and not (res / LEGACY_REGIMES_NAME).exists()
 
 
 def test_cli_pool_bad_input(tmp_path, capsys):

@@ -63,8 +63,8 @@ def test_python_quickstart_runs_as_written(tmp_path, monkeypatch):
     exec(compile(block, "README.md (Python quickstart)", "exec"), namespace)  # noqa: S102 - our own README
     assert sorted(p.name for p in (tmp_path / "identify").glob("*.identify.nc")) == [f"E00{i}.identify.nc"
                                                                                      for i in range(1, 7)]
-    pooled = namespace["pooled"]  # coverage: the share of window-equations with a regime flagged identifiable
-    scored = pooled["regime"].values > 0
+    regimes = namespace["regimes"]  # coverage: the share of window-equations with a regime flagged identifiable
+    scored = regimes["regime"].values > 0
     assert scored.any()
-    assert_close(pooled.attrs["coverage"], np.mean(pooled["identifiable"].values[scored]), what="pooled coverage")
+    assert_close(regimes.attrs["coverage"], np.mean(regimes["identifiable"].values[scored]), what="coverage of the campaign regimes")
     assert namespace["model"].curves([7.0])["curves"].shape == (3, 4, 1)

@@ -65,9 +65,9 @@ def test_both_columns_from_their_own_campaign(side_by_side):
     s_lib = validate_campaign(lib.campaign, lib.results)["summary"]
     s_real = validate_campaign(real.campaign, real.results)["summary"]
     for label, key in (("window models: regime accuracy, all windows", "regime_accuracy_all"),
-                       ("campaign model: regime accuracy, all windows", "pooled_regime_accuracy_all"),
+                       ("campaign model: regime accuracy, all windows", "campaign_model_regime_accuracy_all"),
                        ("campaign model: median rel. error of dA/dt on the true (A, U), windows with dynamics",
-                        "pooled_median_rhs_error_true_AU_active")):
+                        "campaign_model_median_rhs_error_true_AU_active")):
         cells = [c.strip(" |") for c in rows[label]]
         assert cells == [f"{s_lib[key]:.3f}", f"{s_real[key]:.3f}"], (label, cells)
     assert s_lib[key] != s_real[key]  # the two campaigns differ: the columns are not copies
@@ -78,8 +78,8 @@ def test_both_columns_from_their_own_campaign(side_by_side):
     # steps not given are said so, not left blank
     assert "not run" in rows["clusters (coef features): number, ARI, purity"][0]
     # the paragraph quotes the measured numbers of both
-    assert f"{s_lib['pooled_median_rhs_error_true_AU_active']:.3f} in-library against " \
-           f"{s_real['pooled_median_rhs_error_true_AU_active']:.3f} realistic" in section
+    assert f"{s_lib['campaign_model_median_rhs_error_true_AU_active']:.3f} in-library against " \
+           f"{s_real['campaign_model_median_rhs_error_true_AU_active']:.3f} realistic" in section
 
 
 def test_paired_figures_and_links(side_by_side):

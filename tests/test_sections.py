@@ -113,7 +113,7 @@ def test_identify_and_pool_use_23n_columns(chain):
     with xr.open_dataset(chain["result"]) as res:
         assert res["coef"].shape[1:] == (n, 23 * n)
         assert [str(s) for s in res["equation"].values] == _sections(n)
-    with xr.open_dataset(chain["identify"] / "campaign.pooled.nc") as pooled:  # the default: varying model
+    with xr.open_dataset(chain["identify"] / "campaign.regimes.nc") as pooled:  # the default: varying model
         assert pooled["curves"].dims[0] == "equation" and pooled["curves"].shape[0] == n
         assert [str(s) for s in pooled["equation"].values] == _sections(n)
 

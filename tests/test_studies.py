@@ -14,9 +14,9 @@ from tests.helpers import assert_close
 from vivbench.models.campaign import PooledSINDy
 from vivbench.analysis.identify import identify_files
 from vivbench.analysis.pool import pool_results
-from vivbench.io.campaign_model import write_pooled
+from vivbench.io.campaign_model import write_campaign_regimes
 from vivbench.synth import CampaignConfig, GeneratorConfig, SensorConfig, TurbulenceConfig, generate_campaign
-from vivbench.validate import campaign_recovery, pooled_recovery
+from vivbench.validate import campaign_recovery, campaign_model_recovery
 
 pytestmark = pytest.mark.slow
 
@@ -46,8 +46,8 @@ def clean_recovery(clean_campaign):
 def test_clean_campaign_model_recovers_the_regimes(clean_campaign):
     # regimes match the truth on >= 90 % of identifiable windows, with a coverage that is not vacuous
     tmp, camp, results = clean_campaign
-    pooled = write_pooled(pool_results(results, PooledSINDy()), tmp / "results")
-    scores = pooled_recovery(camp.files, pooled, results)
+    pooled = write_campaign_regimes(pool_results(results, PooledSINDy()), tmp / "results")
+    scores = campaign_model_recovery(camp.files, pooled, results)
     assert scores["coverage"] > 0.9, scores
     assert scores["accuracy_identifiable"] >= 0.9, scores
     assert scores["rhs_median_rel_error_active"] < 0.01, scores

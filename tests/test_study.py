@@ -110,7 +110,7 @@ def test_parse_draws_and_config_checks():
     for bad in ("3-1", "a", "-2", ""):
         with pytest.raises(InputError, match="draws"):
             parse_draws(bad)
-    assert method_spec("pooled") == "campaign" and method_spec("varying") == "varying"
+    assert method_spec("pooled") == "pooled" and method_spec("varying") == "varying"
     with pytest.raises(InputError, match="not one of"):
         StudyConfig(split="development", draws=(0,), methods=("no-such-method",))
     with pytest.raises(InputError, match="split"):

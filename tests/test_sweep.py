@@ -153,8 +153,8 @@ def test_varying_campaign_model_scores_a_campaign(tmp_path):
     assert not result.failures, result.failures
     header, row = (line.split(",") for line in result.table.read_text().splitlines())
     row = dict(zip(header, row))
-    assert np.isfinite(float(row["pooled_rhs_error_true_AU_median_active"])), row
-    assert 0.0 <= float(row["pooled_coverage"]) <= 1.0
+    assert np.isfinite(float(row["campaign_model_rhs_error_true_AU_median_active"])), row
+    assert 0.0 <= float(row["campaign_model_coverage"]) <= 1.0
     assert any(p.name == "campaign.model.nc" for p in (tmp_path / "v" / "files").rglob("*.nc"))
 
 
@@ -176,7 +176,7 @@ def test_dask_cluster_and_this_process_agree(tiny_config, reference, dask_addres
     ref_out, ref = reference
     table = ref.table.read_bytes()
     files = _files(ref_out)
-    # one event, its result, the pooled result and the campaign model's file per campaign
+    # one event, its result, the campaign regimes and the campaign model's file per campaign
     assert len(files) == 8 and sum(name.endswith("campaign.model.nc") for name in files) == 2
     result = run_sweep(tiny_config, tmp_path / "dask", keep_files=True, scheduler=dask_address)
     assert result.table.read_bytes() == table, "dask: table differs from the single-process run"

@@ -18,7 +18,7 @@ def realistic_campaign(tmp_path_factory):
     """Two 6 min realistic events (aero outside the library), identified and pooled: (campaign dir, results dir)."""
     from vivbench.analysis.identify import identify_files
     from vivbench.analysis.pool import pool_results
-    from vivbench.io.campaign_model import write_pooled
+    from vivbench.io.campaign_model import write_campaign_regimes
     from vivbench.models.campaign import PooledSINDy
     from vivbench.synth import CampaignConfig, generate_campaign, load_config
 
@@ -31,7 +31,7 @@ def realistic_campaign(tmp_path_factory):
     results, failures = identify_files(camp.files, root / "id", workers=1)
     assert not failures, failures
     model = PooledSINDy(n_bootstrap=10, block_s=30.0, seed=0)
-    write_pooled(pool_results(results, model), root / "id")
+    write_campaign_regimes(pool_results(results, model), root / "id")
     model.save(root / "id" / "campaign.model.nc")
     return root / "camp", root / "id"
 
@@ -128,10 +128,10 @@ def test_truth_curves_bad_input():
 
 
 def test_pooled_curves_and_bands(realistic_campaign):
-    from vivbench.io.campaign_model import read_pooled
+    from vivbench.io.campaign_model import read_campaign_regimes
 
     _camp, res_dir = realistic_campaign
-    pooled = read_pooled(res_dir / "campaign.pooled.nc")
+    pooled = read_campaign_regimes(res_dir / "campaign.regimes.nc")
     S = pooled.sizes["equation"]
     for name in ("curves", "curves_lower", "curves_upper"):
         assert pooled[name].dims == ("equation", "order", "wind")
@@ -153,8 +153,8 @@ def test_validate_realistic_campaign_scores_dAdt_for_both_models(realistic_campa
     assert not v["skipped"]
     assert v["rhs"] is None and v["support"] is None and v["support_note"] == NO_TRUE_SUPPORT
     assert all(row["support"] == NO_TRUE_SUPPORT for row in v["per_event"])
-    for key in ("median_rhs_error_true_AU_active", "pooled_median_rhs_error_true_AU_active",
-                "pooled_curve_error_linear", "pooled_curve_error_total"):
+    for key in ("median_rhs_error_true_AU_active", "campaign_model_median_rhs_error_true_AU_active",
+                "campaign_model_curve_error_linear", "campaign_model_curve_error_total"):
         assert np.isfinite(s[key]) and s[key] > 0, key  # the truth lies outside the model class: never exact
     assert main(["validate", str(camp), str(res_dir), "--out", str(tmp_path / "val")]) == 0
     assert (tmp_path / "val" / "summary.json").is_file()

@@ -22,7 +22,7 @@ from scipy.ndimage import gaussian_filter1d
 from tests.helpers import assert_close
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
 from vivbench.regression.stlsq import aicc, stlsq_path
-from vivbench.models.window import WindowedSINDy
+from vivbench.models.window import EventWindowSINDy
 from vivbench.preprocess.windows import window_bounds
 from vivbench.library.basis import condition_number, library_cond, window_library
 from vivbench.core.terms import evaluate_library, feature_exponents
@@ -81,7 +81,7 @@ def _noisy_event(seed: int, duration: float, *, noise_seed: int = 0, d_noise: fl
     return t, A, U, dA
 
 
-def _window_design(model: WindowedSINDy, t, A, U, dA, w: int):
+def _window_design(model: EventWindowSINDy, t, A, U, dA, w: int):
     """The scaled design and targets the estimator regressed in window w."""
     first, stop = window_bounds(t, model.window, model.step)[2:]
     sl = slice(first[w], stop[w])
@@ -221,7 +221,7 @@ def _fit_and_compare(events, *, alpha, ridge_kw=None):
     pred_err = []
     for seed in events:
         t, A, U, dA = _noisy_event(seed, 600.0)
-        model = WindowedSINDy(alpha=alpha).fit(t, A, U, dA)
+        model = EventWindowSINDy(alpha=alpha).fit(t, A, U, dA)
         for w in range(model.window_start_.size):
             lib, y = _window_design(model, t, A, U, dA, w)
             ref = _pysindy_path(lib.theta, y, model.thresholds_, alpha=alpha, max_iter=20, ridge_kw=ridge_kw)
@@ -274,7 +274,7 @@ def test_stlsq_path_is_not_monotone_and_pysindy_agrees():
     found = None
     for seed in (0, 1, 2, 3):
         t, A, U, dA = _noisy_event(seed, 600.0)
-        model = WindowedSINDy().fit(t, A, U, dA)
+        model = EventWindowSINDy().fit(t, A, U, dA)
         up = np.argwhere(np.any(np.diff(model.path_n_terms_, axis=2) > 0, axis=2))
         if up.size:
             found = (t, A, U, dA, model, *up[0])
@@ -297,7 +297,7 @@ def test_single_iteration_path_is_nested(seed, noise_seed, alpha):
     """(b) With max_iter = 1 (threshold the first ridge solution once) a larger
     threshold never keeps more terms, and the supports are nested."""
     t, A, U, dA = _noisy_event(seed, 300.0, noise_seed=noise_seed)
-    model = WindowedSINDy(alpha=alpha, max_iter=1).fit(t, A, U, dA)
+    model = EventWindowSINDy(alpha=alpha, max_iter=1).fit(t, A, U, dA)
     s = model.path_support_
     assert not np.any(s[:, :, 1:] & ~s[:, :, :-1]), "a larger threshold kept a term a smaller one dropped"
     assert np.all(np.diff(model.path_n_terms_, axis=2) <= 0), "a larger threshold kept more terms"
@@ -309,8 +309,8 @@ def test_units_do_not_change_supports(seed, noise_seed, factor):
     """(b) A and dA in mm instead of m (or any factor): identical supports and
     selections; the RSS carries the unit."""
     t, A, U, dA = _noisy_event(seed, 300.0, noise_seed=noise_seed)
-    m1 = WindowedSINDy().fit(t, A, U, dA)
-    m2 = WindowedSINDy().fit(t, A * factor, U, dA * factor)
+    m1 = EventWindowSINDy().fit(t, A, U, dA)
+    m2 = EventWindowSINDy().fit(t, A * factor, U, dA * factor)
     assert np.array_equal(m1.path_support_, m2.path_support_), "path supports changed with the unit of A"
     assert np.array_equal(m1.selected_, m2.selected_), "selected models changed with the unit of A"
     assert_close(m2.a_scale_, factor * m1.a_scale_, rtol=1e-12, reason="RMS of rescaled data")
@@ -324,8 +324,8 @@ def test_units_do_not_change_supports(seed, noise_seed, factor):
 @given(seed=st.integers(0, 3), shift=st.floats(-1e5, 1e5))
 def test_time_shift_does_not_change_supports(seed, shift):
     t, A, U, dA = _noisy_event(seed, 300.0)
-    m1 = WindowedSINDy().fit(t, A, U, dA)
-    m2 = WindowedSINDy().fit(t + shift, A, U, dA)
+    m1 = EventWindowSINDy().fit(t, A, U, dA)
+    m2 = EventWindowSINDy().fit(t + shift, A, U, dA)
     assert np.array_equal(m1.path_support_, m2.path_support_), "supports changed with a time shift"
     atol = 1e-9 * max(1.0, abs(shift))
     assert_close(m2.window_start_ - shift, m1.window_start_, rtol=0, atol=atol, reason="float shift")
@@ -365,7 +365,7 @@ def test_exact_sparse_model_is_recovered(seed, section, terms, signs, mags):
         # Each term carries a comparable share of dA/dt (0.3-3 x 1e-3 m/s).
         xi[0, col] = sgn * mag * 1e-3 / np.sqrt(np.mean(x**2))
     dA = evaluate_library(A, U) @ xi.T
-    model = WindowedSINDy(alpha=0.0, refit_rcond=None)
+    model = EventWindowSINDy(alpha=0.0, refit_rcond=None)
     first, stop = window_bounds(t, model.window, model.step)[2:]
     # The model's exact coefficients on each window's basis (standardised):
     # their non-zeros are the support STLSQ must find. Terms that nearly
@@ -433,8 +433,8 @@ def test_cholesky_shortcut_matches_qr(alpha, solver):
     (here everywhere, so 'gram' does the same): it must reproduce the
     all-QR path."""
     t, A, U, dA = _noisy_event(1, 600.0)
-    m_chol = WindowedSINDy(alpha=alpha, solver=solver).fit(t, A, U, dA)
-    m_qr = WindowedSINDy(alpha=alpha, solver="qr").fit(t, A, U, dA)
+    m_chol = EventWindowSINDy(alpha=alpha, solver=solver).fit(t, A, U, dA)
+    m_qr = EventWindowSINDy(alpha=alpha, solver="qr").fit(t, A, U, dA)
     assert m_chol.solves_["cholesky"] > 0, "the Cholesky shortcut was not used"
     assert m_qr.solves_["cholesky"] == 0, "solver='qr' must not use normal equations"
     assert np.array_equal(m_chol.path_support_, m_qr.path_support_), "supports differ between solvers"
@@ -492,7 +492,7 @@ def test_estimator_outputs_and_short_windows():
     t, A, U, dA = _noisy_event(0, 300.0)
     A = A.copy()
     A[40:190] = np.nan  # the first window keeps only 50 valid samples
-    model = WindowedSINDy(thresholds=DEFAULT_THRESHOLDS[:10]).fit(t, A, U, dA)
+    model = EventWindowSINDy(thresholds=DEFAULT_THRESHOLDS[:10]).fit(t, A, U, dA)
     W = model.window_start_.size
     assert model.coef_.shape == (W, 3, 69) and model.path_support_.shape == (W, 3, 10, 69)
     assert model.n_samples_[0] == 50
@@ -501,16 +501,16 @@ def test_estimator_outputs_and_short_windows():
     assert model.get_params()["alpha"] == 0.05
     assert model.set_params(alpha=0.1).alpha == 0.1
     with pytest.raises(ValueError, match="shorter than one window"):
-        WindowedSINDy(window=1e4).fit(t, A, U, dA)
+        EventWindowSINDy(window=1e4).fit(t, A, U, dA)
     with pytest.raises(ValueError, match="scaling"):
-        WindowedSINDy(scaling="log").fit(t, A, U, dA)
+        EventWindowSINDy(scaling="log").fit(t, A, U, dA)
 
 
 @pytest.mark.parametrize("scaling", ["normalized", "raw"])
 def test_other_bases_fit(scaling):
     """The comparison bases fit too; targets are scaled only with a basis."""
     t, A, U, dA = _noisy_event(0, 300.0)
-    model = WindowedSINDy(scaling=scaling, keep_path=False, raw_cond=True).fit(t, A, U, dA)
+    model = EventWindowSINDy(scaling=scaling, keep_path=False, raw_cond=True).fit(t, A, U, dA)
     assert not hasattr(model, "path_support_")
     assert np.all(np.isfinite(model.coef_)), f"{scaling}: every window must give a model"
     assert np.all(model.cond_raw_ >= 1e10), "the physical library is expected to be ill-conditioned"
@@ -578,10 +578,10 @@ def test_ensemble_is_deterministic_for_a_seed_and_leaves_global_state():
     before = np.random.get_state()[1].copy()
     kw = dict(optimizer="ensemble", keep_path=False, thresholds=DEFAULT_THRESHOLDS[::2],
               optimizer_options=OptimizerOptions(n_models=8))
-    m1 = WindowedSINDy(random_state=5, **kw).fit(t, A, U, dA)
+    m1 = EventWindowSINDy(random_state=5, **kw).fit(t, A, U, dA)
     assert np.array_equal(np.random.get_state()[1], before), "the global random state must be restored"
-    m2 = WindowedSINDy(random_state=5, chunk_size=1, **kw).fit(t, A, U, dA)
-    m3 = WindowedSINDy(random_state=6, **kw).fit(t, A, U, dA)
+    m2 = EventWindowSINDy(random_state=5, chunk_size=1, **kw).fit(t, A, U, dA)
+    m3 = EventWindowSINDy(random_state=6, **kw).fit(t, A, U, dA)
     assert np.array_equal(m1.inclusion_, m2.inclusion_, equal_nan=True), "same seed, other chunking: same inclusion"
     assert np.array_equal(m1.coef_, m2.coef_, equal_nan=True)
     assert not np.array_equal(m1.inclusion_, m3.inclusion_), "another seed must draw other bootstrap samples"
@@ -599,7 +599,7 @@ def test_optimizer_is_validated():
 
     t, A, U, dA = _noisy_event(0, 150.0)
     with pytest.raises(ValueError, match="optimizer must be one of"):
-        WindowedSINDy(optimizer="lasso").fit(t, A, U, dA)
+        EventWindowSINDy(optimizer="lasso").fit(t, A, U, dA)
     with pytest.raises(ValueError, match="inclusion_cut"):
         OptimizerOptions(inclusion_cut=0.0)
     with pytest.raises(ValueError, match="coef_rule"):

@@ -40,8 +40,8 @@ print(f"{len(written)} results, {len(failed)} failures")
 # dA_k/dt = sum_i a_ki(U) A_k^i, with a per-window verdict of which regimes can be trusted.
 # (100 bootstrap replicates by default; 20 keep this example fast.)
 model = VaryingCoefficientSINDy(n_bootstrap=20, seed=0)
-pooled = pool_results(list_results(work / "identify"), model)
-print(f"windows: {pooled.sizes['window_all']}, flagged identifiable: {pooled.attrs['coverage']:.2f}")
+regimes = pool_results(list_results(work / "identify"), model)
+print(f"windows: {regimes.sizes['window_all']}, flagged identifiable: {regimes.attrs['coverage']:.2f}")
 
 # %%
 # The fitted net linear coefficient a_k1(U) of the middle section against the truth's. Above

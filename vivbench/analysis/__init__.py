@@ -27,7 +27,7 @@ from vivbench.analysis.pool import (
     with_campaign_model,
     campaign_model_file,
     load_campaign_model,
-    pooled_wind_smoothing,
+    campaign_wind_smoothing,
 )
 from vivbench.analysis.selection import (
     CRITERIA,
@@ -53,7 +53,7 @@ __all__ = [
     "identify_event", "identify_files", "FEATURE_SETS", "ClusterConfig", "CampaignWindows", "ClusterResult",
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
-    "with_campaign_model", "campaign_model_file", "load_campaign_model", "pooled_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
+    "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
     "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "ModelSelection", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss",
     "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",

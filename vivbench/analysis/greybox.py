@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from vivbench.analysis.pool import (campaign_model_file, curve_wind_grid, load_campaign_model, pooled_wind_smoothing,
+from vivbench.analysis.pool import (campaign_model_file, curve_wind_grid, load_campaign_model, campaign_wind_smoothing,
                                     records_from_results)
 from vivbench.core.errors import InputError
-from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
 from vivbench.io.result import read_result
 from vivbench.models.greybox import BridgeProperties, GreyBoxRefit
 from vivbench.models.model_input import measured_input
@@ -73,7 +73,7 @@ def campaign_warm_start(results_dir, wind: np.ndarray):
     """Curves (docs/concepts.md (coefficient curves)) of the campaign model in ``results_dir`` on ``wind``, and a description.
 
     Returns (None, reason) when there is no campaign model or it has no curves
-    (a model rebuilt from an old ``campaign.pooled.nc``).
+    (a model rebuilt from an old ``campaign.regimes.nc``).
     """
     path = campaign_model_file(results_dir)
     if path is None:
@@ -106,9 +106,7 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
         Gaussian smoothing of the measured wind (and yaw) in time before the
         fit, the verdicts and the simulations (:func:`records_from_results`;
         0: none): the deck feels the wind averaged over its tributary
-        length, the anemometer is one point. The default 30 s was chosen on
-        the default campaign A (a_k1 error 0.151 without, 0.107 with 30 s,
-        0.120 with 60 s; penalty 1).
+        length, the anemometer is one point. Default 30 s.
     verdict_reference : "auto" or None
         "auto": a window is identifiable only if the campaign model beside the
         first result (when there is one) gives it the same regime
@@ -142,8 +140,8 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
     if cm_path is not None:
         try:
             reference = load_campaign_model(cm_path)
-            pooled_path = cm_path.parent / POOLED_NAME
-            ref_smoothing = pooled_wind_smoothing(read_pooled(pooled_path) if pooled_path.is_file() else None)
+            pooled_path = regimes_file(cm_path.parent)
+            ref_smoothing = campaign_wind_smoothing(read_campaign_regimes(pooled_path) if pooled_path.is_file() else None)
             reference_name = f"{cm_path.name} ({type(reference).__name__})"
         except (InputError, ValueError):
             reference = None

@@ -24,7 +24,7 @@ import xarray as xr
 import vivbench
 from vivbench.preprocess.derivative import Derivative
 from vivbench.regression.settings import DEFAULT_THRESHOLDS
-from vivbench.models.window import WindowedSINDy
+from vivbench.models.window import EventWindowSINDy
 from vivbench.preprocess.noise_floor import window_amplitude_snr
 from vivbench.regression.optimizers import OPTIMIZERS
 from vivbench.regimes.window import label_windows
@@ -104,8 +104,8 @@ class IdentifyConfig:
         # the estimator validates the rest (thresholds, alpha, scaling) when it is built
         self.estimator()
 
-    def estimator(self) -> WindowedSINDy:
-        est = WindowedSINDy(window=self.window, step=self.step, thresholds=self.thresholds, alpha=self.alpha,
+    def estimator(self) -> EventWindowSINDy:
+        est = EventWindowSINDy(window=self.window, step=self.step, thresholds=self.thresholds, alpha=self.alpha,
                             scaling=self.scaling, keep_path=False, optimizer=self.optimizer,
                             random_state=self.seed)
         est.settings()
@@ -115,7 +115,7 @@ class IdentifyConfig:
         return json.dumps(dataclasses.asdict(self), sort_keys=True, default=float)
 
 
-# Attribute of the fitted WindowedSINDy (or verdict of label_windows) behind each window variable of
+# Attribute of the fitted EventWindowSINDy (or verdict of label_windows) behind each window variable of
 # the result; the variables' dims, units and meanings are the result format's (vivbench.io.result).
 _FITTED = {name: f"{name}_" for name in WINDOW_FIT_VARIABLES}
 

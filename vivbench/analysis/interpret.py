@@ -12,8 +12,8 @@ of a campaign is one point. Two feature sets describe it:
     0.1 means the term carries a tenth of the RMS of dA/dt. The physical
     coefficients cannot be compared across windows: inside a window U is
     nearly constant, and the physical coefficients of U^0..U^5 are huge with
-    alternating signs (on the default campaign the largest physical term of a
-    window is ~1e8 times the RMS of dA/dt), so any distance between them
+    alternating signs (the largest physical term of a window can be many
+    orders of magnitude above the RMS of dA/dt), so any distance between them
     measures cancellation, not dynamics. The standardised coefficients are
     dimensionless and comparable term by term, so they are clustered as they
     are (no further per-feature scaling; a common scaling would not change
@@ -33,29 +33,16 @@ campaign's truth is available, by true regime
 (:func:`vivbench.validate.truth_window_regimes`); the partition is scored
 against the true regimes by the adjusted Rand index and purity.
 
-What the automatic rule finds on the default campaign (31 events, seed 0,
-8685 window-equations; ``benchmarks/bench_clustering.py``, ``vivbench cluster``):
-
-- "coef": no cluster structure. About a quarter of the models form one dense
-  core, the rest are spread far out (isolated models with delta up to 2e4,
-  against d_c = 47). The automatic rule finds 2-9 centres depending on d_c
-  fraction (0.005-0.1) and kernel, but one cluster always holds 99-100 % of
-  the models and the others are groups of 1-60 outlying models; ARI against
-  the true regimes -0.004..0.001, purity 0.48 (the share of the most common
-  true regime). Earlier, on z-scored physical coefficients, the rule found one
-  cluster: the same finding, seen through cancellation noise.
-- "order": the decision graph shows clear peaks (4 centres with the cutoff
-  kernel at d_c fraction 0.02, 2 with the Gaussian kernel, 2-3 at 0.005, 1 at
-  0.05 and above), but the clusters do not match the regimes: ARI 0.10-0.22,
-  purity 0.57-0.58. The identified models split their dynamics between the
-  orders of A almost arbitrarily (96 % of them are labelled regime 4 against 18 %
-  of the truth), so the clusters group models by how the regression split the
-  orders, not by the physics.
-
-The window models do not form clusters that match the regimes; this is the
-non-identifiability of regimes in 50 s windows (README, docs/concepts.md (regimes)), not a
-defect of the clustering, which recovers well-separated groups of unequal
-size exactly (tests) and agrees label for label with pydpc on these points.
+What the clusters are expected to show: with "coef" features the windows'
+models rarely form clusters at all (a dense core and isolated outlying
+models); with "order" features the decision graph can show clear centres that
+still do not match the regimes, because a 50 s window's regression splits its
+dynamics between the orders of A almost arbitrarily (the non-identifiability
+of regimes in short windows, docs/concepts.md (regimes)), not because of the
+clustering, which recovers well-separated groups of unequal size exactly
+(tests). ``vivbench cluster`` reports the adjusted Rand index and purity
+against the true regimes of a synthetic campaign, and
+``benchmarks/bench_clustering.py`` measures them over the clustering's settings.
 """
 
 from __future__ import annotations

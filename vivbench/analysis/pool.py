@@ -18,7 +18,8 @@ from vivbench.models.curve_support import EXTRAPOLATED, data_wind_range, mark_ex
 from vivbench.regimes.campaign import campaign_window_verdicts
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.result import read_result, result_noise_std
-from vivbench.io.campaign_model import MODEL_NAME, POOLED_FORMAT, POOLED_NAME, read_pooled
+from vivbench.io.campaign_model import (LEGACY_REGIMES_FORMAT, MODEL_NAME, REGIMES_FORMAT, REGIMES_NAME,
+                                        read_campaign_regimes, regimes_file)
 from vivbench.io.model_file import ModelFileError
 from vivbench.core.errors import InputError
 from vivbench.analysis.wind_inputs import with_yaw
@@ -26,7 +27,7 @@ from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.models.model_input import measured_input
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
-           "with_campaign_model", "campaign_model_file", "load_campaign_model", "pooled_wind_smoothing"]
+           "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing"]
 
 #: Spacing of the wind grid of the campaign model's coefficient curves, m/s.
 CURVE_STEP = 0.1
@@ -151,9 +152,7 @@ def pool_results(result_files: Sequence, model=None, *,
         (default :data:`CAMPAIGN_DERIVATIVE`); None uses the results' own dA.
         The window regressions want a smoothed derivative (few samples,
         variance matters most), the campaign model an unbiased one (tens of
-        thousands of samples average the noise, but not a smoother's bias):
-        with the chain's smoothed dA its median dA/dt error was 0.0121
-        against 0.0105 on the default campaign.
+        thousands of samples average the noise, but not a smoother's bias).
     campaign : path or None
         Directory of the results' event files, for results without the
         ``yaw`` variable (written before identification stored it): their
@@ -202,8 +201,8 @@ def pool_results(result_files: Sequence, model=None, *,
         attribute ``model = "VaryingCoefficientSINDy"`` and per equation
         ``n_basis``, ``penalty``, ``edf``, ``rss`` instead (no library
         coefficients: the splines are in the model's own file,
-        ``campaign.model.nc``). Written by :func:`write_pooled` as
-        ``campaign.pooled.nc``.
+        ``campaign.model.nc``). Written by :func:`write_campaign_regimes` as
+        ``campaign.regimes.nc``.
     """
     from vivbench.analysis.changes import (FLAG_FDR, change_point_scan, change_relative_flags, event_residual_checks,
                                            offset_flags, offset_strata, statistics_change_scan)
@@ -404,7 +403,7 @@ def pool_results(result_files: Sequence, model=None, *,
                    "event": ("event", event_ids, {"long_name": "events in the order of the result files"})})
     enough = bool(model.enough_data_) if not varying else True
     attrs = {
-        "format": "vivbench-pooled",
+        "format": REGIMES_FORMAT,
         "format_version": 1,
         "events": json.dumps(event_ids),
         "n_samples": model.n_samples_,
@@ -421,7 +420,7 @@ def pool_results(result_files: Sequence, model=None, *,
                  f"only {model.n_blocks_} bootstrap blocks of {model.block_s:g} s (fewer than {model.min_blocks}): "
                  "too little data for an identifiability verdict, no window is flagged identifiable"),
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
-        "pooled_config_json": model.to_json(),
+        "model_config_json": model.to_json(),
         "derivative_json": json.dumps(None if derivative is None else dataclasses.asdict(derivative), sort_keys=True),
         "wind_smoothing_s": float(model.fitted_wind_smoothing() if varying else wind_smoothing_s),
         "wind_yaw": int(all(r.yaw is not None for r in records)),
@@ -444,7 +443,7 @@ def pool_results(result_files: Sequence, model=None, *,
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
-def pooled_wind_smoothing(pooled) -> float:
+def campaign_wind_smoothing(pooled) -> float:
     """The smoothing of the measured wind, s, a campaign model of ``vivbench pool`` was fitted with.
 
     For :func:`vivbench.models.measured_input` of a model that does not know
@@ -454,12 +453,12 @@ def pooled_wind_smoothing(pooled) -> float:
     Parameters
     ----------
     pooled : xarray.Dataset or None
-        A ``campaign.pooled.nc`` (:func:`vivbench.io.campaign_model.read_pooled`).
+        A ``campaign.regimes.nc`` (:func:`vivbench.io.campaign_model.read_campaign_regimes`).
 
     Returns
     -------
     float, s
-        Its ``wind_smoothing_s`` attribute; 0 without a pooled result or for
+        Its ``wind_smoothing_s`` attribute; 0 without a campaign regimes file or for
         outputs written before the attribute existed (no smoothing then).
     """
     if pooled is None:
@@ -478,12 +477,11 @@ def campaign_model_file(directory) -> Path | None:
     Returns
     -------
     Path or None
-        ``campaign.model.nc`` when present, else ``campaign.pooled.nc`` (outputs
+        ``campaign.model.nc`` when present, else ``campaign.regimes.nc`` (outputs
         written before the model file existed; :func:`load_campaign_model` then
         rebuilds the model from its ``coef``), else None.
     """
-    for name in (MODEL_NAME, POOLED_NAME):
-        path = Path(directory) / name
+    for path in (Path(directory) / MODEL_NAME, regimes_file(directory)):
         if path.is_file():
             return path
     return None
@@ -507,7 +505,7 @@ def load_campaign_model(path):
     path : path
         A campaign model file (``campaign.model.nc``: :meth:`PooledSINDy.save`
         or :meth:`VaryingCoefficientSINDy.save`, told apart by the file's
-        ``model`` attribute), a pooled result (``campaign.pooled.nc``) or a
+        ``model`` attribute), a campaign regimes file (``campaign.regimes.nc``) or a
         directory holding one of them (the model file first, see
         :func:`campaign_model_file`).
 
@@ -515,7 +513,7 @@ def load_campaign_model(path):
     -------
     PooledSINDy or VaryingCoefficientSINDy
         A ``PooledSINDy`` file is loaded with :meth:`PooledSINDy.load`; from a
-        pooled result (older outputs) rebuilt with :meth:`PooledSINDy.from_pooled`,
+        regimes file (older outputs) rebuilt with :meth:`PooledSINDy.from_regimes`,
         which predicts, gives order contributions, simulates and prints
         equations but has no ``curves``. A file whose ``model`` attribute is
         ``"VaryingCoefficientSINDy"`` is loaded with
@@ -525,11 +523,11 @@ def load_campaign_model(path):
     ------
     InputError
         One line naming the file or directory: nothing of ``vivbench pool``
-        there, a file that is neither a campaign model nor a pooled result, a
-        pooled result of the varying model without its model file, or (for a
-        directory) a model file of another model than the pooled result's.
+        there, a file that is neither a campaign model nor a campaign regimes file, a
+        regimes file of the varying model without its model file, or (for a
+        directory) a model file of another model than the regimes file's.
     """
-    from vivbench.io.campaign_model import pooled_model_name
+    from vivbench.io.campaign_model import regimes_model_name
     from vivbench.models.varying import VaryingCoefficientSINDy
 
     path = Path(path)
@@ -537,31 +535,31 @@ def load_campaign_model(path):
     if path.is_dir():
         found = campaign_model_file(path)
         if found is None:
-            raise InputError(f"{path}: no campaign model ({MODEL_NAME} or {POOLED_NAME}) in this directory; "
+            raise InputError(f"{path}: no campaign model ({MODEL_NAME} or {REGIMES_NAME}) in this directory; "
                              "run vivbench pool first")
-        if found.name == MODEL_NAME and (path / POOLED_NAME).is_file():
-            pooled_name = _file_model_name(path / POOLED_NAME)[0] or "PooledSINDy"
+        if found.name == MODEL_NAME and regimes_file(path).is_file():
+            pooled_name = _file_model_name(regimes_file(path))[0] or "PooledSINDy"
         path = found
     name, fmt = _file_model_name(path) if path.is_file() else (None, None)
     if pooled_name is not None and (name or "PooledSINDy") != pooled_name:
-        raise InputError(f"{path}: a {name or 'PooledSINDy'} model beside a pooled result of {pooled_name}; "
+        raise InputError(f"{path}: a {name or 'PooledSINDy'} model beside a campaign regimes file of {pooled_name}; "
                          "re-run vivbench pool")
     if name == VaryingCoefficientSINDy.__name__:
-        if fmt != POOLED_FORMAT:
+        if fmt not in (REGIMES_FORMAT, LEGACY_REGIMES_FORMAT):
             return VaryingCoefficientSINDy.load(path)
-        raise InputError(f"{path}: a pooled result of VaryingCoefficientSINDy holds no model; its {MODEL_NAME} "
+        raise InputError(f"{path}: a campaign regimes file of VaryingCoefficientSINDy holds no model; its {MODEL_NAME} "
                          "is needed (re-run vivbench pool --model varying)")
     try:
         return PooledSINDy.load(path)
     except ModelFileError as exc:
         try:
-            pooled = read_pooled(path)
+            pooled = read_campaign_regimes(path)
         except ModelFileError:
             raise exc from None
-    if pooled_model_name(pooled) != "PooledSINDy":
-        raise InputError(f"{path}: a pooled result of {pooled_model_name(pooled)} holds no model; its {MODEL_NAME} "
+    if regimes_model_name(pooled) != "PooledSINDy":
+        raise InputError(f"{path}: a campaign regimes file of {regimes_model_name(pooled)} holds no model; its {MODEL_NAME} "
                          "is needed (re-run vivbench pool)")
-    return PooledSINDy.from_pooled(pooled)
+    return PooledSINDy.from_regimes(pooled)
 
 
 def with_campaign_model(result, pooled):
@@ -575,12 +573,12 @@ def with_campaign_model(result, pooled):
     Parameters
     ----------
     result : xarray.Dataset, an ``<event_id>.identify.nc``
-    pooled : xarray.Dataset, a ``campaign.pooled.nc`` with the same equations and features
+    pooled : xarray.Dataset, a ``campaign.regimes.nc`` with the same equations and features
     """
     missing = [v for v in ("coef", "feature") if v not in pooled]
     if missing:
         source = pooled.encoding.get("source", "the campaign model")
-        raise InputError(f"{source}: not a campaign model (campaign.pooled.nc of vivbench pool): missing {missing}")
+        raise InputError(f"{source}: not a campaign model (campaign.regimes.nc of vivbench pool): missing {missing}")
     if [str(x) for x in pooled["feature"].values] != [str(x) for x in result["feature"].values]:
         raise InputError("the campaign model's features differ from the result's")
     out = result.copy()

@@ -62,3 +62,13 @@ def record_command(out_dir, args) -> None:
     argv = getattr(args, "argv", None)
     if argv is not None and Path(out_dir).is_dir():
         write_command(out_dir, argv)
+
+
+def renamed_option(parser: argparse.ArgumentParser, old: str, new: str) -> None:
+    """Refuse the former option ``old`` with a one-line error naming ``new`` (exit 2); hidden from ``--help``."""
+
+    class _Renamed(argparse.Action):
+        def __call__(self, parser, namespace, values, option_string=None):
+            parser.error(f"{old} is now named {new}")
+
+    parser.add_argument(old, action=_Renamed, nargs="?", help=argparse.SUPPRESS)

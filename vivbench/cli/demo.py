@@ -12,7 +12,7 @@ summary: where the report is, and the headline recovery figures.
 identification's model class: the inverse crime, docs/concepts.md (no inverse crime)) into
 ``OUT/baseline_in_library`` and passes it to ``vivbench report --baseline``,
 which shows both campaigns' recovery side by side. It is off by default: it
-roughly doubles the demo's time (README).
+roughly doubles the demo's time.
 """
 
 from __future__ import annotations
@@ -134,7 +134,7 @@ def _chain(out: Path, *, mode: str, events: int, seed: int, minutes: str, worker
 
 
 def _after_pool(out: Path, campaign: Path, identify: Path, refit: bool, failures: list[str]) -> None:
-    """Cluster, forecast, (refit) and validate one pooled campaign."""
+    """Cluster, forecast, (refit) and validate one campaign after vivbench pool."""
     from vivbench.validate import clearest_plateau
 
     _step(["cluster", str(identify), "--out", str(out / "cluster"), "--campaign", str(campaign)], out / "cluster", failures)
@@ -147,7 +147,7 @@ def _after_pool(out: Path, campaign: Path, identify: Path, refit: bool, failures
     result = identify / f"{event_id}.identify.nc"
     _step(["forecast", str(result), "--out", str(out / "forecast"), "--campaign", str(campaign)], out / "forecast", failures)
     if refit:
-        # The refit on the full identified or true support does not converge in reasonable time (README);
+        # The refit on the full identified or true support does not converge in reasonable time;
         # the demo refits a small, identifiable support around the forecast's t0.
         t0 = _read_json(out / "forecast" / "summary.json").get("t0_s")
         window = []
@@ -204,17 +204,17 @@ def run(args) -> int:
         print(f"regimes:  {s.get('n_window_equations')} window-equations; window models (the paper's method): "
               f"coverage {_f(s.get('regime_coverage'))}, accuracy {_f(s.get('regime_accuracy_identifiable'))} "
               f"identifiable / {_f(s.get('regime_accuracy_all'))} all (chance {_f(s.get('truth_most_common_regime_share'))})")
-        print(f"          campaign model (vivbench pool): coverage {_f(s.get('pooled_regime_coverage'))}, accuracy "
-              f"{_f(s.get('pooled_regime_accuracy_identifiable'))} identifiable / {_f(s.get('pooled_regime_accuracy_all'))} all")
+        print(f"          campaign model (vivbench pool): coverage {_f(s.get('campaign_model_regime_coverage'))}, accuracy "
+              f"{_f(s.get('campaign_model_regime_accuracy_identifiable'))} identifiable / {_f(s.get('campaign_model_regime_accuracy_all'))} all")
         if s.get("median_rhs_rel_error_active") is not None:  # an exact coefficient matrix (in_library truth)
-            window, pooled, where = "median_rhs_rel_error_active", "pooled_median_rhs_rel_error_active", ""
+            window, pooled, where = "median_rhs_rel_error_active", "campaign_model_median_rhs_rel_error_active", ""
         else:  # a truth outside the library (the realistic default): measured on the true (A, U)
-            window, pooled = "median_rhs_error_true_AU_active", "pooled_median_rhs_error_true_AU_active"
+            window, pooled = "median_rhs_error_true_AU_active", "campaign_model_median_rhs_error_true_AU_active"
             where = " (on the true A, U)"
         print(f"dynamics: median relative error of dA/dt on windows with dynamics{where}: window models "
               f"{_f(s.get(window))}, campaign model {_f(s.get(pooled))}; energy-weighted over every sample on the "
               f"true (A, U): window models {_f(s.get('energy_rhs_error_true_AU'))}, campaign model "
-              f"{_f(s.get('pooled_energy_rhs_error_true_AU'))} (curves {_f(s.get('pooled_curve_error_energy'))})")
+              f"{_f(s.get('campaign_model_energy_rhs_error_true_AU'))} (curves {_f(s.get('campaign_model_curve_error_energy'))})")
     if c:
         tags = sorted(k[len("n_clusters_"):] for k in c if k.startswith("n_clusters_"))
         print("clusters: " + "; ".join(f"{t}: {c.get('n_clusters_' + t)} clusters, ARI {_f(c.get('ari_' + t))}" for t in tags))
@@ -239,11 +239,11 @@ def run(args) -> int:
         # The same scores on both campaigns, on the true (A, U): the only dA/dt error a realistic truth has.
         print(f"baseline: in-library (truth inside the model class: the inverse crime), {b.get('n_events')} events, "
               f"in {baseline}, against realistic ({s.get('n_events')} events): campaign model coverage "
-              f"{_f(b.get('pooled_regime_coverage'))} / {_f(s.get('pooled_regime_coverage'))}, accuracy all "
-              f"{_f(b.get('pooled_regime_accuracy_all'))} / {_f(s.get('pooled_regime_accuracy_all'))}, median dA/dt "
-              f"error on the true (A, U) {_f(b.get('pooled_median_rhs_error_true_AU_active'))} / "
-              f"{_f(s.get('pooled_median_rhs_error_true_AU_active'))}, energy-weighted "
-              f"{_f(b.get('pooled_energy_rhs_error_true_AU'))} / {_f(s.get('pooled_energy_rhs_error_true_AU'))}")
+              f"{_f(b.get('campaign_model_regime_coverage'))} / {_f(s.get('campaign_model_regime_coverage'))}, accuracy all "
+              f"{_f(b.get('campaign_model_regime_accuracy_all'))} / {_f(s.get('campaign_model_regime_accuracy_all'))}, median dA/dt "
+              f"error on the true (A, U) {_f(b.get('campaign_model_median_rhs_error_true_AU_active'))} / "
+              f"{_f(s.get('campaign_model_median_rhs_error_true_AU_active'))}, energy-weighted "
+              f"{_f(b.get('campaign_model_energy_rhs_error_true_AU'))} / {_f(s.get('campaign_model_energy_rhs_error_true_AU'))}")
     for line in failures:
         print(f"vivbench demo: {line}", file=sys.stderr)
     return 1 if failures else 0

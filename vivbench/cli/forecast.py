@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from vivbench.cli.common import renamed_option
 from vivbench.core.errors import InputError
 
 _COLUMNS = ("kind", "clip", "d_s", "section", "nmse", "stopped", "stopped_at_s", "covered", "n_windows",
@@ -129,8 +130,8 @@ def _figure(path, event_id, sim, fcs, t0, horizon, campaign=None, ref=1, section
 def run(args) -> int:
     from vivbench.models.simulate import CLIP_MODES, forecast, simulate_identified
     from vivbench.io.result import read_result, result_record
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
-    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, campaign_wind_smoothing
+    from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
     from vivbench.models.model_input import measured_input
     from vivbench.models.simulate import model_jacobian
     from vivbench.io.netcdf import atomic_path
@@ -178,8 +179,8 @@ def run(args) -> int:
                 summary[f"growth_rate_per_s_d{d:g}"] = growth
                 paper.append((d, fc))
     campaign = None
-    model_path = Path(args.pooled) if args.pooled else campaign_model_file(Path(args.result).parent)
-    if args.pooled and not model_path.is_file():
+    model_path = Path(args.campaign_model) if args.campaign_model else campaign_model_file(Path(args.result).parent)
+    if args.campaign_model and not model_path.is_file():
         raise InputError(f"{model_path}: no such campaign model file")
     if model_path is not None:
         # The campaign model of ``vivbench pool`` through the model protocol: one model for the
@@ -189,8 +190,8 @@ def run(args) -> int:
             raise InputError(f"{model_path}: the campaign model has {model.n_sections_} sections, "
                              f"{args.result} {len(sections)}")
         # The measured record on the wind as the model saw it at fit (the varying model's smoothing).
-        beside = model_path.parent / POOLED_NAME
-        smoothing = pooled_wind_smoothing(read_pooled(beside) if beside.is_file() else None)
+        beside = regimes_file(model_path.parent)
+        smoothing = campaign_wind_smoothing(read_campaign_regimes(beside) if beside.is_file() else None)
         record = measured_input(model, result_record(result), wind_smoothing_s=smoothing)
         span = (float(result["window_start"].values.min()), float(result["window_end"].values.max()))
         csim = model.simulate(record, *span)
@@ -249,8 +250,9 @@ def register(sub) -> None:
     s.add_argument("--horizon", type=float, default=300.0, help="forecast length, s (default 300, as the paper)")
     s.add_argument("--d", type=_ds, default=(0.0, 50.0, 150.0, 300.0),
                    help="averaging durations, s, comma-separated (default 0,50,150,300)")
-    s.add_argument("--pooled", default=None,
-                   help="campaign model of vivbench pool: campaign.model.nc, or campaign.pooled.nc of older outputs "
-                        "(default: whichever lies beside the result, the model file first)")
+    s.add_argument("--campaign-model", default=None, metavar="FILE",
+                   help="campaign model of vivbench pool: campaign.model.nc, or the campaign.regimes.nc of outputs "
+                        "without it (default: whichever lies beside the result, the model file first)")
+    renamed_option(s, "--pooled", "--campaign-model")
     s.add_argument("--campaign", default=None, help="campaign directory with the event file (truth: t0, growth rate)")
     s.set_defaults(func=run)

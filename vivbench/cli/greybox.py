@@ -237,7 +237,7 @@ def register(sub) -> None:
                    default="sandwich_bias_wind",
                    help="covariance of the bands: the Bayesian posterior sigma^2 kappa (J'J + R)^-1, the block "
                         "sandwich (variance only), the sandwich plus the prior-averaged squared smoothing bias "
-                        "(the posterior was half the sandwich's width on campaign A, README), or the event "
+                        "(the posterior alone is narrower than the sandwich), or the event "
                         "bootstrap's covariance (needs --boot >= 20), alone or plus the same bias, or sandwich_bias "
                         "plus the wind's errors-in-variables (default; needs --wind-draws >= 2)")
     s.add_argument("--wind-draws", dest="wind_draws", type=int, default=4, metavar="N",
@@ -251,8 +251,8 @@ def register(sub) -> None:
                         "(default 2)")
     s.add_argument("--boot", type=int, default=0, metavar="N",
                    help="event bootstrap replicates after the fit (refits on events drawn with replacement, "
-                        "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians: "
-                        "on bridge C 30 replicates took 460 s, so not within the 60 s budget)")
+                        "seeded by --seed; default 0: none; each costs up to 2 (--boot-iter + 1) Jacobians, "
+                        "so tens of replicates take minutes)")
     s.add_argument("--boot-iter", dest="boot_iter", type=int, default=10, metavar="K",
                    help="Gauss-Newton iterations of a bootstrap replicate from the fit's optimum in each of its "
                         "two continuation stages (default 10)")
@@ -274,8 +274,8 @@ def register(sub) -> None:
                         "block of one event, independent between blocks (default a day: one block per event)")
     s.add_argument("--wind-smoothing", dest="wind_smoothing", type=float, default=30.0, metavar="S",
                    help="Gaussian smoothing of the measured wind and yaw in time, standard deviation in s "
-                        "(the deck feels the tributary-averaged wind, the anemometer is a point; default 30, "
-                        "chosen on the default campaign; 0: none)")
+                        "(the deck feels the tributary-averaged wind, the anemometer is a point; default 30; "
+                        "0: none)")
     s.add_argument("--tau", type=float, default=0.2, help="regime threshold (docs/concepts.md (regimes))")
     s.add_argument("--agreement", type=float, default=0.95,
                    help="share of parameter draws that must agree on a window's regime (default 0.95)")

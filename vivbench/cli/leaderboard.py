@@ -57,7 +57,7 @@ def register(sub) -> None:
     s = sub.add_parser("leaderboard",
                        help="score methods on the scenario suite (writes leaderboard.csv/.md/.png); resumable")
     s.add_argument("--methods", required=True,
-                   help="comma-separated methods: windows, campaign, varying, pysindy-cp, binned, greybox (the "
+                   help="comma-separated methods: windows, pooled, varying, pysindy-cp, binned, greybox (the "
                         "grey-box refit given each scenario bridge's structural properties), or package.module:factory "
                         "(a factory takes no arguments and returns a method with fit(records))")
     s.add_argument("--scenarios", default=None,

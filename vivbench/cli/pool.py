@@ -2,14 +2,24 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
 
 from vivbench.core.errors import InputError
 
-#: The campaign models of ``--model``: "pooled" and "sindy" (its former name) are both PooledSINDy.
-MODELS = ("varying", "pooled", "sindy")
+#: The campaign models of ``--model``: VaryingCoefficientSINDy and PooledSINDy.
+MODELS = ("varying", "pooled")
+#: Former names of ``--model`` values, refused with the current name.
+RENAMED_MODELS = {"sindy": "pooled"}
+
+
+def _model_name(text: str) -> str:
+    """The ``--model`` value; a former name is refused with a message naming the current one."""
+    if text in RENAMED_MODELS:
+        raise argparse.ArgumentTypeError(f"{text!r} is now named {RENAMED_MODELS[text]!r}")
+    return text
 
 
 def run(args) -> int:
@@ -18,7 +28,7 @@ def run(args) -> int:
     from vivbench.analysis.selection import varying_selection
     from vivbench.io.result import list_results
     from vivbench.analysis.pool import pool_results
-    from vivbench.io.campaign_model import MODEL_NAME, write_pooled
+    from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 
     weights = _wind_weights(args.wind_weights)  # a bad option is reported before any file is read
     results_dir = Path(args.results)
@@ -50,7 +60,7 @@ def run(args) -> int:
               file=sys.stderr)
     out_dir = Path(args.out) if args.out else results_dir
     out_dir.mkdir(parents=True, exist_ok=True)
-    out = write_pooled(ds, out_dir)
+    out = write_campaign_regimes(ds, out_dir)
     # The fitted model itself, for forecast, validate and the report (the model protocol's load).
     model_out = model.save(out_dir / MODEL_NAME)
     if ds.attrs.get("note"):
@@ -101,11 +111,10 @@ def register(sub) -> None:
     s = sub.add_parser("pool", help="fit one model to a whole campaign's results and label every window with it")
     s.add_argument("results", help="directory of <event_id>.identify.nc")
     s.add_argument("--out", default=None, help="output directory (default: the results directory)")
-    s.add_argument("--model", choices=MODELS, default="varying",
+    s.add_argument("--model", type=_model_name, choices=MODELS, default="varying",
                    help="campaign model: varying (VaryingCoefficientSINDy, penalised spline curves in U with the "
-                        "wind's yaw; default: it follows a lock-in bell that no polynomial in U does, README) or "
-                        "pooled (PooledSINDy, sparse regression on the 69-term library, the paper's class; 'sindy' "
-                        "is the same)")
+                        "wind's yaw; default: it follows a lock-in bell that no polynomial in U does) or "
+                        "pooled (PooledSINDy, sparse regression on the 69-term library, the paper's class)")
     s.add_argument("--campaign", default=None,
                    help="directory of the results' event files, only for results identified before the result "
                         "stored the wind's yaw: their yaw is then measured from the events' anemometers")

@@ -47,8 +47,8 @@ def register(sub) -> None:
                    help="development draws may be used to choose anything; evaluation draws only to report")
     s.add_argument("--draws", required=True, help="draw numbers: N, N-M or a comma-separated list (e.g. 0-29)")
     s.add_argument("--methods", default="varying,pooled",
-                   help="comma-separated methods (default varying,pooled; pooled is the built-in campaign model, "
-                        "greybox is the grey-box refit given each draw's structural properties, other names "
+                   help="comma-separated methods (default varying,pooled: the two campaign models of vivbench pool; "
+                        "greybox is the grey-box refit given each draw's structural properties; other names "
                         "as in vivbench compare, or package.module:factory)")
     s.add_argument("--out", required=True, help="output directory; rerunning with the same options resumes")
     s.add_argument("--max-events", type=int, default=None,

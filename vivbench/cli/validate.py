@@ -30,19 +30,19 @@ def run(args) -> int:
           f"{f('median_rhs_error_true_AU_active')} (active), energy-weighted {f('energy_rhs_error_true_AU')}"
           + (f", on the measured (A, U) {f('median_rhs_rel_error_active')} (active)" if v["rhs"] is not None else "")
           + f"; {support}")
-    if "pooled_regime_coverage" in s:
-        curves = v["pooled"]["curves"]
-        curve_text = (f"curve error over lock-in ({curves['reference_equation']}): a_k1 {f('pooled_curve_error_linear')}, "
-                      f"total {f('pooled_curve_error_total')}" if curves.get("scored")
+    if "campaign_model_regime_coverage" in s:
+        curves = v["campaign_model"]["curves"]
+        curve_text = (f"curve error over lock-in ({curves['reference_equation']}): a_k1 {f('campaign_model_curve_error_linear')}, "
+                      f"total {f('campaign_model_curve_error_total')}" if curves.get("scored")
                       else f"curves not scored against the truth's curves: {curves.get('reason')}")
-        curve_text += f"; curve dA/dt error energy-weighted {f('pooled_curve_error_energy')}"
-        print(f"campaign model (vivbench pool): regime coverage {f('pooled_regime_coverage')}, accuracy "
-              f"{f('pooled_regime_accuracy_identifiable')} identifiable / {f('pooled_regime_accuracy_all')} all; "
+        curve_text += f"; curve dA/dt error energy-weighted {f('campaign_model_curve_error_energy')}"
+        print(f"campaign model (vivbench pool): regime coverage {f('campaign_model_regime_coverage')}, accuracy "
+              f"{f('campaign_model_regime_accuracy_identifiable')} identifiable / {f('campaign_model_regime_accuracy_all')} all; "
               f"dA/dt rel. error on the true (A, U): median over windows "
-              f"{f('pooled_median_rhs_error_true_AU_active')} (active), energy-weighted "
-              f"{f('pooled_energy_rhs_error_true_AU')}"
-              + (f", on the measured (A, U) {f('pooled_median_rhs_rel_error_active')} (active)"
-                 if v["pooled"]["rhs"] is not None else "") + f"; {curve_text}")
+              f"{f('campaign_model_median_rhs_error_true_AU_active')} (active), energy-weighted "
+              f"{f('campaign_model_energy_rhs_error_true_AU')}"
+              + (f", on the measured (A, U) {f('campaign_model_median_rhs_rel_error_active')} (active)"
+                 if v["campaign_model"]["rhs"] is not None else "") + f"; {curve_text}")
     print(f"wrote {len(written)} files to {args.out}")
     return 0
 

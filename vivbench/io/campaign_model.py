@@ -1,4 +1,4 @@
-"""Campaign-model files: the fitted model (``save``/``load``) and the pooled result ``campaign.pooled.nc``.
+"""Campaign-model files: the fitted model (``save``/``load``) and its regimes ``campaign.regimes.nc``.
 
 Two schemas, one owner:
 
@@ -7,16 +7,23 @@ Two schemas, one owner:
   :class:`vivbench.models.PooledSINDy` needs to predict, simulate, draw its
   curves and label windows. Written by :func:`write_campaign_model`, read and
   checked by :func:`read_campaign_model`; ``vivbench pool`` saves it as
-  :data:`MODEL_NAME` (``campaign.model.nc``) beside the pooled result.
-- the *pooled result* ``campaign.pooled.nc`` of ``vivbench pool`` (format
-  ``"vivbench-pooled"``): the model's coefficients with every window's regime.
-  Written by :func:`write_pooled`, read by :func:`read_pooled`. Its ``model``
-  attribute names the campaign model (:data:`POOLED_MODELS`; absent in files of
-  the SINDy model written before it existed): only ``"PooledSINDy"`` files hold
+  :data:`MODEL_NAME` (``campaign.model.nc``) beside the regimes file.
+- the *campaign regimes* ``campaign.regimes.nc`` of ``vivbench pool`` (format
+  ``"vivbench-campaign-regimes"``): every window's regime and verdict by the
+  campaign model, its curves and, for ``PooledSINDy``, its coefficients.
+  Written by :func:`write_campaign_regimes`, read by
+  :func:`read_campaign_regimes`. Its ``model`` attribute names the campaign
+  model (:data:`CAMPAIGN_MODEL_CLASSES`; absent in files of the pooled model written
+  before it existed): only ``"PooledSINDy"`` files hold
   the 69 library coefficients (``coef``, ``coef_bootstrap``); a
   ``"VaryingCoefficientSINDy"`` file holds the windows' verdicts, the curves and
   per-equation spline settings, and its model lives in ``campaign.model.nc``
   (that model's own file, :meth:`vivbench.models.VaryingCoefficientSINDy.save`).
+
+Earlier versions wrote the regimes as ``campaign.pooled.nc`` (format
+``"vivbench-pooled"``, the model's settings in the attribute
+``pooled_config_json``); :func:`regimes_file` finds such a file and
+:func:`read_campaign_regimes` reads it as a current one.
 """
 
 from __future__ import annotations
@@ -29,14 +36,20 @@ from vivbench.io.model_file import ModelFileError, read_model_dataset
 from vivbench.io.netcdf import write_netcdf_atomic
 
 __all__ = [
-    "POOLED_NAME", "MODEL_NAME", "POOLED_FORMAT", "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "write_pooled",
-    "read_pooled", "write_campaign_model", "read_campaign_model", "POOLED_MODELS", "pooled_model_name",
+    "REGIMES_NAME", "LEGACY_REGIMES_NAME", "MODEL_NAME", "REGIMES_FORMAT", "LEGACY_REGIMES_FORMAT",
+    "CAMPAIGN_MODEL_FORMAT", "CAMPAIGN_MODEL_VERSION", "regimes_file", "write_campaign_regimes",
+    "read_campaign_regimes", "write_campaign_model", "read_campaign_model", "CAMPAIGN_MODEL_CLASSES", "regimes_model_name",
 ]
 
-POOLED_NAME = "campaign.pooled.nc"
-#: File name of the fitted campaign model that ``vivbench pool`` saves beside :data:`POOLED_NAME`.
+#: File name of the campaign model's regimes (every window's regime and verdict, the curves).
+REGIMES_NAME = "campaign.regimes.nc"
+#: The name earlier versions gave that file; still read.
+LEGACY_REGIMES_NAME = "campaign.pooled.nc"
+#: File name of the fitted campaign model that ``vivbench pool`` saves beside :data:`REGIMES_NAME`.
 MODEL_NAME = "campaign.model.nc"
-POOLED_FORMAT = "vivbench-pooled"
+REGIMES_FORMAT = "vivbench-campaign-regimes"
+#: The ``format`` attribute earlier versions wrote in that file; still read.
+LEGACY_REGIMES_FORMAT = "vivbench-pooled"
 CAMPAIGN_MODEL_FORMAT = "vivbench-campaign-model"
 CAMPAIGN_MODEL_VERSION = 1
 
@@ -57,10 +70,10 @@ _MODEL_VARIABLES = {
     "to_physical": ("basis", "basis_"),
 }
 
-#: Campaign models a pooled result can come from (its ``model`` attribute; absent means the first).
-POOLED_MODELS = ("PooledSINDy", "VaryingCoefficientSINDy")
+#: Campaign models a regimes file can come from (its ``model`` attribute; absent means the first).
+CAMPAIGN_MODEL_CLASSES = ("PooledSINDy", "VaryingCoefficientSINDy")
 
-#: Variables of a pooled result of the SINDy model beyond :data:`_POOLED_VARIABLES`.
+#: Variables of a regimes file of the pooled model beyond :data:`_POOLED_VARIABLES`.
 _POOLED_SINDY_VARIABLES = {
     "coef": ("equation", "feature"),
     "coef_bootstrap": ("bootstrap", "equation", "feature"),
@@ -76,34 +89,77 @@ _POOLED_VARIABLES = {
 }
 
 
-def write_pooled(ds, out_dir) -> Path:
-    """Write a pooled result atomically as ``out_dir/campaign.pooled.nc``."""
-    return Path(write_netcdf_atomic(ds, Path(out_dir) / POOLED_NAME))
+def regimes_file(directory) -> Path:
+    """The campaign regimes file of a results directory.
+
+    Parameters
+    ----------
+    directory : str or Path
+
+    Returns
+    -------
+    Path
+        ``directory/campaign.regimes.nc``; ``directory/campaign.pooled.nc``
+        instead when only that file (written by an earlier version) is there.
+        The path need not exist.
+    """
+    directory = Path(directory)
+    current, legacy = directory / REGIMES_NAME, directory / LEGACY_REGIMES_NAME
+    return legacy if legacy.is_file() and not current.is_file() else current
 
 
-def read_pooled(path) -> xr.Dataset:
-    """Load and check a pooled result (``campaign.pooled.nc``).
+def write_campaign_regimes(ds, out_dir) -> Path:
+    """Write the campaign regimes atomically as ``out_dir/campaign.regimes.nc``.
+
+    A ``campaign.pooled.nc`` of an earlier version in ``out_dir`` is removed
+    afterwards, so that the directory holds one regimes file.
+    """
+    path = Path(write_netcdf_atomic(ds, Path(out_dir) / REGIMES_NAME))
+    (Path(out_dir) / LEGACY_REGIMES_NAME).unlink(missing_ok=True)
+    return path
+
+
+def read_campaign_regimes(path) -> xr.Dataset:
+    """Load and check a campaign regimes file (``campaign.regimes.nc``, or ``campaign.pooled.nc`` of earlier versions).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (:func:`regimes_file` finds it in a directory).
+
+    Returns
+    -------
+    xarray.Dataset
+        Loaded; a file of an earlier version comes back as a current one:
+        ``format`` is ``"vivbench-campaign-regimes"`` and the model's settings
+        are in the attribute ``model_config_json`` (earlier:
+        ``pooled_config_json``).
 
     Raises
     ------
     ModelFileError
         One line naming the file (missing, unreadable, other format, lacking a variable).
     """
-    ds = read_model_dataset(path, fmt=POOLED_FORMAT, max_version=1, variables=_POOLED_VARIABLES, what="pooled result")
-    name = ds.attrs.get("model", POOLED_MODELS[0])
-    if name not in POOLED_MODELS:
-        raise ModelFileError(f"{path}: pooled result of an unknown campaign model {name!r} (known: {', '.join(POOLED_MODELS)})")
+    ds = read_model_dataset(path, fmt=(REGIMES_FORMAT, LEGACY_REGIMES_FORMAT), max_version=1,
+                            variables=_POOLED_VARIABLES, what="campaign regimes")
+    if "model_config_json" not in ds.attrs and "pooled_config_json" in ds.attrs:
+        ds.attrs["model_config_json"] = ds.attrs.pop("pooled_config_json")
+    ds.attrs["format"] = REGIMES_FORMAT
+    name = ds.attrs.get("model", CAMPAIGN_MODEL_CLASSES[0])
+    if name not in CAMPAIGN_MODEL_CLASSES:
+        raise ModelFileError(f"{path}: campaign regimes of an unknown campaign model {name!r} "
+                             f"(known: {', '.join(CAMPAIGN_MODEL_CLASSES)})")
     if name == "PooledSINDy":
         missing = [v for v in _POOLED_SINDY_VARIABLES if v not in ds.variables]
         if missing:
-            raise ModelFileError(f"{path}: pooled result of PooledSINDy lacks {', '.join(missing)}")
+            raise ModelFileError(f"{path}: campaign regimes of PooledSINDy lack {', '.join(missing)}")
         _check_library(ds, path)
     return ds
 
 
-def pooled_model_name(ds: xr.Dataset) -> str:
-    """The campaign model a pooled result comes from: its ``model`` attribute, ``"PooledSINDy"`` when absent."""
-    return str(ds.attrs.get("model", POOLED_MODELS[0]))
+def regimes_model_name(ds: xr.Dataset) -> str:
+    """The campaign model a regimes file comes from: its ``model`` attribute, ``"PooledSINDy"`` when absent."""
+    return str(ds.attrs.get("model", CAMPAIGN_MODEL_CLASSES[0]))
 
 
 def _check_library(ds: xr.Dataset, path) -> None:

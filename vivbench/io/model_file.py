@@ -1,4 +1,4 @@
-"""Checks shared by the model files (campaign model, window model, pooled result): one-line errors naming the file."""
+"""Checks shared by the model files (campaign model, window model, campaign regimes): one-line errors naming the file."""
 
 from __future__ import annotations
 
@@ -18,15 +18,16 @@ class ModelFileError(InputError):
     """A model file is missing, unreadable, of another format or version, or lacks a variable."""
 
 
-def read_model_dataset(path, *, fmt: str, max_version: int, variables: Mapping[str, tuple[str, ...]],
+def read_model_dataset(path, *, fmt: str | tuple[str, ...], max_version: int, variables: Mapping[str, tuple[str, ...]],
                        what: str) -> xr.Dataset:
     """Load a model file into memory and check its format, version and variables.
 
     Parameters
     ----------
     path : str or Path
-    fmt : str
-        Required value of the ``format`` attribute.
+    fmt : str or tuple of str
+        Required value of the ``format`` attribute (a tuple: any of them, e.g.
+        a format's current name and the one earlier versions wrote).
     max_version : int
         Newest ``format_version`` this reader understands (>= 1).
     variables : mapping of name to dims
@@ -51,9 +52,10 @@ def read_model_dataset(path, *, fmt: str, max_version: int, variables: Mapping[s
             ds = ds.load()
     except Exception as exc:  # noqa: BLE001 - any reader failure means "not such a file"
         raise ModelFileError(f"{path}: cannot be read as a NetCDF-4 {what} ({type(exc).__name__})") from exc
-    if ds.attrs.get("format") != fmt:
+    formats = (fmt,) if isinstance(fmt, str) else tuple(fmt)
+    if ds.attrs.get("format") not in formats:
         raise ModelFileError(f"{path}: not a {what} file (format attribute is {ds.attrs.get('format')!r}, "
-                             f"expected {fmt!r})")
+                             f"expected {formats[0]!r})")
     try:
         version = int(ds.attrs.get("format_version"))
     except (TypeError, ValueError):

@@ -13,21 +13,16 @@ import xarray as xr
 __all__ = ["NETCDF_ENGINE", "atomic_path", "write_netcdf_atomic"]
 
 
-# Compression, measured on a 40 min event (76800 x 3 float32 per wind component
-# quantised to 0.01 m/s, 120000 x 3 float32 acceleration quantised to 16 bits,
-# float64 times; 5.8 MB raw), CPU time of write_event on the shared 2-core build
-# machine: uncompressed 37 ms; deflate level 1 85 ms for 1.7 MB; deflate 4
-# 110 ms for 1.4 MB. The byte-shuffle filter makes quantised float32 samples
-# compress worse (u: 0.38 -> 0.52 MB) but float64 times 10x better (accel
-# time: 0.22 -> 0.02 MB), so it is used for 8-byte types only. Deflate rather
+# Compression: deflate level 1 gets most of level 4's size reduction for less CPU
+# time. The byte-shuffle filter makes quantised float32 samples compress worse but
+# float64 times much better, so it is used for 8-byte types only. Deflate rather
 # than lzf because every netCDF-C/HDF5 reader can decode it.
 _DEFLATE_LEVEL = 1
 
 
-# The netCDF-C library (netCDF4-python) reads and writes these files 3x faster
-# than h5netcdf (measured: 0.035 s against 0.11 s to write a result file of 25
-# variables, 0.033 s against 0.096 s to read an event): h5netcdf's per-variable
-# bookkeeping in Python dominated the identification of short events.
+# The netCDF-C library (netCDF4-python) reads and writes these files faster than
+# h5netcdf, whose per-variable bookkeeping in Python dominates the identification
+# of short events.
 NETCDF_ENGINE = "netcdf4"
 
 

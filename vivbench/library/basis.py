@@ -43,15 +43,14 @@ Bases (``scaling``)
 
 Scaling by constants (a, s, u_ref) never changes the condition number after
 column normalisation; they only keep the numbers in range. Only the centring
-of U does real work, and it does not suffice for three sections. Measured on
-the synthetic 50 s windows of the tests (U about 8 m/s, slow swings and
-gusts; A from a sparse model): one section's 23 terms have condition numbers
-1e17-1e21 raw, 1e13-1e17 ``"normalized"``, 1e6.6-1e9 ``"scaled"``; all 69
-terms of three sections still 1e14-1e17 ``"scaled"``. That floor is not an
-artefact of the basis: within a window each section's U q(U) (deg q <= 4)
-approximates a constant to about (s/c)^5, so the three sections' constant-like
-terms are nearly interchangeable in any basis of the physical space. The
-regression engine copes with it (:mod:`vivbench.regression.stlsq`).
+of U does real work, and it does not suffice for three sections: scaled, one
+section's 23 terms are orders of magnitude better conditioned than raw or
+normalized ones, but all 69 terms of three sections stay ill-conditioned.
+That floor is not an artefact of the basis: within a window each section's
+U q(U) (deg q <= 4) approximates a constant to about (s/c)^5, so the three
+sections' constant-like terms are nearly interchangeable in any basis of the
+physical space. The regression engine copes with it
+(:mod:`vivbench.regression.stlsq`).
 
 All three bases span exactly the physical space, so a model fitted in any of
 them is a physical model: ``to_physical @ coef`` is exact in exact arithmetic.

@@ -2,7 +2,6 @@
 
 from vivbench.models.campaign import (
     PooledSINDy,
-    CampaignSINDy,
     WindowRecord,
     amplitude_ratios,
     pooled_window_stats,
@@ -58,21 +57,21 @@ from vivbench.models.varying import VaryingCoefficientSINDy
 from vivbench.models.wind_weights import modal_wind_weights, weighted_section_mean
 from vivbench.models.model_input import measured_input
 from vivbench.models.quasi_steady import QuasiSteadyAmplitude
-from vivbench.models.window import WindowProblem, WindowedSINDy
+from vivbench.models.window import WindowProblem, EventWindowSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
     "QuasiSteadyAmplitude",
     "BridgeProperties", "GreyBoxRefit", "curves_to_functions", "BinnedPolynomial",
     "EXTRAPOLATED", "curves_inside_data", "data_wind_range", "extrapolated_mask", "mark_extrapolated",
-    "PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
+    "PooledSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
     "window_record", "window_stats", "window_sums", "RATIO_LEVEL", "Method", "FittedModel", "Predictor",
     "Simulator", "CampaignLevel", "Persistent", "HasEquations", "ModelBase", "NotFittedError", "as_record",
     "fit_records",
     "coef_order_contributions", "format_equations", "section_names", "simulate_windows", "RefitConfig",
     "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients", "order_rms",
     "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",
-    "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "WindowedSINDy",
+    "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "EventWindowSINDy",
     "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "modal_wind_weights", "weighted_section_mean",
     "measured_input",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",

@@ -1,7 +1,6 @@
 """One SINDy model for a whole campaign, and the regimes it gives every window.
 
-Why: inside a 50 s window the orders of A cannot be told apart (docs/concepts.md (regimes);
-``identifiability.py`` finds no identifiable window on the default campaign),
+Why: inside a 50 s window the orders of A cannot be told apart (docs/concepts.md (regimes)),
 because U drifts smoothly and U^j then acts as a time basis. The aeroelastic
 truth is, however, time-invariant as a function of (A, U): the coefficients of
 A^i vary only through the wind, which the library's U^j already carries. Pooled
@@ -60,7 +59,7 @@ from vivbench.models.protocol import (
 )
 from vivbench.models.simulate import Simulation
 
-__all__ = ["PooledSINDy", "CampaignSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats", "window_record",
+__all__ = ["PooledSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats", "window_record",
            "window_stats", "window_sums", "RATIO_LEVEL"]
 
 #: Samples whose amplitude is below this share of the section's largest amplitude
@@ -236,10 +235,11 @@ def _replicate_fits(factors, mult: np.ndarray, settings: StlsqSettings, chunk_si
 class PooledSINDy(ModelBase):
     """STLSQ + AICc on all samples of a campaign, with a block bootstrap of the selection.
 
-    The campaign model of the model protocol (:mod:`vivbench.models.protocol`):
-    ``fit(records)``, ``predict``, ``order_contributions``, ``simulate``,
-    ``curves`` (docs/concepts.md (coefficient curves)), ``save``/``load`` (NetCDF), ``equations``/``print``.
-    ``CampaignSINDy`` is the same class.
+    The pooled model (method ``pooled``, ``vivbench pool --model pooled``): one
+    sparse model of the 69-term library for the whole campaign, a model of the
+    protocol (:mod:`vivbench.models.protocol`): ``fit(records)``, ``predict``,
+    ``order_contributions``, ``simulate``, ``curves`` (docs/concepts.md
+    (coefficient curves)), ``save``/``load`` (NetCDF), ``equations``/``print``.
 
     Parameters
     ----------
@@ -572,12 +572,12 @@ class PooledSINDy(ModelBase):
         return model
 
     @classmethod
-    def from_pooled(cls, ds: xr.Dataset) -> "PooledSINDy":
-        """The campaign model of a pooled result (``campaign.pooled.nc``), for outputs without a model file.
+    def from_regimes(cls, ds: xr.Dataset) -> "PooledSINDy":
+        """The campaign model of a campaign regimes file (``campaign.regimes.nc``), for outputs without a model file.
 
         ``vivbench pool`` saves the fitted model as ``campaign.model.nc``
-        (:meth:`save`); directories written before it hold only the pooled
-        result, whose ``coef`` is the same model. This rebuilds what
+        (:meth:`save`); directories written before it hold only the regimes
+        file, whose ``coef`` is the same model. This rebuilds what
         :meth:`predict`, :meth:`order_contributions`, :meth:`simulate` and
         :meth:`equations` need (and the selection summaries: ``coef_bootstrap_``,
         ``n_terms_``, ``threshold_``, ``rss_``, ``aicc_``, ``n_samples_``,
@@ -586,10 +586,10 @@ class PooledSINDy(ModelBase):
         Parameters
         ----------
         ds : xarray.Dataset
-            A pooled result read by :func:`vivbench.io.campaign_model.read_pooled`:
+            A regimes file read by :func:`vivbench.io.campaign_model.read_campaign_regimes`:
             ``coef`` (equation, feature) in physical units (dA/dt in m/s),
             ``coef_bootstrap``, ``n_terms``, ``threshold``, ``rss``, ``aicc`` and
-            the attributes ``pooled_config_json``, ``n_samples``, ``n_blocks``,
+            the attributes ``model_config_json``, ``n_samples``, ``n_blocks``,
             ``enough_data``, ``cond``, ``events``.
 
         Returns
@@ -597,13 +597,13 @@ class PooledSINDy(ModelBase):
         PooledSINDy
             Fitted for evaluation only: ``curves``, ``save`` and ``to_dataset``
             raise :class:`~vivbench.core.errors.InputError`
-            naming the file, because the pooled result holds neither the
+            naming the file, because the regimes file holds neither the
             amplitude ratios of the curves nor the regression basis (the
-            windows' identifiability verdicts are in the pooled result itself).
+            windows' identifiability verdicts are in the regimes file itself).
         """
-        source = ds.encoding.get("source", "the pooled result")
+        source = ds.encoding.get("source", "the campaign regimes")
         try:
-            params = json.loads(ds.attrs["pooled_config_json"])
+            params = json.loads(ds.attrs["model_config_json"])
             params["thresholds"] = tuple(params["thresholds"])
             model = cls(**params)
             model.coef_ = np.asarray(ds["coef"].values, dtype=float)
@@ -615,23 +615,19 @@ class PooledSINDy(ModelBase):
             model.enough_data_, model.cond_ = bool(int(ds.attrs["enough_data"])), float(ds.attrs["cond"])
             model.event_ids_ = json.loads(ds.attrs.get("events", "[]"))
         except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"{source}: not a pooled result of vivbench pool ({type(exc).__name__}: {exc})") from None
+            raise InputError(f"{source}: not a campaign regimes file of vivbench pool ({type(exc).__name__}: {exc})") from None
         model.support_ = model.coef_ != 0
         model.n_sections_ = int(ds.sizes["equation"])
         model.feature_names_ = [str(x) for x in ds["feature"].values]
 
         def unavailable(*_args, **_kwargs):
-            raise InputError(f"{source}: a campaign model rebuilt from the pooled result has no amplitude ratios "
+            raise InputError(f"{source}: a campaign model rebuilt from the regimes file has no amplitude ratios "
                              "or regression basis (no curves, window verdicts or save); re-run vivbench pool to "
                              "write campaign.model.nc")
 
         for name in ("curves", "save", "to_dataset"):
             setattr(model, name, unavailable)
         return model
-
-
-#: The campaign model of the model protocol (docs/methods.md); the same class as :class:`PooledSINDy`.
-CampaignSINDy = PooledSINDy
 
 
 def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):

@@ -41,7 +41,7 @@ def measured_input(model, record: Record, *, wind_smoothing_s: float = 0.0) -> R
     wind_smoothing_s : float, s
         The Gaussian smoothing of U and yaw the model's measured records had at
         fit when the model does not know it itself: the ``wind_smoothing_s``
-        attribute of ``vivbench pool``'s ``campaign.pooled.nc`` (0: none, the
+        attribute of ``vivbench pool``'s ``campaign.regimes.nc`` (0: none, the
         record unchanged).
 
     Returns

@@ -16,7 +16,7 @@ from vivbench.library.basis import SCALINGS, basis_orders, library_cond, order_c
 from vivbench.core.terms import feature_names
 from vivbench.core.errors import InputError
 
-__all__ = ["WindowProblem", "WindowedSINDy"]
+__all__ = ["WindowProblem", "EventWindowSINDy"]
 
 
 class WindowProblem(NamedTuple):
@@ -51,8 +51,11 @@ class WindowProblem(NamedTuple):
     settings: StlsqSettings
 
 
-class WindowedSINDy(ModelBase):
-    """Time-varying SINDy: STLSQ with AICc selection on sliding windows (docs/concepts.md (identifiability)).
+class EventWindowSINDy(ModelBase):
+    """Time-varying SINDy on one event's record: STLSQ with AICc selection on sliding windows.
+
+    The paper's method (docs/concepts.md, identifiability); :class:`vivbench.models.WindowSINDy`
+    fits it to every record of a campaign (method ``windows``).
 
     Each window's library (:func:`vivbench.library.basis.window_library`,
     69 terms for three sections) is regressed against each section's dA/dt
@@ -201,7 +204,7 @@ class WindowedSINDy(ModelBase):
             solver=self.solver,
         )
 
-    def fit(self, t, A, U, dA, *, on_chunk: Callable[[WindowProblem], None] | None = None) -> "WindowedSINDy":
+    def fit(self, t, A, U, dA, *, on_chunk: Callable[[WindowProblem], None] | None = None) -> "EventWindowSINDy":
         """Identify one model per window and equation.
 
         Parameters

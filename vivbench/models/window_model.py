@@ -1,6 +1,6 @@
 """Window SINDy as a model of the protocol (docs/methods.md): per-event window models over records.
 
-:class:`vivbench.models.window.WindowedSINDy` fits one record (the paper's
+:class:`vivbench.models.window.EventWindowSINDy` fits one record (the paper's
 time-varying SINDy); :class:`WindowSINDy` fits it to every record of a
 campaign and keeps each event's windows. Evaluated on a record, the model at a
 time is that of the event's fitted window whose centre is nearest (ties: the
@@ -32,7 +32,7 @@ from vivbench.models.protocol import (
     simulate_windows,
 )
 from vivbench.models.simulate import Simulation
-from vivbench.models.window import WindowedSINDy
+from vivbench.models.window import EventWindowSINDy
 from vivbench.regression.optimizers import OptimizerOptions
 
 __all__ = ["WindowSINDy", "nearest_window"]
@@ -71,13 +71,13 @@ def nearest_window(window_start: np.ndarray, window_end: np.ndarray, fitted: np.
 
 
 class WindowSINDy(ModelBase):
-    """Time-varying SINDy over a campaign's records: one :class:`WindowedSINDy` fit per event.
+    """Time-varying SINDy over a campaign's records: one :class:`EventWindowSINDy` fit per event.
 
     Parameters
     ----------
     window, step, thresholds, alpha, max_iter, scaling, unbias, allow_empty, residual_floor,
     refit_rcond, solver, chunk_size, keep_path, raw_cond, optimizer, optimizer_options, random_state
-        Those of :class:`vivbench.models.window.WindowedSINDy`, with the same
+        Those of :class:`vivbench.models.window.EventWindowSINDy`, with the same
         defaults (``keep_path=True`` keeps each event's threshold path in
         ``estimators_``; pass False to save memory on long campaigns).
 
@@ -85,7 +85,7 @@ class WindowSINDy(ModelBase):
     ----------
     event_ids_ : list of str
         Events fitted, in the order of the records.
-    estimators_ : dict of str to WindowedSINDy
+    estimators_ : dict of str to EventWindowSINDy
         The fitted per-event estimators (not restored by :meth:`load`).
     coef_ : ndarray, shape (W, S, 23 S)
         Physical coefficients of every window of every event (dA/dt in m/s); NaN
@@ -99,11 +99,11 @@ class WindowSINDy(ModelBase):
     """
 
     # The same parameters as the single-record estimator, so the two cannot drift apart.
-    __init__ = WindowedSINDy.__init__
+    __init__ = EventWindowSINDy.__init__
 
-    def estimator(self) -> WindowedSINDy:
+    def estimator(self) -> EventWindowSINDy:
         """A fresh single-record estimator with these parameters."""
-        return WindowedSINDy(**self.get_params())
+        return EventWindowSINDy(**self.get_params())
 
     def fit(self, records: Sequence[Record | tuple]) -> "WindowSINDy":
         """Fit window SINDy to every record.

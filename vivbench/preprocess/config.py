@@ -61,10 +61,9 @@ class PreprocessConfig:
         1 / (2 pi wind_cutoff_hz) for the wind low-pass (9.5 s by default) and
         1 / (pi band_taper half-width) for the vibration band, whose ringing
         is set by its raised-cosine edges (6.5 s for the default band around
-        0.327 Hz). The default 60 s covers both for modes above about 0.11 Hz
-        (measured on a noise-free synthetic oscillation at 0.327 Hz: the
-        band filter's end ringing leaves an envelope error of at most 1.7 %
-        20 s from an end, 0.4 % at 30 s and 0.17 % at 60 s).
+        0.327 Hz). The default 60 s covers both for modes above about 0.11 Hz:
+        the band filter's end ringing has then decayed over several of its
+        time constants.
     grid_step_s : float
         Step of the output grid, s. Grid times are integer multiples of the
         step (counted from the record's start time), so grids of different

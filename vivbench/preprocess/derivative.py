@@ -56,8 +56,8 @@ The dual variable of the problem is the twice-integrated residual; over a
 stretch of ``L`` samples white noise makes it grow like ``sigma * dt * L**1.5``,
 so this ``alpha`` is the level that noise reaches over about ``tau``: noise
 alone cannot put kinks in ``g`` (steps in the derivative) much closer than
-``tau``. Measured on white noise around a line, kinks come about ``4 tau``
-apart. The Huber threshold on the change of the derivative per sample is
+``tau``: on white noise around a line they come a few ``tau`` apart. The
+Huber threshold on the change of the derivative per sample is
 ``delta = huber * sigma * dt / tau**2``. Both scale with the data, so scaling
 ``x`` by ``c`` scales the derivative by exactly ``c`` when ``alpha`` is
 automatic (an explicit ``alpha`` must be scaled by the caller).
@@ -71,9 +71,9 @@ noise the two coincide and the plain third differences estimate it. The
 envelopes of the identification chain are different: the Hilbert envelope of
 a displacement band-limited to f_mode +- 30 % carries noise only below the
 band's half-width (about 0.1 Hz), correlated over seconds, which third
-differences at 4 Hz barely see (on the default campaign they find a noise
-level 1e-7 of the envelope's RMS, about 1e4 times too small, and the weight
-they give leaves TV equal to finite differences). For such data ``sigma`` is
+differences at 4 Hz barely see (they find a noise level orders of magnitude
+too small, and the weight they give leaves TV equal to finite differences).
+For such data ``sigma`` is
 estimated per column by :func:`estimate_noise_std` with block length
 ``L = noise_scale / dt``: third differences at lag ``L`` of ``L``-sample
 means, scaled by ``sqrt(L)``. This is unbiased for white noise at any ``L``
@@ -86,35 +86,22 @@ smoothed more (on white noise, the 75 s modulation of
 ``benchmarks/bench_derivative.py`` is the case). ``noise_scale=0`` (the
 default) gives the plain third differences, the white-noise rule.
 
-Choosing the settings (measured). The class defaults (``time_scale = 10`` s,
-exact TV, ``noise_scale = 0``: the white-noise rule) suit white noise and are
-what the campaign model uses; ``time_scale = 20``, ``huber = 10``,
-``noise_scale = 10`` is the setting for band-limited envelope noise
-(:meth:`Derivative.for_envelope`), the identification chain's default. It
-was chosen among time_scale 10/20/40 s, huber 0/3/10/30 and noise_scale = time_scale/2 or
-time_scale as the smallest error on the first 8 events of the default
-synthetic campaign (relative RMS error of dA/dt against the true averaged
-dA/dt, geometric mean over events: 0.060, against 0.156 for the white-noise
-rule and for finite differences, and 0.056 for Huber-TV tuned per event against the
-truth). On the 23 other events, not used for the choice: 0.063 against 0.177
-(tuned 0.058); ``benchmarks/bench_derivative_campaign.py``. With ``huber =
+Choosing the settings. The class defaults (``time_scale = 10`` s, exact TV,
+``noise_scale = 0``: the white-noise rule) suit white noise and are what the
+campaign model uses; ``time_scale = 20``, ``huber = 10``, ``noise_scale = 10``
+is the setting for band-limited envelope noise (:meth:`Derivative.for_envelope`),
+the identification chain's default, chosen on synthetic campaigns by the
+relative RMS error of dA/dt against the true averaged dA/dt
+(``benchmarks/bench_derivative_campaign.py`` measures it). With ``huber =
 10`` most changes of slope fall below the Huber threshold and the fit behaves
 as a second-difference (Whittaker) smoother whose cut-off is set by
 ``time_scale`` alone (about 0.024 Hz at 20 s), while large changes still cost
 only their total variation; Chartrand's own algorithm smooths ``|.|`` in the
-same way. Exact TV with the same noise rule (``huber=0, time_scale=20,
-noise_scale=10``) gives 0.096 on the 31 events. On noise-free campaign
-envelopes the band-limited setting's error is 0.2 % (white-noise rule 0.3 %, finite
-differences 0.4 %; geometric means over 8 events), so it does not over-smooth
-clean envelopes. With it as the chain's default, the window
-models' median dA/dt error on the default campaign falls from 0.26 to 0.078.
-Fed to the campaign model it would raise that model's median dA/dt error
-from 0.0105 to 0.0121 (coverage 0.438 to 0.485, accuracy 1.000 on
-identifiable windows in both): the pooled regression averages the noise over
-the whole campaign anyway but not the smoother's bias, so the campaign model
-differentiates with the white-noise rule (``vivbench.models.campaign``).
-With exact TV and the white-noise rule on such envelopes the automatic weight
-is tiny and the derivative is nearly the finite differences.
+same way. The campaign model differentiates with the white-noise rule
+(``vivbench.models.campaign``): its pooled regression averages the noise over
+the whole campaign anyway, but not a smoother's bias. With exact TV and the
+white-noise rule on band-limited envelopes the automatic weight is tiny and
+the derivative is nearly the finite differences.
 
 NaN. All methods refuse input containing NaN or infinity with a
 ``ValueError``: the derivative is global, a gap would contaminate the whole

@@ -42,7 +42,7 @@ def campaign_window_verdicts(model: PooledSINDy, t: np.ndarray, A: np.ndarray, U
         regime (NaN without replicates), ``order_rms`` (W, S, 4) m/s.
     """
     if not hasattr(model, "gram_inv_"):
-        raise InputError("this campaign model was rebuilt from a pooled result, which holds no regression basis; "
+        raise InputError("this campaign model was rebuilt from a campaign regimes file, which holds no regression basis; "
                          "re-run vivbench pool (it writes campaign.model.nc) for window verdicts")
     models = np.concatenate([model.coef_[None], model.coef_bootstrap_], axis=0)
     rec = window_record(t, A, U, window_start, window_end)  # evaluated once for the statistics and the margins

@@ -13,44 +13,28 @@ Bounded coefficients (e1, e2, C_L >= 0, yaw c >= 0) are drawn by reflecting a
 Gaussian draw that falls below its bound back above it, not by clipping it to
 the bound. Clipping puts every draw beyond the bound on the bound itself: where
 a curve is fitted near its bound with a wide band (e2 on a bridge whose
-amplitudes barely tell e1 A^2 from e2 A^3 apart, correlation -0.92), about
-half the draws then carry exactly no cubic term and vote together for
-regime 3, an agreement made by the clipping, not by the data. Reflection is
-the Gaussian restricted to the feasible side (exact for a mean on the bound),
-so the draws spread over the values the fit allows. Measured on bridge C
-(examples/bridge_c_realistic.toml, the campaign used for this diagnosis): 204
-of the 231 wrong flags of S2 were true regime 4 called 3 at 7.5-9.7 m/s and
-A 0.06-0.17 m, the model's order-3 share of the window 0.01 against the
-truth's 0.3, the e2 band at 8.7 m/s [-184, 214] around a fitted 15.
+amplitudes barely tell e1 A^2 from e2 A^3 apart), about half the draws then
+carry exactly no cubic term and vote together for regime 3, an agreement made
+by the clipping, not by the data. Reflection is the Gaussian restricted to the
+feasible side (exact for a mean on the bound), so the draws spread over the
+values the fit allows.
 
-Reflection alone leaves most of those wrong flags (C: 0.851 -> 0.883 right):
-the truth's e2 there (220-400) lies outside the band, the fit having stayed
-near its start's e2 = 10 along the nearly flat e1/e2 direction, a model error
-the parameter draws cannot know about. So a ``reference`` model, a second
-campaign-level estimate of the same dynamics fitted independently of the
-grey-box curves (``vivbench greybox`` passes the campaign model of ``vivbench
-pool``), must give the window the same regime (its point estimate, on the same
-data) for the window to count as identifiable: where two estimators of the
-same curves disagree on the regime, at least one carries a model error the
-bands miss. Measured with benchmarks/bench_greybox_verdict_bounds.py (share of
-flagged windows with the true regime, coverage), clip without reference ->
-reflect with reference: campaign A 0.994, 0.687 -> 0.995, 0.654; bridge B
-0.983, 0.662 -> 0.990, 0.579; bridge C (varying warm start) 0.851, 0.864 ->
-0.952, 0.711, (pooled warm start, pooled reference) 0.874, 0.840 -> 0.978,
-0.535. C was the diagnosis campaign, so its figures are not held out.
+The parameter draws cannot see a model error: a fit that stayed near its
+start along a nearly flat direction (e1 against e2) has a band that need not
+hold the truth. So a ``reference`` model, a second campaign-level estimate of
+the same dynamics fitted independently of the grey-box curves (``vivbench
+greybox`` passes the campaign model of ``vivbench pool``), must give the window
+the same regime (its point estimate, on the same data) for the window to count
+as identifiable: where two estimators of the same curves disagree on the
+regime, at least one carries a model error the bands miss.
 
 A reference with a confidence set of penalties (the varying campaign model's
 ``penalty_order_contributions`` and ``penalty_plausible_``) must give the
 window the grey-box regime at every plausible penalty as well, the rule of its
-own verdict: its point estimate is one member of that set, and with the least
-plausible penalty (its default on campaigns of 4 h or more) the roughest one.
-Measured with ``vivbench greybox R --bridge ... --campaign CAMP`` after
-``vivbench pool R`` (share of flagged windows with the true regime, coverage),
-the point reference -> the set: bridge C 0.937, 0.722 -> 0.997, 0.611 (with a
-reference pooled with equal weights and the 5-fold penalty 0.962 -> 0.996,
-0.599); held out, a fresh bridge-C campaign (seed 97, 20 events) 0.973, 0.667
--> 0.994, 0.598 and a fresh bridge-B one (seed 93, 16 events) 0.998, 0.434 ->
-1.000, 0.422; campaign A 0.995, 0.623 -> 0.997, 0.603.
+own verdict: its point estimate is one member of that set. The share of
+flagged windows with the true regime and the coverage are reported by
+``vivbench validate`` and ``vivbench greybox`` on a synthetic campaign, and
+compared over bounds and references by benchmarks/bench_greybox_verdict_bounds.py.
 """
 
 from __future__ import annotations

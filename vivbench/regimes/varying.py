@@ -19,17 +19,11 @@ contributions over the window's data. It counts as identifiable when
    (``model.penalty_plausible_``: the candidate penalties whose
    leave-one-event-out error is not significantly above the best one's, by
    the same test) gives it the same regime. A penalty's smoothing bias is
-   shared by every bootstrap replicate: on a two-event realistic campaign
-   (seed 61) cross-validation chose the largest penalty, the near-linear
-   a_1(U) said self-excited at 10-12 m/s where the bell has fallen, the
-   replicates agreed, and 17 of the 83 flagged window-equations carried the
-   right regime; with the penalty set (two events cannot reject a penalty)
-   17 are flagged, all right. On the realistic campaigns of
-   ``vivbench validate`` the cost is small: coverage 0.570 -> 0.567 on seed 0
-   (31 events), 0.475 -> 0.458 on seed 1, 0.458 -> 0.457 on bridge B, 0.434
-   -> 0.432 on bridge C, the forced-only campaign unchanged (0.072, no
-   self-excited flag), flagged accuracy unchanged (0.996-1.000). Models
-   loaded from files written before the set go without it.
+   shared by every bootstrap replicate, so the bootstrap alone cannot see
+   it: a too-large penalty flattens the bell of a_1(U) and can call a wind
+   self-excited where the bell has fallen, with every replicate agreeing.
+   Few events cannot reject a penalty, and then this check flags less.
+   Models loaded from files written before the set go without it.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ import dataclasses
 
 import numpy as np
 
-from vivbench.models.window import WindowedSINDy, WindowProblem
+from vivbench.models.window import EventWindowSINDy, WindowProblem
 from vivbench.regression.settings import StlsqSettings
 from vivbench.regression.stlsq import stlsq_path
 from vivbench.core.regime import classify_regime
@@ -192,13 +192,13 @@ def window_regimes(
             "n_equivalent": n_equiv, "order_rms": order_rms}
 
 
-def label_windows(model: WindowedSINDy, t, A, U, dA, *, tau: float = 0.2, margin: float | None = 2.0,
+def label_windows(model: EventWindowSINDy, t, A, U, dA, *, tau: float = 0.2, margin: float | None = 2.0,
                   order_deletion: bool = True, fit_tolerance: float = 0.1) -> dict:
     """Fit window SINDy and give every selected model its regime and identifiability verdict.
 
     Parameters
     ----------
-    model : WindowedSINDy
+    model : EventWindowSINDy
         Fitted here (``model.fit(t, A, U, dA)``); its fitted attributes are set as usual.
     t : ndarray, shape (n,), s
     A, U, dA : ndarray, shape (n, S); m, m/s and m/s

@@ -23,7 +23,7 @@ class StlsqSettings:
     ----------
     thresholds : sequence of float
         Strictly increasing, non-negative thresholds on the coefficients of
-        the design the path is run on (for :class:`WindowedSINDy` with
+        the design the path is run on (for :class:`EventWindowSINDy` with
         scaling, standardised coefficients: unit-RMS columns and targets).
     alpha : float
         Ridge parameter added to the diagonal of X^T X (pysindy's ``alpha``

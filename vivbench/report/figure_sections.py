@@ -14,11 +14,11 @@ from urllib.parse import quote
 
 import numpy as np
 
-from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
+from vivbench.analysis.pool import campaign_model_file, load_campaign_model, campaign_wind_smoothing
 from vivbench.core.errors import InputError
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.core.terms import reference_section, section_exponents
-from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+from vivbench.io.campaign_model import MODEL_NAME, read_campaign_regimes, regimes_file
 from vivbench.io.result import result_record
 from vivbench.models.model_input import measured_input
 from vivbench.regimes.model import model_window_regimes
@@ -213,22 +213,22 @@ def campaign_model_figures(fig: ReportFigures, results_dir: Path, events: Sequen
     tree0, res0 = trees[e0], results[e0]
     sec_names = [str(s) for s in res0["equation"].values.tolist()]
     ref_name = sec_names[reference_section(len(sec_names))]
-    pooled_path = results_dir / POOLED_NAME
+    pooled_path = regimes_file(results_dir)
     if not pooled_path.is_file():
         return
     # The campaign model through the model protocol (campaign.model.nc, or rebuilt from the pooled
-    # result's coef for older outputs); the windows' identifiability verdicts from the pooled result.
-    pooled = read_pooled(pooled_path)
+    # result's coef for older outputs); the windows' identifiability verdicts from the campaign regimes.
+    pooled = read_campaign_regimes(pooled_path)
     model_path = campaign_model_file(results_dir)
     model = load_campaign_model(model_path)
     varying = pooled.attrs.get("model") == "VaryingCoefficientSINDy"
-    smoothing = pooled_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
+    smoothing = campaign_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
     if varying:
         intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
                  "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
                  "window's regime is the rule of docs/concepts.md (regimes) applied to this model's order contributions over the "
                  "window's data; it counts as identifiable when at least "
-                 f"{json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap replicates "
+                 f"{json.loads(pooled.attrs['model_config_json'])['agreement']:.0%} of block-bootstrap replicates "
                  "of the spline coefficients agree, every order subset in the model's confidence set "
                  "(leave-one-event-out) gives the same regime, and the amplitude is above the noise floor. "
                  f"The measured wind (and its yaw, a second covariate when the results store it: "
@@ -244,15 +244,15 @@ def campaign_model_figures(fig: ReportFigures, results_dir: Path, events: Sequen
            "docs/concepts.md (regimes) applied to this model's order contributions over the window's data; it counts as "
            "identifiable when (i) no model inside the coefficients' joint 95 % confidence region (residual "
            "variance inflated by the residuals' correlation time) gives the window another regime, and (ii) at "
-           f"least {json.loads(pooled.attrs['pooled_config_json'])['agreement']:.0%} of block-bootstrap "
+           f"least {json.loads(pooled.attrs['model_config_json'])['agreement']:.0%} of block-bootstrap "
            "replicates of the whole selection agree. "
            f"Terms per equation: {', '.join(str(int(k)) for k in pooled['n_terms'].values)}; "
            f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
            f"coverage {float(pooled.attrs['coverage']):.3f}."
            + (f" **{pooled.attrs['note']}**" if pooled.attrs.get("note") else "")]) + ["",
            f"Model file: `{model_path.name}`"
-           + ("" if model_path.name != POOLED_NAME else
-                 " (no campaign.model.nc: the model is rebuilt from the pooled result's coefficients)") + ".", "",
+           + ("" if model_path.name == MODEL_NAME else
+                 " (no campaign.model.nc: the model is rebuilt from the regimes file's coefficients)") + ".", "",
            produced_by(f"vivbench pool {results_dir}" + (" --model varying" if varying else "")), ""]
     ev_of = pooled["event_id"].values.astype(str)
     pres = []
@@ -373,7 +373,7 @@ def _generator_config_of(tree) -> dict | None:
 
 
 def _campaign_curves(pooled, model, results):
-    """The campaign model's curves: those of ``campaign.pooled.nc``, or drawn by the model; None if it has none."""
+    """The campaign model's curves: those of ``campaign.regimes.nc``, or drawn by the model; None if it has none."""
     if "curves" in pooled.data_vars:
         return pooled
     if getattr(model, "amplitude_ratios_", None) is None:

@@ -197,7 +197,7 @@ def curves_figure(curves: xr.Dataset, path: str | Path, *, truth: tuple[np.ndarr
     curves : xarray.Dataset
         ``curves`` and optionally ``curves_lower``, ``curves_upper``
         (equation, order, wind) in m^(1-i)/s with coordinate ``wind`` (m/s),
-        e.g. a ``campaign.pooled.nc`` or :meth:`vivbench.models.PooledSINDy.curves`;
+        e.g. a ``campaign.regimes.nc`` or :meth:`vivbench.models.PooledSINDy.curves`;
         with ``curves_extrapolated`` (equation, wind; :func:`vivbench.models.mark_extrapolated`)
         the extrapolated parts are drawn grey dotted, with their own legend entry.
     path : output PNG

@@ -33,6 +33,7 @@ from vivbench.core.errors import InputError
 from vivbench.io.event import list_events, read_event_summary
 from vivbench.io.netcdf import atomic_path
 from vivbench.report.tables import md_table, produced_by
+from vivbench.validate.campaign import upgrade_metrics
 
 __all__ = ["CampaignRun", "MODE_LABELS", "baseline_section", "campaign_run", "inverse_crime_paragraph"]
 
@@ -55,7 +56,7 @@ class CampaignRun:
     campaign : path
         Directory of the event files (``<event_id>.nc``, ``catalogue.csv``).
     results : path
-        Identification results (``<event_id>.identify.nc``; ``campaign.pooled.nc``
+        Identification results (``<event_id>.identify.nc``; ``campaign.regimes.nc``
         and ``campaign.model.nc`` of ``vivbench pool`` when fitted).
     cluster, forecast, validate : path, optional
         Output directories of ``vivbench cluster``, ``forecast`` and
@@ -166,7 +167,7 @@ def _same_dir(a, b) -> bool:
 def _validation(run: CampaignRun) -> tuple[dict, str]:
     """validate_campaign's scores of a run and where they come from."""
     if run.validate is not None:
-        metrics = _read_json(run.validate / "metrics.json")
+        metrics = upgrade_metrics(_read_json(run.validate / "metrics.json"))
         settings = (metrics or {}).get("settings", {})
         if metrics and _same_dir(settings.get("campaign_dir"), run.campaign) and _same_dir(
                 settings.get("results_dir"), run.results):
@@ -189,7 +190,7 @@ def _model_scores(regime: Mapping | None, rhs_true: Mapping | None) -> dict | No
 
 
 def _figure_scores(v: Mapping) -> dict:
-    pooled = v.get("pooled")
+    pooled = v.get("campaign_model")
     return {"chance": v["summary"].get("truth_most_common_regime_share"),
             "window": _model_scores(v["regime"], v.get("rhs_true_AU")),
             "campaign": None if pooled is None else _model_scores(pooled["regime"], pooled.get("rhs_true_AU"))}
@@ -227,12 +228,12 @@ def inverse_crime_paragraph(labels: Sequence[str], summaries: Sequence[Mapping] 
         return f"{_f(lib.get(key))} in-library against {_f(real.get(key))} realistic"
 
     parts = []
-    if "pooled_median_rhs_error_true_AU_active" in lib and "pooled_median_rhs_error_true_AU_active" in real:
+    if "campaign_model_median_rhs_error_true_AU_active" in lib and "campaign_model_median_rhs_error_true_AU_active" in real:
         parts.append(f"the campaign model's median dA/dt error on the true (A, U) is "
-                     f"{pair('pooled_median_rhs_error_true_AU_active')} (energy-weighted "
-                     f"{pair('pooled_energy_rhs_error_true_AU')}), its coverage "
-                     f"{pair('pooled_regime_coverage')} (accuracy on the windows it flags "
-                     f"{pair('pooled_regime_accuracy_identifiable')}; n/a: none flagged)")
+                     f"{pair('campaign_model_median_rhs_error_true_AU_active')} (energy-weighted "
+                     f"{pair('campaign_model_energy_rhs_error_true_AU')}), its coverage "
+                     f"{pair('campaign_model_regime_coverage')} (accuracy on the windows it flags "
+                     f"{pair('campaign_model_regime_accuracy_identifiable')}; n/a: none flagged)")
     parts.append(f"the window models' (the paper's method) error is {pair('median_rhs_error_true_AU_active')} "
                  f"(energy-weighted {pair('energy_rhs_error_true_AU')}) and "
                  f"their coverage {pair('regime_coverage')}")
@@ -259,20 +260,20 @@ def _recovery_rows(vs: Sequence[Mapping], clusters: Sequence[dict | None], forec
                 "energy_rhs_error_true_AU"),
             row("window models: median rel. error of dA/dt on the measured (A, U), exact matrix (in-library only)",
                 "median_rhs_rel_error_active")]
-    if any("pooled_regime_coverage" in x for x in s):
-        rows += [row("campaign model: coverage (flagged identifiable)", "pooled_regime_coverage"),
-                 row("campaign model: regime accuracy, flagged windows", "pooled_regime_accuracy_identifiable"),
-                 row("campaign model: regime accuracy, all windows", "pooled_regime_accuracy_all"),
+    if any("campaign_model_regime_coverage" in x for x in s):
+        rows += [row("campaign model: coverage (flagged identifiable)", "campaign_model_regime_coverage"),
+                 row("campaign model: regime accuracy, flagged windows", "campaign_model_regime_accuracy_identifiable"),
+                 row("campaign model: regime accuracy, all windows", "campaign_model_regime_accuracy_all"),
                  row("campaign model: median rel. error of dA/dt on the true (A, U), windows with dynamics",
-                     "pooled_median_rhs_error_true_AU_active"),
+                     "campaign_model_median_rhs_error_true_AU_active"),
                  row("campaign model: rel. error of dA/dt on the true (A, U), energy-weighted over every sample",
-                     "pooled_energy_rhs_error_true_AU"),
+                     "campaign_model_energy_rhs_error_true_AU"),
                  row("campaign model: curve error over lock-in, net linear a_k1(U) (rel. RMS)",
-                     "pooled_curve_error_linear"),
+                     "campaign_model_curve_error_linear"),
                  row("campaign model: curve error over lock-in, sum_i a_ki(U) A^i (rel. RMS)",
-                     "pooled_curve_error_total"),
+                     "campaign_model_curve_error_total"),
                  row("campaign model: curve error, sum_i a_ki(U) A^i at the true (A, U), energy-weighted over every "
-                     "sample", "pooled_curve_error_energy")]
+                     "sample", "campaign_model_curve_error_energy")]
     for kind in ("coef", "order"):
         rows.append([f"clusters ({kind} features): number, ARI, purity"]
                     + [("not run" if c is None else f"{c.get(f'n_clusters_{kind}', 'n/a')}, "
@@ -313,8 +314,8 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     list of str
         Markdown lines; the baseline column comes first.
     """
-    from vivbench.analysis.pool import campaign_model_file, curve_wind_grid, load_campaign_model, pooled_wind_smoothing
-    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
+    from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
+    from vivbench.io.campaign_model import MODEL_NAME, read_campaign_regimes, regimes_file
     from vivbench.models.model_input import measured_input
     from vivbench.io.result import read_result, result_record
     from vivbench.report.figures import curves_figure, model_forecast_figure
@@ -386,11 +387,11 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     # Coefficient curves of each campaign model against its own truth.
     cells = []
     for k, (r, i) in enumerate(zip(runs, info)):
-        pooled_path = r.results / POOLED_NAME
+        pooled_path = regimes_file(r.results)
         if not pooled_path.is_file():
             cells.append("campaign model not fitted (`vivbench pool` not run)")
             continue
-        pooled = read_pooled(pooled_path)
+        pooled = read_campaign_regimes(pooled_path)
         model = load_campaign_model(campaign_model_file(r.results))
         curves = pooled if "curves" in pooled.data_vars else None
         if curves is None and getattr(model, "amplitude_ratios_", None) is not None:
@@ -462,8 +463,8 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
         fname = f"sbs_forecast_{k + 1}_{modes[k]}.png"
         try:
             model = load_campaign_model(model_path)
-            pooled_path = r.results / POOLED_NAME
-            smoothing = pooled_wind_smoothing(read_pooled(pooled_path) if pooled_path.is_file() else None)
+            pooled_path = regimes_file(r.results)
+            smoothing = campaign_wind_smoothing(read_campaign_regimes(pooled_path) if pooled_path.is_file() else None)
             record = measured_input(model, result_record(res), wind_smoothing_s=smoothing)
             model_forecast_figure(model, record, out_dir / fname,
                                   t0=float(t0), span=span, name=f"campaign model ({_SHORT.get(modes[k], modes[k])})")

@@ -42,6 +42,7 @@ from vivbench.validate.scenarios import (
 )
 from vivbench.validate.methods import (
     BUILTIN_METHODS,
+    RENAMED_METHODS,
     SCORE_KEYS,
     CampaignMethod,
     SelectedVerdictModel,
@@ -59,7 +60,8 @@ from vivbench.validate.methods import (
     scoring_inputs,
     simulation_nmse,
 )
-from vivbench.validate.campaign import read_cluster_labels, read_forecast_tables, validate_campaign, write_validation
+from vivbench.validate.campaign import (read_cluster_labels, read_forecast_tables, upgrade_metrics, validate_campaign,
+                                        write_validation)
 from vivbench.validate.metrics import (
     REGIMES,
     SUPPORT_NOTES,
@@ -81,7 +83,7 @@ from vivbench.validate.metrics import (
     support_scores,
 )
 from vivbench.validate.plateau import Plateau, clearest_plateau, measured_plateau, truth_plateau
-from vivbench.validate.pooled import pooled_recovery
+from vivbench.validate.campaign_model import campaign_model_recovery
 from vivbench.validate.drift import FLAG_VARIABLES, event_structural_state, score_change_flags
 from vivbench.validate.recovery import (
     campaign_recovery,
@@ -143,7 +145,7 @@ __all__ = [
     "method_slug", "parse_methods", "plot_leaderboard", "read_leaderboard", "run_leaderboard",
     "SCENARIO_FINGERPRINTS", "SCENARIOS", "Scenario", "load_scenario_file", "scenario", "scenarios_from_dict",
     "select_scenarios", "family_scenarios",
-    "BUILTIN_METHODS", "SCORE_KEYS", "CampaignMethod", "SelectedVerdictModel", "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel", "WindowMethod", "above_noise_floor",
+    "BUILTIN_METHODS", "RENAMED_METHODS", "SCORE_KEYS", "CampaignMethod", "SelectedVerdictModel", "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel", "WindowMethod", "above_noise_floor",
     "check_method_spec", "default_windows", "fit_method", "resolve_method", "score_fitted", "score_method",
     "scoring_inputs",
     "simulation_nmse",
@@ -165,7 +167,7 @@ __all__ = [
     "forecast_summary",
     "merge_support_scores",
     "order_support",
-    "pooled_recovery",
+    "campaign_model_recovery",
     "FLAG_VARIABLES", "event_structural_state", "score_change_flags",
     "pooled_support",
     "read_cluster_labels",
@@ -187,6 +189,7 @@ __all__ = [
     "truth_record",
     "record_yaw_on",
     "write_validation",
+    "upgrade_metrics",
     "DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "method_spec",
     "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks",
     "LABEL_COLUMNS", "PROMISE_MIN_FLAGS", "PROMISE_SHARE", "SUMMARY_SCORES", "study_markdown", "study_summary",

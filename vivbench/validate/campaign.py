@@ -47,7 +47,7 @@ from vivbench.validate.recovery import (
 from vivbench.core.errors import InputError
 from vivbench.validate.drift import event_structural_state, score_change_flags
 
-__all__ = ["validate_campaign", "write_validation", "read_cluster_labels", "read_forecast_tables", "event_truth_curves",
+__all__ = ["validate_campaign", "write_validation", "upgrade_metrics", "read_cluster_labels", "read_forecast_tables", "event_truth_curves",
            "NO_TRUE_SUPPORT"]
 
 #: What the support scores say for a truth without an exact coefficient matrix.
@@ -65,10 +65,10 @@ _NOTES = (
     "'active' as above with the truth's dA/dt. Beside the median over windows, the same error energy-weighted "
     "(energy_rhs_error_true_AU, rhs_true_AU.energy): sqrt(sum of squared errors / sum of squared true dA/dt) over "
     "every sample (the window models: over their windows' samples), which the large amplitudes dominate.",
-    "Curve errors (pooled.curves): the campaign model's coefficient curves a_ki(U) (campaign.pooled.nc) against "
+    "Curve errors (pooled.curves): the campaign model's coefficient curves a_ki(U) (campaign.regimes.nc) against "
     "the truth's (/truth/curves), over the lock-in range (winds of the truth samples whose regime is "
     "self-excited, 2..4): relative RMS of the net linear coefficient a_k1 on the model's wind grid, and of "
-    "sum_i a_ki(U) A^i on those samples; and energy-weighted (pooled_curve_error_energy): sum_i a_ki(U_k) A_k^i "
+    "sum_i a_ki(U) A^i on those samples; and energy-weighted (campaign_model_curve_error_energy): sum_i a_ki(U_k) A_k^i "
     "at the truth's (A, U) of every sample of every equation against the same sum with the truth's curves. "
     "The curves are scored only at winds inside each equation's fitted data (the extrapolated parts, "
     "curves_extrapolated, are left out).",
@@ -227,14 +227,14 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         (rows; events without ``coef`` have ``support`` = :data:`NO_TRUE_SUPPORT`
         instead of support scores), ``clusters`` (rows, or None), ``forecast`` (rows of
         :func:`forecast_summary` per d, or None), ``truth_regime_shares``,
-        ``pooled`` (regime report, ``rhs`` and ``rhs_true_AU`` errors and
+        ``campaign_model`` (regime report, ``rhs`` and ``rhs_true_AU`` errors and
         ``curves`` (:func:`curve_errors` of its coefficient curves against the
         truth's, or ``scored`` False with the reason) of the campaign model when
-        ``results_dir/campaign.pooled.nc`` is present, else None: regimes and
+        ``results_dir/campaign.regimes.nc`` is present, else None: regimes and
         dA/dt of the model object of ``campaign.model.nc`` through the model
-        protocol, or of the model rebuilt from the pooled result's ``coef``
+        protocol, or of the model rebuilt from the regimes file's ``coef``
         for outputs without that file; identifiability verdicts from the
-        pooled result),
+        campaign regimes),
         ``skipped`` (event file -> reason), ``notes``, ``settings``, ``summary``
         (flat headline numbers).
 
@@ -271,19 +271,19 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     sup_all, sup_ok = [], []
     skipped, truth_by_key, change_states = {}, {}, {}
     # The campaign model of ``vivbench pool``, scored beside the window models when present: the
-    # model object (campaign.model.nc, or rebuilt from the pooled result's coef for older outputs)
-    # through the protocol, the windows' identifiability verdicts from the pooled result.
-    from vivbench.io.campaign_model import POOLED_NAME, read_pooled
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
+    # model object (campaign.model.nc, or rebuilt from the regimes file's coef for older outputs)
+    # through the protocol, the windows' identifiability verdicts from the campaign regimes.
+    from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, campaign_wind_smoothing
 
-    pooled_path = results_dir / POOLED_NAME
+    pooled_path = regimes_file(results_dir)
     pooled = model = model_path = None
     if pooled_path.is_file():
-        pooled = read_pooled(pooled_path)
+        pooled = read_campaign_regimes(pooled_path)
         model_path = campaign_model_file(results_dir)
         model = load_campaign_model(model_path)
         model_tau = float(getattr(model, "tau", DEFAULT_TAU))
-        smoothing = pooled_wind_smoothing(pooled)
+        smoothing = campaign_wind_smoothing(pooled)
     p_reg, p_ok, p_errs, p_act, p_errs_true, p_act_true = [], [], [], [], [], []
     for event_id, ep, rp in pairs:
         tree = read_event(ep)
@@ -381,9 +381,9 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
     confusion_rows = []
     groups = [(g, regime) for g in ("identifiable", "not_identifiable", "all")]
     if pooled_out is not None:
-        groups += [(f"pooled_{g}", pooled_out["regime"]) for g in ("identifiable", "not_identifiable", "all")]
+        groups += [(f"campaign_model_{g}", pooled_out["regime"]) for g in ("identifiable", "not_identifiable", "all")]
     for g, rep in groups:
-        cm = rep["groups"][g.removeprefix("pooled_")]["confusion"]
+        cm = rep["groups"][g.removeprefix("campaign_model_")]["confusion"]
         for a in REGIMES:
             confusion_rows.append({"group": g, "truth_regime": a, **{f"identified_{b}": cm[a - 1][b - 1] for b in REGIMES},
                                    "n": int(sum(cm[a - 1]))})
@@ -421,7 +421,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
         "per_event": per_event,
         "clusters": clusters,
         "forecast": forecast,
-        "pooled": pooled_out,
+        "campaign_model": pooled_out,
         "truth_regime_shares": {str(k): float(np.mean(truth_all == k)) for k in REGIMES},
         "skipped": skipped,
         "notes": list(_NOTES),
@@ -503,28 +503,28 @@ def _summary(v: dict) -> dict:
             out[f"support_precision_{level}_dense_model"] = s[level]["precision_dense_model"]
         for i in range(4):
             out[f"order_recall_A{i}"] = s["order_recall"][i]
-    if v.get("pooled") is not None:
-        pg = v["pooled"]["regime"]["groups"]
-        out.update(pooled_regime_coverage=v["pooled"]["regime"]["coverage"],
-                   pooled_regime_accuracy_identifiable=pg["identifiable"]["accuracy"],
-                   pooled_regime_accuracy_not_identifiable=pg["not_identifiable"]["accuracy"],
-                   pooled_regime_accuracy_all=pg["all"]["accuracy"])
-        if v["pooled"]["rhs"] is not None:
-            out["pooled_median_rhs_rel_error_active"] = v["pooled"]["rhs"]["active"]["median"]
-        prt = v["pooled"]["rhs_true_AU"]
-        out.update(pooled_median_rhs_error_true_AU=prt["all"]["median"],
-                   pooled_median_rhs_error_true_AU_active=prt["active"]["median"],
-                   pooled_energy_rhs_error_true_AU=prt["energy"])
-        ch = v["pooled"].get("changes")
+    if v.get("campaign_model") is not None:
+        pg = v["campaign_model"]["regime"]["groups"]
+        out.update(campaign_model_regime_coverage=v["campaign_model"]["regime"]["coverage"],
+                   campaign_model_regime_accuracy_identifiable=pg["identifiable"]["accuracy"],
+                   campaign_model_regime_accuracy_not_identifiable=pg["not_identifiable"]["accuracy"],
+                   campaign_model_regime_accuracy_all=pg["all"]["accuracy"])
+        if v["campaign_model"]["rhs"] is not None:
+            out["campaign_model_median_rhs_rel_error_active"] = v["campaign_model"]["rhs"]["active"]["median"]
+        prt = v["campaign_model"]["rhs_true_AU"]
+        out.update(campaign_model_median_rhs_error_true_AU=prt["all"]["median"],
+                   campaign_model_median_rhs_error_true_AU_active=prt["active"]["median"],
+                   campaign_model_energy_rhs_error_true_AU=prt["energy"])
+        ch = v["campaign_model"].get("changes")
         if ch is not None:
             for key, sc in ch["flags"].items():
                 name = key.removeprefix("event_")
-                out.update({f"pooled_{name}_hits": sc["hits"], f"pooled_{name}_false_alarms": sc["false_alarms"]})
-            out["pooled_changed_events"] = len(ch["changed_events"])
-        c = v["pooled"]["curves"]
-        out["pooled_curve_error_energy"] = c.get("energy", math.nan)
+                out.update({f"campaign_model_{name}_hits": sc["hits"], f"campaign_model_{name}_false_alarms": sc["false_alarms"]})
+            out["campaign_model_changed_events"] = len(ch["changed_events"])
+        c = v["campaign_model"]["curves"]
+        out["campaign_model_curve_error_energy"] = c.get("energy", math.nan)
         if c.get("scored"):
-            out.update(pooled_curve_error_linear=c["reference"]["linear"], pooled_curve_error_total=c["reference"]["total"])
+            out.update(campaign_model_curve_error_linear=c["reference"]["linear"], campaign_model_curve_error_total=c["reference"]["total"])
     for row in v["clusters"] or []:
         tag = f"{row['feature_set']}{'_no_halo' if row['halo_ignored'] else ''}"
         out[f"ari_{tag}"] = row["ari"]
@@ -534,6 +534,38 @@ def _summary(v: dict) -> dict:
         tag = f"d{row['d_s']:g}s"
         out[f"forecast_median_nmse_{tag}"] = row["median"]
         out[f"forecast_stopped_share_{tag}"] = row["stopped_share"]
+    return out
+
+
+def upgrade_metrics(metrics: dict | None) -> dict | None:
+    """A ``metrics.json`` of :func:`write_validation` in the current names, whatever version wrote it.
+
+    Earlier versions named the campaign model's part ``pooled``, its summary
+    keys ``pooled_*`` and its regime-confusion groups ``pooled_*``; they are
+    renamed ``campaign_model``, ``campaign_model_*``. Current metrics come
+    back unchanged (a new dict); None stays None.
+
+    Parameters
+    ----------
+    metrics : dict or None
+        As read from ``metrics.json`` (or returned by :func:`validate_campaign`).
+
+    Returns
+    -------
+    dict or None
+    """
+    if metrics is None:
+        return None
+
+    def renamed(key):
+        return "campaign_model_" + key.removeprefix("pooled_") if key.startswith("pooled_") else key
+
+    out = {("campaign_model" if k == "pooled" else k): v for k, v in metrics.items()}
+    if isinstance(out.get("summary"), dict):
+        out["summary"] = {renamed(k): v for k, v in out["summary"].items()}
+    if isinstance(out.get("regime_confusion"), list):
+        out["regime_confusion"] = [{**r, "group": renamed(r["group"])} if isinstance(r, dict) and "group" in r else r
+                                   for r in out["regime_confusion"]]
     return out
 
 

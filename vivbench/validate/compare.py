@@ -27,7 +27,7 @@ drift                  realism: relative amplitude of the daily       0
 ====================== ============================================= ==========================
 
 ``method`` (docs/methods.md) names the method scored in the cell: ``"windows"`` (the
-paper's window SINDy: the identification itself, the default), ``"campaign"``,
+paper's window SINDy: the identification itself, the default), ``"pooled"``,
 ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"`` (a factory
 with no arguments returning any object with ``fit(records)``; see
 :mod:`vivbench.validate.methods`). Every method of a cell is fitted to the

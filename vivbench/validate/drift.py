@@ -20,7 +20,7 @@ import numpy as np
 
 __all__ = ["FLAG_VARIABLES", "event_structural_state", "score_change_flags"]
 
-#: The pooled result's per-event flags that are scored, with their meaning.
+#: The regimes file's per-event flags that are scored, with their meaning.
 FLAG_VARIABLES = {
     "event_after_change": "from the change the model change scan located (campaign-level test)",
     "event_change_flag": "after the located change, held-out offset departs from the before-events' (per event)",
@@ -60,17 +60,17 @@ def event_structural_state(truth) -> np.ndarray | None:
 
 
 def score_change_flags(pooled, states: dict) -> dict | None:
-    """Hits and false alarms of the pooled result's change flags against the truth's steps and retrofits.
+    """Hits and false alarms of the regimes file's change flags against the truth's steps and retrofits.
 
     Parameters
     ----------
-    pooled : xarray.Dataset, a ``campaign.pooled.nc``
+    pooled : xarray.Dataset, a ``campaign.regimes.nc``
     states : dict event_id -> :func:`event_structural_state` (None: no recorded changes), events in time order
 
     Returns
     -------
     dict or None
-        None when the pooled result has no per-event flags. Otherwise
+        None when the regimes file has no per-event flags. Otherwise
         ``changed_events`` (truth), ``first_changed`` (or None), per flag
         variable present ``{flag: {"flagged", "hits", "false_alarms",
         "n_changed", "n_unchanged", "hit_rate", "false_alarm_rate"}}`` under

@@ -75,7 +75,7 @@ def parse_methods(methods: str | Sequence[str]) -> list[str]:
     methods = list(methods)
     if not methods:
         raise InputError("no method named: give e.g. "
-                         "--methods windows,campaign,varying,pysindy-cp,binned,pkg.mod:factory")
+                         "--methods windows,pooled,varying,pysindy-cp,binned,pkg.mod:factory")
     if len(set(methods)) != len(methods):
         raise InputError(f"methods named twice: {', '.join(methods)}")
     return methods
@@ -259,7 +259,7 @@ def run_leaderboard(methods: Sequence[str], scenarios: Sequence[Scenario], out_d
     Parameters
     ----------
     methods : method specs, as :func:`vivbench.validate.methods.resolve_method` takes them:
-        ``"windows"``, ``"campaign"``, ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"``;
+        ``"windows"``, ``"pooled"``, ``"varying"``, ``"pysindy-cp"``, ``"binned"`` or ``"package.module:factory"``;
         or ``"greybox"``: :class:`vivbench.validate.greybox_method.GreyBoxMethod` given each scenario bridge's
         structural properties (:func:`vivbench.validate.greybox_method.structural_properties`)
     scenarios : the scenarios (e.g. :func:`vivbench.validate.select_scenarios`)

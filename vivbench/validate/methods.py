@@ -12,7 +12,7 @@ results.
 API (stable; the leaderboard builds on it)::
 
     resolve_method(spec: str) -> method
-        spec: "windows" | "campaign" | "varying" | "pysindy-cp" | "binned" | "package.module:factory"
+        spec: "windows" | "pooled" | "varying" | "pysindy-cp" | "binned" | "package.module:factory"
     fit_method(method, records) -> (fitted, fit_time_s)
     score_fitted(fitted, records, truths, *, windows=None, window=50.0, step=25.0,
                  tau=0.2, active_share=0.1, fit_time_s=nan, simulate=True) -> dict
@@ -58,8 +58,7 @@ plug-in methods:
   (:func:`vivbench.validate.metrics.curve_energy_error`; NaN where the other
   two are). Against the truth's dA/dt itself the curves would also be charged
   with what no curve of one wind carries (sections at different winds, the
-  yaw): on the demo campaign the truth's own curves are 0.59 off its dA/dt by
-  that measure. All three use the curves only at winds inside each
+  yaw), an error the truth's own curves would score too. All three use the curves only at winds inside each
   equation's fitted data (:func:`vivbench.models.data_wind_range`): the
   extrapolated parts are not scored.
 - ``simulation_nmse``: median over records and sections of the NMSE of
@@ -73,7 +72,7 @@ window SINDy's scores those of the identification chain: a fitted model may
 give ``window_regimes(record, window_start, window_end)`` -> int (W, S), its
 own regime of each window (window SINDy: the regime of the window's own
 model; otherwise the rule on the order contributions, in which overlapping
-windows' models mix, see README), and ``identifiable``. The identification's
+windows' models mix), and ``identifiable``. The identification's
 noise-floor test (``min_snr``) needs the preprocessing's noise level: records
 read from identification results carry it (``Record.noise_std``), and the
 built-in verdicts apply it (:func:`above_noise_floor`); records without it are
@@ -101,13 +100,16 @@ from vivbench.validate.metrics import curve_energy_error, curve_errors, curves_r
 from vivbench.validate.recovery import (finite_median, model_window_rhs_errors, model_window_rhs_true_AU,
                                        record_yaw_on, regime_scores)
 
-__all__ = ["BUILTIN_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
+__all__ = ["BUILTIN_METHODS", "RENAMED_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
            "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
            "CampaignMethod", "SelectedVerdictModel",
            "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel"]
 
 #: Names of the built-in methods.
-BUILTIN_METHODS = ("windows", "campaign", "varying", "pysindy-cp", "binned")
+BUILTIN_METHODS = ("windows", "pooled", "varying", "pysindy-cp", "binned")
+
+#: Former names of built-in methods, refused with the current name.
+RENAMED_METHODS = {"campaign": "pooled"}
 
 #: The keys of :func:`score_fitted`'s dict, in table order.
 SCORE_KEYS = ("n_scored", "truth_majority_share", "truth_share_regime1", "truth_share_regime2", "truth_share_regime3",
@@ -222,13 +224,14 @@ class CampaignMethod:
 
     Parameters
     ----------
-    kind : {"campaign", "varying"}
+    kind : {"pooled", "varying"}
+        The method name: ``"pooled"`` (PooledSINDy) or ``"varying"`` (VaryingCoefficientSINDy).
     **params : the model's parameters (defaults: those of ``vivbench pool``)
     """
 
-    def __init__(self, kind: str = "campaign", **params):
-        if kind not in ("campaign", "varying"):
-            raise ValueError(f"kind must be 'campaign' or 'varying'; got {kind!r}")
+    def __init__(self, kind: str = "pooled", **params):
+        if kind not in ("pooled", "varying"):
+            raise ValueError(f"kind must be 'pooled' or 'varying'; got {kind!r}")
         self.kind = kind
         self.params = params
 
@@ -239,7 +242,7 @@ class CampaignMethod:
         from vivbench.analysis.selection import varying_selection, without_yaw
         from vivbench.models.campaign import PooledSINDy
 
-        if self.kind == "campaign":
+        if self.kind == "pooled":
             return VerdictModel(PooledSINDy(**self.params).fit(records), _campaign_verdict)
         # The options not given in params are chosen from the records' held-out evidence, as by vivbench pool.
         params = dict(self.params)
@@ -409,6 +412,8 @@ class WindowMethod:
 
 def check_method_spec(spec) -> str:
     """The spec if it is a built-in name or has the form ``package.module:factory``; InputError otherwise."""
+    if isinstance(spec, str) and spec in RENAMED_METHODS:
+        raise InputError(f"method {spec!r} is now named {RENAMED_METHODS[spec]!r}")
     if not isinstance(spec, str) or not (spec in BUILTIN_METHODS or _SPEC.match(spec)):
         raise InputError(f"method {spec!r} is not one of {', '.join(BUILTIN_METHODS)} nor of the form "
                          "'package.module:factory'")
@@ -422,7 +427,7 @@ def resolve_method(spec: str):
     ----------
     spec : str
         ``"windows"`` (:class:`WindowMethod`: the paper's window SINDy with the chain's verdict),
-        ``"campaign"`` (:class:`CampaignMethod`: ``PooledSINDy`` with its bootstrap and
+        ``"pooled"`` (:class:`CampaignMethod`: ``PooledSINDy`` with its bootstrap and
         confidence-region verdict), ``"varying"`` (``VaryingCoefficientSINDy`` with its own defaults,
         those of ``vivbench pool --model varying``: the yaw covariate when the records carry the
         yaw, 30 s wind smoothing; bootstrap and confidence-set verdict), ``"pysindy-cp"``
@@ -445,7 +450,7 @@ def resolve_method(spec: str):
     check_method_spec(spec)
     if spec == "windows":
         return WindowMethod()
-    if spec in ("campaign", "varying"):
+    if spec in ("pooled", "varying"):
         return CampaignMethod(spec)
     if spec == "pysindy-cp":
         from vivbench.models.pysindy_adapter import PySINDyCP

@@ -70,7 +70,7 @@ __all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "St
            "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks"]
 
 #: Short names of the study's methods that are not :func:`resolve_method` names.
-METHOD_ALIASES = {"pooled": "campaign"}
+METHOD_ALIASES: dict[str, str] = {}
 #: Study methods built from each draw's structural properties (not :func:`resolve_method` names).
 DRAW_METHODS = ("greybox",)
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
@@ -85,8 +85,8 @@ _MAX_DRAW = 2**31
 
 
 def method_spec(name: str) -> str:
-    """The :func:`resolve_method` spec of a study method name (``pooled`` is ``campaign``; a
-    :data:`DRAW_METHODS` name is its own)."""
+    """The :func:`resolve_method` spec of a study method name (the same name: study names are method names;
+    a :data:`DRAW_METHODS` name is its own)."""
     if name in DRAW_METHODS:
         return name
     spec = name if name in BUILTIN_METHODS else METHOD_ALIASES.get(name, name)
@@ -117,9 +117,9 @@ class StudyConfig:
     ----------
     split : "development" or "evaluation"
     draws : draw numbers, sorted, without repeats
-    methods : study method names (``pooled`` is the built-in ``campaign``; ``greybox`` the grey-box
-        refit given the draw's structural properties; any other name or ``package.module:factory``
-        that :func:`resolve_method` knows)
+    methods : study method names (built-in method names such as ``pooled`` and ``varying``; ``greybox`` the
+        grey-box refit given the draw's structural properties; or ``package.module:factory`` that
+        :func:`resolve_method` knows)
     max_events : cap on each campaign's events (None: the draw's)
     max_duration : s; cap on each event's duration (None: the draw's)
     identify : the identification's configuration

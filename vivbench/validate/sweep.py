@@ -83,12 +83,12 @@ METRIC_COLUMNS = (
     "active_share",
     "rhs_error_true_AU_median_active",
     "rhs_error_true_AU_energy",
-    "pooled_coverage",
-    "pooled_accuracy_all",
-    "pooled_accuracy_identifiable",
-    "pooled_rhs_median_rel_error_active",
-    "pooled_rhs_error_true_AU_median_active",
-    "pooled_rhs_error_true_AU_energy",
+    "campaign_model_coverage",
+    "campaign_model_accuracy_all",
+    "campaign_model_accuracy_identifiable",
+    "campaign_model_rhs_median_rel_error_active",
+    "campaign_model_rhs_error_true_AU_median_active",
+    "campaign_model_rhs_error_true_AU_energy",
     "truth_share_regime1",
     "truth_share_regime2",
     "truth_share_regime3",
@@ -490,17 +490,17 @@ def run_sweep_task(task: SweepTask) -> dict[str, Any]:
         from vivbench.models.campaign import PooledSINDy
         from vivbench.models.varying import VaryingCoefficientSINDy
         from vivbench.analysis.pool import pool_results
-        from vivbench.io.campaign_model import write_pooled
-        from vivbench.validate.pooled import pooled_recovery
+        from vivbench.io.campaign_model import write_campaign_regimes
+        from vivbench.validate.campaign_model import campaign_model_recovery
 
         from vivbench.io.campaign_model import MODEL_NAME
 
         model = (VaryingCoefficientSINDy if task.campaign_model == "varying" else PooledSINDy)(seed=task.campaign_seed)
-        pooled = write_pooled(pool_results(results, model), root / "identify")
+        pooled = write_campaign_regimes(pool_results(results, model), root / "identify")
         # the verdicts of a varying model are evaluated by the model itself, which validate loads from its file
         model.save(root / "identify" / MODEL_NAME)
-        ps = pooled_recovery(events, pooled, results)
-        metrics.update({f"pooled_{k}": float(ps[k]) for k in ("coverage", "accuracy_all", "accuracy_identifiable",
+        ps = campaign_model_recovery(events, pooled, results)
+        metrics.update({f"campaign_model_{k}": float(ps[k]) for k in ("coverage", "accuracy_all", "accuracy_identifiable",
                                                                "rhs_median_rel_error_active",
                                                                "rhs_error_true_AU_median_active",
                                                                "rhs_error_true_AU_energy")})

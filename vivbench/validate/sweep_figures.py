@@ -85,7 +85,7 @@ def plot_recovery(rows: Sequence[dict], parameters: Sequence[str], path: str | P
             ax.plot(x, y, "o", color="0.55", ms=4, alpha=0.8, label="campaign")
             mx, my = _medians(x, y)
             ax.plot(mx, my, "-", color="C0", lw=2, marker="s", ms=5, label="median, window models")
-            pooled = _column(ok_rows, f"pooled_{col}") if ok_rows and f"pooled_{col}" in ok_rows[0] else None
+            pooled = _column(ok_rows, f"campaign_model_{col}") if ok_rows and f"campaign_model_{col}" in ok_rows[0] else None
             if pooled is not None and np.isfinite(pooled).any():
                 px, py = _medians(x, pooled)
                 ax.plot(px, py, "-", color="C2", lw=2, marker="^", ms=5, label="median, campaign model (vivbench pool)")
@@ -146,10 +146,10 @@ def sweep_summary(rows: Sequence[dict], varied: Sequence[str], n_tasks: int) -> 
         "n_window_equations": int(np.nansum(_column(ok_rows, "n_window_equations"))) if ok_rows else 0,
     }
     for col in ("accuracy_all", "accuracy_identifiable", "truth_majority_share", "coverage",
-                "rhs_median_rel_error", "rhs_median_rel_error_active", "pooled_coverage", "pooled_accuracy_all",
-                "pooled_accuracy_identifiable", "pooled_rhs_median_rel_error_active", "rhs_error_true_AU_median_active",
-                "rhs_error_true_AU_energy", "pooled_rhs_error_true_AU_median_active",
-                "pooled_rhs_error_true_AU_energy"):
+                "rhs_median_rel_error", "rhs_median_rel_error_active", "campaign_model_coverage", "campaign_model_accuracy_all",
+                "campaign_model_accuracy_identifiable", "campaign_model_rhs_median_rel_error_active", "rhs_error_true_AU_median_active",
+                "rhs_error_true_AU_energy", "campaign_model_rhs_error_true_AU_median_active",
+                "campaign_model_rhs_error_true_AU_energy"):
         out[f"median_{col}"] = _median(ok_rows, col)
     for name in varied:
         x = _column(ok_rows, name)

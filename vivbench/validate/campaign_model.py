@@ -8,7 +8,7 @@ against its dA/dt for any truth). Measured records reach the model through
 :func:`vivbench.models.measured_input` (the wind as at fit: the varying
 model's smoothing); the truth's felt wind is used as it is. The identifiability verdict of each
 window (bootstrap agreement, confidence-region margins) is the one written in
-the pooled result ``campaign.pooled.nc``.
+the campaign regimes ``campaign.regimes.nc``.
 """
 
 from __future__ import annotations
@@ -32,24 +32,24 @@ from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.core.errors import InputError
 
-__all__ = ["pooled_recovery"]
+__all__ = ["campaign_model_recovery"]
 
 
-def pooled_recovery(event_files, pooled_file, result_files, *, active_share: float = 0.1, tau: float = 0.2,
-                    model=None) -> dict:
+def campaign_model_recovery(event_files, regimes_path, result_files, *, active_share: float = 0.1, tau: float = 0.2,
+                            model=None) -> dict:
     """Regime scores and right-hand-side errors of the campaign model against the truth.
 
     Parameters
     ----------
     event_files : synthetic event files (with ``/truth``)
-    pooled_file : ``campaign.pooled.nc`` (windows and their identifiability verdicts)
+    regimes_path : ``campaign.regimes.nc`` (windows and their identifiability verdicts)
     result_files : the ``<event_id>.identify.nc`` the campaign model was fitted on
         (their A and U are where the right-hand sides are compared)
     active_share : as in :func:`vivbench.validate.campaign_recovery`
     tau : regime threshold of the truth's window regimes (docs/concepts.md (regimes))
     model : fitted model of the protocol, optional
-        Default: ``campaign.model.nc`` beside ``pooled_file``, or, for outputs
-        without it, the model rebuilt from ``pooled_file``'s ``coef``
+        Default: ``campaign.model.nc`` beside ``regimes_path``, or, for outputs
+        without it, the model rebuilt from ``regimes_path``'s ``coef``
         (:func:`vivbench.analysis.load_campaign_model`). Its regimes use its own
         ``tau`` (the one it labelled the windows with).
 
@@ -66,16 +66,16 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
         ``rhs_error_true_AU_energy``, the same error energy-weighted over every
         truth sample (:func:`vivbench.validate.metrics.energy_relative_error`).
     """
-    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, pooled_wind_smoothing
-    from vivbench.io.campaign_model import read_pooled
+    from vivbench.analysis.pool import campaign_model_file, load_campaign_model, campaign_wind_smoothing
+    from vivbench.io.campaign_model import read_campaign_regimes
     from vivbench.io.event import read_event
     from vivbench.io.result import read_result, result_record
 
-    pooled = read_pooled(pooled_file)
+    pooled = read_campaign_regimes(regimes_path)
     if model is None:
-        model = load_campaign_model(campaign_model_file(Path(pooled_file).parent) or pooled_file)
+        model = load_campaign_model(campaign_model_file(Path(regimes_path).parent) or regimes_path)
     model_tau = float(getattr(model, "tau", DEFAULT_TAU))
-    smoothing = pooled_wind_smoothing(pooled)
+    smoothing = campaign_wind_smoothing(pooled)
     truths = {}
     for path in event_files:
         tree = read_event(path)
@@ -89,15 +89,15 @@ def pooled_recovery(event_files, pooled_file, result_files, *, active_share: flo
     f_model_all, f_true_all = [], []
     for event_id in dict.fromkeys(event_of):
         if event_id not in truths:
-            raise InputError(f"{pooled_file}: event {event_id} has no event file among the {len(truths)} given")
+            raise InputError(f"{regimes_path}: event {event_id} has no event file among the {len(truths)} given")
         if event_id not in results:
-            raise InputError(f"{pooled_file}: event {event_id} has no identification result among those given")
+            raise InputError(f"{regimes_path}: event {event_id} has no identification result among those given")
         sel = event_of == event_id
         truth = truths[event_id]
         res = results[event_id]
         start, end = res["window_start"].values, res["window_end"].values
         if not np.array_equal(pooled["window_start"].values[sel], start):
-            raise InputError(f"{pooled_file}: its windows of {event_id} differ from the result's; re-run vivbench pool")
+            raise InputError(f"{regimes_path}: its windows of {event_id} differ from the result's; re-run vivbench pool")
         measured = result_record(res)
         # The model on the measured record's wind as it was at fit; the truth's own wind below as it is.
         record = measured_input(model, measured, wind_smoothing_s=smoothing)
