@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.helpers import assert_close
+
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 #: The pages whose Python blocks are run: the user paths of the engineer and the method researcher.
 PAGES = ("field_workflow.md", "methods.md", "model_selection.md")

@@ -314,8 +314,8 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
     list of str
         Markdown lines; the baseline column comes first.
     """
+    from vivbench.analysis.pool import campaign_model_file, curve_wind_grid, load_campaign_model, campaign_wind_smoothing
     from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
-    from vivbench.io.campaign_model import MODEL_NAME, read_campaign_regimes, regimes_file
     from vivbench.models.model_input import measured_input
     from vivbench.io.result import read_result, result_record
     from vivbench.report.figures import curves_figure, model_forecast_figure
