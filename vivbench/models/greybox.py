@@ -182,10 +182,12 @@ from scipy.stats import norm
 
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
+from vivbench.library.splines import bspline_basis, difference_penalty, uniform_knots
 from vivbench.models.curve_support import mark_extrapolated
+from vivbench.models.integrate import rk4
 from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.greybox_bootstrap import event_bootstrap
-from vivbench.models.greybox_shooting import rk4_step_function, shooting_grid
+from vivbench.models.greybox_shooting import shooting_grid
 from vivbench.models.greybox_solve import (
     ShootingProblem,
     gcv_score,
@@ -199,7 +201,7 @@ from vivbench.models.greybox_wind import (
 )
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
-from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots
+from vivbench.regression.penalised import penalised_solve
 
 __all__ = ["BridgeProperties", "GreyBoxRefit", "FUNCTIONS", "BANDS", "curves_to_functions"]
 
@@ -333,7 +335,7 @@ def _penalised_fit(B: np.ndarray, v: np.ndarray, K: np.ndarray, lam: float = 1e-
     """Spline coefficients of values v (n,) on basis B (n, M) with a small roughness penalty."""
     ok = np.isfinite(v)
     G = B[ok].T @ B[ok]
-    return np.linalg.solve(G + lam * np.trace(G) / np.trace(K) * K + 1e-12 * np.eye(K.shape[0]), B[ok].T @ v[ok])
+    return penalised_solve(G, B[ok].T @ v[ok], K, lam * np.trace(G) / np.trace(K), ridge=1e-12, relative_ridge=False)
 
 
 def curves_to_functions(wind: np.ndarray, p: np.ndarray, bridge: BridgeProperties, phi: np.ndarray,
@@ -934,8 +936,7 @@ class GreyBoxRefit(ModelBase):
                 sc = np.sqrt(np.maximum(np.diag(Gt), 1e-300))
                 Gs = Gt / np.outer(sc, sc)
                 pen = np.kron(np.eye(2), K)
-                c = np.linalg.solve(Gs + 1e-3 * np.trace(Gs) / np.trace(pen) * pen + 1e-10 * np.eye(2 * M),
-                                    bt / sc) / sc
+                c = penalised_solve(Gs, bt / sc, pen, 1e-3 * np.trace(Gs) / np.trace(pen), relative_ridge=False) / sc
                 rss = yy - 2.0 * c @ bt + c @ Gt @ c
                 if rss < best[0]:
                     best = (rss, (float(e1), float(e2)), c)
@@ -958,7 +959,7 @@ class GreyBoxRefit(ModelBase):
         K = difference_penalty(M)
         Pen = np.kron(np.eye(4), K)
         G = (Xf / sc).T @ (Xf / sc)
-        c = np.linalg.solve(G + 1e-3 * np.trace(G) / np.trace(Pen) * Pen + 1e-10 * np.eye(4 * M), (Xf / sc).T @ y) / sc
+        c = penalised_solve(G, (Xf / sc).T @ y, Pen, 1e-3 * np.trace(G) / np.trace(Pen), relative_ridge=False) / sc
         c = c.reshape(4, M)  # order-major: C_L, Y1, Y1 e1, Y1 e2
         Uw = np.repeat(wind[:, None], phi.size, axis=1)
         k = section_factors(Uw, self.bridge, phi, beta).sum(axis=1)
@@ -1057,15 +1058,17 @@ class GreyBoxRefit(ModelBase):
         Q = np.full(ts.size, np.nan)
         Q[0] = Q0
         if n > 0:
-            h = np.diff(ts[:n + 1])
             Umid = 0.5 * (U[:n] + U[1:n + 1])
             Y = np.zeros_like(U) if record.yaw is None else np.nan_to_num(record.yaw[i0:i1 + 1], nan=0.0)
             ga, gm, gb = (self.amplitude_coefficients(x, yaw=y) for x, y in
                           ((U[:n], Y[:n]), (Umid, 0.5 * (Y[:n] + Y[1:n + 1])), (U[1:n + 1], Y[1:n + 1])))
-            step = rk4_step_function()
-            run = step.mapaccum("run", n)
-            traj = np.asarray(run(Q0, np.concatenate([ga, gm, gb], axis=1).T, h[None, :])).ravel()
-            Q[1:n + 1] = traj
+            g_stage = (ga, gm, gb)  # the coefficients at each step's start, midpoint and end
+
+            def f(q, j, stage):
+                c = g_stage[stage][j]
+                return c[0] + q * (c[1] + q * (c[2] + q * c[3]))
+
+            Q[1:n + 1] = rk4(f, [Q0], ts[:n + 1]).x[1:, 0]
         bad = ~np.isfinite(Q)
         stopped_at, reason = None, None
         if bad.any():

@@ -93,18 +93,20 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.netcdf import write_netcdf_atomic
+from vivbench.library.splines import (DEGREE, bspline_basis, bspline_local, bspline_local_t, difference_penalty,
+                                      first_index, uniform_knots)
 from vivbench.models.curve_support import EXTRAPOLATED
+from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights,
                                           weighted_mean_standard_error, weighted_section_mean)
 from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.regression.penalised import (held_out_errors, penalised_rss, penalised_solve, penalty_scale,
+                                           quadratic_error)
 
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "penalised_rss", "ORDER_SUBSETS",
            "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES", "YAW_INSIDE_DEG"]
-
-#: Spline degree (cubic).
-DEGREE = 3
 
 #: Default candidates of the measured wind's Gaussian smoothing, s (0: none), chosen per campaign by
 #: the cross-validated error over events: roughly doubling steps, from the exact wind of an in-library
@@ -134,109 +136,6 @@ ORDER_SUBSETS = np.array([[o0, True, o2, o3] for o0 in (True, False) for o2 in (
                           for o3 in (True, False)])
 
 
-def uniform_knots(lo: float, hi: float, n_basis: int, degree: int = DEGREE) -> np.ndarray:
-    """Knot vector of ``n_basis`` B-splines of ``degree`` on uniform intervals over [lo, hi].
-
-    Returns
-    -------
-    ndarray, shape (n_basis + degree + 1,), m/s
-        The boundary knots are repeated ``degree`` times beyond [lo, hi] at the
-        same spacing (P-spline convention), so every interval is alike.
-    """
-    n_int = n_basis - degree
-    if n_int < 1:
-        raise InputError(f"n_basis must exceed the degree {degree}; got {n_basis}")
-    if not hi > lo:
-        hi = lo + 1.0  # a campaign at one wind speed: any unit interval
-    h = (hi - lo) / n_int
-    return lo + h * np.arange(-degree, n_int + degree + 1)
-
-
-def bspline_local(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> tuple[np.ndarray, np.ndarray]:
-    """The non-zero B-splines at each U (local form of :func:`bspline_basis`), U clipped to the base interval.
-
-    The Cox-de Boor recursion, vectorised over the samples, with the same
-    operations in the same order as scipy's ``BSpline.design_matrix`` (so the
-    values are the same to the bit; ``tests/test_varying_speed.py`` checks it)
-    but without building a sparse matrix per call.
-
-    Parameters
-    ----------
-    U : ndarray, shape (n,), m/s (NaN allowed: that row's values are NaN, its first index 0)
-    knots : ndarray, shape (M + degree + 1,), non-decreasing with distinct base-interval knots
-
-    Returns
-    -------
-    first : ndarray of intp, shape (n,)
-        Index of the first non-zero B-spline (0..M - degree - 1).
-    vals : ndarray, shape (n, degree + 1)
-        B_{first + a}(U), a = 0..degree.
-    """
-    first, h = _bspline_local_t(U, knots, degree)
-    return first, h.T
-
-
-def _bspline_local_t(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`bspline_local` with the values transposed, shape (degree + 1, n): every operation runs along the samples."""
-    U = np.asarray(U, dtype=float).ravel()
-    knots = np.asarray(knots, dtype=float)
-    n_b = knots.size - degree - 1
-    lo, hi = knots[degree], knots[n_b]
-    ok = np.isfinite(U)
-    x = np.clip(np.where(ok, U, lo), lo, hi)
-    ell = _first_index(x, knots, degree) + degree
-    h = np.zeros((degree + 1, x.size))
-    h[0] = 1.0
-    for j in range(1, degree + 1):  # the recursion's degrees, not samples
-        hh = h[:j].copy()
-        h[0] = 0.0
-        for m in range(1, j + 1):
-            xb, xa = knots[ell + m], knots[ell + m - j]
-            w = hh[m - 1] / (xb - xa)
-            h[m - 1] += w * (xb - x)
-            h[m] = w * (x - xa)
-    h[:, ~ok] = np.nan
-    return np.where(ok, ell - degree, 0), h
-
-
-def _first_index(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> np.ndarray:
-    """Index of the first non-zero B-spline at each U (clipped; NaN: 0), shape (n,) intp.
-
-    The knot interval t[ell] <= x < t[ell + 1], the last one at the right end (as scipy's
-    ``find_interval``), minus ``degree``.
-    """
-    n_b = knots.size - degree - 1
-    x = np.clip(np.nan_to_num(np.asarray(U, dtype=float), nan=knots[degree]), knots[degree], knots[n_b])
-    return np.clip(np.searchsorted(knots, x, side="right") - 1, degree, n_b - 1) - degree
-
-
-def bspline_basis(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> np.ndarray:
-    """Dense B-spline design matrix, U clipped to the knots' base interval.
-
-    Parameters
-    ----------
-    U : ndarray, shape (n,), m/s (NaN allowed: that row is NaN)
-    knots : ndarray, shape (M + degree + 1,)
-
-    Returns
-    -------
-    ndarray, shape (n, M)
-        The same values as scipy's ``BSpline.design_matrix`` (:func:`bspline_local`).
-    """
-    first, vals = bspline_local(U, knots, degree)
-    n = first.size
-    B = np.zeros((n, knots.size - degree - 1))
-    B[np.arange(n)[:, None], first[:, None] + np.arange(degree + 1)] = vals
-    B[np.isnan(vals[:, 0])] = np.nan
-    return B
-
-
-def difference_penalty(n_basis: int, order: int = 2) -> np.ndarray:
-    """D^T D for the ``order``-th difference matrix D of ``n_basis`` coefficients, shape (M, M)."""
-    D = np.diff(np.eye(n_basis), n=order, axis=0)
-    return D.T @ D
-
-
 def _design_local_t(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,
                     n_yaw: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The non-zero entries of the rows of :func:`_design`, transposed (samples last).
@@ -256,7 +155,7 @@ def _design_local_t(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: floa
     first = np.empty((n, n_in), dtype=np.intp)
     B = np.empty((n_in, DEGREE + 1, n))
     for s_ in range(n_in):  # a few wind inputs
-        first[:, s_], B[s_] = _bspline_local_t(U2[:, s_], knots)
+        first[:, s_], B[s_] = bspline_local_t(U2[:, s_], knots)
     Apow = (A / a_ref)[None, :] ** np.arange(4)[:, None]  # (4, n)
     Z2 = np.ones_like(U2) if z is None else np.asarray(z, dtype=float).reshape(n, -1)
     Zpow = Z2.T[None, :, :] ** np.arange(n_yaw + 1)[:, None, None]  # (J + 1, n_in, n)
@@ -314,7 +213,7 @@ def _input_contributions(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref:
     Z2 = np.ones_like(U2) if z is None else np.asarray(z, dtype=float).reshape(n, -1)
     out = np.empty((n_in, n))
     for s_ in range(n_in):  # a few wind inputs
-        first, B = _bspline_local_t(U2[:, s_], knots)
+        first, B = bspline_local_t(U2[:, s_], knots)
         # sum_a B_a C[i, j, s, first + a]: each (order, yaw power) curve of this input at the samples
         curve = sum(C[:, :, s_].take(first + a, axis=-1) * B[a] for a in range(DEGREE + 1))  # (4, J + 1, n)
         w = Apow[:, None, :] * Z2[:, s_][None, None, :] ** np.arange(n_yaw + 1)[None, :, None]
@@ -353,7 +252,7 @@ def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray,
     # group key: the block, then each wind input's knot interval (M - DEGREE of them)
     key = np.asarray(block, dtype=np.int64)
     for s_ in range(n_in):
-        key = key * (M - DEGREE) + _first_index(U2[:, s_], knots)
+        key = key * (M - DEGREE) + first_index(U2[:, s_], knots)
     order = np.argsort(key, kind="stable")
     ks = key[order]
     starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
@@ -379,30 +278,6 @@ def _block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray,
             b[j, c] += V @ ysel[glo[g]:ghi[g]]
         g0 = g1
     return G, b, cy[bounds[1:]] - cy[bounds[:-1]], np.diff(bounds)
-
-
-def _solve(G: np.ndarray, b: np.ndarray, P: np.ndarray, lam: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """Penalised solutions for every penalty: (G + lam P) c = b on the kept columns.
-
-    G (..., p, p), b (..., p), lam (L,) -> c (..., L, p) (zero outside ``keep``).
-    """
-    idx = np.flatnonzero(keep)
-    Gk = G[..., idx[:, None], idx]
-    Pk = P[idx[:, None], idx]
-    bk = b[..., idx]
-    scale = np.trace(Gk, axis1=-2, axis2=-1)[..., None, None, None] / max(len(idx), 1)
-    ridge = 1e-10 * scale * np.eye(len(idx))
-    M = Gk[..., None, :, :] + lam[:, None, None] * Pk + ridge
-    ck = np.linalg.solve(M, np.broadcast_to(bk[..., None, :], M.shape[:-1])[..., None])[..., 0]
-    out = np.zeros(ck.shape[:-1] + (G.shape[-1],))
-    out[..., idx] = ck
-    return out
-
-
-def _quad_error(c: np.ndarray, G: np.ndarray, b: np.ndarray, yy: np.ndarray) -> np.ndarray:
-    """||y - X c||^2 from the statistics: c^T G c - 2 c^T b + y^T y; c (..., L, p), G (..., p, p)."""
-    return (np.einsum("...lp,...pq,...lq->...l", c, G, c) - 2.0 * np.einsum("...lp,...p->...l", c, b)
-            + yy[..., None])
 
 
 class VaryingCoefficientSINDy(ModelBase):
@@ -883,14 +758,14 @@ class VaryingCoefficientSINDy(ModelBase):
             np.add.at(eb, ev_of_block, b)
             ey = np.bincount(ev_of_block, weights=yy, minlength=n_ev)
             has = np.bincount(ev_of_block, minlength=n_ev) > 0
-            lams = pen * _penalty_scale(Gs, P)
+            lams = pen * penalty_scale(Gs, P)
             loss_all = None  # every candidate penalty's leave-one-event-out losses with every order kept
             if self.penalty_choice_ in ("least", "loeo"):
                 # The 5-fold choice came from the unweighted fit on 80 % of the events; re-choose on the final
                 # fit's leave-one-event-out errors (every order kept): their minimum, or the least penalty of
                 # their confidence set (which suits which campaigns: the parameter's docstring).
-                loss = loss_all = _penalty_loeo(Gs, bs, ev_b[has], eb[has], ey[has], P, lams,
-                                                np.ones(P.shape[0], dtype=bool))
+                loss = loss_all = held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, lams,
+                                                  np.ones(P.shape[0], dtype=bool)).T
                 if self.penalty_choice_ == "loeo":
                     lam_rel = float(pen[int(np.argmin(loss.sum(axis=1)))])
                 else:
@@ -899,11 +774,11 @@ class VaryingCoefficientSINDy(ModelBase):
             if self.select_orders:
                 keep_orders = self._select_orders(G, b, yy, fold_of_block, K, P, lam_rel, (J + 1) * n_in * M, _err * n)
             keep = np.repeat(keep_orders, (J + 1) * n_in * M)
-            lam = np.array([lam_rel * _penalty_scale(Gs, P)])
-            c = _solve(Gs, bs, P, lam, keep)[0]
-            rss = float(_quad_error(c[None], Gs, bs, yy.sum())[0]) * ys**2
+            lam = lam_rel * penalty_scale(Gs, P)
+            c = penalised_solve(Gs, bs, P, lam, keep)
+            rss = float(quadratic_error(c, Gs, bs, yy.sum())) * ys**2
             idx = np.flatnonzero(keep)
-            H = np.linalg.solve(Gs[idx[:, None], idx] + lam[0] * P[idx[:, None], idx] + 1e-10 * np.eye(idx.size)
+            H = np.linalg.solve(Gs[idx[:, None], idx] + lam * P[idx[:, None], idx] + 1e-10 * np.eye(idx.size)
                                 * np.trace(Gs[idx[:, None], idx]) / idx.size, Gs[idx[:, None], idx])
             self.edf_[k] = float(np.trace(H))
             to_phys = ys / aref ** np.arange(4)  # (4,)
@@ -921,7 +796,7 @@ class VaryingCoefficientSINDy(ModelBase):
                 mult = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=n_boot).astype(float)
                 Gr = np.einsum("rb,bpq->rpq", mult, G)
                 br = mult @ b
-                cr = _solve(Gr, br, P, lam, keep)[:, 0]
+                cr = penalised_solve(Gr, br, P, lam, keep)
                 crp = cr.reshape(n_boot, 4, J + 1, L).transpose(0, 3, 1, 2) * to_phys[:, None] * zscale
                 self.coef_bootstrap_[:, k, :L] = crp[..., 0]
                 self.coef_yaw_bootstrap_[:, k, :L] = crp[..., 1:]
@@ -929,9 +804,8 @@ class VaryingCoefficientSINDy(ModelBase):
             loeo = np.full((n_sub, n_ev), np.nan)
             for a, orders in enumerate(ORDER_SUBSETS):
                 keep_a = np.repeat(orders, (J + 1) * L)
-                held = _solve(Gs[None] - ev_b[has], bs[None] - eb[has], P, lam, keep_a)  # (n_has, 1, p)
-                loeo[a, has] = _quad_error(held, ev_b[has], eb[has], ey[has])[:, 0]
-                ca = _solve(Gs, bs, P, lam, keep_a)[0].reshape(4, J + 1, L).transpose(2, 0, 1)
+                loeo[a, has] = held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, [lam], keep_a)[:, 0]
+                ca = penalised_solve(Gs, bs, P, lam, keep_a).reshape(4, J + 1, L).transpose(2, 0, 1)
                 ca = ca * to_phys[:, None] * zscale
                 self.subset_coef_[a, k, :L] = ca[..., 0]
                 self.subset_coef_yaw_[a, k, :L] = ca[..., 1:]
@@ -942,9 +816,9 @@ class VaryingCoefficientSINDy(ModelBase):
             # bootstrap replicate, so the verdict also needs the fits at every penalty whose
             # leave-one-event-out error is not significantly above the best one's to agree.
             loss = (loss_all if loss_all is not None and keep.all()
-                    else _penalty_loeo(Gs, bs, ev_b[has], eb[has], ey[has], P, lams, keep))
+                    else held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, lams, keep).T)
             self.penalty_plausible_[:, k] = _confidence_set(loss, self.model_set_level, self.model_set_test)
-            cpen = _solve(Gs, bs, P, lams, keep).reshape(pen.size, 4, J + 1, L).transpose(0, 3, 1, 2)
+            cpen = penalised_solve(Gs, bs, P, lams, keep).reshape(pen.size, 4, J + 1, L).transpose(0, 3, 1, 2)
             cpen = cpen * to_phys[:, None] * zscale
             self.penalty_coef_[:, k, :L] = cpen[..., 0]
             self.penalty_coef_yaw_[:, k, :L] = cpen[..., 1:]
@@ -1027,7 +901,7 @@ class VaryingCoefficientSINDy(ModelBase):
         idx = np.flatnonzero(ok)
         _err, _M, lam_rel, knots, G, b, _yy, P = sk["best"]
         Gs, bs = G.sum(axis=0), b.sum(axis=0)
-        c = _solve(Gs, bs, P, np.array([lam_rel * _penalty_scale(Gs, P)]), np.ones(Gs.shape[0], dtype=bool))[0]
+        c = penalised_solve(Gs, bs, P, lam_rel * penalty_scale(Gs, P))
         Uk, Zk = self._equation_inputs(U, Z, k)
         zk = None if not J else Zk / sk["yaw_ref"]
         res = np.empty(idx.size)
@@ -1178,9 +1052,7 @@ class VaryingCoefficientSINDy(ModelBase):
         Gf = np.stack([G[fold_of_block == f].sum(axis=0) for f in range(K)])
         bf = np.stack([b[fold_of_block == f].sum(axis=0) for f in range(K)])
         yf = np.array([yy[fold_of_block == f].sum() for f in range(K)])
-        lam = pen * _penalty_scale(Gs, P)
-        c = _solve(Gs[None] - Gf, bs[None] - bf, P, lam, keep)  # (K, L, p)
-        return _quad_error(c, Gf, bf, yf).sum(axis=0)
+        return held_out_errors(Gs, bs, Gf, bf, yf, P, pen * penalty_scale(Gs, P), keep).sum(axis=0)
 
     def _select_orders(self, G, b, yy, fold_of_block, K, P, lam_rel, M, err_all) -> np.ndarray:
         """Backward elimination of orders by the cross-validated error (order 1 always kept)."""
@@ -1409,24 +1281,16 @@ class VaryingCoefficientSINDy(ModelBase):
         if x.shape != (S,):
             raise ValueError(f"A0 must have shape ({S},) (one amplitude per section, m); got {x.shape}")
         top = bound_factor * np.nanmax(np.abs(record.A)) if np.isfinite(record.A).any() else np.inf
-        out = np.full((tt.size, S), np.nan)
-        out[0] = x
-        stopped, reason = None, None
+        coef = (a, am, a)  # the curves at a step's start, midpoint and end (index n + 1)
 
-        def f(c, y):
+        def f(y, n, stage):
+            c = coef[stage][n + (stage == 2)]
             return c[:, 0] + y * (c[:, 1] + y * (c[:, 2] + y * c[:, 3]))
 
-        for n in range(tt.size - 1):  # time integration: one step after another
-            h = tt[n + 1] - tt[n]
-            k1 = f(a[n], x)
-            k2 = f(am[n], x + 0.5 * h * k1)
-            k3 = f(am[n], x + 0.5 * h * k2)
-            k4 = f(a[n + 1], x + h * k3)
-            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-            if not np.all(np.isfinite(x)) or np.any(x > top) or np.any(x < -0.05 * top / bound_factor):
-                stopped, reason = float(tt[n + 1]), "non-finite or out-of-bounds amplitude"
-                break
-            out[n + 1] = x
+        run = rk4(f, x, tt, stop=StopRule(upper=top, lower=-0.05 * top / bound_factor))
+        out = run.x
+        stopped = None if run.stop < 0 else float(tt[run.stop])
+        reason = None if stopped is None else "non-finite or out-of-bounds amplitude"
         covered = 1.0 if stopped is None else float((stopped - tt[0]) / max(tt[-1] - tt[0], 1e-12))
         return Simulation(t=tt, A_sim=out, A_meas=A_meas, stopped_at=stopped, reason=reason,
                           nmse=nmse(out, A_meas), covered=covered, windows=np.zeros(max(tt.size - 1, 0), dtype=int))
@@ -1643,30 +1507,6 @@ class VaryingCoefficientSINDy(ModelBase):
         return model
 
 
-def penalised_rss(G: np.ndarray, b: np.ndarray, yy: np.ndarray, P: np.ndarray, penalty: float,
-                  keep: np.ndarray) -> np.ndarray:
-    """Residual sum of squares of the penalised fit to pooled statistics, batched.
-
-    Parameters
-    ----------
-    G : ndarray, shape (..., p, p); b : ndarray, shape (..., p); yy : ndarray, shape (...)
-        Summed statistics of the samples fitted together (e.g. the events on one side of a split).
-    P : ndarray, shape (p, p); penalty : float, relative (times trace(G) / trace(P) of each fit)
-    keep : ndarray of bool, shape (p,)
-
-    Returns
-    -------
-    ndarray, shape (...): ||y - X c||^2 at the penalised solution c (standardised units).
-    """
-    G, b, yy = np.asarray(G, dtype=float), np.asarray(b, dtype=float), np.asarray(yy, dtype=float)
-    scale = np.trace(G, axis1=-2, axis2=-1) / max(np.trace(P), 1e-300)
-    idx = np.flatnonzero(keep)
-    Gk, bk, Pk = G[..., idx[:, None], idx], b[..., idx], P[idx[:, None], idx]
-    ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / max(idx.size, 1))[..., None, None] * np.eye(idx.size)
-    c = np.linalg.solve(Gk + (penalty * scale)[..., None, None] * Pk + ridge, bk[..., None])[..., 0]
-    return np.einsum("...p,...pq,...q->...", c, Gk, c) - 2.0 * np.einsum("...p,...p->...", c, bk) + yy
-
-
 def _confidence_set(loss: np.ndarray, level: float, test: str = "z") -> np.ndarray:
     """Models whose per-event held-out loss is not significantly above the best's, shape (n_models,) bool.
 
@@ -1693,19 +1533,3 @@ def _confidence_set(loss: np.ndarray, level: float, test: str = "z") -> np.ndarr
     se = diff.std(axis=1, ddof=1) / np.sqrt(max(n, 1)) if n > 1 else np.zeros(loss.shape[0])
     z = norm.ppf(level)
     return diff.mean(axis=1) <= z * se + 1e-12 * np.abs(loss[best]).mean()
-
-
-def _penalty_loeo(Gs: np.ndarray, bs: np.ndarray, ev_G: np.ndarray, ev_b: np.ndarray, ev_yy: np.ndarray,
-                  P: np.ndarray, lams: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """Held-out squared error of each event under the fit to all the others, at every penalty; shape (n_pen, n_ev).
-
-    ``Gs``, ``bs``: the summed statistics; ``ev_G`` (n_ev, p, p), ``ev_b`` (n_ev, p), ``ev_yy`` (n_ev,): each
-    event's; ``lams`` (n_pen,): absolute penalties; ``keep`` (p,): the columns fitted.
-    """
-    held = _solve(Gs[None] - ev_G, bs[None] - ev_b, P, lams, keep)  # (n_ev, n_pen, p)
-    return _quad_error(held, ev_G, ev_b, ev_yy).T
-
-
-def _penalty_scale(G: np.ndarray, P: np.ndarray) -> float:
-    """trace(G) / trace(P): makes the relative penalties independent of the data's size and scale."""
-    return float(np.trace(G) / max(np.trace(P), 1e-300))

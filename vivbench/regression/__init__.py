@@ -1,4 +1,5 @@
-"""Sparse regression: batched least squares, the STLSQ threshold path with AICc, pysindy-backed optimisers."""
+"""Regression: batched least squares, penalised least squares from sufficient statistics, the STLSQ threshold path
+with AICc, pysindy-backed optimisers."""
 
 from vivbench.regression.lstsq import NestedFactors, as_batches, empty_path
 from vivbench.regression.optimizers import (
@@ -8,11 +9,14 @@ from vivbench.regression.optimizers import (
     sr3_path,
     ensemble_path,
 )
+from vivbench.regression.penalised import (DEFAULT_RIDGE, held_out_errors, penalised_rss, penalised_solve,
+                                           penalty_scale, quadratic_error, spd_solve)
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, SOLVERS, StlsqSettings
 from vivbench.regression.stlsq import StlsqPath, aicc, stlsq_path
 
 __all__ = [
     "NestedFactors", "as_batches", "empty_path", "OPTIMIZERS", "OptimizerOptions", "run_optimizer",
     "sr3_path", "ensemble_path", "DEFAULT_THRESHOLDS", "SOLVERS", "StlsqSettings", "StlsqPath", "aicc",
-    "stlsq_path",
+    "stlsq_path", "DEFAULT_RIDGE", "held_out_errors", "penalised_rss", "penalised_solve", "penalty_scale",
+    "quadratic_error", "spd_solve",
 ]
