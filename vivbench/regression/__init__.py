@@ -1,4 +1,5 @@
-"""Regression: batched least squares, penalised least squares from sufficient statistics, the STLSQ threshold path
+"""Regression: batched least squares, penalised least squares from sufficient statistics, confidence sets of
+models, the STLSQ threshold path
 with AICc, pysindy-backed optimisers."""
 
 from vivbench.regression.lstsq import NestedFactors, as_batches, empty_path
@@ -9,6 +10,7 @@ from vivbench.regression.optimizers import (
     sr3_path,
     ensemble_path,
 )
+from vivbench.regression.model_set import MODEL_SET_TESTS, confidence_set
 from vivbench.regression.penalised import (DEFAULT_RIDGE, held_out_errors, penalised_rss, penalised_solve,
                                            penalty_scale, quadratic_error, spd_solve)
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, SOLVERS, StlsqSettings
@@ -18,5 +20,5 @@ __all__ = [
     "NestedFactors", "as_batches", "empty_path", "OPTIMIZERS", "OptimizerOptions", "run_optimizer",
     "sr3_path", "ensemble_path", "DEFAULT_THRESHOLDS", "SOLVERS", "StlsqSettings", "StlsqPath", "aicc",
     "stlsq_path", "DEFAULT_RIDGE", "held_out_errors", "penalised_rss", "penalised_solve", "penalty_scale",
-    "quadratic_error", "spd_solve",
+    "quadratic_error", "spd_solve", "MODEL_SET_TESTS", "confidence_set",
 ]
