@@ -43,9 +43,7 @@ squared residual over the median event's), flagged as "not predicted" when it
 is a robust outlier (above the median by more than ``MISFIT_MADS`` scaled
 median absolute deviations on a log scale) and at least ``MISFIT_FLOOR`` times
 the median; the ordered scan then runs over the unflagged events only. The
-statistics before every split of every ordering are running sums of the
-events' statistics and the penalised systems are solved by Cholesky
-(:func:`vivbench.regression.spd_solve`).
+penalised systems are solved by Cholesky (:func:`vivbench.regression.spd_solve`).
 
 Per-event "not predicted" flags, each with its false-alarm control:
 
@@ -319,8 +317,7 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
         (:func:`wind_strata`), so every split of every ordering keeps the
         observed mix of wind regimes on each side; ``"permutation"`` permutes
         all events (exact only if all events are exchangeable, which a
-        campaign whose wind regimes follow a pattern in time is not; see the
-        module docstring).
+        campaign whose wind regimes follow a pattern in time is not).
     stratum_size : int
         Events per stratum (the last stratum takes the remainder).
     statistic : {"max", "standardised"}
@@ -328,8 +325,6 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
         ``"standardised"``: the largest over splits of the gain standardised
         by the null orderings' mean and standard deviation at that split
         (every split judged on its own null scale; same orderings and cost).
-        Measured in the module docstring: neither removes the false alarm on
-        the 20-event campaign without change.
     yaw_terms : bool
         True (default): the split refits use every column of the model,
         its yaw terms included. False: the split refits (observed and null)
@@ -584,9 +579,7 @@ def offset_flags(delta, se, *, n_pieces=None, stratum=None, between: str = "post
     Why the posterior: with 20 events tau is poorly known, and its point
     estimate is often near 0 when the others' standard errors are large;
     an event whose own se_e is small (a brief event of few pieces) is then
-    judged against se_e alone and flagged for an ordinary offset (measured
-    on eight independent no-change campaigns, seeds 41-48: the point
-    estimate flags events in 5 of 8). Integrating over tau is a scale mixture
+    judged against se_e alone and flagged for an ordinary offset. Integrating over tau is a scale mixture
     of normals, heavier-tailed exactly where tau is uncertain, with no tuning
     constant (a Student-t between-event model would need its degrees of
     freedom, which 20 events cannot estimate).
@@ -731,8 +724,7 @@ def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_sca
     the scan). Why all others and not only the events before the change: a
     model of the few events before it extrapolates to the winds and
     amplitudes of the later events and gives them large offsets without any
-    change (measured on a simulated campaign without change: 4 of 6 events
-    flagged); the model of all other events covers every event's (A, U) as
+    change; the model of all other events covers every event's (A, U) as
     well as the campaign allows. Under a step of the linear coefficient by
     D, that model averages over both sides, and the events before and after
     the step get offsets about D apart. The null is calibrated on the events
@@ -748,12 +740,8 @@ def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_sca
     ``between`` as in :func:`offset_flags`; the default stays the
     DerSimonian-Laird point estimate here, because the reference is only the
     few events before the change, whose tau the posterior leaves very
-    uncertain: measured, a damping step of -0.02 1/s after 6 of 12 simulated
-    events is caught in 4 of 6 later events with the point estimate and in 1
-    with the posterior; on the nodrift campaign (scan false alarm at E007)
-    the point estimate flags E012 and E013, the posterior E012; neither
-    flags any event after the change on the drift or step campaigns. These
-    flags inherit the scan's campaign-level control.
+    uncertain, so that it would rarely flag a later event. These flags
+    inherit the scan's campaign-level control.
 
     Parameters
     ----------
