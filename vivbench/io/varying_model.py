@@ -92,7 +92,7 @@ def varying_model_dataset(fitted: Mapping[str, object], *, params_json: str, equ
 
     Returns
     -------
-    xarray.Dataset (without the ``format`` attributes, which :func:`write_varying_model` adds)
+    xarray.Dataset, with the ``format`` and ``format_version`` attributes
     """
     data = {name.rstrip("_"): (dims, _as_variable(name, fitted[name])) for name, dims in VARYING_ARRAYS.items()}
     data.update({name.rstrip("_"): (dims, _as_variable(name, fitted[name])) for name, dims in SUBSET_ARRAYS.items()})
@@ -110,14 +110,15 @@ def varying_model_dataset(fitted: Mapping[str, object], *, params_json: str, equ
              "penalty_cv": json.dumps([float(x) for x in fitted["penalty_cv_"]]),
              "penalty_choice_fitted": fitted["penalty_choice_"],
              "wind_weights_choice": fitted["wind_weights_choice_"],
-             "n_blocks": fitted["n_blocks_"], "events": json.dumps(fitted["event_ids_"])}
+             "n_blocks": fitted["n_blocks_"], "events": json.dumps(fitted["event_ids_"]),
+             "format": VARYING_MODEL_FORMAT, "format_version": VARYING_MODEL_VERSION}
     return xr.Dataset(data, coords={"equation": list(equations), "order": np.arange(4)}, attrs=attrs)
 
 
 def write_varying_model(ds: xr.Dataset, path) -> Path:
-    """Write a varying-model dataset (:func:`varying_model_dataset`) with its format and version, atomically."""
-    ds = ds.copy()
-    ds.attrs.update(format=VARYING_MODEL_FORMAT, format_version=VARYING_MODEL_VERSION)
+    """Write a varying-model dataset (:func:`varying_model_dataset`, which carries the format) atomically."""
+    if ds.attrs.get("format") != VARYING_MODEL_FORMAT:
+        raise ValueError(f"not a varying-model dataset (format attribute {ds.attrs.get('format')!r})")
     return write_netcdf_atomic(ds, path)
 
 
