@@ -13,6 +13,7 @@ from tests.helpers import assert_close
 from vivbench.library.splines import (DEGREE, bspline_basis, bspline_local, difference_penalty, first_index,
                                       uniform_knots)
 from vivbench.models.integrate import ABOVE, BELOW, NON_FINITE, NOT_STOPPED, StopRule, rk4
+from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.penalised import (held_out_errors, penalised_rss, penalised_solve, penalty_scale,
                                            quadratic_error, spd_solve)
 
@@ -171,3 +172,18 @@ def test_rk4_n_steps_and_bad_rules():
         StopRule(upper=0.0, lower=1.0)
     with pytest.raises(ValueError, match="scale"):
         StopRule(scale=0.0)
+
+
+# -- block bootstrap --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("draw", ["multinomial", "indices"])
+def test_block_counts_resample_every_block_with_replacement(draw):
+    counts = block_counts(7, 4000, np.random.default_rng(3), draw=draw)
+    assert counts.shape == (4000, 7) and np.all(counts.sum(axis=1) == 7) and counts.min() >= 0
+    # each block's count is Binomial(7, 1/7): mean 1, variance 6/7
+    assert_close(counts.mean(axis=0), np.ones(7), atol=0.05, reason="4000 replicates: standard error 0.015")
+    assert_close(counts.var(axis=0), np.full(7, 6 / 7), atol=0.08, reason="4000 replicates: standard error ~0.02")
+    again = block_counts(7, 4000, np.random.default_rng(3), draw=draw)
+    assert np.array_equal(counts, again)
+    with pytest.raises(ValueError, match="draw must be one of"):
+        block_counts(7, 1, np.random.default_rng(0), draw="poisson")

@@ -31,6 +31,7 @@ from vivbench.library.splines import DEGREE, difference_penalty, uniform_knots
 from vivbench.models.varying_design import block_stats, input_contributions
 from vivbench.models.wind_weights import WIND_WEIGHT_MODES, check_wind_weights, weighted_mean_standard_error
 from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.model_set import MODEL_SET_TESTS, confidence_set
 from vivbench.regression.penalised import held_out_errors, penalised_solve, penalty_scale, quadratic_error
 
@@ -465,7 +466,7 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
     if n_boot:
         # Block multiplicities; the resampled statistics are weighted sums of the blocks'.
         nb = sec.n_blocks
-        mult = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=n_boot).astype(float)
+        mult = block_counts(nb, n_boot, rng).astype(float)
         boot = physical(penalised_solve(np.einsum("rb,bpq->rpq", mult, G), mult @ b, P, lam, keep))
     # The confidence set of order subsets (leave-one-event-out prediction).
     loeo = np.full((ORDER_SUBSETS.shape[0], n_ev), np.nan)

@@ -1,7 +1,8 @@
 """Regression: batched least squares, penalised least squares from sufficient statistics, confidence sets of
-models, the STLSQ threshold path
+models, the block bootstrap's resampling, the STLSQ threshold path
 with AICc, pysindy-backed optimisers."""
 
+from vivbench.regression.bootstrap import DRAWS, block_counts
 from vivbench.regression.lstsq import NestedFactors, as_batches, empty_path
 from vivbench.regression.optimizers import (
     OPTIMIZERS,
@@ -20,5 +21,6 @@ __all__ = [
     "NestedFactors", "as_batches", "empty_path", "OPTIMIZERS", "OptimizerOptions", "run_optimizer",
     "sr3_path", "ensemble_path", "DEFAULT_THRESHOLDS", "SOLVERS", "StlsqSettings", "StlsqPath", "aicc",
     "stlsq_path", "DEFAULT_RIDGE", "held_out_errors", "penalised_rss", "penalised_solve", "penalty_scale",
-    "quadratic_error", "spd_solve", "MODEL_SET_TESTS", "confidence_set",
+    "quadratic_error", "spd_solve", "MODEL_SET_TESTS", "confidence_set", "DRAWS",
+    "block_counts",
 ]
