@@ -18,6 +18,7 @@ import numpy as np
 import xarray as xr
 from scipy.stats import norm
 
+from vivbench.models.curve_support import curves_dataset
 from vivbench.models.greybox_physics import section_factors
 from vivbench.models.protocol import section_names
 
@@ -179,18 +180,11 @@ class GreyBoxCurves:
         if wind.ndim != 1 or not np.all(np.isfinite(wind)) or np.any(wind <= 0):
             raise ValueError("wind must be a 1-D array of finite positive speeds in m/s")
         p, grad = self._curve_parts(wind)
-        S, M = self.n_sections_, self.n_basis
+        M = self.n_basis
         lo, hi = self._bands(p, grad.reshape(4, wind.size, 4 * M))
         fac = self.phi_[:, None] ** (1 - np.arange(4))[None, :]  # (S, 4)
         point = fac[..., None] * p[None]
         lower = np.where(fac[..., None] >= 0, fac[..., None] * lo[None], fac[..., None] * hi[None])
         upper = np.where(fac[..., None] >= 0, fac[..., None] * hi[None], fac[..., None] * lo[None])
-        dims = ("equation", "order", "wind")
-        units = "m^(1-order) s-1"
-        return xr.Dataset(
-            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (docs/concepts.md (coefficient curves))"}),
-             "curves_lower": (dims, lower, {"units": units, "long_name": f"lower {self.level:g} delta-method band"}),
-             "curves_upper": (dims, upper, {"units": units, "long_name": f"upper {self.level:g} delta-method band"})},
-            coords={"equation": section_names(S), "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})},
-            attrs={"model": type(self).__name__},
-        )
+        return curves_dataset(point, lower, upper, wind, band=f"{self.level:g} delta-method band",
+                              model=type(self).__name__)

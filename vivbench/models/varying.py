@@ -78,7 +78,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.varying_model import read_varying_model, varying_model_dataset, write_varying_model
 from vivbench.library.splines import DEGREE, bspline_basis, bspline_local, difference_penalty, uniform_knots
-from vivbench.models.curve_support import EXTRAPOLATED
+from vivbench.models.curve_support import EXTRAPOLATED, curves_dataset
 from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
@@ -687,18 +687,10 @@ class VaryingCoefficientSINDy(ModelBase):
             lower, upper = np.fmin(lo, point), np.fmax(hi, point)
         else:
             lower = upper = np.full_like(point, np.nan)
-        dims = ("equation", "order", "wind")
-        units = "m^(1-order) s-1"
-        return xr.Dataset(
-            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (docs/concepts.md (coefficient curves))"}),
-             "curves_lower": (dims, lower, {"units": units, "long_name": f"lower {level:g} bootstrap band"}),
-             "curves_upper": (dims, upper, {"units": units, "long_name": f"upper {level:g} bootstrap band"})},
-            coords={"equation": section_names(self.n_sections_), "order": np.arange(4),
-                    "wind": ("wind", wind, {"units": "m/s"})},
-            attrs={"model": type(self).__name__},
-        ).assign({EXTRAPOLATED: (("equation", "wind"), np.repeat(self.yaw_extrapolated()[:, None], wind.size, axis=1),
-                                 {"long_name": "the curve is an extrapolation: the wind's yaw of the curves (0, "
-                                  "perpendicular) lies outside the fitted data's yaw"})})
+        ds = curves_dataset(point, lower, upper, wind, band=f"{level:g} bootstrap band", model=type(self).__name__)
+        return ds.assign({EXTRAPOLATED: (("equation", "wind"), np.repeat(self.yaw_extrapolated()[:, None], wind.size, axis=1),
+                                         {"long_name": "the curve is an extrapolation: the wind's yaw of the curves (0, "
+                                          "perpendicular) lies outside the fitted data's yaw"})})
 
     def yaw_extrapolated(self) -> np.ndarray:
         """Bool (S,): the curves (at yaw 0) are an extrapolation of the yaw covariate.
