@@ -13,6 +13,11 @@ interval of a multiple-shooting grid): each step is one array operation over
 the batch, and the only Python loop is over the time steps. A trajectory stops
 (:class:`StopRule`) when its state turns non-finite or leaves the rule's
 bounds; it is frozen there, the others go on.
+
+The fits that differentiate through the integration (the grey-box's multiple
+shooting, :func:`vivbench.models.greybox_shooting.rk4_step_function`) build the
+same step as a CasADi expression for its exact Jacobians; their simulations use
+this integrator.
 """
 
 from __future__ import annotations
