@@ -7,7 +7,7 @@ inputs, the yaw covariate, M = 10 B-splines: p = 240 columns, 1200-sample blocks
 
 - B-splines: :func:`vivbench.models.varying.bspline_local` against scipy's ``BSpline.design_matrix``
   (dense, as the model built it before), and their largest difference (0 expected: same recursion);
-- block statistics: the grouped local products (``_block_stats``) against the dense design per block
+- block statistics: the grouped local products (``block_stats``) against the dense design per block
   and X_b^T X_b (what it did before), and the largest relative difference of the Grams.
 
 Whole ``vivbench pool`` runs (wall, CPU, peak memory) are in the closing note of the branch; this
@@ -51,7 +51,8 @@ def _inputs(n: int, seed: int = 0):
 def main(samples: int = 60_000) -> dict:
     from scipy.interpolate import BSpline
 
-    from vivbench.models import varying as vm
+    from vivbench.library.splines import bspline_basis
+    from vivbench.models import varying_design as vd
 
     knots, U, A, z, y, block = _inputs(samples)
     nb = int(block.max()) + 1
@@ -59,19 +60,19 @@ def main(samples: int = 60_000) -> dict:
 
     x = np.clip(U[:, 0], knots[3], knots[-4])
     t_old, B_old = best_of(lambda: BSpline.design_matrix(x, knots, 3).toarray())
-    t_new, B_new = best_of(lambda: vm.bspline_basis(x, knots))
+    t_new, B_new = best_of(lambda: bspline_basis(x, knots))
     out["bspline"] = {"scipy_s": t_old, "local_s": t_new, "max_abs_diff": float(np.abs(B_old - B_new).max())}
 
     def dense():
         G = np.empty((nb, 240, 240))
         for j in range(nb):
             r = block == j
-            X = vm._design(U[r], A[r], knots, 0.1, z[r], 1)
+            X = vd.spline_design(U[r], A[r], knots, 0.1, z[r], 1)
             G[j] = X.T @ X
         return G
 
     t_old, G_old = best_of(dense)
-    t_new, (G_new, *_rest) = best_of(lambda: vm._block_stats(U, A, y, block, nb, knots, 0.1, z, 1))
+    t_new, (G_new, *_rest) = best_of(lambda: vd.block_stats(U, A, y, block, nb, knots, 0.1, z, 1))
     out["block_stats"] = {"dense_s": t_old, "grouped_s": t_new,
                           "max_rel_diff": float(np.abs(G_new - G_old).max() / np.abs(G_old).max())}
 

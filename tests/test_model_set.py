@@ -63,12 +63,12 @@ def test_forced_only_bridge_gets_no_self_excited_flag():
 
 
 def test_confidence_set_keeps_models_within_noise_of_the_best():
-    from vivbench.models.varying import _confidence_set  # noqa: PLC2701 - the module's own helper, tested here
+    from vivbench.regression import confidence_set
 
     rng = np.random.default_rng(1)
     base = 1.0 + rng.random(30)
     loss = np.stack([base, base + 0.01 * rng.standard_normal(30), base + 0.3, base * 1.5])
-    keep = _confidence_set(loss, 0.95)
+    keep = confidence_set(loss, 0.95)
     assert keep.tolist() == [True, True, False, False]
 
 

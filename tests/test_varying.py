@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import xarray as xr
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -86,6 +87,32 @@ def test_save_load(fitted, tmp_path):
     rec = _records(1, seed=6)[0]
     np.testing.assert_array_equal(loaded.predict(rec), fitted.predict(rec))
     assert loaded.get_params() == fitted.get_params()
+
+
+
+def test_file_carries_its_format_version_and_unversioned_files_still_load(fitted, tmp_path):
+    from vivbench.io.varying_model import VARYING_MODEL_FORMAT, VARYING_MODEL_VERSION
+
+    path = fitted.save(tmp_path / "vcm.nc")
+    with xr.open_dataset(path) as ds:
+        new = ds.load()
+    assert (new.attrs["format"], new.attrs["format_version"]) == (VARYING_MODEL_FORMAT, VARYING_MODEL_VERSION)
+    rec = _records(2, seed=5)[1]
+    # a file written before the format was versioned: the same variables, no format attributes
+    old = new.copy()
+    del old.attrs["format"], old.attrs["format_version"]
+    old.to_netcdf(tmp_path / "old.nc")
+    np.testing.assert_array_equal(VaryingCoefficientSINDy.load(tmp_path / "old.nc").predict(rec), fitted.predict(rec))
+    future = new.copy()
+    future.attrs["format_version"] = VARYING_MODEL_VERSION + 1
+    future.to_netcdf(tmp_path / "future.nc")
+    with pytest.raises(InputError, match="future.nc: varying-coefficient model format_version"):
+        VaryingCoefficientSINDy.load(tmp_path / "future.nc")
+    other = new.copy()
+    other.attrs["model"] = "PooledSINDy"
+    other.to_netcdf(tmp_path / "other.nc")
+    with pytest.raises(InputError, match="other.nc: not a VaryingCoefficientSINDy file"):
+        VaryingCoefficientSINDy.load(tmp_path / "other.nc")
 
 
 def test_mean_wind_input():
@@ -172,7 +199,7 @@ def test_wind_smoothing_chosen_by_cross_validation(tmp_path):
 
 
 def test_signed_rank_model_set_is_not_outweighed_by_one_event():
-    from vivbench.models.varying import _confidence_set
+    from vivbench.regression import confidence_set
 
     rng = np.random.default_rng(0)
     base = 1.0 + rng.random(31)
@@ -181,12 +208,12 @@ def test_signed_rank_model_set_is_not_outweighed_by_one_event():
     tie = base + 0.1 * rng.standard_normal(31)
     loss = np.stack([base, worse, tie])
     assert 0 < worse.sum() - base.sum() < 1.0 and tie.sum() > base.sum()  # base is the best in total
-    z = _confidence_set(loss, 0.95, "z")
-    ranks = _confidence_set(loss, 0.95, "signed_rank")
+    z = confidence_set(loss, 0.95, "z")
+    ranks = confidence_set(loss, 0.95, "signed_rank")
     assert z.tolist() == [True, True, True]  # the outlier inflates the paired mean's standard error
     assert ranks.tolist() == [True, False, True]
     # Four events cannot reject at 0.95 (the smallest one-sided signed-rank p is 1/16): all stay.
-    assert _confidence_set(loss[:, 1:5], 0.95, "signed_rank").all()
+    assert confidence_set(loss[:, 1:5], 0.95, "signed_rank").all()
 
 
 def test_model_set_test_parameter(tmp_path):

@@ -67,15 +67,15 @@ def _design_inputs(n=6000, n_in=3, seed=0):
 
 @pytest.mark.parametrize("n_in,J,weighted", [(3, 1, False), (3, 1, True), (1, 0, False), (2, 2, True)])
 def test_block_stats_equal_dense(n_in, J, weighted):
-    from vivbench.models import varying as vm
+    from vivbench.models import varying_design as vd
 
     knots, U, A, z, y, block = _design_inputs(n_in=n_in)
     if n_in == 1:
         U, z = U[:, 0], z[:, 0]
     w = np.random.default_rng(1).uniform(0.5, 2.0, y.size) if weighted else None
     n_blocks = 10  # block 9 holds no sample: zero statistics
-    G, b, yy, cnt = vm._block_stats(U, A, y, block, n_blocks, knots, 0.1, z if J else None, J, w, chunk=700)
-    X = vm._design(U, A, knots, 0.1, z if J else None, J)
+    G, b, yy, cnt = vd.block_stats(U, A, y, block, n_blocks, knots, 0.1, z if J else None, J, w, chunk=700)
+    X = vd.spline_design(U, A, knots, 0.1, z if J else None, J)
     yw = y.copy()
     if weighted:
         X, yw = X * np.sqrt(w)[:, None], y * np.sqrt(w)
@@ -91,16 +91,16 @@ def test_block_stats_equal_dense(n_in, J, weighted):
 
 
 def test_input_contributions_sum_to_the_design():
-    from vivbench.models import varying as vm
+    from vivbench.models import varying_design as vd
 
     knots, U, A, z, _y, _b = _design_inputs(n=3000)
     c = np.random.default_rng(2).normal(size=4 * 2 * 3 * 8)
-    parts = vm._input_contributions(U, A, knots, 0.1, z, 1, c)
-    full = vm._design(U, A, knots, 0.1, z, 1) @ c
+    parts = vd.input_contributions(U, A, knots, 0.1, z, 1, c)
+    full = vd.spline_design(U, A, knots, 0.1, z, 1) @ c
     assert parts.shape == (3, U.shape[0])
     assert_close(parts.sum(axis=0), full, atol=1e-12 * np.abs(full).max(), rtol=0.0, reason="sums in another order")
     # each input's share: the design with only that input's columns
-    X = vm._design(U, A, knots, 0.1, z, 1).reshape(U.shape[0], 4, 2, 3, 8)
+    X = vd.spline_design(U, A, knots, 0.1, z, 1).reshape(U.shape[0], 4, 2, 3, 8)
     for s in range(3):
         own = X[:, :, :, s, :].reshape(U.shape[0], -1) @ c.reshape(4, 2, 3, 8)[:, :, s, :].ravel()
         assert_close(parts[s], own, atol=1e-12 * np.abs(own).max(), rtol=0.0, reason="sums in another order")

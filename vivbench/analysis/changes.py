@@ -3,7 +3,7 @@
 A campaign model (``PooledSINDy`` or ``VaryingCoefficientSINDy``) assumes that
 dA/dt is one fixed function of (A, U) over the whole campaign. Changes the wind
 does not carry (a damping drift, a retrofit between events) break it, and the
-model then averages over them. This module measures that on the model's own
+model then averages over them. This module tests that on the model's own
 residual e = dA/dt - predict(record), event by event, with nothing from the
 generator:
 
@@ -12,124 +12,38 @@ generator:
   describe this event).
 - ``event_linear_offset`` delta_e (1/s): the least-squares coefficient of the
   residual on A over the event's samples (all sections pooled),
-  delta_e = sum e A / sum A^2. A change of the net linear coefficient (the
-  structural damping, the aerodynamic damping) that the model averaged over
-  shows as delta_e != 0 (negative: the event is more damped than the model).
-  Its standard error ``event_linear_offset_se`` is block-robust: the residual's
-  correlation in time is handled by summing e A over ``block_s`` pieces of the
-  event and using the spread of the pieces (a cluster-robust sandwich).
+  delta_e = sum e A / sum A^2. A change of the net linear coefficient that the
+  model averaged over shows as delta_e != 0 (negative: the event is more damped
+  than the model). Its standard error ``event_linear_offset_se`` is
+  block-robust: e A summed over ``block_s`` pieces of the event, the spread of
+  the pieces (a cluster-robust sandwich).
 - heterogeneity: Cochran's Q = sum_e ((delta_e - mean) / se_e)^2 against
-  chi-square with (events - 1) degrees of freedom (p-value
-  ``change_heterogeneity_p``): small when the events' offsets differ by more
-  than their noise (drift or a step, or a misfit that differs between events).
-- change point: for every split of the event sequence (events in the order of
-  their start times) the between-group sum of squares of delta_e,
-  W1 W2 / (W1 + W2) (m1 - m2)^2 with weights W = sum A^2 (the offsets'
-  information under a common noise level) and m the weighted means; the
-  largest over splits is the statistic, its p-value
-  (``change_p_value``) is the share of random orderings of the events that
-  give at least as large a maximum (exchangeable events under "no ordered
-  change", so a misfit that merely differs between events does not count),
-  and the first event after the best split is ``change_event``.
+  chi-square with (events - 1) degrees of freedom (``change_heterogeneity_p``).
+- change point (:func:`change_point_scan`): for every split of the event
+  sequence (events in the order of their start times) the between-group sum of
+  squares of delta_e, W1 W2 / (W1 + W2) (m1 - m2)^2 with weights W = sum A^2
+  and m the weighted means; the largest over splits is the statistic, its
+  p-value (``change_p_value``) the share of random orderings of the events
+  giving at least as large a maximum, and the first event after the best split
+  is ``change_event``.
 
-The offsets see only the linear coefficient, through the fixed model's
-residual; a retrofit that changes the deck's aerodynamics changes every order.
-:func:`model_change_scan` is the time-varying method for a model that exposes
-per-event sufficient statistics (``VaryingCoefficientSINDy.event_statistics``):
-the model is refitted separately to the events before and after every split
-(at its fitted basis and relative penalty; at least ``min_events`` on each
-side; each event's equations weighted by the inverse of its mean square of
-dA/dt, at least ``MISFIT_MS_FLOOR`` of the median event's, so every event
-counts alike but near-zero dynamics are not judged by relative errors), the statistic is the relative drop of the penalised residual sum of
-squares, summed over the equations, and its p-value comes from orderings
-of the events (a misfit that merely differs between events moves with its
-event and does not count). The orderings are stratified by default:
-events move only among the ``STRATUM_SIZE`` events of most similar wind
-(:func:`wind_strata`), so every split of every ordering keeps the observed
-mix of winds on each side. Why: a free permutation is exact only if all
-events are exchangeable, and a campaign's wind regimes follow a pattern in
-time (high, low, brief and outside passes in turn); the gain of a split
-depends on whether both sides cover the same winds. The stratified null
-needs only events of similar wind to be exchangeable. Measured
-(``benchmarks/bench_change_calibration.py``, time-ordered random subsets of
-12 events of campaigns without change): both nulls fire at about the
-nominal rate, and the stratification did not remove the one false alarm
-seen on a whole campaign (20 events of seed 0, p = 0.01-0.02): with 99
-orderings and a handful of campaigns a rate is known only to a few per cent. It also gives every event its
-leave-one-event-out misfit (held-out mean squared residual over the median
-event's), flagged as "not predicted" when it is a robust outlier (above the
-median by more than ``MISFIT_MADS`` scaled median absolute deviations on a
-log scale) and at least ``MISFIT_FLOOR`` times the median, which unlike
-Cochran's Q does not fire on a model that merely fits some events worse than
-others by the usual spread. An event whose winds lie outside the other events'
-range is predicted by extrapolation and can be flagged without any change.
-The ordered scan then runs over the unflagged events only.
-
-Why the scan fired on two campaigns without change (nodrift 20 events
-p = 0.01 at E007, bridge C 20 events p = 0.02 at E004), measured on the
-default varying model (``yaw_degree`` 1, 88 columns per equation):
-
-- not one event: refitting with each event left out keeps the best split's
-  gain at 0.13-0.20 (nodrift, 0.173 with all) and 0.15-0.28 (C, 0.254;
-  E002 and E001 carry a third of it); no event is flagged as misfit;
-- not extrapolation in wind: the events' winds overlap (4-13 m/s on both
-  sides); the stratified and the free null agree on nodrift (p 0.012 and
-  0.013 with 999 orderings), on C the free null is the worse (0.002
-  against 0.026);
-- the split refits overfit: the null's mean gain per split is 0.08-0.13,
-  the observed 0.17 (nodrift) and 0.25 (C); half of the columns are the
-  yaw terms (sin^2 psi x the wind splines), which the few events of one
-  side determine poorly; in both campaigns the events before the split
-  have smaller |yaw| (4.9 against 7.2 deg, 4.7 against 7.7 deg);
-- the drift campaign has the same draws as nodrift (same winds and yaws)
-  plus its change, so its p = 0.02 at E010 rides on nodrift's 0.01.
-
-The permutation null is exact when the events are exchangeable; the
-generator draws them independently (only the kinds follow a fixed
-pattern), so the alarms are the statistic's sensitivity to a chance
-ordering of what the model fits worst (the yaw terms), not a broken
-null. Two options keep the default and change the statistic:
-``yaw_terms=False`` (the split refits on the yaw-free columns) and
-``statistic="standardised"`` (each split on its own null scale).
-Measured (99 stratified orderings, whole campaigns, p and located event;
-``benchmarks/bench_change_calibration.py --null stratified --statistic
-max,standardised --yaw-terms 1,0``):
-
-=========  =====  ==========  ==============  ==========
-campaign   true   default     yaw_terms=False standardised
-=========  =====  ==========  ==============  ==========
-nodrift    none   0.01 E007   0.07            0.01 E007
-C          none   0.02 E004   0.19            0.13
-A          none   0.94        0.24            0.81
-S1         none   0.89        0.04 E020       0.91
-B          none   0.68        0.70            0.45
-drift      E010   0.02 E010   0.02 E010       0.02 E010
-step       E007   0.01 E007   0.01 E007       0.01 E007
-=========  =====  ==========  ==============  ==========
-
-On 10 time-ordered random subsets of 12 events per campaign (the same
-run) the share with p < 0.05 over the five campaigns without change is
-4/50 (default), 3/50 (``yaw_terms=False``), 3/50 (standardised), 3/50
-(both); on the step campaign 8/10 (7/10 with both), on drift 1/10
-(default), 1/10, 3/10, 2/10, always at the true change: on subsets the
-test holds about its nominal level under every variant; only whole
-campaigns of 20-31 events show the alarms.
-
-Each option removes one or both alarms and keeps both changes, but
-``yaw_terms=False`` raises one on S1 and ``standardised`` keeps
-nodrift's: with five campaigns without change, every variant fires on
-one or two of them, so none is shown to be calibrated and the default
-stays. A model fitted without the yaw covariate (``yaw_degree=0``)
-gives nodrift 0.09, C 0.20, S1 0.06, A 0.65, B 0.71, drift 0.01 at E010,
-step 0.01 at E007; one without wind smoothing (``wind_smoothing_s=0``)
-0.14, 0.05, 0.92, 0.88, 0.81, 0.02 at E010, 0.02 at E007 (a refit of the
-model, outside this module).
-
-The scan's cost: the statistics before every split of every ordering are one
-matrix product of a 0/1 membership matrix with the events' statistics, the
-whole-campaign fit is solved once, and the penalised systems are solved by
-Cholesky (campaign A, 31 events, 99 orderings: 16-20 s CPU before, 4.6 s
-after, p-values and split gains unchanged to 1e-11).
+:func:`model_change_scan` refits a model that exposes per-event sufficient
+statistics (``VaryingCoefficientSINDy.event_statistics``) separately to the
+events before and after every split (at its fitted basis and relative penalty;
+at least ``min_events`` on each side; each event's equations weighted by the
+inverse of its mean square of dA/dt, floored at ``MISFIT_MS_FLOOR`` of the
+median event's). The statistic is the relative drop of the penalised residual
+sum of squares, summed over the equations; its p-value comes from orderings of
+the events, by default stratified (:func:`wind_strata`: events move only among
+the ``STRATUM_SIZE`` events of most similar wind, so every split keeps the
+observed mix of winds on each side). ``yaw_terms=False`` refits on the yaw-free
+columns only and ``statistic="standardised"`` puts each split on its own null
+scale. It also gives every event its leave-one-event-out misfit (held-out mean
+squared residual over the median event's), flagged as "not predicted" when it
+is a robust outlier (above the median by more than ``MISFIT_MADS`` scaled
+median absolute deviations on a log scale) and at least ``MISFIT_FLOOR`` times
+the median; the ordered scan then runs over the unflagged events only. The
+penalised systems are solved by Cholesky (:func:`vivbench.regression.spd_solve`).
 
 Per-event "not predicted" flags, each with its false-alarm control:
 
@@ -142,26 +56,9 @@ Per-event "not predicted" flags, each with its false-alarm control:
 - :func:`offset_flags`: change-agnostic, each event's offset against a
   random-effects model of the other events' of its stratum
   (:func:`offset_strata`), the between-event variance integrated over its
-  posterior; Benjamini-Hochberg at ``FLAG_FDR``. Measured on no-change
-  campaigns (20 events of the default realistic bridge, seeds 41-48; bridge
-  B, 31 events): the former rule (DerSimonian-Laird point estimate, one
-  stratum) flagged events in 5 of 8 and on B (2); this one in 0 of 8 and on
-  B (1: E026); on six held-out campaigns made afterwards (seeds 51-56, the
-  rule fixed before they were looked at) the former rule flags 1 of 6
-  (E004, an outside event), this one 0 of 6, leaving E004, E012 and E020
-  (the outside events) not assessed in each. On the drift campaign (retrofit
-  from E010) it flags E020 (after the change), on the damping step (from
-  E007) nothing: per event the changes are within the events' spread.
-  It still flags an isolated shifted event, but a block of
-  three or more shifted events widens every member's reference and masks
-  itself: it is no change detector (tests/test_change_flags.py).
-
-Measured (20-event drift campaign, retrofit of
-Y1 x 0.6 and C_L x 0.7 from E010 with a +-30 % daily damping drift): the
-per-event offsets move by less than the events' own spread (|z| < 2 except
-two events of wind outside the lock-in range), so neither per-event test
-flags the events after the change; only the located change does (11 of 11,
-none before). A per-event flag is not possible at this change size.
+  posterior; Benjamini-Hochberg at ``FLAG_FDR``. A block of three or more
+  shifted events widens every member's reference and masks itself: it is no
+  change detector.
 """
 
 from __future__ import annotations
@@ -169,11 +66,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.linalg.lapack import dposv
 from scipy.stats import chi2, false_discovery_control
 from scipy.special import ndtr, ndtri, stdtr
 
 from vivbench.core.record import Record
+from vivbench.regression.penalised import penalised_solve, penalty_scale, quadratic_error, spd_solve
 
 __all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS", "STRATUM_SIZE",
            "UNEXPLAINED_REL_RMS",
@@ -362,23 +259,8 @@ def _rss_of_sums(S: np.ndarray, red: dict) -> np.ndarray:
     else:  # the same sums at the penalty's non-zeros only (no N x q x q temporary)
         S[:, nz] += mu[:, None] * red["Pk_vals"]
     diag += ridge[:, None]
-    c = _spd_solve(H, b)
+    c = spd_solve(H, b)
     return yy - (c * b).sum(axis=1) - mu * ((c @ red["Pk"]) * c).sum(axis=1) - ridge * (c * c).sum(axis=1)
-
-
-def _spd_solve(H: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solutions of the symmetric positive definite systems H x = b, H (N, q, q), b (N, q); returns (N, q).
-
-    Cholesky (LAPACK posv, one call per system: about 1.5 times faster than the LU of
-    ``np.linalg.solve`` at q ~ 100); a system that is not numerically positive definite is solved by LU.
-    """
-    x = np.empty_like(b)
-    for i in range(H.shape[0]):  # one LAPACK call per system (systems, not samples)
-        # H[i] is symmetric: its transpose is the same matrix in the Fortran order LAPACK takes.
-        _, x[i], info = dposv(H[i].T, b[i], lower=1)
-        if info != 0:
-            x[i] = np.linalg.solve(H[i], b[i])
-    return x
 
 
 def _split_gain(reduced: list[dict], order: np.ndarray, splits: np.ndarray) -> np.ndarray:
@@ -435,8 +317,7 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
         (:func:`wind_strata`), so every split of every ordering keeps the
         observed mix of wind regimes on each side; ``"permutation"`` permutes
         all events (exact only if all events are exchangeable, which a
-        campaign whose wind regimes follow a pattern in time is not; see the
-        module docstring).
+        campaign whose wind regimes follow a pattern in time is not).
     stratum_size : int
         Events per stratum (the last stratum takes the remainder).
     statistic : {"max", "standardised"}
@@ -444,8 +325,6 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
         ``"standardised"``: the largest over splits of the gain standardised
         by the null orderings' mean and standard deviation at that split
         (every split judged on its own null scale; same orderings and cost).
-        Measured in the module docstring: neither removes the false alarm on
-        the 20-event campaign without change.
     yaw_terms : bool
         True (default): the split refits use every column of the model,
         its yaw terms included. False: the split refits (observed and null)
@@ -633,10 +512,8 @@ def _subset_coefficients(G, b, st, train=None) -> np.ndarray:
     tG, tb = G[train].sum(axis=0), b[train].sum(axis=0)
     Gk = (tG[None] - G * train[:, None, None])[:, idx[:, None], idx]
     bk = (tb[None] - b * train[:, None])[:, idx]
-    Pk = st["P"][idx[:, None], idx]
-    scale = np.trace(Gk, axis1=-2, axis2=-1) / max(np.trace(st["P"]), 1e-300)
-    ridge = 1e-10 * (np.trace(Gk, axis1=-2, axis2=-1) / idx.size)[:, None, None] * np.eye(idx.size)
-    return np.linalg.solve(Gk + (st["penalty"] * scale)[:, None, None] * Pk + ridge, bk[..., None])[..., 0]
+    # the penalty's scale from the kept block of G
+    return penalised_solve(Gk, bk, st["P"][idx[:, None], idx], st["penalty"] * penalty_scale(Gk, st["P"]))
 
 
 def _held_out_error(G, b, yy, st, train=None) -> np.ndarray:
@@ -646,8 +523,7 @@ def _held_out_error(G, b, yy, st, train=None) -> np.ndarray:
     """
     idx = np.flatnonzero(st["keep"])
     c = _subset_coefficients(G, b, st, train)
-    Ge, be = G[:, idx[:, None], idx], b[:, idx]
-    return np.einsum("ep,epq,eq->e", c, Ge, c) - 2.0 * np.einsum("ep,ep->e", c, be) + yy
+    return quadratic_error(c, G[:, idx[:, None], idx], b[:, idx], yy)
 
 def _benjamini_hochberg(p: np.ndarray, fdr: float) -> np.ndarray:
     """Rejections of the Benjamini-Hochberg step-up rule at ``fdr`` over the finite p-values, shape of p, bool."""
@@ -703,9 +579,7 @@ def offset_flags(delta, se, *, n_pieces=None, stratum=None, between: str = "post
     Why the posterior: with 20 events tau is poorly known, and its point
     estimate is often near 0 when the others' standard errors are large;
     an event whose own se_e is small (a brief event of few pieces) is then
-    judged against se_e alone and flagged for an ordinary offset (measured
-    on eight independent no-change campaigns, seeds 41-48: the point
-    estimate flags events in 5 of 8). Integrating over tau is a scale mixture
+    judged against se_e alone and flagged for an ordinary offset. Integrating over tau is a scale mixture
     of normals, heavier-tailed exactly where tau is uncertain, with no tuning
     constant (a Student-t between-event model would need its degrees of
     freedom, which 20 events cannot estimate).
@@ -850,8 +724,7 @@ def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_sca
     the scan). Why all others and not only the events before the change: a
     model of the few events before it extrapolates to the winds and
     amplitudes of the later events and gives them large offsets without any
-    change (measured on a simulated campaign without change: 4 of 6 events
-    flagged); the model of all other events covers every event's (A, U) as
+    change; the model of all other events covers every event's (A, U) as
     well as the campaign allows. Under a step of the linear coefficient by
     D, that model averages over both sides, and the events before and after
     the step get offsets about D apart. The null is calibrated on the events
@@ -867,12 +740,8 @@ def change_relative_flags(stats: list[dict], change_index: int, se, a_ref, y_sca
     ``between`` as in :func:`offset_flags`; the default stays the
     DerSimonian-Laird point estimate here, because the reference is only the
     few events before the change, whose tau the posterior leaves very
-    uncertain: measured, a damping step of -0.02 1/s after 6 of 12 simulated
-    events is caught in 4 of 6 later events with the point estimate and in 1
-    with the posterior; on the nodrift campaign (scan false alarm at E007)
-    the point estimate flags E012 and E013, the posterior E012; neither
-    flags any event after the change on the drift or step campaigns. These
-    flags inherit the scan's campaign-level control.
+    uncertain, so that it would rarely flag a later event. These flags
+    inherit the scan's campaign-level control.
 
     Parameters
     ----------

@@ -66,6 +66,13 @@ from vivbench.io.window_model import (
     write_window_model,
     read_window_model,
 )
+from vivbench.io.varying_model import (
+    VARYING_MODEL_FORMAT,
+    VARYING_MODEL_VERSION,
+    varying_model_dataset,
+    write_varying_model,
+    read_varying_model,
+)
 from vivbench.io.quality import (
     G,
     MAX_ACC_RMS,
@@ -93,7 +100,8 @@ __all__ = [
     "read_campaign_regimes", "CAMPAIGN_MODEL_CLASSES", "regimes_model_name", "write_campaign_model", "read_campaign_model",
     "GREYBOX_NAME", "GREYBOX_FORMAT", "GREYBOX_VERSION", "write_greybox", "read_greybox",
     "WINDOW_MODEL_FORMAT",
-    "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
+    "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "VARYING_MODEL_FORMAT", "VARYING_MODEL_VERSION",
+    "varying_model_dataset", "write_varying_model", "read_varying_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
     "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude",
     "check_wind_varies", "import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
 ]

@@ -14,6 +14,7 @@ from vivbench.models.binned import BinnedPolynomial
 from vivbench.models.curve_support import (EXTRAPOLATED, curves_inside_data, data_wind_range, extrapolated_mask,
                                            mark_extrapolated)
 from vivbench.models.greybox import BridgeProperties, GreyBoxRefit, curves_to_functions
+from vivbench.models.integrate import Integration, StopRule, rk4
 from vivbench.models.protocol import (
     Method,
     FittedModel,
@@ -73,6 +74,6 @@ __all__ = [
     "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",
     "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "EventWindowSINDy",
     "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "modal_wind_weights", "weighted_section_mean",
-    "measured_input",
+    "measured_input", "Integration", "StopRule", "rk4",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
 ]

@@ -42,6 +42,7 @@ import xarray as xr
 
 import vivbench
 from vivbench.io.campaign_model import read_campaign_model, write_campaign_model
+from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
 from vivbench.regression.stlsq import aicc, stlsq_path
 from vivbench.library.basis import window_library
@@ -373,8 +374,7 @@ class PooledSINDy(ModelBase):
         # Replicate 0 is the data itself; the others resample blocks with replacement.
         mult = np.ones((1 + self.n_bootstrap, offset))
         if self.n_bootstrap:
-            draws = rng.integers(0, offset, size=(self.n_bootstrap, offset))
-            mult[1:] = np.stack([np.bincount(d, minlength=offset) for d in draws])
+            mult[1:] = block_counts(offset, self.n_bootstrap, rng, draw="indices")
         factors = _block_factors(lib.theta[0], y, block, offset)
         coef_scaled, sel, best_rss, best_aicc = _replicate_fits(factors, mult, settings, self.chunk_size)
         phys = lib.physical_coef(np.nan_to_num(coef_scaled)) * ys[None, :, None]

@@ -15,10 +15,45 @@ import xarray as xr
 
 from vivbench.core.record import Record
 
-__all__ = ["EXTRAPOLATED", "data_wind_range", "mark_extrapolated", "extrapolated_mask", "curves_inside_data"]
+__all__ = ["EXTRAPOLATED", "CURVE_UNITS", "curves_dataset", "data_wind_range", "mark_extrapolated", "extrapolated_mask",
+           "curves_inside_data"]
 
 #: Name of the marking variable in a curves dataset.
 EXTRAPOLATED = "curves_extrapolated"
+
+#: Units of the coefficient curves a_ki (of A_k^i in dA_k/dt).
+CURVE_UNITS = "m^(1-order) s-1"
+
+
+def curves_dataset(point: np.ndarray, lower: np.ndarray, upper: np.ndarray, wind: np.ndarray, *, band: str,
+                   model: str) -> xr.Dataset:
+    """The coefficient curves a_ki(U) of docs/concepts.md (coefficient curves) with their band, as a dataset.
+
+    Parameters
+    ----------
+    point, lower, upper : ndarray, shape (S, 4, n_wind), m^(1-i)/s
+        The curves and their band's limits (equation, order, wind).
+    wind : ndarray, shape (n_wind,), m/s
+    band : str
+        What the band is (e.g. "0.95 bootstrap band"), for the limits' long names.
+    model : str
+        The model's class name (attribute ``model``).
+
+    Returns
+    -------
+    xarray.Dataset
+        ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind).
+    """
+    dims = ("equation", "order", "wind")
+    return xr.Dataset(
+        {"curves": (dims, point, {"units": CURVE_UNITS,
+                                  "long_name": "coefficient of A_k^order at wind U (docs/concepts.md (coefficient curves))"}),
+         "curves_lower": (dims, lower, {"units": CURVE_UNITS, "long_name": f"lower {band}"}),
+         "curves_upper": (dims, upper, {"units": CURVE_UNITS, "long_name": f"upper {band}"})},
+        coords={"equation": [f"S{k + 1}" for k in range(point.shape[0])], "order": np.arange(4),
+                "wind": ("wind", wind, {"units": "m/s"})},
+        attrs={"model": model},
+    )
 
 
 def data_wind_range(records: Sequence[Record], *, need_dA: bool = True) -> np.ndarray:

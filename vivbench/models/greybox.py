@@ -20,14 +20,7 @@ ratio zeta, mode shape phi and tributary lengths L, beta_k = L_k phi_k / sum_l
 L_l phi_l^2) are the user's (:class:`BridgeProperties`); without a mode shape
 |phi| is taken from the median amplitude ratios of the data (largest 1).
 
-Structural damping and Y1. Both enter the linear coefficient, -zeta w and
-sum_k beta_k phi_k rho U_k D Y1(U_k) / (2 m), and with Y1 a free function of U
-they cannot be told apart from amplitude records alone (Y1 = -K / U would mimic
-any damping). The damping ratio is therefore *given*: measured from free
-decays at quiet wind, where the aerodynamic part rho U D Y1 / m vanishes with
-U, or from the design value. A wrong zeta moves Y1 by (delta zeta) 2 m w /
-(rho U D sum beta phi) and leaves the fitted dynamics (the curves a_k1 and
-dA/dt) unchanged, so the curves of docs/concepts.md (coefficient curves) do not depend on it.
+Structural damping is given, not fitted (:mod:`vivbench.models.greybox_physics`).
 
 Fit (output error, all events at once): multiple shooting of Q over
 intervals of ``shooting_interval`` seconds on a grid of step ``dt``, RK4 with
@@ -49,18 +42,9 @@ says so (``fit_info_["yaw"]``): Y1 and C_L are then averages over the
 events' yaw angles. The curves (docs/concepts.md (coefficient curves)) and the physical functions are
 reported at yaw 0 (w = 1), as the truth's are.
 
-Starts (multi-start against wrong local minima). The candidates are the
-campaign model's curves (``warm_start``), an equation-error fit with e1 and
-e2 constant (picked from a grid; Y1 and C_L splines by linear least squares
-on finite differences of Q), an equation-error fit of the same model in
-product form (Y1, Y1 e1, Y1 e2, C_L as splines) and copies of the first
-with every function scaled by a seeded log-normal factor and a random yaw
-coefficient. The roughness penalty is scaled once, at the first start,
-before any start is iterated, so all starts minimise one objective; each
-start runs ``screen_iter`` Gauss-Newton iterations at the loosest continuity
-weight, and the one with the lowest penalised cost there is iterated to
-convergence. The draws come from ``seed``: the same data and seed give the
-same fit.
+Starts: a multi-start (:mod:`vivbench.models.greybox_starts`), the penalty
+scaled once at the first start so every start minimises one objective; the
+draws come from ``seed``: the same data and seed give the same fit.
 
 Penalty (``penalty_grid``): the fit at ``penalty`` is continued at every
 other value of the grid, and the fit with the least generalised
@@ -82,24 +66,14 @@ Uncertainty (``band``), covariances of the spline coefficients
 - "posterior": the Bayesian posterior covariance of the penalised spline,
   sigma^2 kappa H^-1 (Wahba 1983, Nychka 1988), residual variance sigma^2 =
   RSS / (n - edf), kappa the batch-means variance inflation of the residuals
-  (block ``block_s``). Measured on campaign A (penalty 0.3) its bands are
-  half as wide as the sandwich's and cover the truth's a_k1 at 62 % of the
-  lock-in winds (the sandwich: 100 %): the residuals' slow correlation acts
-  on the spline directions more strongly than on their plain sum, which is
-  all kappa sees.
+  (block ``block_s``). The residuals' slow correlation acts on the spline
+  directions more strongly than on their plain sum, which is all kappa sees,
+  so these bands can be too narrow.
 - "sandwich": the block sandwich alone, the estimator's variance only.
 - "bootstrap" / "bootstrap_bias" (``n_boot`` > 0): the covariance of refits
   on events drawn with replacement (:mod:`vivbench.models.greybox_bootstrap`),
-  alone or plus the bias term above. Measured with 30 replicates, 10
-  iterations a stage (share of the lock-in winds where the 95 % band of a_k1
-  holds the truth; bootstrap / bootstrap plus bias / sandwich plus bias):
-  A 70 / 80 / 98 %, B 75 / 83 / 85 %, C 66 / 66 / 68 %; the replicates took
-  513 s (A), 553 s (B), 460 s (C) on top of the fit (a loaded machine). The
-  bootstrap's bands are narrower than the sandwich's (half-width 0.5, 0.7,
-  0.8 of it; a likely reason, not measured: the sandwich's event scores
-  are not centred and so also hold the penalty's gradient). It is an option, not the default: it covers no
-  better on B and C and costs ten times the 60 s budget.
-
+  alone or plus the bias term above; each replicate costs up to two
+  continuation stages of Gauss-Newton iterations.
 - "sandwich_bias_wind" (default; ``wind_draws`` >= 2): "sandwich_bias" plus the
   wind's errors-in-variables (:mod:`vivbench.models.greybox_wind`): the
   second moment of ``wind_draws`` refits (``wind_iter`` iterations a
@@ -108,64 +82,12 @@ Uncertainty (``band``), covariances of the spline coefficients
   anemometers, relative, permuted and signed), about the same refit with
   the wind unperturbed: their spread and their mean shift squared (the
   linear SIMEX estimate of the error's bias). ``band_components`` and the
-  file's ``band_sd`` give each component's share.
+  file's ``band_sd`` give each component's share. The truncated refits make
+  the component of the order of the error's effect, not an exact estimate of it.
 
-Bands of the other choices hold no error of the inputs. Bridge B (issue 14,
-a_k1's "sandwich_bias" band covered the truth at 85 % of the lock-in
-winds): the misses lie on the high-wind flank, 10.8-11.5 m/s, the fit above
-the truth by up to 1.37 half-widths (0.16 of the RMS of a_k1; the peak is
-0.085 above, inside). With the truth's felt wind substituted for the
-measured one (``bench_greybox_substitution.py --substitute U``) the data
-RSS falls from 517 to 121, a_k1's error from 0.081 to 0.057 and dA/dt's
-from 0.073 to 0.021: the anemometers' error is most of the misfit, and the
-bias it leaves is what the band misses. Measured with 4 wind draws
-(scale 1, 2 iterations a stage; coverage of a_k1's band over the lock-in
-winds, mean half-width / RMS of a_k1; "sandwich_bias" -> "sandwich_bias_wind"):
-A 97.5 % -> 100 %, 0.18 -> 0.29; B 85 % -> 100 %, 0.15 -> 0.23; C (seed 11)
-68 % -> 100 %, 0.13 -> 0.27. The refits' mean shift is most of the
-component (share of its trace: A 0.81, B 0.60, C 0.25). ``vivbench
-greybox`` on B: the wind component is a median 0.43 of the variance of
-a_k1's band; the wider band leaves fewer windows with an identifiable
-regime verdict (0.66 -> 0.56 of the windows), whose verdicts are right
-more often (0.983 -> 0.994); on C (seed 11) the share is 0.77, the
-identifiable windows 0.86 -> 0.69 and their verdicts right 0.85 -> 0.95;
-on C seed 23 the band covered before and after (share 0.62, windows 0.50
--> 0.49), seed 31 likewise (share 0.68, windows 0.65 -> 0.62); on A
-share 0.50, windows 0.69 -> 0.66, right 0.994 -> 0.996.
-Correcting the
-curve by the SIMEX shift instead (fit minus the mean shift) changes a_k1's
-error to A 0.073 -> 0.086, B 0.081 -> 0.077, C 0.116 -> 0.092: worse on A
-(the tuning campaign), so the shift only widens the band. On synthetic
-envelopes with a known slow 1 % anemometer error the component's SD is 0.3
-to 0.5 of the fit's actual move from the felt-wind fit (truncated refits;
-10 iterations a stage: 0.43 against 0.31), where the sandwich's is 4.8 times that move: the
-component is of the order of the error's effect, not an exact estimate of
-it. A single linearised step per draw instead of the refits fails (module
-:mod:`vivbench.models.greybox_wind`).
-
-None covers the model's own limits (e.g. a truth whose yaw dependence is
-not of the form 1 - c sin^2 psi).
-
-Bridge C (seed 11) diagnosis, issue 14 (a_k1 error 0.116, bands cover 68 %):
-the misses lie at the peak and its high-wind flank (8.2-9.1 m/s, the fit
-+13 % to +26 % of the RMS of a_k1 above the truth), not at the flanks' ends;
-the fit trades a_k1 against a stronger A^2 limiting term (a_2 at 8.5 m/s
--0.079 against the truth's -0.048, a_3 near 0): the e1 A^2 / e2 A^3 split
-and a_k1 form a nearly flat direction (sandwich correlation of a_1 and a_2
-at the peak -0.84, over the bootstrap replicates -0.85). Truth substitution
-(inputs interpolated onto the measured grid, same fit): the truth's felt
-wind 0.096, the true envelope 0.115, both 0.093; so the point anemometer
-costs about 0.02 and the rest is not errors-in-variables. Refits started at
-the truth's curves land elsewhere: on the true (U, A) at 0.026 with a data
-RSS 30 % below the default fit's (17.9 against 25.6: the multi-start misses
-that minimum there); on the measured data at 0.049 with an RSS 1.2 % above
-the default fit's (462.2 against 456.7): with the measured wind the data
-prefer the biased minimum, so no start or band from the data's variance
-fixes it (the bootstrap replicates' a_1 at 8.5 m/s: 0.0138 +- 0.0004, the
-truth 0.0120). A 100-fold roughness penalty on e1 and e2 (tuned on A: a_k1
-0.073 -> 0.074) left C at 0.114 and made B worse (0.081 -> 0.189). The
-other bridge C seeds give 0.061 (seed 23) and 0.084 (seed 31), both bands
-covering: seed 11 is the worst of three, not typical.
+Bands of the other choices hold no error of the inputs, and none covers the
+model's own limits (e.g. a truth whose yaw dependence is not of the form
+1 - c sin^2 psi).
 """
 
 from __future__ import annotations
@@ -174,18 +96,21 @@ import json
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
 
 import numpy as np
 import xarray as xr
-from scipy.stats import norm
 
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
+from vivbench.library.splines import bspline_basis, difference_penalty, uniform_knots
 from vivbench.models.curve_support import mark_extrapolated
-from vivbench.models.campaign import amplitude_ratios
+from vivbench.models.integrate import rk4
 from vivbench.models.greybox_bootstrap import event_bootstrap
-from vivbench.models.greybox_shooting import rk4_step_function, shooting_grid
+from vivbench.models.greybox_curves import FUNCTIONS, GreyBoxCurves
+from vivbench.models.greybox_physics import (BridgeProperties, curves_to_functions, g_from_values, mode_geometry,
+                                           section_factors)
+from vivbench.models.greybox_shooting import shooting_grid
+from vivbench.models.greybox_starts import greybox_starts
 from vivbench.models.greybox_solve import (
     ShootingProblem,
     gcv_score,
@@ -199,12 +124,9 @@ from vivbench.models.greybox_wind import (
 )
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
-from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots
 
 __all__ = ["BridgeProperties", "GreyBoxRefit", "FUNCTIONS", "BANDS", "curves_to_functions"]
 
-#: The unknown functions, in the order of the coefficient rows.
-FUNCTIONS = ("Y1", "e1", "e2", "C_L")
 
 #: What each ``band`` choice holds (stated in the fit's output).
 _BAND_NOTES = {
@@ -229,146 +151,6 @@ BANDS = tuple(_BAND_NOTES)
 _FIRST_WEIGHT = 1e2
 
 
-@dataclass(frozen=True, kw_only=True)
-class BridgeProperties:
-    """What the user knows about the bridge and its mode (never read from a synthetic truth by the fit).
-
-    Parameters
-    ----------
-    mass : float, kg/m
-        Equivalent modal mass per unit length m.
-    depth : float, m
-        Deck depth D.
-    frequency : float, Hz
-        The mode's frequency f.
-    damping_ratio : float
-        Structural damping ratio zeta (dimensionless, >= 0).
-    air_density : float, kg/m^3
-    mode_shape : tuple of float or None
-        phi_k at the instrumented sections; None: ``|phi|`` from the data's amplitude ratios.
-    tributary_lengths : tuple of float or None, m
-        L_k of the sections' strips; None: equal lengths.
-    """
-
-    mass: float
-    depth: float
-    frequency: float
-    damping_ratio: float
-    air_density: float = 1.225
-    mode_shape: tuple[float, ...] | None = None
-    tributary_lengths: tuple[float, ...] | None = None
-
-    def __post_init__(self):
-        for name in ("mass", "depth", "frequency", "air_density"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"bridge {name} must be a finite positive number; got {v!r}")
-        if not (isinstance(self.damping_ratio, (int, float)) and math.isfinite(self.damping_ratio)
-                and 0 <= self.damping_ratio < 1):
-            raise InputError(f"bridge damping_ratio must lie in [0, 1); got {self.damping_ratio!r}")
-        for name in ("mode_shape", "tributary_lengths"):
-            v = getattr(self, name)
-            if v is None:
-                continue
-            try:
-                arr = tuple(float(x) for x in v)
-            except (TypeError, ValueError):
-                raise InputError(f"bridge {name} must be a list of numbers; got {v!r}") from None
-            if not arr or not all(math.isfinite(x) for x in arr):
-                raise InputError(f"bridge {name} must be a non-empty list of finite numbers; got {v!r}")
-            if name == "tributary_lengths" and min(arr) <= 0:
-                raise InputError(f"bridge tributary_lengths must be positive; got {v!r}")
-            object.__setattr__(self, name, arr)
-
-    @property
-    def omega(self) -> float:
-        """Circular frequency w = 2 pi f, rad/s."""
-        return 2.0 * math.pi * self.frequency
-
-    def to_json(self) -> str:
-        return json.dumps(asdict(self), sort_keys=True)
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "BridgeProperties":
-        allowed = {"mass", "depth", "frequency", "damping_ratio", "air_density", "mode_shape", "tributary_lengths"}
-        unknown = set(data) - allowed
-        if unknown:
-            raise InputError(f"unknown bridge propert{'ies' if len(unknown) > 1 else 'y'} {sorted(unknown)}; "
-                             f"allowed: {sorted(allowed)}")
-        missing = {"mass", "depth", "frequency", "damping_ratio"} - set(data)
-        if missing:
-            raise InputError(f"bridge properties lack {sorted(missing)} (kg/m, m, Hz, ratio)")
-        return cls(**data)
-
-
-def section_factors(U: np.ndarray, bridge: BridgeProperties, phi: np.ndarray, beta: np.ndarray) -> np.ndarray:
-    """Factors a_ik with g_0 = sum a_0k C_L, g_1 = sum a_1k Y1, g_2 = sum a_2k Y1 e1, g_3 = sum a_3k Y1 e2.
-
-    Parameters
-    ----------
-    U : ndarray, shape (..., S), m/s
-
-    Returns
-    -------
-    ndarray, shape (..., S, 4); units of g_i (m^(1-i)/s) per unit function.
-    """
-    rho, D, m, w = bridge.air_density, bridge.depth, bridge.mass, bridge.omega
-    U = np.asarray(U, dtype=float)
-    return np.stack([
-        beta * rho * U**2 * D / (4.0 * m * w),
-        beta * phi * rho * U * D / (2.0 * m),
-        -beta * phi * np.abs(phi) * rho * U * (2.0 / (3.0 * math.pi)) / m,
-        -beta * phi**3 * rho * U / (8.0 * m * D),
-    ], axis=-1)
-
-
-def _g_from_values(F: np.ndarray, a: np.ndarray, zw: float) -> np.ndarray:
-    """g (..., 4) from function values F (..., S, 4) [Y1, e1, e2, C_L] and factors a (..., S, 4)."""
-    Y, E1, E2, CL = F[..., 0], F[..., 1], F[..., 2], F[..., 3]
-    return np.stack([(a[..., 0] * CL).sum(-1), (a[..., 1] * Y).sum(-1) - zw,
-                     (a[..., 2] * Y * E1).sum(-1), (a[..., 3] * Y * E2).sum(-1)], axis=-1)
-
-
-def _penalised_fit(B: np.ndarray, v: np.ndarray, K: np.ndarray, lam: float = 1e-3) -> np.ndarray:
-    """Spline coefficients of values v (n,) on basis B (n, M) with a small roughness penalty."""
-    ok = np.isfinite(v)
-    G = B[ok].T @ B[ok]
-    return np.linalg.solve(G + lam * np.trace(G) / np.trace(K) * K + 1e-12 * np.eye(K.shape[0]), B[ok].T @ v[ok])
-
-
-def curves_to_functions(wind: np.ndarray, p: np.ndarray, bridge: BridgeProperties, phi: np.ndarray,
-                        beta: np.ndarray, *, share: float = 0.3) -> np.ndarray:
-    """Y1, e1, e2, C_L on a wind grid from the amplitude-equation coefficients p_i(U) (all sections at U).
-
-    Parameters
-    ----------
-    wind : ndarray, shape (n,), m/s
-    p : ndarray, shape (4, n)
-        p_i(U) such that dQ/dt = sum_i p_i Q^i (p_1 includes -zeta w).
-    share : float
-        e1 and e2 are read only where Y1 exceeds this share of its largest
-        value (elsewhere Y1 e is near 0/0); outside, their median there.
-
-    Returns
-    -------
-    ndarray, shape (4, n) [Y1, e1, e2, C_L]; e and C_L clipped at 0.
-    """
-    U = np.repeat(np.asarray(wind, dtype=float)[:, None], phi.size, axis=1)
-    k = section_factors(U, bridge, phi, beta).sum(axis=1)  # (n, 4)
-    Y = (p[1] + bridge.omega * bridge.damping_ratio) / k[:, 1]
-    CL = np.clip(p[0] / k[:, 0], 0.0, None)
-    out = [Y]
-    big = np.isfinite(Y) & (Y > share * np.nanmax(np.where(np.isfinite(Y), Y, -np.inf), initial=0.0)) & (Y > 0)
-    for i in (2, 3):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            e = p[i] / (k[:, i] * Y)
-        ok = big & np.isfinite(e) & (e > 0)
-        fill = float(np.median(e[ok])) if ok.any() else 1.0
-        out.append(np.where(ok, e, fill))
-    out.append(CL)
-    return np.stack(out)
-
-
 def _thirds(x: np.ndarray) -> np.ndarray:
     """Values at the stage points (I, 2n+1, ...) -> at the start, midpoint and end of every step (I, n, 3, ...)."""
     return np.stack([x[:, 0:-1:2], x[:, 1::2], x[:, 2::2]], axis=2)
@@ -385,7 +167,7 @@ def _g_function(B, a, B3, a3, s2, s2_3, use_yaw: bool, zw: float, M: int):
         F = B @ C.T  # (I, 2n+1, S, 4)
         # every order holds Y1 or C_L exactly once: the yaw factor scales each section's factors
         w = 1.0 - theta[4 * M] * s2 if use_yaw else None
-        g = _g_from_values(F, a if w is None else a * w[..., None], zw)
+        g = g_from_values(F, a if w is None else a * w[..., None], zw)
         F3 = _thirds(F)
         aw3 = a3 if w is None else a3 * _thirds(w)[..., None]
 
@@ -397,7 +179,7 @@ def _g_function(B, a, B3, a3, s2, s2_3, use_yaw: bool, zw: float, M: int):
             d = np.einsum("ijpsm,ijpsf->ijfm", B3, cw, optimize=True).reshape(B3.shape[0], B3.shape[1], 4 * M)
             if not use_yaw:
                 return d
-            hyaw = _g_from_values(F3, a3 * s2_3[..., None], 0.0)  # dg/dc = -hyaw, (I, n, 3, 4)
+            hyaw = g_from_values(F3, a3 * s2_3[..., None], 0.0)  # dg/dc = -hyaw, (I, n, 3, 4)
             return np.concatenate([d, -np.einsum("ijpf,ijpf->ij", wt, hyaw)[..., None]], axis=2)
 
         return g, dg
@@ -405,7 +187,7 @@ def _g_function(B, a, B3, a3, s2, s2_3, use_yaw: bool, zw: float, M: int):
     return g_of
 
 
-class GreyBoxRefit(ModelBase):
+class GreyBoxRefit(GreyBoxCurves, ModelBase):
     """Grey-box output-error refit of Y1, e1, e2, C_L over a campaign (docs/field_workflow.md (the grey-box reference)).
 
     Parameters
@@ -417,8 +199,7 @@ class GreyBoxRefit(ModelBase):
         Roughness penalty of each function relative to its share of the
         Gauss-Newton matrix at the first start (trace ratio), a dimensionless
         weight: the value of the first fit, and the final one when
-        ``penalty_grid`` is None (0.3 was picked by hand on campaign A; GCV
-        picked it from (0.1, 0.3, 1) on A, on bridge B and on bridge C).
+        ``penalty_grid`` is None.
     penalty_grid : tuple of float or None
         Penalties (same scale) whose fits are scored by GCV with the
         effective sample size (module docstring); None: ``penalty`` is kept.
@@ -443,9 +224,7 @@ class GreyBoxRefit(ModelBase):
         batch-means variance inflation: residuals are taken as
         correlated within a block of one event and independent between
         blocks. The default (a day) makes every event one block, which
-        accounts for the slow model error that runs through an event (on
-        campaign A, 300 s blocks covered the truth's a_k1 at 65 % of the
-        lock-in winds, event blocks at 78 %, both with penalty 1).
+        accounts for the slow model error that runs through an event.
     level : float
         Level of the confidence bands.
     continuity_weight : float
@@ -476,27 +255,21 @@ class GreyBoxRefit(ModelBase):
     boot_iter : int
         Levenberg-Marquardt iterations of a bootstrap replicate from the
         full fit's optimum in each of its two continuation stages (each one
-        linearisation). Measured on 6 synthetic events with slow errors: the
-        bootstrap's SD of a_k1 was 0.4 times the Monte Carlo SD over noise
-        draws with 2, 1.4 times with 10 (the sandwich's 1.6): a few
-        iterations leave the replicates near the optimum and the band too
-        narrow.
+        linearisation); a few iterations leave the replicates near the
+        optimum and the band too narrow.
     wind_draws : int
         Refits with the wind perturbed by draws of the anemometers' error
         (:mod:`vivbench.models.greybox_wind`) after the fit, for the band
         component of the wind's errors-in-variables (covariance "wind", band
         "sandwich_bias_wind"); 0: none (then pick another ``band``). Each
-        costs about 2 (``wind_iter`` + 1) linearisations; with 4 (and the
-        unperturbed one) the refit of campaign A took 60.5 s CPU against
-        40.7 s without, on a loaded machine (28 s idle without).
+        costs about 2 (``wind_iter`` + 1) linearisations.
     wind_scale : float
         Factor on the drawn wind error's size (1: the spread between the
         sections' anemometers as it is).
     wind_iter : int
         Levenberg-Marquardt iterations of a wind refit from the optimum in
-        each of its two continuation stages (1 covered the truth's a_k1 on
-        bridge C at 88 % of the lock-in winds, 2 at 100 %; the truncated
-        refits understate the error's effect, see the module docstring).
+        each of its two continuation stages (truncated refits understate the
+        error's effect, see the module docstring).
 
     Attributes
     ----------
@@ -620,7 +393,7 @@ class GreyBoxRefit(ModelBase):
     def _ur(self, U):
         return np.asarray(U, dtype=float) / (self.bridge.frequency * self.bridge.depth)
 
-    def _basis(self, U: np.ndarray) -> np.ndarray:
+    def basis_values(self, U: np.ndarray) -> np.ndarray:
         """B-spline values at winds U (any shape), shape U.shape + (M,)."""
         U = np.asarray(U, dtype=float)
         return bspline_basis(self._ur(U).ravel(), self.knots_).reshape(U.shape + (self.knots_.size - 4,))
@@ -629,26 +402,7 @@ class GreyBoxRefit(ModelBase):
         """Y1, e1, e2, C_L at winds U (any shape), shape U.shape + (4,) (dimensionless)."""
         self._check_fitted()
         coef = self.coef_ if coef is None else coef
-        return self._basis(U) @ coef.T
-
-    def _geometry(self, records: Sequence[Record]):
-        S = records[0].n_sections
-        b = self.bridge
-        if b.mode_shape is not None:
-            if len(b.mode_shape) != S:
-                raise InputError(f"bridge mode_shape has {len(b.mode_shape)} values; the records have {S} sections")
-            phi = np.array(b.mode_shape)
-        else:
-            ratios = amplitude_ratios(np.concatenate([r.A for r in records]))
-            ref = int(np.nanargmax(np.nanmedian(ratios, axis=0)))  # the section others are largest against
-            phi = np.abs(ratios[ref])
-            phi = np.where(np.isfinite(phi), phi, 1.0)
-            phi = phi / phi.max()
-        L = np.ones(S) if b.tributary_lengths is None else np.array(b.tributary_lengths)
-        if L.size != S:
-            raise InputError(f"bridge tributary_lengths has {L.size} values; the records have {S} sections")
-        beta = L * phi / np.sum(L * phi**2)
-        return phi, beta
+        return self.basis_values(U) @ coef.T
 
     # ------------------------------------------------------------------ fit
 
@@ -674,7 +428,7 @@ class GreyBoxRefit(ModelBase):
         S = records[0].n_sections
         if any(r.n_sections != S for r in records):
             raise InputError("all records must have the same number of sections")
-        phi, beta = self._geometry(records)
+        phi, beta = mode_geometry(self.bridge, records)
         amp = np.abs(phi)
         n_steps = max(1, int(round(self.shooting_interval / self.dt)))
         grid = shooting_grid(records, dt=self.dt, n_steps=n_steps)
@@ -686,7 +440,7 @@ class GreyBoxRefit(ModelBase):
         use_yaw = bool(self.yaw_factor) and bool(grid.has_yaw.any())
         self.yaw_used_ = use_yaw
         P = 4 * M + int(use_yaw)
-        B = self._basis(grid.U)  # (I, 2n+1, S, M)
+        B = self.basis_values(grid.U)  # (I, 2n+1, S, M)
         a = section_factors(grid.U, self.bridge, phi, beta)  # (I, 2n+1, S, 4)
         zw = self.bridge.omega * self.bridge.damping_ratio
         scale = np.array([np.sqrt(np.nanmean(r.A**2)) for r in records])[grid.event]
@@ -702,7 +456,7 @@ class GreyBoxRefit(ModelBase):
             if U is grid.U:
                 B_, a_ = B, a
             else:
-                B_, a_ = self._basis(U), section_factors(U, self.bridge, phi, beta)
+                B_, a_ = self.basis_values(U), section_factors(U, self.bridge, phi, beta)
             return _g_function(B_, a_, _thirds(B_), _thirds(a_), s2, s2_3, use_yaw, zw, M)
 
         g_of = g_builder(grid.U)
@@ -710,7 +464,7 @@ class GreyBoxRefit(ModelBase):
         lower = np.concatenate([np.full(M, -np.inf), np.zeros(3 * M), np.zeros(P - 4 * M)])
         probe = ShootingProblem(grid=grid, amp=amp, scale=scale, g_of=g_of, penalty=np.zeros((P, P)), lower=lower,
                                 continuity_weight=self.continuity_weight)
-        starts = self._starts(grid, B, a, zw, Qm, phi, beta, P, s2)
+        starts = greybox_starts(self, grid, B, a, zw, Qm, phi, beta, P, s2)
 
         def finite_start(name, theta0):
             theta0 = np.maximum(theta0, lower)
@@ -836,137 +590,6 @@ class GreyBoxRefit(ModelBase):
                           "band_info": res.band_info, "bootstrap": boot_info, "wind_error": wind_info}
         return self
 
-    def _starts(self, grid, B, a, zw, Qm, phi, beta, P, s2):
-        """The named starts of the multi-start.
-
-        The starts, in order: the warm start (if given), the equation-error
-        start with constant e1, e2, the product-form equation-error start,
-        then perturbed copies of the first (seeded), ``n_starts`` in all;
-        their yaw coefficient is 0 except in the perturbed ones.
-        """
-        M = self.n_basis
-        K = difference_penalty(M)
-        wind = np.linspace(*self.wind_range_, 200)
-        Bw = self._basis(wind)
-
-        def from_p(p):
-            F = curves_to_functions(wind, p, self.bridge, phi, beta)
-            return np.concatenate([_penalised_fit(Bw, F[f], K) for f in range(4)] + [np.zeros(P - 4 * M)])
-
-        eq = from_p(self._equation_error(grid, B, a, zw, Qm, wind, phi, beta))
-        starts = []
-        if self.warm_start is not None:
-            ws = self.warm_start
-            try:
-                cur = np.asarray(ws["curves"].values, dtype=float)
-                w = np.asarray(ws["wind"].values, dtype=float)
-            except (KeyError, TypeError) as exc:
-                raise InputError(f"warm_start must be a curves dataset of docs/concepts.md (coefficient curves) ({exc})") from None
-            if cur.shape[0] != phi.size or cur.shape[1] != 4:
-                raise InputError(f"warm_start curves must have shape ({phi.size}, 4, n_wind); got {cur.shape}")
-            ref = int(np.argmax(np.abs(phi)))
-            p = cur[ref] * phi[ref] ** (np.arange(4) - 1)[:, None]  # a_ki = phi_k^(1-i) p_i
-            starts.append(("warm start from curves", from_p(np.stack([np.interp(wind, w, pi) for pi in p]))))
-        ce, (e1c, e2c) = self._constant_e_start(grid, B, a, zw, Qm, P)
-        # the constant-e start before the product form: without a warm start it sets the penalty's scale and is
-        # the one perturbed (the product form's division by Y1 near its zeros can blow e1, e2 up by orders of
-        # magnitude: e2 ~ 2e6 on campaign A)
-        starts.append((f"equation error with constant e1 = {e1c:g}, e2 = {e2c:g} (grid)", ce))
-        starts.append(("equation error (product form)", eq))
-        base = starts[0][1]
-        rng = np.random.default_rng(self.seed)
-        # the yaw coefficient of a perturbed start: up to a factor 1/2 at the largest measured yaw
-        c_hi = 0.5 / max(float(np.max(s2)), 1e-6) if s2 is not None else 0.0
-        for j in range(self.n_starts - len(starts)):
-            # each function scaled by a log-normal factor, which keeps the signs and the bounds
-            factor = np.exp(self.start_spread * rng.standard_normal(4))
-            c = np.atleast_1d(rng.uniform(0.0, c_hi))[:P - 4 * M]
-            theta = np.concatenate([(base[:4 * M].reshape(4, M) * factor[:, None]).ravel(), c])
-            starts.append((f"perturbed start {j + 1} (seed {self.seed}; function factors "
-                           f"{', '.join(f'{x:.2f}' for x in factor)}"
-                           + (f", yaw coefficient {c[0]:.3g})" if c.size else ")"), theta))
-        return starts[:self.n_starts]
-
-    def _constant_e_start(self, grid, B, a, zw, Qm, P):
-        """Start from an equation-error fit with e1, e2 constant, picked from a grid, and Y1, C_L splines.
-
-        With e1 and e2 fixed the amplitude equation is linear in the splines
-        of C_L and Y1: dQ/dt + zeta w Q = sum_k a_0k C_L + sum_k Y1 (a_1k Q +
-        a_2k e1 Q^2 + a_3k e2 Q^3). Every pair (e1, e2) of a small logarithmic
-        grid is solved by penalised linear least squares on finite
-        differences of Q (each event's rows divided by its amplitude scale),
-        and the pair with the least residual kept; C_L is clipped at 0. The
-        constant, non-negative limiting terms keep the start's simulation
-        bounded where the product form's e = (Y1 e) / Y1 explodes near a zero of Y1.
-
-        Returns
-        -------
-        theta : ndarray, shape (P,)
-        (e1, e2) : the chosen constants
-        """
-        M = self.n_basis
-        Bg, ag = B[:, 0::2], a[:, 0::2]
-        dQ = np.gradient(Qm, grid.h, axis=1)
-        powers = Qm[..., None] ** np.arange(4)
-        X = np.einsum("ijsm,ijsf,ijf->ijfm", Bg, ag, powers)  # (I, n+1, 4, M) by order
-        ok = grid.weight > 0
-        ev, inv = np.unique(grid.event, return_inverse=True)
-        num, den = np.zeros(ev.size), np.zeros(ev.size)
-        np.add.at(num, inv, np.sum(np.where(ok, Qm, 0.0) ** 2, axis=1))
-        np.add.at(den, inv, ok.sum(axis=1))
-        w = np.broadcast_to((1.0 / np.sqrt(np.maximum(num / np.maximum(den, 1), 1e-300)))[inv][:, None],
-                            ok.shape)[ok]
-        Xf = X[ok].reshape(-1, 4 * M) * w[:, None]
-        y = (dQ[ok] + zw * Qm[ok]) * w
-        G, b, yy = Xf.T @ Xf, Xf.T @ y, float(y @ y)
-        K = difference_penalty(M)
-        e1_grid = np.array([0.0, 3.0, 10.0, 30.0, 100.0])
-        e2_grid = np.logspace(1.0, 4.0, 13)
-        best = (np.inf, None, None)
-        for e1 in e1_grid:
-            for e2 in e2_grid:
-                T = np.zeros((4 * M, 2 * M))
-                T[:M, :M] = np.eye(M)  # C_L
-                T[M:2 * M, M:] = np.eye(M)  # Y1 a_1
-                T[2 * M:3 * M, M:] = e1 * np.eye(M)
-                T[3 * M:, M:] = e2 * np.eye(M)
-                Gt, bt = T.T @ G @ T, T.T @ b
-                sc = np.sqrt(np.maximum(np.diag(Gt), 1e-300))
-                Gs = Gt / np.outer(sc, sc)
-                pen = np.kron(np.eye(2), K)
-                c = np.linalg.solve(Gs + 1e-3 * np.trace(Gs) / np.trace(pen) * pen + 1e-10 * np.eye(2 * M),
-                                    bt / sc) / sc
-                rss = yy - 2.0 * c @ bt + c @ Gt @ c
-                if rss < best[0]:
-                    best = (rss, (float(e1), float(e2)), c)
-        _, (e1, e2), c = best
-        theta = np.concatenate([c[M:], np.full(M, e1), np.full(M, e2), np.clip(c[:M], 0.0, None),
-                                np.zeros(P - 4 * M)])
-        return theta, (e1, e2)
-
-    def _equation_error(self, grid, B, a, zw, Qm, wind, phi, beta) -> np.ndarray:
-        """p_i(U) on ``wind`` from linear least squares of dQ/dt in the product form."""
-        M = self.n_basis
-        Bg, ag = B[:, 0::2], a[:, 0::2]  # grid points
-        dQ = np.gradient(Qm, grid.h, axis=1)
-        powers = Qm[..., None] ** np.arange(4)  # (I, n+1, 4)
-        X = np.einsum("ijsm,ijsf,ijf->ijfm", Bg, ag, powers)  # columns (CL*, Y, H2, H3) by order
-        ok = grid.weight > 0
-        Xf = X[ok].reshape(-1, 4 * M)
-        y = dQ[ok] + zw * Qm[ok]
-        sc = np.sqrt(np.mean(Xf**2, axis=0)) + 1e-300
-        K = difference_penalty(M)
-        Pen = np.kron(np.eye(4), K)
-        G = (Xf / sc).T @ (Xf / sc)
-        c = np.linalg.solve(G + 1e-3 * np.trace(G) / np.trace(Pen) * Pen + 1e-10 * np.eye(4 * M), (Xf / sc).T @ y) / sc
-        c = c.reshape(4, M)  # order-major: C_L, Y1, Y1 e1, Y1 e2
-        Uw = np.repeat(wind[:, None], phi.size, axis=1)
-        k = section_factors(Uw, self.bridge, phi, beta).sum(axis=1)
-        vals = self._basis(wind) @ c.T  # (n, 4)
-        p = (k * vals).T
-        p[1] -= zw
-        return p
-
     # ------------------------------------------------------------------ evaluation
 
     def yaw_factor_values(self, yaw, yaw_coef: float | None = None) -> np.ndarray:
@@ -995,7 +618,7 @@ class GreyBoxRefit(ModelBase):
         F = self.function_values(U, coef)
         a = section_factors(U, self.bridge, self.phi_, self.beta_) * self.yaw_factor_values(
             np.zeros(U.shape) if yaw is None else yaw)[..., None]
-        return _g_from_values(F, a, self.bridge.omega * self.bridge.damping_ratio)
+        return g_from_values(F, a, self.bridge.omega * self.bridge.damping_ratio)
 
     def amplitude_coefficient_function(self, U, yaw=None):
         """A function of draws giving g_i at section winds U (n, S) and yaw (n, S) degrees: shape (c, n, 4).
@@ -1006,7 +629,7 @@ class GreyBoxRefit(ModelBase):
         """
         self._check_fitted()
         U = np.asarray(U, dtype=float)
-        B = self._basis(U)  # (n, S, M)
+        B = self.basis_values(U)  # (n, S, M)
         a = section_factors(U, self.bridge, self.phi_, self.beta_)
         s2 = self._yaw_sin2(yaw, U.shape)
         zw = self.bridge.omega * self.bridge.damping_ratio
@@ -1017,7 +640,7 @@ class GreyBoxRefit(ModelBase):
                                 (coef.shape[0],))
             F = np.einsum("nsm,cfm->cnsf", B, coef, optimize=True)
             w = 1.0 - c[:, None, None] * s2[None]  # (c, n, S)
-            return _g_from_values(F, a[None] * w[..., None], zw)
+            return g_from_values(F, a[None] * w[..., None], zw)
 
         return g
 
@@ -1057,15 +680,17 @@ class GreyBoxRefit(ModelBase):
         Q = np.full(ts.size, np.nan)
         Q[0] = Q0
         if n > 0:
-            h = np.diff(ts[:n + 1])
             Umid = 0.5 * (U[:n] + U[1:n + 1])
             Y = np.zeros_like(U) if record.yaw is None else np.nan_to_num(record.yaw[i0:i1 + 1], nan=0.0)
             ga, gm, gb = (self.amplitude_coefficients(x, yaw=y) for x, y in
                           ((U[:n], Y[:n]), (Umid, 0.5 * (Y[:n] + Y[1:n + 1])), (U[1:n + 1], Y[1:n + 1])))
-            step = rk4_step_function()
-            run = step.mapaccum("run", n)
-            traj = np.asarray(run(Q0, np.concatenate([ga, gm, gb], axis=1).T, h[None, :])).ravel()
-            Q[1:n + 1] = traj
+            g_stage = (ga, gm, gb)  # the coefficients at each step's start, midpoint and end
+
+            def f(q, j, stage):
+                c = g_stage[stage][j]
+                return c[0] + q * (c[1] + q * (c[2] + q * c[3]))
+
+            Q[1:n + 1] = rk4(f, [Q0], ts[:n + 1]).x[1:, 0]
         bad = ~np.isfinite(Q)
         stopped_at, reason = None, None
         if bad.any():
@@ -1078,173 +703,6 @@ class GreyBoxRefit(ModelBase):
         covered = 1.0 if stopped_at is None else float((stopped_at - ts[0]) / max(ts[-1] - ts[0], 1e-300))
         return Simulation(t=ts, A_sim=A_sim, A_meas=A_meas, stopped_at=stopped_at, reason=reason,
                           nmse=nmse(A_sim, A_meas), covered=covered, windows=np.zeros(0, dtype=int))
-
-    # ------------------------------------------------------------------ curves
-
-    def _z(self) -> float:
-        return float(norm.ppf(0.5 + 0.5 * self.level))
-
-    def _bands(self, value: np.ndarray, grad: np.ndarray):
-        """value (...), grad (..., P) -> lower, upper by the delta method."""
-        P = grad.shape[-1]  # the spline block (curves at yaw 0 do not depend on the yaw coefficient)
-        sd = np.sqrt(np.maximum(np.einsum("...a,ab,...b->...", grad, self.cov_[:P, :P], grad), 0.0))
-        return value - self._z() * sd, value + self._z() * sd
-
-    def default_wind(self, step: float = 0.1) -> np.ndarray:
-        """The fitted data's wind range on multiples of ``step`` (m/s)."""
-        self._check_fitted()
-        lo, hi = self.wind_range_
-        return np.arange(math.ceil(lo / step - 1e-9), math.floor(hi / step + 1e-9) + 1) * step
-
-    def physical_curves(self, wind=None) -> xr.Dataset:
-        """Y1, e1, e2, C_L against wind with their bands (``<name>_lower``, ``<name>_upper``)."""
-        self._check_fitted()
-        wind = self.default_wind() if wind is None else np.atleast_1d(np.asarray(wind, dtype=float))
-        B = self._basis(wind)  # (n, M)
-        M = self.n_basis
-        data = {}
-        for f, name in enumerate(FUNCTIONS):
-            val = B @ self.coef_[f]
-            grad = np.zeros((wind.size, 4 * M))
-            grad[:, f * M:(f + 1) * M] = B
-            lo, hi = self._bands(val, grad)
-            data[name] = ("wind", val, {"units": "1", "long_name": f"{name} at wind U (yaw 0)"})
-            data[f"{name}_lower"] = ("wind", lo, {"units": "1", "long_name": f"lower {self.level:g} band of {name}"})
-            data[f"{name}_upper"] = ("wind", hi, {"units": "1", "long_name": f"upper {self.level:g} band of {name}"})
-        return xr.Dataset(data, coords={"wind": ("wind", wind, {"units": "m/s"}),
-                                        "reduced_velocity": ("wind", self._ur(wind), {"units": "1"})})
-
-    def yaw_curve(self, yaw=None) -> xr.Dataset:
-        """The yaw coefficient c and the factor 1 - c sin^2(yaw) on Y1 and C_L, with bands.
-
-        Parameters
-        ----------
-        yaw : array_like or None, degrees (default -30..30 by 1)
-
-        Returns
-        -------
-        xarray.Dataset
-            ``yaw_coef`` (scalar, with ``yaw_coef_lower``, ``yaw_coef_upper``)
-            and ``yaw_factor`` (yaw) with ``yaw_factor_lower``/``_upper``;
-            c = 0 with a zero-width band when the yaw factor was not fitted
-            (attribute ``yaw_used`` 0).
-        """
-        self._check_fitted()
-        yaw = np.arange(-30.0, 30.5, 1.0) if yaw is None else np.atleast_1d(np.asarray(yaw, dtype=float))
-        c = float(self.yaw_coef_)
-        sd = float(np.sqrt(max(self.cov_[-1, -1], 0.0))) if self.yaw_used_ else 0.0
-        lo, hi = max(c - self._z() * sd, 0.0), c + self._z() * sd  # c >= 0 is a bound of the fit
-        s2 = np.sin(np.radians(yaw)) ** 2
-        att = {"units": "1"}
-        return xr.Dataset(
-            {"yaw_coef": ((), c, {**att, "long_name": "c of the yaw factor 1 - c sin^2(yaw) on Y1 and C_L"}),
-             "yaw_coef_lower": ((), lo, {**att, "long_name": f"lower {self.level:g} band of yaw_coef (>= 0)"}),
-             "yaw_coef_upper": ((), hi, {**att, "long_name": f"upper {self.level:g} band of yaw_coef"}),
-             "yaw_factor": ("yaw", 1.0 - c * s2, {**att, "long_name": "factor on Y1 and C_L at the yaw angle"}),
-             "yaw_factor_lower": ("yaw", 1.0 - hi * s2, {**att, "long_name": f"lower {self.level:g} band"}),
-             "yaw_factor_upper": ("yaw", 1.0 - lo * s2, {**att, "long_name": f"upper {self.level:g} band"})},
-            coords={"yaw": ("yaw", yaw, {"units": "degree", "long_name": "mean wind's angle to the span's normal"})},
-            attrs={"yaw_used": int(self.yaw_used_)})
-
-    def _curve_parts(self, wind: np.ndarray):
-        """p_i(U) (4, n) of the curves with every section at U, and their gradients in coef (4, n, 4 M)."""
-        S, M = self.n_sections_, self.n_basis
-        U = np.repeat(wind[:, None], S, axis=1)
-        k = section_factors(U, self.bridge, self.phi_, self.beta_).sum(axis=1)  # (n, 4)
-        B = self._basis(wind)
-        F = B @ self.coef_.T  # (n, 4)
-        Y, E1, E2, CL = F.T
-        p = np.stack([k[:, 0] * CL, k[:, 1] * Y - self.bridge.omega * self.bridge.damping_ratio,
-                      k[:, 2] * Y * E1, k[:, 3] * Y * E2])  # (4, n)
-        grad = np.zeros((4, wind.size, 4, M))
-        grad[0, :, 3] = k[:, 0, None] * B
-        grad[1, :, 0] = k[:, 1, None] * B
-        grad[2, :, 0] = (k[:, 2] * E1)[:, None] * B
-        grad[2, :, 1] = (k[:, 2] * Y)[:, None] * B
-        grad[3, :, 0] = (k[:, 3] * E2)[:, None] * B
-        grad[3, :, 2] = (k[:, 3] * Y)[:, None] * B
-        return p, grad.reshape(4, wind.size, 4 * M)
-
-    #: Components of the bands, each a covariance of coef: name -> how it is formed from ``covariances_``.
-    BAND_COMPONENTS = ("sandwich", "smoothing_bias", "wind")
-
-    def band_components(self, wind=None) -> xr.Dataset:
-        """Standard deviation of every curve a_ki(U) from each component of the band's covariance alone.
-
-        Components: "sandwich" (the estimator's variance, residuals correlated
-        within blocks), "smoothing_bias" (prior-averaged squared smoothing
-        bias), "wind" (second moment of refits with the wind perturbed by
-        draws of the anemometers' error, :mod:`vivbench.models.greybox_wind`);
-        NaN for a component the fit did not compute.
-        The chosen band's variance is the sum of the squares of its
-        components (``band_sd_used``).
-
-        Returns
-        -------
-        xarray.Dataset
-            ``band_sd`` (component, equation, order, wind), m^(1-i)/s, and
-            ``band_sd_used`` (component) 1 where the band holds the component.
-        """
-        self._check_fitted()
-        wind = self.default_wind() if wind is None else np.atleast_1d(np.asarray(wind, dtype=float))
-        _, grad = self._curve_parts(wind)
-        P = grad.shape[-1]
-        covs = self.covariances_
-        parts = {"sandwich": covs.get("sandwich"),
-                 "smoothing_bias": (covs["sandwich_bias"] - covs["sandwich"]
-                                    if "sandwich_bias" in covs and "sandwich" in covs else None),
-                 "wind": covs.get("wind")}
-        used = {"posterior": (), "sandwich": ("sandwich",), "sandwich_bias": ("sandwich", "smoothing_bias"),
-                "bootstrap": (), "bootstrap_bias": ("smoothing_bias",),
-                "sandwich_bias_wind": ("sandwich", "smoothing_bias", "wind")}[self.band]
-        fac = np.abs(self.phi_[:, None] ** (1 - np.arange(4))[None, :])  # (S, 4)
-        out = np.full((len(self.BAND_COMPONENTS), self.n_sections_, 4, wind.size), np.nan)
-        for j, name in enumerate(self.BAND_COMPONENTS):
-            c = parts[name]
-            if c is None:
-                continue
-            var = np.einsum("...a,ab,...b->...", grad, c[:P, :P], grad)
-            out[j] = fac[..., None] * np.sqrt(np.maximum(var, 0.0))[None]
-        units = "m^(1-order) s-1"
-        return xr.Dataset(
-            {"band_sd": (("component", "equation", "order", "wind"), out,
-                         {"units": units, "long_name": "standard deviation of a curve from one band component alone"}),
-             "band_sd_used": (("component",), np.array([int(n in used) for n in self.BAND_COMPONENTS]),
-                              {"units": "1", "long_name": "1 where the band's covariance holds the component"})},
-            coords={"component": list(self.BAND_COMPONENTS), "equation": section_names(self.n_sections_),
-                    "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})})
-
-    def curves(self, wind=None) -> xr.Dataset:
-        """Coefficient curves a_ki(U) of docs/concepts.md (coefficient curves) with delta-method bands.
-
-        a_ki = phi_k^(1-i) p_i(U), p_i the amplitude-equation coefficients with
-        every section at wind U (p_1 includes -zeta w).
-
-        Returns
-        -------
-        xarray.Dataset
-            ``curves``, ``curves_lower``, ``curves_upper`` (equation, order, wind), m^(1-i)/s.
-        """
-        self._check_fitted()
-        wind = self.default_wind() if wind is None else np.atleast_1d(np.asarray(wind, dtype=float))
-        if wind.ndim != 1 or not np.all(np.isfinite(wind)) or np.any(wind <= 0):
-            raise ValueError("wind must be a 1-D array of finite positive speeds in m/s")
-        p, grad = self._curve_parts(wind)
-        S, M = self.n_sections_, self.n_basis
-        lo, hi = self._bands(p, grad.reshape(4, wind.size, 4 * M))
-        fac = self.phi_[:, None] ** (1 - np.arange(4))[None, :]  # (S, 4)
-        point = fac[..., None] * p[None]
-        lower = np.where(fac[..., None] >= 0, fac[..., None] * lo[None], fac[..., None] * hi[None])
-        upper = np.where(fac[..., None] >= 0, fac[..., None] * hi[None], fac[..., None] * lo[None])
-        dims = ("equation", "order", "wind")
-        units = "m^(1-order) s-1"
-        return xr.Dataset(
-            {"curves": (dims, point, {"units": units, "long_name": "coefficient of A_k^order at wind U (docs/concepts.md (coefficient curves))"}),
-             "curves_lower": (dims, lower, {"units": units, "long_name": f"lower {self.level:g} delta-method band"}),
-             "curves_upper": (dims, upper, {"units": units, "long_name": f"upper {self.level:g} delta-method band"})},
-            coords={"equation": section_names(S), "order": np.arange(4), "wind": ("wind", wind, {"units": "m/s"})},
-            attrs={"model": type(self).__name__},
-        )
 
     def equations(self, precision: int = 3) -> list[str]:
         """One line per section: its amplitude equation with the functions named."""

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vivbench.models.greybox_solve import ShootingProblem, solve_gauss_newton
+from vivbench.regression.bootstrap import block_counts
 
 __all__ = ["BootstrapResult", "event_bootstrap", "event_counts"]
 
@@ -76,8 +77,7 @@ def event_counts(n_events: int, n_boot: int, seed: int) -> np.ndarray:
     """Multinomial counts of ``n_events`` events drawn with replacement, shape (n_boot, n_events)."""
     if n_events < 2:
         raise ValueError("an event bootstrap needs at least two events")
-    rng = np.random.default_rng(seed)
-    return rng.multinomial(n_events, np.full(n_events, 1.0 / n_events), size=n_boot)
+    return block_counts(n_events, n_boot, np.random.default_rng(seed))
 
 
 def event_bootstrap(problem: ShootingProblem, theta: np.ndarray, s: np.ndarray, *, n_boot: int, n_iter: int,

@@ -47,6 +47,7 @@ import numpy as np
 
 from vivbench.core.record import Record
 from vivbench.models.campaign import amplitude_ratios
+from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, fit_records, section_names
 from vivbench.models.window_model import nearest_window
 from vivbench.preprocess.windows import window_bounds
@@ -371,26 +372,15 @@ class PySINDyCampaign(_PySINDyBase):
         g_mid = wind_part(0.5 * (U[1:] + U[:-1]))
         x = (np.asarray(A_meas[0] if A0 is None else A0, dtype=float) / self.a_scale_).reshape(S)
         top = bound_factor * np.nanmax(A_meas)
-        out = np.full(A_meas.shape, np.nan)
-        out[0] = x * self.a_scale_
-        stop = None
+        g_stage = (g, g_mid, g)  # the wind parts at a step's start, midpoint and end (index n + 1)
 
-        def f(xv, gv):
+        def f(xv, n, stage):
+            gv = g_stage[stage][n + (stage == 2)]
             return coef @ (gv * np.prod(xv[None, :] ** P, axis=1)) / self.a_scale_
 
-        dt = np.diff(tt)
-        for n in range(tt.size - 1):  # an ODE step needs the previous one: the loop is over steps
-            h = dt[n]
-            k1 = f(x, g[n])
-            k2 = f(x + 0.5 * h * k1, g_mid[n])
-            k3 = f(x + 0.5 * h * k2, g_mid[n])
-            k4 = f(x + h * k3, g[n + 1])
-            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-            a = x * self.a_scale_
-            if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > top):
-                stop = n + 1
-                break
-            out[n + 1] = a
+        run = rk4(f, x, tt, stop=StopRule(upper=top, lower=0.0, scale=self.a_scale_))
+        out = run.x * self.a_scale_
+        stop = None if run.stop < 0 else int(run.stop)
         covered = 1.0 if stop is None else stop / (tt.size - 1)
         return Simulation(t=tt, A_sim=out, A_meas=A_meas, stopped_at=None if stop is None else float(tt[stop]),
                           reason=None if stop is None else "amplitude left the data's range", nmse=nmse(out, A_meas),

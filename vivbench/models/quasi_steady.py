@@ -23,7 +23,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.protocol import as_record
 from vivbench.models.simulate import Simulation, nmse
-from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots
+from vivbench.library.splines import bspline_basis, difference_penalty, uniform_knots
 from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["QuasiSteadyAmplitude"]

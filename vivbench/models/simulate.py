@@ -77,6 +77,7 @@ from scipy.interpolate import make_interp_spline
 
 from vivbench.core.terms import feature_exponents, section_exponents
 from vivbench.core.errors import InputError
+from vivbench.models.integrate import ABOVE, NON_FINITE, StopRule, rk4
 
 __all__ = ["CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
            "window_in_force"]
@@ -354,24 +355,19 @@ def _integrate(t, A0, U_stage, n_ok, P, widx, bound, neg, lims=None, clip="none"
         a_lo = np.full((n_ok, n_sec), -np.inf)
         a_hi = np.full((n_ok, n_sec), np.inf)
     pw = np.arange(4)
-    h = np.diff(t)
-    a = A[0].copy()
-    for k in range(n_ok):
-        Ck, hk, lo, hi = C[k], h[k], a_lo[k], a_hi[k]
-        k1 = Ck[0] @ (np.clip(a, lo, hi)[:, None] ** pw).ravel()
-        k2 = Ck[1] @ (np.clip(a + 0.5 * hk * k1, lo, hi)[:, None] ** pw).ravel()
-        k3 = Ck[1] @ (np.clip(a + 0.5 * hk * k2, lo, hi)[:, None] ** pw).ravel()
-        k4 = Ck[2] @ (np.clip(a + hk * k3, lo, hi)[:, None] ** pw).ravel()
-        a = a + hk / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        if not np.all(np.isfinite(a)):
-            return A, k + 1, f"A became non-finite at t = {t[k + 1]:.2f} s"
-        if a.max() > bound:
-            return A, k + 1, (f"A exceeded {bound:.3g} m (bound_factor x largest measured A) "
-                              f"at t = {t[k + 1]:.2f} s")
-        if a.min() < -neg:
-            return A, k + 1, (f"A fell below -{neg:.3g} m (negative_tolerance x largest measured A) "
-                              f"at t = {t[k + 1]:.2f} s")
-        A[k + 1] = a
+
+    def f(a, k, stage):
+        return C[k, stage] @ (np.clip(a, a_lo[k], a_hi[k])[:, None] ** pw).ravel()
+
+    run = rk4(f, A[0], t, stop=StopRule(upper=bound, lower=-neg), n_steps=n_ok)
+    A = run.x
+    if run.stop >= 0:
+        k, when = int(run.stop), f"at t = {t[int(run.stop)]:.2f} s"
+        if run.reason == NON_FINITE:
+            return A, k, f"A became non-finite {when}"
+        if run.reason == ABOVE:
+            return A, k, f"A exceeded {bound:.3g} m (bound_factor x largest measured A) {when}"
+        return A, k, f"A fell below -{neg:.3g} m (negative_tolerance x largest measured A) {when}"
     if n_ok < n - 1:
         return A, n_ok + 1, f"measured U is missing at t = {t[n_ok + 1]:.2f} s"
     return A, None, None
