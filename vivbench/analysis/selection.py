@@ -31,6 +31,15 @@ gives the window the same regime, and when the regime survives refits of the
 chosen candidate with the measured wind perturbed by its estimated error
 (:func:`wind_error_scale`): errors in the wind bias every bootstrap replicate
 alike, so the bootstrap alone cannot see them.
+
+With a **null model** (``null_model``; :func:`varying_selection` uses the quasi-steady map
+:class:`vivbench.models.QuasiSteadyAmplitude`, A_k = g_k(U)), the null is scored on the same folds,
+and the verdict flags no window at all unless the null falls outside the confidence set: where
+the dynamic candidates do not predict held-out events significantly better than an amplitude that
+follows the wind with no dynamics (a forced response, an envelope driven by buffeting, errors in
+the wind that drown the amplitude's own changes), any split of the dynamics between the orders of A
+fits, and the regimes are not identified from the campaign. With too few events for held-out
+evidence (fewer than :data:`MIN_EVENTS`) nothing is flagged either.
 """
 
 from __future__ import annotations
@@ -236,16 +245,6 @@ def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: n
                   noise_std=record.noise_std)
 
 
-class _Contributions:
-    """Fixed order contributions (n, S, 4) seen through the protocol's ``order_contributions``."""
-
-    def __init__(self, r: np.ndarray):
-        self._r = r
-
-    def order_contributions(self, record: Record) -> np.ndarray:
-        return self._r
-
-
 def _unfitted(model, **params):
     """A fresh copy of an unfitted model with ``params`` set where it has them (e.g. n_bootstrap)."""
     m = copy.deepcopy(model)
@@ -314,6 +313,9 @@ class ModelSelection:
         Local processes for the held-out fits (1: in this process).
     scheduler : str or None
         A dask scheduler address instead (see :func:`vivbench.core.parallel.run_tasks`).
+    null_model : object or None
+        An unfitted model with ``fit`` and ``simulate`` (``predict`` for the derivative criterion) that
+        has no dynamics of its own, scored on the same folds (module docstring); None: no null test.
 
     Attributes
     ----------
@@ -327,16 +329,18 @@ class ModelSelection:
     set_models_ : list of fitted models of the set other than the chosen (n_bootstrap 0)
     perturbed_models_ : list of fitted models of the chosen candidate on perturbed winds
     wind_error_ : ndarray, shape (E, S), m/s, the estimated wind error of every event
+    null_loss_ : ndarray, shape (E,), the null model's held-out loss (NaN without one or without folds)
+    null_in_set_ : bool or None, whether the null is in the confidence set (None: not tested)
+    dynamics_shown_ : bool, whether the verdict may flag windows (module docstring)
     event_ids_ : list of str
     """
 
     def __init__(self, *, candidates: Sequence[Candidate], n_folds: int = 5, criterion: str = "output",
                  n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, tau: float = DEFAULT_TAU,
                  verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None,
-                 null_model=None, extrapolate_error: bool = False):
+                 null_model=None):
         self.candidates = tuple(candidates)
         self.null_model = null_model
-        self.extrapolate_error = extrapolate_error
         self.n_folds = n_folds
         self.criterion = criterion
         self.n_perturbations = n_perturbations
@@ -502,22 +506,7 @@ class ModelSelection:
         ok = np.ones(ref.shape, dtype=bool)
         for m in list(self.set_models_) + list(self.perturbed_models_):
             ok &= self._regimes(m, record, window_start, window_end) == ref
-        if self.extrapolate_error and self.perturbed_models_:
-            ok &= self._extrapolated_regimes(record, window_start, window_end) == ref
         return ok
-
-    def _extrapolated_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
-        """Regimes (W, S) of the order contributions extrapolated to an error-free wind.
-
-        The perturbed refits add the wind's estimated error once more (error variance doubled); the
-        contributions r_i of every sample are extrapolated linearly in the error variance back to
-        none, 2 r(chosen) - mean r(perturbed) (simulation-extrapolation, Cook & Stefanski 1994).
-        """
-        r0 = np.asarray(self.model_.order_contributions(measured_input(self.model_, record)), dtype=float)
-        rp = np.mean([np.asarray(m.order_contributions(measured_input(m, record)), dtype=float)
-                      for m in self.perturbed_models_], axis=0)
-        return model_window_regimes(_Contributions(2.0 * r0 - rp), record, window_start, window_end,
-                                    tau=self.tau)["regime"].astype(int)
 
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
         """The chosen model's verdict (W, S) narrowed to :meth:`agreement`'s windows."""
@@ -644,7 +633,7 @@ VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0}
 def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterion: str = "output",
                       n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, seed: int = 0,
                       workers: int = 1, scheduler: str | None = None, null: bool = True,
-                      extrapolate_error: bool = False, **params) -> ModelSelection:
+                      **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -656,6 +645,9 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         A parameter given in ``params`` is pinned: it leaves the grid.
     n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler
         Those of :class:`ModelSelection` (``seed`` also the models').
+    null : bool
+        Test the candidates against the quasi-steady map :class:`vivbench.models.QuasiSteadyAmplitude`
+        (with the candidates' wind smoothing) before any window is flagged.
     **params
         Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given).
 
@@ -685,7 +677,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     return ModelSelection(candidates=candidates, n_folds=n_folds, criterion=criterion,
                           n_perturbations=n_perturbations, perturbation_timescale_s=perturbation_timescale_s,
                           tau=fixed.get("tau", DEFAULT_TAU), verdict=varying_window_verdicts, seed=seed,
-                          workers=workers, scheduler=scheduler, extrapolate_error=extrapolate_error,
+                          workers=workers, scheduler=scheduler,
                           null_model=(QuasiSteadyAmplitude(wind_smoothing_s=fixed.get("wind_smoothing_s", 30.0))
                                       if null else None))
 

@@ -83,13 +83,25 @@ def _chosen_model(fitted):
     return getattr(model, "model_", model)
 
 
+def _dynamics_shown(fitted) -> bool:
+    """Whether a fitted campaign method's held-out evidence shows the dynamics (its selection's null test;
+    True for a model without held-out evidence)."""
+    evidence = getattr(getattr(fitted, "model", fitted), "evidence", None)
+    return bool(evidence().get("dynamics_shown", True)) if callable(evidence) else True
+
+
 def _greybox_verdict(model: GreyBoxRefit, record: Record, window_start, window_end, *, reference,
-                     wind_smoothing_s: float, tau: float, agreement: float, n_draws: int) -> dict:
+                     wind_smoothing_s: float, tau: float, agreement: float, n_draws: int,
+                     dynamics_shown: bool = True) -> dict:
     """:func:`greybox_window_verdicts` of a measured record: its wind smoothed as at fit, the reference's
-    record as the reference saw it at its own fit."""
+    record as the reference saw it at its own fit; no window flagged when the campaign's held-out
+    evidence does not show its dynamics."""
     ref_rec = None if reference is None else measured_input(reference, record)
-    return greybox_window_verdicts(model, smooth_wind(record, wind_smoothing_s), window_start, window_end, tau=tau,
-                                   agreement=agreement, n_draws=n_draws, reference=reference, reference_record=ref_rec)
+    out = greybox_window_verdicts(model, smooth_wind(record, wind_smoothing_s), window_start, window_end, tau=tau,
+                                  agreement=agreement, n_draws=n_draws, reference=reference, reference_record=ref_rec)
+    if not dynamics_shown:
+        out = {**out, "identifiable": np.zeros(np.shape(out["identifiable"]), dtype=bool)}
+    return out
 
 
 class GreyBoxVerdictModel(MeasuredWindVerdictModel):
@@ -107,14 +119,18 @@ class GreyBoxVerdictModel(MeasuredWindVerdictModel):
     wind_smoothing_s : float, s
     tau, agreement, n_draws : the verdict's settings (:func:`greybox_window_verdicts`)
     reference_seconds : wall time of the reference's fit, s (NaN: given fitted)
+    dynamics_shown : bool
+        False when the campaign's held-out evidence does not show its dynamics (the default campaign
+        model's null test, :class:`vivbench.analysis.ModelSelection`): no window is flagged.
     """
 
     def __init__(self, model: GreyBoxRefit, reference=None, *, wind_smoothing_s: float = 30.0,
                  tau: float = DEFAULT_TAU, agreement: float = 0.95, n_draws: int = 100,
-                 reference_seconds: float = math.nan):
+                 reference_seconds: float = math.nan, dynamics_shown: bool = True):
         super().__init__(model, functools.partial(_greybox_verdict, reference=reference,
                                                   wind_smoothing_s=wind_smoothing_s, tau=tau, agreement=agreement,
-                                                  n_draws=n_draws))
+                                                  n_draws=n_draws, dynamics_shown=bool(dynamics_shown)))
+        self.dynamics_shown = bool(dynamics_shown)
         self.reference = reference
         self.wind_smoothing_s = wind_smoothing_s
         self.reference_seconds = reference_seconds
@@ -178,6 +194,7 @@ class GreyBoxMethod:
             t0 = time.perf_counter()
             reference = CampaignMethod("varying").fit(records)
             seconds = time.perf_counter() - t0
+        shown = True if reference is None else _dynamics_shown(reference)
         reference = None if reference is None else _chosen_model(reference)
         smoothed = [smooth_wind(r, self.wind_smoothing_s) for r in records]
         warm = None
@@ -191,4 +208,5 @@ class GreyBoxMethod:
         model.set_params(bridge=self.bridge, warm_start=warm)
         model.fit(smoothed)
         return GreyBoxVerdictModel(model, reference, wind_smoothing_s=self.wind_smoothing_s, tau=self.tau,
-                                   agreement=self.agreement, n_draws=self.n_draws, reference_seconds=seconds)
+                                   agreement=self.agreement, n_draws=self.n_draws, reference_seconds=seconds,
+                                   dynamics_shown=shown)

@@ -74,7 +74,7 @@ METHOD_ALIASES: dict[str, str] = {}
 #: Study methods built from each draw's structural properties (not :func:`resolve_method` names).
 DRAW_METHODS = ("greybox",)
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
-_FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set",
+_FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set", "dynamics_shown",
                  "change_p_value", "change_detected", "change_index")
 _SCORES = tuple(k for k in SCORE_KEYS if k != "fit_time_s")
 #: Columns of ``study.csv``: one row per draw and method.
@@ -276,10 +276,12 @@ def _choice(fitted) -> dict[str, Any]:
     """The candidate a model chose from the campaign's evidence and its confidence set ("" without)."""
     evidence = getattr(fitted, "evidence", None)
     if not callable(evidence):
-        return {"chosen": "", "confidence_set": ""}
+        shown = getattr(fitted, "dynamics_shown", "")
+        return {"chosen": "", "confidence_set": "", "dynamics_shown": "" if shown == "" else int(bool(shown))}
     ev = evidence()
     return {"chosen": str(ev["chosen"]),
-            "confidence_set": ";".join(c["name"] for c in ev["candidates"] if c["in_set"])}
+            "confidence_set": ";".join(c["name"] for c in ev["candidates"] if c["in_set"]),
+            "dynamics_shown": int(bool(ev.get("dynamics_shown", True)))}
 
 
 def _change_scan(fitted, records) -> dict[str, Any]:

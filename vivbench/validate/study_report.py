@@ -47,6 +47,10 @@ _GREYBOX_NOTE = ("- greybox: the grey-box refit given each draw's structural pro
                  "the family.")
 
 
+#: Campaigns with fewer events than this are summarised apart on the page (a reporting split, not a setting).
+SMALL_CAMPAIGN_EVENTS = 10
+
+
 def _number(value) -> float:
     try:
         return float(value)
@@ -95,6 +99,16 @@ def _choices(rows: Sequence[dict]) -> dict[str, Any]:
     return {"draws": len(chosen), "yaw_chosen": len(with_yaw)}
 
 
+def _withheld(rows: Sequence[dict]) -> dict[str, Any]:
+    """Draws on which the campaign's held-out evidence did not show its dynamics (``dynamics_shown`` 0):
+    the null model predicted held-out events as well, and no window was flagged."""
+    tested = [r for r in rows if str(r.get("dynamics_shown", "")).strip() not in ("", "nan")]
+    withheld = [r for r in tested if not int(_number(r.get("dynamics_shown")))]
+    return {"draws": len(tested), "withheld": len(withheld),
+            "forced_only_withheld": sum(1 for r in withheld if str(r.get("forced_only")) == "True"),
+            "forced_only": sum(1 for r in tested if str(r.get("forced_only")) == "True")}
+
+
 def _changes(rows: Sequence[dict]) -> dict[str, Any]:
     """The change scan's alarms on draws without a change, and its detections of the damping steps.
 
@@ -116,7 +130,18 @@ def _block(rows: Sequence[dict]) -> dict[str, Any]:
     return {"n_draws": len(rows), "method_errors": sum(1 for r in rows if r.get("error")),
             "scores": {key: _distribution(rows, key, worse) for key, worse in SUMMARY_SCORES},
             "promise": _promise(rows), "forced_only": _forced(rows), "choices": _choices(rows),
-            "changes": _changes(rows)}
+            "changes": _changes(rows), "withheld": _withheld(rows),
+            "by_size": {label: {"n_draws": len(sub),
+                                "energy_error_median": _distribution(sub, "rhs_error_true_AU_energy", "high")["median"],
+                                "promise": _promise(sub)}
+                        for label, sub in _by_size(rows)}}
+
+
+def _by_size(rows: Sequence[dict]) -> list[tuple[str, list[dict]]]:
+    """The rows of small campaigns (fewer than :data:`SMALL_CAMPAIGN_EVENTS` events) and of the others."""
+    small = [r for r in rows if _number(r.get("n_events")) < SMALL_CAMPAIGN_EVENTS]
+    large = [r for r in rows if _number(r.get("n_events")) >= SMALL_CAMPAIGN_EVENTS]
+    return [(f"fewer than {SMALL_CAMPAIGN_EVENTS} events", small), (f"{SMALL_CAMPAIGN_EVENTS} events or more", large)]
 
 
 def _versus(rows: Sequence[dict], methods: Sequence[str], key: str = "rhs_error_true_AU_energy") -> dict[str, Any]:
@@ -239,6 +264,24 @@ def study_markdown(summary: dict[str, Any]) -> str:
             f = block["forced_only"]
             lines.append(f"| {name} | {_subset(subset, block)} | {f['draws']} | {f['self_excited_flags']} | "
                          f"{f['draws_with_self_excited_flags']} |")
+    lines += ["", "## Regimes withheld for want of evidence of the dynamics", "",
+              "Draws on which the dynamic models did not predict held-out events significantly better than the "
+              "quasi-steady map A = g(U) (or the campaign had too few events to tell): no window is flagged there.",
+              "", "| method | draws | draws tested | withheld | forced-only draws | forced-only withheld |",
+              "|---|---|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        for subset, block in blocks.items():
+            w = block.get("withheld", {})
+            if w.get("draws"):
+                lines.append(f"| {name} | {_subset(subset, block)} | {w['draws']} | {w['withheld']} | "
+                             f"{w['forced_only']} | {w['forced_only_withheld']} |")
+    lines += ["", "## By campaign size", "",
+              "| method | campaigns | draws | energy-weighted dA/dt error, median | draws with enough flags | "
+              "promise kept |", "|---|---|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        for label, b in blocks["all"].get("by_size", {}).items():
+            lines.append(f"| {name} | {label} | {b['n_draws']} | {_fmt(b['energy_error_median'])} | "
+                         f"{b['promise']['draws_with_enough_flags']} | {b['promise']['draws_kept']} |")
     lines += ["", "## Against each other", "",
               "Draws on which the first method's energy-weighted dA/dt error on the true (A, U) is below the "
               "second's.", "", "| methods | draws with both | first lower | share |", "|---|---|---|---|"]
