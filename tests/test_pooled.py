@@ -9,7 +9,7 @@ import pytest
 
 from tests.helpers import assert_close, assert_not_close
 from vivbench.models.campaign import PooledSINDy, pooled_window_stats
-from vivbench.regimes.campaign import campaign_window_verdicts
+from vivbench.regimes import campaign_window_verdicts
 from vivbench.regression.settings import StlsqSettings
 from vivbench.regression.stlsq import stlsq_path
 from vivbench.library.basis import window_library

@@ -13,9 +13,10 @@ import xarray as xr
 
 import vivbench
 from vivbench.core.record import Record
+from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.campaign import PooledSINDy
 from vivbench.models.curve_support import EXTRAPOLATED, data_wind_range, mark_extrapolated
-from vivbench.regimes.campaign import campaign_window_verdicts
+from vivbench.regimes.model import measured_verdicts
 from vivbench.preprocess.derivative import Derivative
 from vivbench.io.result import read_result, result_noise_std
 from vivbench.io.campaign_model import (LEGACY_REGIMES_FORMAT, MODEL_NAME, REGIMES_FORMAT, REGIMES_NAME,
@@ -25,6 +26,8 @@ from vivbench.core.errors import InputError
 from vivbench.analysis.wind_inputs import with_yaw
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.models.model_input import measured_input
+from vivbench.models.protocol import (model_change_inputs, model_class_path, model_for_records, model_summary,
+                                      transforms_wind)
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
            "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing"]
@@ -206,24 +209,8 @@ def pool_results(result_files: Sequence, model=None, *,
     """
     from vivbench.analysis.changes import (FLAG_FDR, change_point_scan, change_relative_flags, event_residual_checks,
                                            offset_flags, offset_strata, statistics_change_scan)
-    from vivbench.analysis.selection import ModelSelection, without_yaw
-    from vivbench.models.varying import VaryingCoefficientSINDy
-    from vivbench.regimes.varying import varying_window_verdicts
 
     model = PooledSINDy() if model is None else model
-    selection = model if isinstance(model, ModelSelection) else None
-    if selection is not None:
-        inner = [c.model for c in selection.candidates]
-        if not (all(isinstance(m, VaryingCoefficientSINDy) for m in inner)
-                or all(isinstance(m, PooledSINDy) for m in inner)):
-            raise InputError("pool_results takes a selection among VaryingCoefficientSINDy candidates or among "
-                             "PooledSINDy candidates")
-        first = inner[0]
-    else:
-        first = model
-    varying = isinstance(first, VaryingCoefficientSINDy)
-    if not varying and not isinstance(first, PooledSINDy):
-        raise InputError(f"pool_results takes a PooledSINDy or a VaryingCoefficientSINDy; got {type(model).__name__}")
     results = []
     for path in result_files:
         ds = read_result(path, ["A", "U", "dA", "segment", "window_start", "window_end"],
@@ -235,38 +222,27 @@ def pool_results(result_files: Sequence, model=None, *,
     for path, _ds, _attrs, eq in results:
         if eq != sections:
             raise InputError(f"{path}: equations {eq} differ from {sections} of the other results")
-    if varying and wind_smoothing_s:
-        raise InputError("the varying model smooths its own wind (VaryingCoefficientSINDy(wind_smoothing_s=...)): "
+    own_wind = transforms_wind(model)  # the model smooths its own wind (VaryingCoefficientSINDy(wind_smoothing_s=...))
+    if own_wind and wind_smoothing_s:
+        raise InputError(f"the campaign model ({type(model).__name__}) smooths its own wind (its wind_smoothing_s): "
                          "give pool_results wind_smoothing_s=0 with it")
     records = [_result_record(ds, attrs, derivative) for _p, ds, attrs, _e in results]
     if campaign is not None:
         records = [r if r.yaw is not None else _with_event_yaw(r, attrs, campaign)
                    for r, (_p, _d, attrs, _e) in zip(records, results)]
-    if selection is not None and varying and any(r.yaw is None for r in records):
-        selection = model = without_yaw(selection)  # no yaw to choose from: the yaw-free candidates
-        inner = [c.model for c in selection.candidates]
-    if varying and any(m.yaw_degree for m in ([first] if selection is None else inner)) \
-            and any(r.yaw is None for r in records):
-        raise InputError("the varying model with a yaw covariate (yaw_degree > 0) needs every "
-                         "result to store the wind's yaw (identify it again) or the campaign's event files "
-                         "(campaign / --campaign)")
-    model.fit(records if varying else [smooth_wind(r, wind_smoothing_s) for r in records])
-    if selection is not None:
-        model = selection.model_  # the chosen candidate, fitted to every event
-    # Verdicts and checks on the wind the model was fitted on: the varying model smooths its own.
+    model = model_for_records(model, records)  # e.g. without the candidates needing a yaw the records lack
+    model.fit(records if own_wind else [smooth_wind(r, wind_smoothing_s) for r in records])
+    summary = model_summary(model)
+    # Verdicts and checks on the wind the model was fitted on (a model may smooth its own).
     raw_records = records
     records = [measured_input(model, r, wind_smoothing_s=wind_smoothing_s) for r in records]
-    keys = ("regime", "identifiable", "agreement", "order_rms") + (() if varying else ("robust",))
+    keys = ("regime", "identifiable", "agreement", "order_rms") + tuple(k for k in summary["verdicts"]
+                                                                       if k != "identifiable")
     rows = {k: [] for k in ("event_id", "window", "window_start", "window_end") + keys}
-    for (_path, ds, attrs, _eq), record, raw in zip(results, records, raw_records):
+    for (_path, ds, attrs, _eq), raw in zip(results, raw_records):
         s, e = ds["window_start"].values, ds["window_end"].values
-        if varying:
-            out = varying_window_verdicts(model, record, s, e)
-        else:
-            out = campaign_window_verdicts(model, record.t, record.A, record.U, s, e)
-        if selection is not None:
-            # Every model of the confidence set and every wind-perturbed refit must give the window's regime.
-            out["identifiable"] = out["identifiable"] & selection.agreement(raw, s, e, out["regime"])
+        out = measured_verdicts(model, raw, s, e, wind_smoothing_s=wind_smoothing_s,
+                                tau=float(getattr(model, "tau", DEFAULT_TAU)))
         min_snr = json.loads(attrs.get("identify_config_json", "{}")).get("min_snr")
         if min_snr is not None and "amplitude_snr" in ds:
             # The identification's noise-floor test holds for any model: below the floor A is noise.
@@ -278,48 +254,21 @@ def pool_results(result_files: Sequence, model=None, *,
         for key in keys:
             rows[key].append(out[key])
     cat = {k: np.concatenate(v) for k, v in rows.items()}
-    windows = {
+    data = dict(summary["variables"])
+    data.update({
         "event_id": (("window_all",), cat["event_id"].astype(str)),
         "window": (("window_all",), cat["window"].astype(np.int32), {"long_name": "window index in the event's result"}),
         "window_start": (("window_all",), cat["window_start"], {"units": "s"}),
         "window_end": (("window_all",), cat["window_end"], {"units": "s"}),
         "regime": (("window_all", "equation"), cat["regime"].astype(np.int8), {"long_name": "regime of the pooled model (docs/concepts.md (regimes))"}),
-    }
-    agreement = (("window_all", "equation"), cat["agreement"], {"units": "1", "long_name": "share of bootstrap models with the same regime"})
-    order_rms = (("window_all", "equation", "order"), cat["order_rms"], {"units": "m/s"})
-    if varying:
-        data = {
-            "n_basis": (("equation",), model.n_basis_.astype(np.int32), {"units": "1", "long_name": "cubic B-splines per curve"}),
-            "penalty": (("equation",), model.penalty_, {"units": "1", "long_name": "relative second-difference penalty"}),
-            "edf": (("equation",), model.edf_, {"units": "1", "long_name": "effective degrees of freedom"}),
-            "rss": (("equation",), model.rss_, {"units": "m2 s-2"}),
-            **windows,
-            "identifiable": (("window_all", "equation"), cat["identifiable"].astype(np.int8),
-                             {"long_name": "bootstrap agreement on the regime reaches the agreement level and the "
-                              "amplitude is above the noise floor"}),
-            "agreement": agreement,
-            "order_rms": order_rms,
-        }
-    else:
-        data = {
-            "coef": (("equation", "feature"), model.coef_, {"units": "m/s per unit of the feature", "long_name": "pooled campaign model"}),
-            "coef_bootstrap": (("bootstrap", "equation", "feature"), model.coef_bootstrap_, {"long_name": "block-bootstrap replicate models"}),
-            "n_terms": (("equation",), model.n_terms_.astype(np.int32), {"units": "1"}),
-            "threshold": (("equation",), model.threshold_, {"units": "1", "long_name": "selected STLSQ threshold (standardised)"}),
-            "rss": (("equation",), model.rss_, {"units": "m2 s-2"}),
-            "aicc": (("equation",), model.aicc_, {"units": "1"}),
-            **windows,
-            "identifiable": (("window_all", "equation"), cat["identifiable"].astype(np.int8),
-                             {"long_name": "bootstrap agreement on the regime reaches the agreement level, the "
-                              "near-null-space test passes and the amplitude is above the noise floor"}),
-            "agreement": agreement,
-            "robust": (("window_all", "equation"), cat["robust"].astype(np.int8),
-                       {"long_name": "no model within the fit tolerance gives the window another regime (near-null-space test)"}),
-            "order_rms": order_rms,
-        }
+        "agreement": (("window_all", "equation"), cat["agreement"], {"units": "1", "long_name": "share of bootstrap models with the same regime"}),
+        "order_rms": (("window_all", "equation", "order"), cat["order_rms"], {"units": "m/s"}),
+    })
+    for key, long_name in summary["verdicts"].items():
+        data[key] = (("window_all", "equation"), np.asarray(cat[key]).astype(np.int8), {"long_name": long_name})
     # With a selection: the chosen model's curves, their bands widened to hold the confidence set's.
     grid = curve_wind_grid(np.concatenate([ds["U"].values.ravel() for _p, ds, _a, _e in results]))
-    curves = (model if selection is None else selection).curves(grid)
+    curves = model.curves(grid)
     # Marked where a section's curve lies outside the winds it was fitted on (the wind as at fit).
     curves = mark_extrapolated(curves, data_wind_range(records))
     for name in ("curves", "curves_lower", "curves_upper"):
@@ -328,7 +277,8 @@ def pool_results(result_files: Sequence, model=None, *,
                           curves[EXTRAPOLATED].attrs)
     # Does the model's assumption (one function of (A, U) for the whole campaign) hold? (vivbench.analysis.changes)
     checks = event_residual_checks(model, records)
-    scan = change_point_scan(checks["linear_offset"], checks["linear_offset_se"], checks["weight"], seed=model.seed)
+    scan = change_point_scan(checks["linear_offset"], checks["linear_offset_se"], checks["weight"],
+                             seed=int(getattr(model, "seed", 0)))
     data.update({
         "event_residual_ratio": (("event",), checks["residual_ratio"],
                                  {"units": "1", "long_name": "RMS of the event's dA/dt residual over the median of the events'"}),
@@ -362,13 +312,14 @@ def pool_results(result_files: Sequence, model=None, *,
     })
     event_ids = [str(a["event_id"]) for _p, _d, a, _e in results]
     model_scan = None
-    if varying:
-        stats = model.event_statistics(records)
-        model_scan = statistics_change_scan(stats, seed=model.seed)
+    change_inputs = model_change_inputs(model, records)
+    if change_inputs is not None:
+        stats = change_inputs["statistics"]
+        model_scan = statistics_change_scan(stats, seed=int(getattr(model, "seed", 0)))
         # Flags relative to the located change, only when the scan reports one.
         ci = model_scan["change_index"] if model_scan["detected"] else -1
-        rel = change_relative_flags(stats, ci, checks["linear_offset_se"], model.a_ref_, model.y_scale_,
-                                    n_pieces=checks["n_pieces"])
+        rel = change_relative_flags(stats, ci, checks["linear_offset_se"], change_inputs["a_ref"],
+                                    change_inputs["y_scale"], n_pieces=checks["n_pieces"])
         data.update({
             "event_after_change": (("event",), (np.arange(len(records)) >= ci if ci >= 0
                                                 else np.zeros(len(records), dtype=bool)).astype(np.int8),
@@ -395,34 +346,21 @@ def pool_results(result_files: Sequence, model=None, *,
                                        {"units": "1", "long_name": "relative drop of the penalised RSS when the model is "
                                         "refitted separately before and after this event"}),
         })
-    coords = {"equation": sections}
-    if not varying:
-        coords.update(feature=model.feature_names_, bootstrap=np.arange(model.coef_bootstrap_.shape[0]))
+    coords = {"equation": sections, **summary["coords"]}
     coords.update({"order": np.arange(4), "window_all": np.arange(cat["window"].size),
                    "wind": ("wind", curves["wind"].values, {"units": "m/s", "long_name": "mean wind speed of the curves"}),
                    "event": ("event", event_ids, {"long_name": "events in the order of the result files"})})
-    enough = bool(model.enough_data_) if not varying else True
     attrs = {
         "format": REGIMES_FORMAT,
         "format_version": 1,
         "events": json.dumps(event_ids),
-        "n_samples": model.n_samples_,
-        "n_blocks": model.n_blocks_,
+        "note": "",
+        "wind_smoothing_s": float(wind_smoothing_s),
+        **summary["attrs"],
     }
-    if selection is not None:
-        attrs["selection_json"] = json.dumps(selection.evidence(), sort_keys=True)
-    if varying:
-        attrs["model"] = type(model).__name__
-    else:
-        attrs.update(cond=model.cond_, enough_data=int(model.enough_data_))
     attrs.update({
-        "note": ("" if enough else
-                 f"only {model.n_blocks_} bootstrap blocks of {model.block_s:g} s (fewer than {model.min_blocks}): "
-                 "too little data for an identifiability verdict, no window is flagged identifiable"),
         "coverage": float(np.mean(cat["identifiable"][cat["regime"] > 0])) if (cat["regime"] > 0).any() else float("nan"),
-        "model_config_json": model.to_json(),
         "derivative_json": json.dumps(None if derivative is None else dataclasses.asdict(derivative), sort_keys=True),
-        "wind_smoothing_s": float(model.fitted_wind_smoothing() if varying else wind_smoothing_s),
         "wind_yaw": int(all(r.yaw is not None for r in records)),
         "vivbench_version": vivbench.__version__,
         "change_event": "" if scan["change_index"] < 0 else event_ids[scan["change_index"]],
@@ -531,6 +469,9 @@ def load_campaign_model(path):
     from vivbench.models.varying import VaryingCoefficientSINDy
 
     path = Path(path)
+    plugin = _plugin_class(path)
+    if plugin is not None:
+        return _load_plugin(plugin, path)
     pooled_name = None
     if path.is_dir():
         found = campaign_model_file(path)
@@ -560,6 +501,43 @@ def load_campaign_model(path):
         raise InputError(f"{path}: a campaign regimes file of {regimes_model_name(pooled)} holds no model; its {MODEL_NAME} "
                          "is needed (re-run vivbench pool)")
     return PooledSINDy.from_regimes(pooled)
+
+
+def _plugin_class(path: Path) -> str | None:
+    """The ``model_class`` (``"module:Class"``, :func:`vivbench.models.model_class_path`) that ``vivbench pool``
+    wrote for a model of the protocol other than the built-in ones: the file's own attribute, else the
+    campaign regimes file's in the file's directory (or in the directory given)."""
+    candidates = [regimes_file(path)] if path.is_dir() else [path, regimes_file(path.parent)]
+    for candidate in candidates:
+        if candidate.is_file():
+            try:
+                with xr.open_dataset(candidate) as ds:
+                    value = ds.attrs.get("model_class")
+            except Exception:  # noqa: BLE001 - the built-in readers give the one-line error
+                continue
+            if value:
+                return str(value)
+    return None
+
+
+def _load_plugin(spec: str, path: Path):
+    """``Class.load(model file)`` of the class ``spec`` (``"module:Qualified.Name"``) that pool's file names."""
+    import importlib
+
+    module_name, _, qualname = spec.partition(":")
+    try:
+        obj = importlib.import_module(module_name)
+        for part in qualname.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(f"{path}: the campaign model's class {spec!r} cannot be imported ({exc}); "
+                         "is its module on PYTHONPATH?") from None
+    model_path = path / MODEL_NAME if path.is_dir() else path
+    if model_path.name == REGIMES_NAME:
+        model_path = model_path.parent / MODEL_NAME
+    if not model_path.is_file():
+        raise InputError(f"{model_path}: no campaign model file of {spec} (re-run vivbench pool)")
+    return obj.load(model_path)
 
 
 def with_campaign_model(result, pooled):

@@ -58,10 +58,10 @@ from vivbench.core.parallel import run_tasks
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.model_input import measured_input
-from vivbench.models.protocol import as_record
+from vivbench.models.protocol import as_record, model_summary
 from vivbench.preprocess.runs import mask_runs
 from vivbench.preprocess.wind_smoothing import smooth_wind
-from vivbench.regimes.model import model_window_regimes
+from vivbench.regimes.model import model_verdicts, model_window_regimes
 
 __all__ = ["Candidate", "ModelSelection", "CRITERIA", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "VARYING_OPTIONS", "VARYING_PRIORS", "event_folds",
            "held_out_loss", "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
@@ -493,6 +493,34 @@ class ModelSelection:
         self.__dict__["_last_verdict"] = (key, record, out)
         return out
 
+    @property
+    def measured_wind(self):
+        """The chosen model's ``measured_wind`` (before the fit the first candidate's); AttributeError when
+        the models take a record's wind as given."""
+        model = self.__dict__.get("model_")
+        return (self.candidates[0].model if model is None else model).measured_wind
+
+    def measured_verdicts(self, record: Record, window_start, window_end) -> dict:
+        """The chosen model's verdicts (:func:`vivbench.regimes.model_verdicts`) on the measured record,
+        ``identifiable`` narrowed to :meth:`agreement`'s windows (the verdict ``vivbench pool`` writes)."""
+        self._check_fitted()
+        out = model_verdicts(self.model_, measured_input(self.model_, record), window_start, window_end, tau=self.tau)
+        # Every model of the confidence set and every wind-perturbed refit must give the window's regime.
+        out["identifiable"] = out["identifiable"] & self.agreement(record, window_start, window_end, out["regime"])
+        return out
+
+    def for_records(self, records: Sequence[Record]) -> "ModelSelection":
+        """The selection to fit on ``records``: without the candidates that need the wind's yaw when a record
+        carries none (:func:`without_yaw`)."""
+        return without_yaw(self) if any(r.yaw is None for r in records) else self
+
+    def campaign_summary(self) -> dict:
+        """The chosen model's :func:`vivbench.models.model_summary` with the attribute ``selection_json``
+        (:meth:`evidence`)."""
+        self._check_fitted()
+        out = model_summary(self.model_)
+        return {**out, "attrs": {**out["attrs"], "selection_json": json.dumps(self.evidence(), sort_keys=True)}}
+
     def window_regimes(self, record: Record, window_start, window_end) -> np.ndarray:
         """Regime of every window (W, S) by the chosen model, on the record's wind as at fit."""
         self._check_fitted()
@@ -659,7 +687,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
 
     from vivbench.models.quasi_steady import QuasiSteadyAmplitude
     from vivbench.models.varying import VaryingCoefficientSINDy
-    from vivbench.regimes.varying import varying_window_verdicts
+    from vivbench.regimes import varying_window_verdicts
 
     grid = {k: tuple(v) for k, v in (VARYING_OPTIONS if options is None else options).items() if k not in params}
     for k, v in grid.items():

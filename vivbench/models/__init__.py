@@ -31,6 +31,14 @@ from vivbench.models.protocol import (
     format_equations,
     section_names,
     simulate_windows,
+    model_summary,
+    model_size,
+    model_for_records,
+    model_change_inputs,
+    transforms_wind,
+    model_curves,
+    model_class_path,
+    IDENTIFIABLE_LONG_NAME,
 )
 from vivbench.models.refit import (
     RefitConfig,
@@ -55,6 +63,9 @@ from vivbench.models.simulate import (
 )
 from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
 from vivbench.models.varying import VaryingCoefficientSINDy
+from vivbench.models.campaign_verdicts import campaign_window_verdicts
+from vivbench.models.varying_verdicts import (gram_order_stats, varying_summary, varying_window_verdicts, window_grams,
+                                              window_order_stats)
 from vivbench.models.wind_weights import modal_wind_weights, weighted_section_mean
 from vivbench.models.model_input import measured_input
 from vivbench.models.quasi_steady import QuasiSteadyAmplitude
@@ -75,5 +86,8 @@ __all__ = [
     "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "EventWindowSINDy",
     "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "modal_wind_weights", "weighted_section_mean",
     "measured_input", "Integration", "StopRule", "rk4",
+    "model_summary", "model_size", "model_for_records", "model_change_inputs", "transforms_wind", "model_curves",
+    "model_class_path", "IDENTIFIABLE_LONG_NAME", "campaign_window_verdicts", "gram_order_stats", "varying_summary",
+    "varying_window_verdicts", "window_grams", "window_order_stats",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
 ]

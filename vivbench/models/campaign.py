@@ -52,6 +52,7 @@ from vivbench.core.terms import evaluate_library, feature_exponents, feature_nam
 from vivbench.core.errors import InputError
 from vivbench.models.protocol import (
     ModelBase,
+    NotFittedError,
     as_record,
     coef_order_contributions,
     format_equations,
@@ -505,6 +506,56 @@ class PooledSINDy(ModelBase):
             attrs={"model": type(self).__name__, "amplitude_ratios": json.dumps(self.amplitude_ratios_.tolist())},
         )
 
+    def window_verdicts(self, record: Record, window_start, window_end) -> dict:
+        """Regime of every window and its identifiability verdict (:func:`vivbench.regimes.campaign_window_verdicts`).
+
+        Returns the dict of that function: ``regime``, ``identifiable``, ``agreement``, ``robust``,
+        ``order_rms``, ``order_rms_margin`` (W windows, S sections).
+        """
+        from vivbench.models.campaign_verdicts import campaign_window_verdicts
+
+        record = as_record(record)
+        return campaign_window_verdicts(self, record.t, record.A, record.U, np.asarray(window_start, dtype=float),
+                                        np.asarray(window_end, dtype=float))
+
+    def terms_per_equation(self) -> list[int]:
+        """Active library terms of each equation (``n_terms_``)."""
+        self._check_fitted()
+        return [int(k) for k in self.n_terms_]
+
+    def campaign_summary(self) -> dict:
+        """What ``vivbench pool`` writes of this model into ``campaign.regimes.nc`` (:func:`vivbench.models.model_summary`).
+
+        The library coefficients and their bootstrap replicates, the selected thresholds and fit
+        statistics; the file has no ``model`` attribute (as before other campaign models existed).
+        """
+        self._check_fitted()
+        enough = bool(self.enough_data_)
+        return {
+            "variables": {
+                "coef": (("equation", "feature"), self.coef_, {"units": "m/s per unit of the feature", "long_name": "pooled campaign model"}),
+                "coef_bootstrap": (("bootstrap", "equation", "feature"), self.coef_bootstrap_, {"long_name": "block-bootstrap replicate models"}),
+                "n_terms": (("equation",), self.n_terms_.astype(np.int32), {"units": "1"}),
+                "threshold": (("equation",), self.threshold_, {"units": "1", "long_name": "selected STLSQ threshold (standardised)"}),
+                "rss": (("equation",), self.rss_, {"units": "m2 s-2"}),
+                "aicc": (("equation",), self.aicc_, {"units": "1"}),
+            },
+            "coords": {"feature": self.feature_names_, "bootstrap": np.arange(self.coef_bootstrap_.shape[0])},
+            "attrs": {
+                "n_samples": self.n_samples_, "n_blocks": self.n_blocks_, "cond": self.cond_,
+                "enough_data": int(self.enough_data_),
+                "note": ("" if enough else
+                         f"only {self.n_blocks_} bootstrap blocks of {self.block_s:g} s (fewer than {self.min_blocks}): "
+                         "too little data for an identifiability verdict, no window is flagged identifiable"),
+                "model_config_json": self.to_json(),
+            },
+            "verdicts": {
+                "identifiable": ("bootstrap agreement on the regime reaches the agreement level, the "
+                                 "near-null-space test passes and the amplitude is above the noise floor"),
+                "robust": "no model within the fit tolerance gives the window another regime (near-null-space test)",
+            },
+        }
+
     def _curves(self, models: np.ndarray, wind: np.ndarray) -> np.ndarray:
         """Curves (M, S, 4, n_wind) of models (M, S, 23 S)."""
         S = self.n_sections_
@@ -621,13 +672,17 @@ class PooledSINDy(ModelBase):
         model.feature_names_ = [str(x) for x in ds["feature"].values]
 
         def unavailable(*_args, **_kwargs):
-            raise InputError(f"{source}: a campaign model rebuilt from the regimes file has no amplitude ratios "
+            raise _RebuiltModelError(f"{source}: a campaign model rebuilt from the regimes file has no amplitude ratios "
                              "or regression basis (no curves, window verdicts or save); re-run vivbench pool to "
                              "write campaign.model.nc")
 
         for name in ("curves", "save", "to_dataset"):
             setattr(model, name, unavailable)
         return model
+
+
+class _RebuiltModelError(InputError, NotFittedError):
+    """A campaign model rebuilt from a regimes file cannot do this (no curves, window verdicts or save)."""
 
 
 def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):

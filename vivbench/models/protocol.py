@@ -9,6 +9,24 @@ the powers of A to dA/dt (n_samples, n_sections, 4). It may also give
 the report use only these names, so a user's model works wherever a built-in
 one does.
 
+A campaign model may also give the optional methods below; code outside the
+models asks for them only through the helper of the same concern, which
+supplies the default, so no caller branches on a model's class or fitted
+attributes:
+
+================================  ==================================  =====================================
+method                            helper                              default
+================================  ==================================  =====================================
+``window_verdicts(record, s, e)`` :func:`vivbench.regimes.model_verdicts`  the regime rule on the order
+                                                                      contributions, nothing identifiable
+``campaign_summary()``            :func:`model_summary`               the class's name and import path
+``terms_per_equation()``          :func:`model_size`                  ``[]`` (no size to report)
+``for_records(records)``          :func:`model_for_records`           the model itself
+``event_change_inputs(records)``  :func:`model_change_inputs`         None (no model change scan)
+``measured_wind(record)``         :func:`transforms_wind`             the caller's wind smoothing
+``curves(wind)``                  :func:`model_curves`                None (no curves)
+================================  ==================================  =====================================
+
 The protocols are :func:`typing.runtime_checkable`: ``isinstance(m, FittedModel)``
 checks that the methods exist (not their signatures). :class:`ModelBase`
 gives scikit-learn's conventions (``get_params``/``set_params`` from the
@@ -23,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import json
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
@@ -36,7 +55,8 @@ from vivbench.models.simulate import Simulation, nmse, simulate_identified
 __all__ = [
     "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations",
     "ModelBase", "NotFittedError", "as_record", "fit_records", "coef_order_contributions", "format_equations",
-    "section_names", "simulate_windows",
+    "section_names", "simulate_windows", "model_summary", "model_size", "model_for_records", "model_change_inputs",
+    "transforms_wind", "model_curves", "model_class_path", "IDENTIFIABLE_LONG_NAME",
 ]
 
 
@@ -353,3 +373,93 @@ def simulate_windows(record: Record, coef: np.ndarray, window_start, window_end,
     i0 = int(np.searchsorted(t, sim.t[0]))
     A_meas = record.A[i0:i0 + sim.t.size]
     return dataclasses.replace(sim, A_meas=A_meas, nmse=nmse(sim.A_sim, A_meas))
+
+
+#: The ``identifiable`` variable's long name for a model without its own (``campaign_summary``'s ``verdicts``).
+IDENTIFIABLE_LONG_NAME = "the model's own verdict (window_verdicts) and the amplitude above the noise floor"
+
+
+def model_class_path(model) -> str:
+    """``"module:QualifiedName"`` of the model's class: how a file names a model's class for loading it again."""
+    cls = type(model)
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def model_summary(model) -> dict:
+    """What a fitted campaign model writes into ``campaign.regimes.nc`` besides the windows' regimes.
+
+    Parameters
+    ----------
+    model : fitted campaign model
+        Its ``campaign_summary()`` when it has one, else the default below.
+
+    Returns
+    -------
+    dict
+        ``variables`` (name -> (dims, values, attrs)) over the dimensions
+        ``equation`` and those of ``coords``; ``coords`` (name -> values);
+        ``attrs`` (file attributes, e.g. ``model``, ``model_config_json``,
+        ``note``); ``verdicts`` (name -> long name) of the per-window
+        verdict outputs written as int8 flags (at least ``identifiable``).
+        The default: no variable, the attributes ``model`` (the class name),
+        ``model_class`` (:func:`model_class_path`, which
+        :func:`vivbench.analysis.load_campaign_model` imports to load the
+        model's file) and ``model_config_json`` (``get_params()`` as JSON, or
+        ``{}``).
+    """
+    own = getattr(model, "campaign_summary", None)
+    if callable(own):
+        return own()
+    params = model.get_params() if callable(getattr(model, "get_params", None)) else {}
+    return {"variables": {}, "coords": {},
+            "attrs": {"model": type(model).__name__, "model_class": model_class_path(model),
+                      "model_config_json": json.dumps(params, sort_keys=True, default=str)},
+            "verdicts": {"identifiable": IDENTIFIABLE_LONG_NAME}}
+
+
+def model_size(model) -> list[int]:
+    """Terms (or basis functions) per equation: ``model.terms_per_equation()``, or ``[]`` without it."""
+    own = getattr(model, "terms_per_equation", None)
+    return [int(k) for k in own()] if callable(own) else []
+
+
+def model_for_records(model, records):
+    """The model to fit on ``records``: ``model.for_records(records)`` (which may refuse them with an
+    InputError, or give a narrower model, e.g. without a covariate the records lack), else the model."""
+    own = getattr(model, "for_records", None)
+    return own(records) if callable(own) else model
+
+
+def model_change_inputs(model, records) -> dict | None:
+    """Inputs of the model change scan (:func:`vivbench.analysis.changes.statistics_change_scan`).
+
+    Returns
+    -------
+    dict or None
+        ``model.event_change_inputs(records)``: ``statistics`` (the per-event
+        sufficient statistics of its penalised regressions), ``a_ref`` and
+        ``y_scale`` (the fit's amplitude and dA/dt scales); None for a model
+        without them (no model change scan).
+    """
+    own = getattr(model, "event_change_inputs", None)
+    return own(records) if callable(own) else None
+
+
+def transforms_wind(model) -> bool:
+    """Whether the model transforms a measured record's wind itself (it has ``measured_wind(record)``)."""
+    return callable(getattr(model, "measured_wind", None))
+
+
+def model_curves(model, wind):
+    """The model's coefficient curves on ``wind`` (its ``curves(wind)``), or None when it gives none.
+
+    A model without ``curves``, or whose ``curves`` raises :class:`NotFittedError`
+    (e.g. a model rebuilt from a file that holds no curves), gives None.
+    """
+    own = getattr(model, "curves", None)
+    if not callable(own):
+        return None
+    try:
+        return own(wind)
+    except NotFittedError:
+        return None

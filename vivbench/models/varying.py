@@ -451,6 +451,35 @@ class VaryingCoefficientSINDy(ModelBase):
 
     # -- the model protocol --------------------------------------------------------------------------
 
+    def window_verdicts(self, record: Record, window_start, window_end) -> dict:
+        """Regime of every window and its verdict (:func:`vivbench.regimes.varying_window_verdicts`)."""
+        from vivbench.models.varying_verdicts import varying_window_verdicts
+
+        return varying_window_verdicts(self, record, window_start, window_end)
+
+    def campaign_summary(self) -> dict:
+        """What ``vivbench pool`` writes of this model into ``campaign.regimes.nc`` (:func:`vivbench.models.model_summary`)."""
+        from vivbench.models.varying_verdicts import varying_summary
+
+        return varying_summary(self)
+
+    def event_change_inputs(self, records: Sequence[Record]) -> dict:
+        """The model change scan's inputs (:func:`vivbench.models.model_change_inputs`): :meth:`event_statistics`
+        of ``records`` and the fit's scales ``a_ref`` (m) and ``y_scale`` (m/s)."""
+        return {"statistics": self.event_statistics(records), "a_ref": self.a_ref_, "y_scale": self.y_scale_}
+
+    def for_records(self, records: Sequence[Record]) -> "VaryingCoefficientSINDy":
+        """The model itself; refuses records without the wind's yaw when ``yaw_degree`` > 0 (InputError)."""
+        if self.yaw_degree and any(as_record(r, k).yaw is None for k, r in enumerate(records)):
+            raise InputError("the varying model with a yaw covariate (yaw_degree > 0) needs every "
+                             "result to store the wind's yaw (identify it again) or the campaign's event files "
+                             "(campaign / --campaign)")
+        return self
+
+    def terms_per_equation(self) -> list[int]:
+        """Cubic B-splines per curve of each equation (``n_basis_``)."""
+        return [int(k) for k in self.n_basis_]
+
     def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None, yaw=None,
                            coef_yaw: np.ndarray | None = None) -> np.ndarray:
         """The curves a_ki at each equation's wind (and yaw, with ``yaw_degree`` > 0).

@@ -45,7 +45,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU, regime_rule
 from vivbench.models.greybox import GreyBoxRefit
-from vivbench.regimes.varying import window_order_stats
+from vivbench.models.varying_verdicts import window_order_stats
 
 __all__ = ["greybox_draws", "greybox_window_verdicts"]
 

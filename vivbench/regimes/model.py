@@ -6,9 +6,10 @@ import numpy as np
 
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU, regime_rule
+from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import FittedModel
 
-__all__ = ["model_window_regimes"]
+__all__ = ["measured_verdicts", "model_verdicts", "model_window_regimes"]
 
 
 def model_window_regimes(model: FittedModel, record: Record, window_start, window_end,
@@ -60,3 +61,57 @@ def model_window_regimes(model: FittedModel, record: Record, window_start, windo
         c1 = wsum(rz[..., 1] * inv) / wsum(okA.astype(float))
     regime = np.where(nv > 0, regime_rule(np.nan_to_num(R), c1, tau), 0).astype(np.int8)
     return {"regime": regime, "order_rms": R, "c1": c1, "n_valid": nv.astype(int)}
+
+
+def model_verdicts(model: FittedModel, record: Record, window_start, window_end, *, tau: float = DEFAULT_TAU) -> dict:
+    """The model's regime of every window and its verdict, on the record as the model sees it.
+
+    Parameters
+    ----------
+    model : FittedModel
+        Its ``window_verdicts(record, window_start, window_end)`` when it has
+        one (the built-in campaign models: :func:`vivbench.regimes.campaign_window_verdicts`,
+        :func:`vivbench.regimes.varying_window_verdicts`); otherwise the rule on
+        its order contributions (:func:`model_window_regimes`, or its own
+        ``window_regimes``) with its ``identifiable`` when it has one, else
+        no window identifiable.
+    record : Record
+    window_start, window_end : array_like, shape (W,), s
+    tau : float
+        Regime threshold for the default.
+
+    Returns
+    -------
+    dict
+        At least ``regime`` (W, S) int, ``identifiable`` (W, S) bool,
+        ``agreement`` (W, S) (NaN: no replicates) and ``order_rms`` (W, S, 4) m/s.
+    """
+    own = getattr(model, "window_verdicts", None)
+    if callable(own):
+        return dict(own(record, window_start, window_end))
+    base = model_window_regimes(model, record, window_start, window_end, tau=tau)
+    regimes = getattr(model, "window_regimes", None)
+    regime = (np.asarray(regimes(record, window_start, window_end), dtype=np.int8) if callable(regimes)
+              else base["regime"])
+    verdict = getattr(model, "identifiable", None)
+    flag = (np.asarray(verdict(record, window_start, window_end), dtype=bool) if callable(verdict)
+            else np.zeros(regime.shape, dtype=bool))
+    return {"regime": regime, "identifiable": flag, "agreement": np.full(regime.shape, np.nan),
+            "order_rms": base["order_rms"]}
+
+
+def measured_verdicts(model: FittedModel, record: Record, window_start, window_end, *,
+                      wind_smoothing_s: float = 0.0, tau: float = DEFAULT_TAU) -> dict:
+    """:func:`model_verdicts` of a measured record, its wind transformed as at fit.
+
+    A model with ``measured_verdicts(record, window_start, window_end)`` (a
+    :class:`vivbench.analysis.ModelSelection`, whose members each see the
+    wind as at their fit) gives them itself; any other model gets
+    :func:`vivbench.models.measured_input` of the record (``wind_smoothing_s``
+    for a model that does not know its own smoothing).
+    """
+    own = getattr(model, "measured_verdicts", None)
+    if callable(own):
+        return dict(own(record, window_start, window_end))
+    rec = measured_input(model, record, wind_smoothing_s=wind_smoothing_s)
+    return model_verdicts(model, rec, window_start, window_end, tau=tau)

@@ -208,13 +208,13 @@ def above_noise_floor(record: Record, window_start, window_end, min_snr: float |
 
 
 def _campaign_verdict(model, record, start, end):
-    from vivbench.regimes.campaign import campaign_window_verdicts
+    from vivbench.regimes import campaign_window_verdicts
 
     return campaign_window_verdicts(model, record.t, record.A, record.U, np.asarray(start, float), np.asarray(end, float))
 
 
 def _varying_verdict(model, record, start, end):
-    from vivbench.regimes.varying import varying_window_verdicts
+    from vivbench.regimes import varying_window_verdicts
 
     return varying_window_verdicts(model, record, start, end)
 

@@ -34,7 +34,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
 from vivbench.models.varying import DEGREE, VaryingCoefficientSINDy
 
-__all__ = ["gram_order_stats", "varying_window_verdicts", "window_grams", "window_order_stats"]
+__all__ = ["gram_order_stats", "varying_summary", "varying_window_verdicts", "window_grams", "window_order_stats"]
 
 
 def window_order_stats(r: np.ndarray, A: np.ndarray, t: np.ndarray, window_start, window_end):
@@ -296,3 +296,25 @@ def _direct_verdicts(model, record, window_start, window_end, chunk) -> dict:
         Rp, c1p, _ = window_order_stats(r, A, t, window_start, window_end)
         pen = regime_rule(np.nan_to_num(Rp), c1p, model.tau)
     return _verdict(model, point, same / B, R, regime_rule(np.nan_to_num(Rs), c1s, model.tau), pen)
+
+
+def varying_summary(model: VaryingCoefficientSINDy) -> dict:
+    """The varying model's ``campaign_summary`` (:func:`vivbench.models.model_summary`).
+
+    Per equation the basis size, penalty, effective degrees of freedom and RSS (the splines
+    themselves are in the model's own file); the attribute ``model`` names the class.
+    """
+    return {
+        "variables": {
+            "n_basis": (("equation",), model.n_basis_.astype(np.int32), {"units": "1", "long_name": "cubic B-splines per curve"}),
+            "penalty": (("equation",), model.penalty_, {"units": "1", "long_name": "relative second-difference penalty"}),
+            "edf": (("equation",), model.edf_, {"units": "1", "long_name": "effective degrees of freedom"}),
+            "rss": (("equation",), model.rss_, {"units": "m2 s-2"}),
+        },
+        "coords": {},
+        "attrs": {"n_samples": model.n_samples_, "n_blocks": model.n_blocks_, "model": type(model).__name__,
+                  "note": "", "model_config_json": model.to_json(),
+                  "wind_smoothing_s": float(model.fitted_wind_smoothing())},
+        "verdicts": {"identifiable": "bootstrap agreement on the regime reaches the agreement level and the "
+                                    "amplitude is above the noise floor"},
+    }
