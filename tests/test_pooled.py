@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from tests.helpers import assert_close, assert_not_close
-from vivbench.models.campaign import PooledSINDy, pooled_window_stats
+from vivbench.models.campaign import PooledSINDy
+from vivbench.models.campaign_verdicts import pooled_window_stats
 from vivbench.regimes import campaign_window_verdicts
 from vivbench.regression.settings import StlsqSettings
 from vivbench.regression.stlsq import stlsq_path

@@ -1,15 +1,6 @@
 """Models that turn data into dynamics: window SINDy, the campaign model, simulation and forecasts, refits."""
 
-from vivbench.models.campaign import (
-    PooledSINDy,
-    WindowRecord,
-    amplitude_ratios,
-    pooled_window_stats,
-    window_record,
-    window_stats,
-    window_sums,
-    RATIO_LEVEL,
-)
+from vivbench.models.campaign import PooledSINDy, amplitude_ratios, RATIO_LEVEL
 from vivbench.models.binned import BinnedPolynomial
 from vivbench.models.curve_support import (EXTRAPOLATED, curves_inside_data, data_wind_range, extrapolated_mask,
                                            mark_extrapolated)
@@ -63,7 +54,8 @@ from vivbench.models.simulate import (
 )
 from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
 from vivbench.models.varying import VaryingCoefficientSINDy
-from vivbench.models.campaign_verdicts import campaign_window_verdicts
+from vivbench.models.campaign_verdicts import (WindowRecord, campaign_window_verdicts, pooled_window_stats,
+                                               window_record, window_stats, window_sums)
 from vivbench.models.varying_verdicts import (gram_order_stats, varying_summary, varying_window_verdicts, window_grams,
                                               window_order_stats)
 from vivbench.models.wind_weights import modal_wind_weights, weighted_section_mean

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from typing import NamedTuple
 
 import numpy as np
 
@@ -59,10 +58,10 @@ from vivbench.models.protocol import (
     section_names,
     simulate_windows,
 )
+from vivbench.models.campaign_verdicts import campaign_window_verdicts
 from vivbench.models.simulate import Simulation
 
-__all__ = ["PooledSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats", "window_record",
-           "window_stats", "window_sums", "RATIO_LEVEL"]
+__all__ = ["PooledSINDy", "amplitude_ratios", "RATIO_LEVEL"]
 
 #: Samples whose amplitude is below this share of the section's largest amplitude
 #: do not enter the amplitude ratios (there A is mostly noise and ratios scatter).
@@ -101,32 +100,6 @@ def amplitude_ratios(A: np.ndarray, level: float = RATIO_LEVEL) -> np.ndarray:
         out[has] = np.nanmedian(ratio[:, has], axis=0)
     np.fill_diagonal(out, 1.0)
     return out
-
-
-class WindowRecord(NamedTuple):
-    """One record's library (zero on samples with a non-finite term) and its windows' sample ranges."""
-
-    A: np.ndarray
-    theta: np.ndarray
-    ok: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-
-
-def window_record(t, A, U, window_start, window_end) -> WindowRecord:
-    """A record's physical library (zero where a term is not finite) and its windows' sample ranges."""
-    t = np.asarray(t, dtype=float)
-    A = np.asarray(A, dtype=float)
-    theta = evaluate_library(A, np.asarray(U, dtype=float))
-    ok = np.isfinite(theta).all(axis=1)
-    return WindowRecord(A=A, theta=np.where(ok[:, None], theta, 0.0), ok=ok,
-                   lo=np.searchsorted(t, window_start, side="left"), hi=np.searchsorted(t, window_end, side="left"))
-
-
-def window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Sums of x over samples lo[w] <= i < hi[w] along axis 0, by one cumulative sum."""
-    c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)], axis=0)
-    return c[hi] - c[lo]
 
 
 def _blocks(t: np.ndarray, ok: np.ndarray, block_s: float) -> np.ndarray:
@@ -512,8 +485,6 @@ class PooledSINDy(ModelBase):
         Returns the dict of that function: ``regime``, ``identifiable``, ``agreement``, ``robust``,
         ``order_rms``, ``order_rms_margin`` (W windows, S sections).
         """
-        from vivbench.models.campaign_verdicts import campaign_window_verdicts
-
         record = as_record(record)
         return campaign_window_verdicts(self, record.t, record.A, record.U, np.asarray(window_start, dtype=float),
                                         np.asarray(window_end, dtype=float))
@@ -683,51 +654,3 @@ class PooledSINDy(ModelBase):
 
 class _RebuiltModelError(InputError, NotFittedError):
     """A campaign model rebuilt from a regimes file cannot do this (no curves, window verdicts or save)."""
-
-
-def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
-    """Order RMS and net linear coefficient of several models over every window.
-
-    Parameters
-    ----------
-    models : ndarray, shape (M, S, 23 S)
-        Physical coefficients.
-    t : ndarray, shape (n,), s; A, U : ndarray, shape (n, S)
-    window_start, window_end : ndarray, shape (W,), s
-
-    Returns
-    -------
-    R : ndarray, shape (M, W, S, 4), m/s; c1 : ndarray, shape (M, W, S), 1/s;
-    n_valid : ndarray, shape (W,)
-    """
-    return window_stats(models, window_record(t, A, U, window_start, window_end))
-
-
-def window_stats(models: np.ndarray, rec: WindowRecord):
-    A, theta, ok, lo, hi = rec
-    S = A.shape[1]
-    orders = np.tile(section_exponents()[:, 0], S)
-    models = np.nan_to_num(np.asarray(models, dtype=float))
-    M = models.shape[0]
-    okA = ok[:, None] & (A > 0)
-    invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
-
-    def wsum(x):
-        return window_sums(x, lo, hi)
-
-    nv = wsum(ok.astype(float))
-    sq = np.empty((lo.size, M, S, 4))
-    c1 = None
-    for i in range(4):
-        # (n, M*S) by one matrix product per order
-        r = theta[:, orders == i] @ models[..., orders == i].reshape(M * S, -1).T
-        r = r.reshape(-1, M, S)
-        sq[..., i] = wsum(r**2)
-        if i == 1:
-            c1 = wsum(r * invA[:, None, :])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        R = np.sqrt(sq / nv[:, None, None, None])
-        c1 = c1 / wsum(okA.astype(float))[:, None, :]
-    return np.moveaxis(R, 1, 0), np.moveaxis(c1, 1, 0), nv
-
-

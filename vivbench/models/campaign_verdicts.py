@@ -13,15 +13,17 @@ contributions over that window's data. It counts as identifiable when
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.stats import chi2
 
 from vivbench.core.errors import InputError
 from vivbench.core.regime import regime_rule
-from vivbench.core.terms import section_exponents
-from vivbench.models.campaign import PooledSINDy, WindowRecord, window_record, window_stats, window_sums
+from vivbench.core.terms import evaluate_library, section_exponents
 
-__all__ = ["campaign_window_verdicts"]
+__all__ = ["WindowRecord", "campaign_window_verdicts", "pooled_window_stats", "window_record", "window_stats",
+           "window_sums"]
 
 
 def campaign_window_verdicts(model: PooledSINDy, t: np.ndarray, A: np.ndarray, U: np.ndarray,
@@ -126,3 +128,77 @@ def _regime_is_determined(R, dR, c1, dc1, tau):
         can2 = below & ~(c1 + dc1 <= 0)
         can1 = below & ~(c1 - dc1 > 0)
     return (can4.astype(int) + can3 + can2 + can1) == 1
+
+
+class WindowRecord(NamedTuple):
+    """One record's library (zero on samples with a non-finite term) and its windows' sample ranges."""
+
+    A: np.ndarray
+    theta: np.ndarray
+    ok: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+def window_record(t, A, U, window_start, window_end) -> WindowRecord:
+    """A record's physical library (zero where a term is not finite) and its windows' sample ranges."""
+    t = np.asarray(t, dtype=float)
+    A = np.asarray(A, dtype=float)
+    theta = evaluate_library(A, np.asarray(U, dtype=float))
+    ok = np.isfinite(theta).all(axis=1)
+    return WindowRecord(A=A, theta=np.where(ok[:, None], theta, 0.0), ok=ok,
+                   lo=np.searchsorted(t, window_start, side="left"), hi=np.searchsorted(t, window_end, side="left"))
+
+
+def window_sums(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Sums of x over samples lo[w] <= i < hi[w] along axis 0, by one cumulative sum."""
+    c = np.concatenate([np.zeros((1,) + x.shape[1:]), np.cumsum(x, axis=0)], axis=0)
+    return c[hi] - c[lo]
+
+
+def pooled_window_stats(models: np.ndarray, t, A, U, window_start, window_end):
+    """Order RMS and net linear coefficient of several models over every window.
+
+    Parameters
+    ----------
+    models : ndarray, shape (M, S, 23 S)
+        Physical coefficients.
+    t : ndarray, shape (n,), s; A, U : ndarray, shape (n, S)
+    window_start, window_end : ndarray, shape (W,), s
+
+    Returns
+    -------
+    R : ndarray, shape (M, W, S, 4), m/s; c1 : ndarray, shape (M, W, S), 1/s;
+    n_valid : ndarray, shape (W,)
+    """
+    return window_stats(models, window_record(t, A, U, window_start, window_end))
+
+
+def window_stats(models: np.ndarray, rec: WindowRecord):
+    A, theta, ok, lo, hi = rec
+    S = A.shape[1]
+    orders = np.tile(section_exponents()[:, 0], S)
+    models = np.nan_to_num(np.asarray(models, dtype=float))
+    M = models.shape[0]
+    okA = ok[:, None] & (A > 0)
+    invA = np.where(okA, 1.0 / np.where(okA, A, 1.0), 0.0)
+
+    def wsum(x):
+        return window_sums(x, lo, hi)
+
+    nv = wsum(ok.astype(float))
+    sq = np.empty((lo.size, M, S, 4))
+    c1 = None
+    for i in range(4):
+        # (n, M*S) by one matrix product per order
+        r = theta[:, orders == i] @ models[..., orders == i].reshape(M * S, -1).T
+        r = r.reshape(-1, M, S)
+        sq[..., i] = wsum(r**2)
+        if i == 1:
+            c1 = wsum(r * invA[:, None, :])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        R = np.sqrt(sq / nv[:, None, None, None])
+        c1 = c1 / wsum(okA.astype(float))[:, None, :]
+    return np.moveaxis(R, 1, 0), np.moveaxis(c1, 1, 0), nv
+
+

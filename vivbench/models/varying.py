@@ -83,6 +83,7 @@ from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.models.varying_design import design_rows
+from vivbench.models.varying_verdicts import varying_summary, varying_window_verdicts
 from vivbench.models.varying_fit import (ORDER_SUBSETS, PENALTY_CHOICES, check_parameters, choose_smoothing,
                                          event_statistics, fitted_arrays)
 from vivbench.models.wind_weights import resolve_wind_weights, weighted_section_mean
@@ -453,14 +454,10 @@ class VaryingCoefficientSINDy(ModelBase):
 
     def window_verdicts(self, record: Record, window_start, window_end) -> dict:
         """Regime of every window and its verdict (:func:`vivbench.regimes.varying_window_verdicts`)."""
-        from vivbench.models.varying_verdicts import varying_window_verdicts
-
         return varying_window_verdicts(self, record, window_start, window_end)
 
     def campaign_summary(self) -> dict:
         """What ``vivbench pool`` writes of this model into ``campaign.regimes.nc`` (:func:`vivbench.models.model_summary`)."""
-        from vivbench.models.varying_verdicts import varying_summary
-
         return varying_summary(self)
 
     def event_change_inputs(self, records: Sequence[Record]) -> dict:

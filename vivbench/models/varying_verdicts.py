@@ -32,7 +32,7 @@ import numpy as np
 
 from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
-from vivbench.models.varying import DEGREE, VaryingCoefficientSINDy
+from vivbench.library.splines import DEGREE
 
 __all__ = ["gram_order_stats", "varying_summary", "varying_window_verdicts", "window_grams", "window_order_stats"]
 
