@@ -9,7 +9,8 @@ from pathlib import Path
 
 from vivbench.core.errors import InputError
 
-#: The campaign models of ``--model``: VaryingCoefficientSINDy and PooledSINDy.
+#: The built-in campaign models of ``--model``: VaryingCoefficientSINDy and PooledSINDy (or a user's model
+#: of the protocol, ``package.module:factory``).
 MODELS = ("varying", "pooled")
 #: Former names of ``--model`` values, refused with the current name.
 RENAMED_MODELS = {"sindy": "pooled"}
@@ -19,6 +20,8 @@ def _model_name(text: str) -> str:
     """The ``--model`` value; a former name is refused with a message naming the current one."""
     if text in RENAMED_MODELS:
         raise argparse.ArgumentTypeError(f"{text!r} is now named {RENAMED_MODELS[text]!r}")
+    if text not in MODELS and ":" not in text:
+        raise argparse.ArgumentTypeError(f"must be one of {', '.join(MODELS)} or a package.module:factory; got {text!r}")
     return text
 
 
@@ -36,8 +39,12 @@ def run(args) -> int:
     campaign = Path(args.campaign) if args.campaign else None
     smoothing = 0.0
     if args.model not in MODELS:
-        raise InputError(f"--model must be one of {', '.join(MODELS)}; got {args.model!r}")
-    if args.model == "varying":
+        from vivbench.validate.methods import check_method_spec, resolve_method
+
+        # A user's campaign model of the protocol (docs/methods.md), fitted in place like the built-in ones.
+        model = resolve_method(check_method_spec(args.model))
+        smoothing = 0.0 if args.wind_smoothing is None else args.wind_smoothing
+    elif args.model == "varying":
         # Options given on the command line are pinned; the others of VARYING_OPTIONS are chosen from the
         # campaign's held-out evidence (vivbench.analysis.selection).
         extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing),
@@ -70,8 +77,10 @@ def run(args) -> int:
         shape = (f"cubic B-splines per curve {', '.join(str(int(k)) for k in ds['n_basis'].values)} "
                  f"({model.wind_weights_choice_} wind weights, {model.penalty_choice_} penalty, "
                  f"yaw degree {model.yaw_degree_}, wind smoothing {model.fitted_wind_smoothing():g} s)")
-    else:
+    elif args.model == "pooled":
         shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
+    else:
+        shape = f"model {ds.attrs.get('model', args.model)}"
     print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, {shape}, "
           f"regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
     if ds.attrs.get("model_change_detected"):
@@ -111,10 +120,12 @@ def register(sub) -> None:
     s = sub.add_parser("pool", help="fit one model to a whole campaign's results and label every window with it")
     s.add_argument("results", help="directory of <event_id>.identify.nc")
     s.add_argument("--out", default=None, help="output directory (default: the results directory)")
-    s.add_argument("--model", type=_model_name, choices=MODELS, default="varying",
+    s.add_argument("--model", type=_model_name, default="varying", metavar="{varying,pooled,MODULE:FACTORY}",
                    help="campaign model: varying (VaryingCoefficientSINDy, penalised spline curves in U with the "
                         "wind's yaw; default: it follows a lock-in bell that no polynomial in U does) or "
-                        "pooled (PooledSINDy, sparse regression on the 69-term library, the paper's class)")
+                        "pooled (PooledSINDy, sparse regression on the 69-term library, the paper's class), or "
+                        "package.module:factory, a user's campaign model of the protocol (docs/methods.md) that "
+                        "the factory returns unfitted")
     s.add_argument("--campaign", default=None,
                    help="directory of the results' event files, only for results identified before the result "
                         "stored the wind's yaw: their yaw is then measured from the events' anemometers")

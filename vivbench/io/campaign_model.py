@@ -19,6 +19,8 @@ Two schemas, one owner:
   ``"VaryingCoefficientSINDy"`` file holds the windows' verdicts, the curves and
   per-equation spline settings, and its model lives in ``campaign.model.nc``
   (that model's own file, :meth:`vivbench.models.VaryingCoefficientSINDy.save`).
+  A user's campaign model of the protocol adds the attribute ``model_class``
+  (``"module:Class"``), whose ``load`` reads its ``campaign.model.nc``.
 
 Earlier versions wrote the regimes as ``campaign.pooled.nc`` (format
 ``"vivbench-pooled"``, the model's settings in the attribute
@@ -146,7 +148,8 @@ def read_campaign_regimes(path) -> xr.Dataset:
         ds.attrs["model_config_json"] = ds.attrs.pop("pooled_config_json")
     ds.attrs["format"] = REGIMES_FORMAT
     name = ds.attrs.get("model", CAMPAIGN_MODEL_CLASSES[0])
-    if name not in CAMPAIGN_MODEL_CLASSES:
+    if name not in CAMPAIGN_MODEL_CLASSES and not ds.attrs.get("model_class"):
+        # A user's model of the protocol names its class ("module:Class", attribute model_class).
         raise ModelFileError(f"{path}: campaign regimes of an unknown campaign model {name!r} "
                              f"(known: {', '.join(CAMPAIGN_MODEL_CLASSES)})")
     if name == "PooledSINDy":

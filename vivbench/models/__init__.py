@@ -29,6 +29,7 @@ from vivbench.models.protocol import (
     transforms_wind,
     model_curves,
     model_class_path,
+    model_description,
     IDENTIFIABLE_LONG_NAME,
 )
 from vivbench.models.refit import (
@@ -56,8 +57,8 @@ from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySIND
 from vivbench.models.varying import VaryingCoefficientSINDy
 from vivbench.models.campaign_verdicts import (WindowRecord, campaign_window_verdicts, pooled_window_stats,
                                                window_record, window_stats, window_sums)
-from vivbench.models.varying_verdicts import (gram_order_stats, varying_summary, varying_window_verdicts, window_grams,
-                                              window_order_stats)
+from vivbench.models.varying_verdicts import (gram_order_stats, varying_description, varying_summary,
+                                              varying_window_verdicts, window_grams, window_order_stats)
 from vivbench.models.wind_weights import modal_wind_weights, weighted_section_mean
 from vivbench.models.model_input import measured_input
 from vivbench.models.quasi_steady import QuasiSteadyAmplitude
@@ -79,7 +80,7 @@ __all__ = [
     "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "modal_wind_weights", "weighted_section_mean",
     "measured_input", "Integration", "StopRule", "rk4",
     "model_summary", "model_size", "model_for_records", "model_change_inputs", "transforms_wind", "model_curves",
-    "model_class_path", "IDENTIFIABLE_LONG_NAME", "campaign_window_verdicts", "gram_order_stats", "varying_summary",
+    "model_class_path", "model_description", "IDENTIFIABLE_LONG_NAME", "varying_description", "campaign_window_verdicts", "gram_order_stats", "varying_summary",
     "varying_window_verdicts", "window_grams", "window_order_stats",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
 ]

@@ -489,6 +489,26 @@ class PooledSINDy(ModelBase):
         return campaign_window_verdicts(self, record.t, record.A, record.U, np.asarray(window_start, dtype=float),
                                         np.asarray(window_end, dtype=float))
 
+    def report_description(self, regimes) -> dict:
+        """The report's paragraph on this model and its verdict (:func:`vivbench.models.model_description`).
+
+        Parameters
+        ----------
+        regimes : xarray.Dataset, the model's ``campaign.regimes.nc``
+        """
+        text = ("One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
+                "AICc on all samples of all events (`vivbench.models.campaign`). A window's regime is the rule of "
+                "docs/concepts.md (regimes) applied to this model's order contributions over the window's data; it "
+                "counts as identifiable when (i) no model inside the coefficients' joint 95 % confidence region "
+                "(residual variance inflated by the residuals' correlation time) gives the window another regime, "
+                f"and (ii) at least {json.loads(regimes.attrs['model_config_json'])['agreement']:.0%} of "
+                "block-bootstrap replicates of the whole selection agree. "
+                f"Terms per equation: {', '.join(str(int(k)) for k in regimes['n_terms'].values)}; "
+                f"{int(regimes.attrs['n_samples'])} samples in {int(regimes.attrs['n_blocks'])} blocks; "
+                f"coverage {float(regimes.attrs['coverage']):.3f}."
+                + (f" **{regimes.attrs['note']}**" if regimes.attrs.get("note") else ""))
+        return {"text": text, "pool_options": ""}
+
     def terms_per_equation(self) -> list[int]:
         """Active library terms of each equation (``n_terms_``)."""
         self._check_fitted()

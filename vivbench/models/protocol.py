@@ -25,6 +25,7 @@ method                            helper                              default
 ``event_change_inputs(records)``  :func:`model_change_inputs`         None (no model change scan)
 ``measured_wind(record)``         :func:`transforms_wind`             the caller's wind smoothing
 ``curves(wind)``                  :func:`model_curves`                None (no curves)
+``report_description(regimes)``   :func:`model_description`           the class's name and its coverage
 ================================  ==================================  =====================================
 
 The protocols are :func:`typing.runtime_checkable`: ``isinstance(m, FittedModel)``
@@ -56,7 +57,7 @@ __all__ = [
     "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations",
     "ModelBase", "NotFittedError", "as_record", "fit_records", "coef_order_contributions", "format_equations",
     "section_names", "simulate_windows", "model_summary", "model_size", "model_for_records", "model_change_inputs",
-    "transforms_wind", "model_curves", "model_class_path", "IDENTIFIABLE_LONG_NAME",
+    "transforms_wind", "model_curves", "model_class_path", "model_description", "IDENTIFIABLE_LONG_NAME",
 ]
 
 
@@ -463,3 +464,29 @@ def model_curves(model, wind):
         return own(wind)
     except NotFittedError:
         return None
+
+
+def model_description(model, regimes) -> dict:
+    """The report's account of a campaign model: ``model.report_description(regimes)`` or the default.
+
+    Parameters
+    ----------
+    model : fitted campaign model
+    regimes : xarray.Dataset, its ``campaign.regimes.nc``
+
+    Returns
+    -------
+    dict
+        ``text``, a Markdown paragraph on the model and its verdict, and
+        ``pool_options``, the options of ``vivbench pool`` that fit it
+        (default: ``--model module:Class``, the class called without
+        arguments as the factory).
+    """
+    own = getattr(model, "report_description", None)
+    if callable(own):
+        return own(regimes)
+    coverage = float(regimes.attrs.get("coverage", float("nan")))
+    text = (f"A campaign model of the protocol, `{type(model).__name__}` (`{model_class_path(model)}`), fitted to "
+            "every event. A window's regime and its identifiability verdict are the model's own "
+            f"(its `window_verdicts`, or the regime rule on its order contributions); coverage {coverage:.3f}.")
+    return {"text": text, "pool_options": f" --model {model_class_path(model)}"}

@@ -83,7 +83,7 @@ from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.models.varying_design import design_rows
-from vivbench.models.varying_verdicts import varying_summary, varying_window_verdicts
+from vivbench.models.varying_verdicts import varying_description, varying_summary, varying_window_verdicts
 from vivbench.models.varying_fit import (ORDER_SUBSETS, PENALTY_CHOICES, check_parameters, choose_smoothing,
                                          event_statistics, fitted_arrays)
 from vivbench.models.wind_weights import resolve_wind_weights, weighted_section_mean
@@ -459,6 +459,10 @@ class VaryingCoefficientSINDy(ModelBase):
     def campaign_summary(self) -> dict:
         """What ``vivbench pool`` writes of this model into ``campaign.regimes.nc`` (:func:`vivbench.models.model_summary`)."""
         return varying_summary(self)
+
+    def report_description(self, regimes) -> dict:
+        """The report's paragraph on this model and its verdict (:func:`vivbench.models.model_description`)."""
+        return varying_description(regimes)
 
     def event_change_inputs(self, records: Sequence[Record]) -> dict:
         """The model change scan's inputs (:func:`vivbench.models.model_change_inputs`): :meth:`event_statistics`

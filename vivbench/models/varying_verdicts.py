@@ -28,13 +28,15 @@ contributions over the window's data. It counts as identifiable when
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
 from vivbench.library.splines import DEGREE
 
-__all__ = ["gram_order_stats", "varying_summary", "varying_window_verdicts", "window_grams", "window_order_stats"]
+__all__ = ["gram_order_stats", "varying_description", "varying_summary", "varying_window_verdicts", "window_grams", "window_order_stats"]
 
 
 def window_order_stats(r: np.ndarray, A: np.ndarray, t: np.ndarray, window_start, window_end):
@@ -318,3 +320,28 @@ def varying_summary(model: VaryingCoefficientSINDy) -> dict:
         "verdicts": {"identifiable": "bootstrap agreement on the regime reaches the agreement level and the "
                                     "amplitude is above the noise floor"},
     }
+
+
+def varying_description(regimes) -> dict:
+    """The varying model's ``report_description`` (:func:`vivbench.models.model_description`).
+
+    Parameters
+    ----------
+    regimes : xarray.Dataset, the model's ``campaign.regimes.nc``
+    """
+    smoothing = float(regimes.attrs.get("wind_smoothing_s", 0.0))
+    text = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
+            "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
+            "window's regime is the rule of docs/concepts.md (regimes) applied to this model's order contributions over the "
+            "window's data; it counts as identifiable when at least "
+            f"{json.loads(regimes.attrs['model_config_json'])['agreement']:.0%} of block-bootstrap replicates "
+            "of the spline coefficients agree, every order subset in the model's confidence set "
+            "(leave-one-event-out) gives the same regime, and the amplitude is above the noise floor. "
+            f"The measured wind (and its yaw, a second covariate when the results store it: "
+            f"{'yes' if int(regimes.attrs.get('wind_yaw', 0)) else 'no'}) is smoothed over "
+            f"{smoothing:g} s (Gaussian sigma) before the fit and every evaluation on measured records; "
+            "the truth's felt wind is used as it is. "
+            f"B-splines per curve: {', '.join(str(int(k)) for k in regimes['n_basis'].values)}; "
+            f"{int(regimes.attrs['n_samples'])} samples in {int(regimes.attrs['n_blocks'])} blocks; "
+            f"coverage {float(regimes.attrs['coverage']):.3f}.")
+    return {"text": text, "pool_options": " --model varying"}

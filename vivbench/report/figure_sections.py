@@ -21,6 +21,7 @@ from vivbench.core.terms import reference_section, section_exponents
 from vivbench.io.campaign_model import MODEL_NAME, read_campaign_regimes, regimes_file
 from vivbench.io.result import result_record
 from vivbench.models.model_input import measured_input
+from vivbench.models.protocol import model_curves, model_description
 from vivbench.regimes.model import model_window_regimes
 from vivbench.report.tables import produced_by
 
@@ -221,39 +222,13 @@ def campaign_model_figures(fig: ReportFigures, results_dir: Path, events: Sequen
     pooled = read_campaign_regimes(pooled_path)
     model_path = campaign_model_file(results_dir)
     model = load_campaign_model(model_path)
-    varying = pooled.attrs.get("model") == "VaryingCoefficientSINDy"
     smoothing = campaign_wind_smoothing(pooled)  # the measured wind as at fit (vivbench.models.measured_input)
-    if varying:
-        intro = ("One varying-coefficient model dA_k/dt = sum_i a_ki(U) A_k^i for the whole campaign, the curves "
-                 "penalised cubic B-splines in U (`vivbench.models.varying`, `vivbench pool --model varying`). A "
-                 "window's regime is the rule of docs/concepts.md (regimes) applied to this model's order contributions over the "
-                 "window's data; it counts as identifiable when at least "
-                 f"{json.loads(pooled.attrs['model_config_json'])['agreement']:.0%} of block-bootstrap replicates "
-                 "of the spline coefficients agree, every order subset in the model's confidence set "
-                 "(leave-one-event-out) gives the same regime, and the amplitude is above the noise floor. "
-                 f"The measured wind (and its yaw, a second covariate when the results store it: "
-                 f"{'yes' if int(pooled.attrs.get('wind_yaw', 0)) else 'no'}) is smoothed over "
-                 f"{smoothing:g} s (Gaussian sigma) before the fit and every evaluation on measured records; "
-                 "the truth's felt wind is used as it is. "
-                 f"B-splines per curve: {', '.join(str(int(k)) for k in pooled['n_basis'].values)}; "
-                 f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
-                 f"coverage {float(pooled.attrs['coverage']):.3f}.")
-    fig.md += ["## The campaign model (`vivbench pool`)", ""] + ([intro] if varying else [
-           "One sparse model dA/dt = Theta(A, U) xi for the whole campaign, fitted by the same STLSQ path and "
-           "AICc on all samples of all events (`vivbench.models.campaign`). A window's regime is the rule of "
-           "docs/concepts.md (regimes) applied to this model's order contributions over the window's data; it counts as "
-           "identifiable when (i) no model inside the coefficients' joint 95 % confidence region (residual "
-           "variance inflated by the residuals' correlation time) gives the window another regime, and (ii) at "
-           f"least {json.loads(pooled.attrs['model_config_json'])['agreement']:.0%} of block-bootstrap "
-           "replicates of the whole selection agree. "
-           f"Terms per equation: {', '.join(str(int(k)) for k in pooled['n_terms'].values)}; "
-           f"{int(pooled.attrs['n_samples'])} samples in {int(pooled.attrs['n_blocks'])} blocks; "
-           f"coverage {float(pooled.attrs['coverage']):.3f}."
-           + (f" **{pooled.attrs['note']}**" if pooled.attrs.get("note") else "")]) + ["",
-           f"Model file: `{model_path.name}`"
-           + ("" if model_path.name == MODEL_NAME else
-                 " (no campaign.model.nc: the model is rebuilt from the regimes file's coefficients)") + ".", "",
-           produced_by(f"vivbench pool {results_dir}" + (" --model varying" if varying else "")), ""]
+    described = model_description(model, pooled)  # the model's own account of itself and its verdict
+    fig.md += ["## The campaign model (`vivbench pool`)", "", described["text"], "",
+               f"Model file: `{model_path.name}`"
+               + ("" if model_path.name == MODEL_NAME else
+                  " (no campaign.model.nc: the model is rebuilt from the regimes file's coefficients)") + ".", "",
+               produced_by(f"vivbench pool {results_dir}" + described["pool_options"]), ""]
     ev_of = pooled["event_id"].values.astype(str)
     pres = []
     for e in events:
@@ -376,8 +351,6 @@ def _campaign_curves(pooled, model, results):
     """The campaign model's curves: those of ``campaign.regimes.nc``, or drawn by the model; None if it has none."""
     if "curves" in pooled.data_vars:
         return pooled
-    if getattr(model, "amplitude_ratios_", None) is None:
-        return None
     from vivbench.analysis.pool import curve_wind_grid
 
-    return model.curves(curve_wind_grid(np.concatenate([r["U"].values.ravel() for r in results.values()])))
+    return model_curves(model, curve_wind_grid(np.concatenate([r["U"].values.ravel() for r in results.values()])))

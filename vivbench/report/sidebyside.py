@@ -30,6 +30,7 @@ from urllib.parse import quote
 import numpy as np
 
 from vivbench.core.errors import InputError
+from vivbench.models.protocol import model_curves
 from vivbench.io.event import list_events, read_event_summary
 from vivbench.io.netcdf import atomic_path
 from vivbench.report.tables import md_table, produced_by
@@ -394,9 +395,9 @@ def baseline_section(run: CampaignRun, baseline: CampaignRun, *, out_dir, comman
         pooled = read_campaign_regimes(pooled_path)
         model = load_campaign_model(campaign_model_file(r.results))
         curves = pooled if "curves" in pooled.data_vars else None
-        if curves is None and getattr(model, "amplitude_ratios_", None) is not None:
+        if curves is None:
             U = [read_result(p, variables=("U",))["U"].values.ravel() for p in sorted(r.results.glob("*.identify.nc"))]
-            curves = model.curves(curve_wind_grid(np.concatenate(U)))
+            curves = model_curves(model, curve_wind_grid(np.concatenate(U)))
         if curves is None:
             cells.append("no curves (re-run `vivbench pool`)")
             continue

@@ -35,6 +35,7 @@ from vivbench.validate.metrics import (
 )
 from vivbench.models.model_input import measured_input
 from vivbench.models.curve_support import data_wind_range
+from vivbench.models.protocol import model_curves, model_size
 from vivbench.regimes.model import model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.recovery import (
@@ -368,7 +369,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
                                       "energy": energy_relative_error(np.concatenate(p_f), np.concatenate(p_f_true))},
                       "file": str(pooled_path), "model_file": str(model_path),
                       "model": type(model).__name__,
-                      "n_terms": [int(k) for k in getattr(model, "n_terms_", getattr(model, "n_basis_", []))],
+                      "n_terms": model_size(model),
                       "curves": _pooled_curve_errors(pooled, model, truth_curves, truth_U, truth_A, truth_excited,
                                                      data_wind_range(fitted_records)),
                       "changes": score_change_flags(pooled, change_states)}
@@ -444,11 +445,11 @@ def _pooled_curve_errors(pooled, model, truth_curves, U, A, excited, wind_range)
 
     if "curves" in pooled.data_vars:
         c = pooled[["curves"]]
-    elif hasattr(model, "curves") and getattr(model, "amplitude_ratios_", None) is not None:
+    else:
         from vivbench.analysis.pool import curve_wind_grid
 
-        c = model.curves(curve_wind_grid(np.concatenate([u.ravel() for u in U])))
-    else:
+        c = model_curves(model, curve_wind_grid(np.concatenate([u.ravel() for u in U])))
+    if c is None:
         return {"scored": False, "reason": "the campaign model has no curves (re-run vivbench pool)"}
     curves, wind = c["curves"].values, c["wind"].values
     if curves.shape[0] != U[0].shape[1]:
