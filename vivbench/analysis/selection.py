@@ -493,6 +493,11 @@ class ModelSelection:
         self.__dict__["_last_verdict"] = (key, record, out)
         return out
 
+    def chosen_model(self):
+        """The chosen candidate, fitted to every event (:func:`vivbench.models.chosen_model`)."""
+        self._check_fitted()
+        return self.model_
+
     @property
     def measured_wind(self):
         """The chosen model's ``measured_wind`` (before the fit the first candidate's); AttributeError when

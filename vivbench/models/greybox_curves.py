@@ -12,6 +12,7 @@ share of each covariance component in their bands
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -39,6 +40,17 @@ class GreyBoxCurves:
         P = grad.shape[-1]  # the spline block (curves at yaw 0 do not depend on the yaw coefficient)
         sd = np.sqrt(np.maximum(np.einsum("...a,ab,...b->...", grad, self.cov_[:P, :P], grad), 0.0))
         return value - self._z() * sd, value + self._z() * sd
+
+    def band_alternatives(self) -> dict:
+        """The fitted model with each of its covariances (``covariances_``) in force, by name (copies; the
+        model's own band is ``band``). Empty for a model without alternative covariances."""
+        self._check_fitted()
+        out = {}
+        for name, cov in (getattr(self, "covariances_", None) or {}).items():
+            alt = copy.copy(self)
+            alt.cov_ = cov
+            out[name] = alt
+        return out
 
     def default_wind(self, step: float = 0.1) -> np.ndarray:
         """The fitted data's wind range on multiples of ``step`` (m/s)."""

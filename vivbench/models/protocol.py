@@ -26,6 +26,8 @@ method                            helper                              default
 ``measured_wind(record)``         :func:`transforms_wind`             the caller's wind smoothing
 ``curves(wind)``                  :func:`model_curves`                None (no curves)
 ``report_description(regimes)``   :func:`model_description`           the class's name and its coverage
+``chosen_model()``                :func:`chosen_model`                the model itself (not a wrapper)
+``evidence()``                    :func:`model_evidence`              None (no held-out evidence)
 ================================  ==================================  =====================================
 
 The protocols are :func:`typing.runtime_checkable`: ``isinstance(m, FittedModel)``
@@ -57,7 +59,8 @@ __all__ = [
     "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations",
     "ModelBase", "NotFittedError", "as_record", "fit_records", "coef_order_contributions", "format_equations",
     "section_names", "simulate_windows", "model_summary", "model_size", "model_for_records", "model_change_inputs",
-    "transforms_wind", "model_curves", "model_class_path", "model_description", "IDENTIFIABLE_LONG_NAME",
+    "transforms_wind", "model_curves", "model_class_path", "model_description", "chosen_model",
+    "model_evidence", "IDENTIFIABLE_LONG_NAME",
 ]
 
 
@@ -490,3 +493,16 @@ def model_description(model, regimes) -> dict:
             "every event. A window's regime and its identifiability verdict are the model's own "
             f"(its `window_verdicts`, or the regime rule on its order contributions); coverage {coverage:.3f}.")
     return {"text": text, "pool_options": f" --model {model_class_path(model)}"}
+
+
+def chosen_model(fitted):
+    """The model a fitted wrapper stands for (a verdict wrapper's model, a selection's chosen one), unwrapped
+    through every ``chosen_model()``; a model without that method is its own."""
+    own = getattr(fitted, "chosen_model", None)
+    return fitted if not callable(own) else chosen_model(own())
+
+
+def model_evidence(fitted) -> dict | None:
+    """The held-out evidence of a model chosen from the campaign's data (``evidence()``, JSON-ready), or None."""
+    own = getattr(fitted, "evidence", None)
+    return own() if callable(own) else None

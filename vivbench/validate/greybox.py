@@ -18,7 +18,6 @@ The dynamics on the true (A, U) are evaluated at the records' measured yaw
 
 from __future__ import annotations
 
-import copy
 import json
 from collections.abc import Sequence
 
@@ -220,12 +219,11 @@ def greybox_recovery(model: GreyBoxRefit, event_files: Sequence, windows, events
                        campaign_curve_error_total=out["campaign_curves"]["total"],
                        campaign_linear_band_coverage=out["campaign_curves"]["linear_band_coverage"],
                        campaign_curve_error_energy=out["campaign_curves"]["energy"])
-    if out["curves"] is not None and getattr(model, "covariances_", None) and g.any():
+    alternatives = model.band_alternatives() if out["curves"] is not None else {}
+    if alternatives and g.any():
         # the same fit's bands with each covariance, to set them side by side
         half = 0.5 * (cur["curves_upper"].values[k, 1, g] - cur["curves_lower"].values[k, 1, g])
-        for name, cov in model.covariances_.items():
-            alt = copy.copy(model)
-            alt.cov_ = cov
+        for name, alt in alternatives.items():
             cs, ps = alt.curves(wind), alt.physical_curves(wind)
             half_s = 0.5 * (cs["curves_upper"].values[k, 1, g] - cs["curves_lower"].values[k, 1, g])
             summary[f"{name}_linear_band_coverage"] = _coverage(cs["curves_lower"].values[k, 1, g],

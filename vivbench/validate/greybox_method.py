@@ -39,6 +39,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.greybox import BridgeProperties, GreyBoxRefit
 from vivbench.models.model_input import measured_input
+from vivbench.models.protocol import chosen_model, model_evidence
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regimes.greybox import greybox_window_verdicts
 from vivbench.synth.config import StructureConfig
@@ -77,17 +78,11 @@ def structural_properties(structure: StructureConfig) -> BridgeProperties:
     return BridgeProperties(**{name: getattr(structure, name) for name in STRUCTURAL_FIELDS})
 
 
-def _chosen_model(fitted):
-    """The campaign model a fitted method stands for: a verdict wrapper's model, a selection's chosen one."""
-    model = getattr(fitted, "model", fitted)
-    return getattr(model, "model_", model)
-
-
 def _dynamics_shown(fitted) -> bool:
     """Whether a fitted campaign method's held-out evidence shows the dynamics (its selection's null test;
     True for a model without held-out evidence)."""
-    evidence = getattr(getattr(fitted, "model", fitted), "evidence", None)
-    return bool(evidence().get("dynamics_shown", True)) if callable(evidence) else True
+    evidence = model_evidence(fitted)
+    return True if evidence is None else bool(evidence.get("dynamics_shown", True))
 
 
 def _greybox_verdict(model: GreyBoxRefit, record: Record, window_start, window_end, *, reference,
@@ -195,7 +190,7 @@ class GreyBoxMethod:
             reference = CampaignMethod("varying").fit(records)
             seconds = time.perf_counter() - t0
         shown = True if reference is None else _dynamics_shown(reference)
-        reference = None if reference is None else _chosen_model(reference)
+        reference = None if reference is None else chosen_model(reference)
         smoothed = [smooth_wind(r, self.wind_smoothing_s) for r in records]
         warm = None
         if reference is not None:

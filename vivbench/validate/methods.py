@@ -94,7 +94,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.model_input import measured_input
 from vivbench.preprocess.runs import mask_runs
-from vivbench.regimes.model import model_window_regimes
+from vivbench.regimes.model import model_verdicts, model_window_regimes
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.validate.metrics import curve_energy_error, curve_errors, curves_rhs, energy_relative_error
 from vivbench.validate.recovery import (finite_median, model_window_rhs_errors, model_window_rhs_true_AU,
@@ -139,6 +139,10 @@ class VerdictModel:
         if name == "model" or "model" not in self.__dict__:  # unpickling: no wrapped model yet
             raise AttributeError(name)
         return getattr(self.__dict__["model"], name)
+
+    def chosen_model(self):
+        """The wrapped model (:func:`vivbench.models.chosen_model`)."""
+        return self.model
 
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
         """Bool (W, S): the model's regime of the window is identifiable (its verdict of docs/concepts.md (regimes)).
@@ -207,18 +211,6 @@ def above_noise_floor(record: Record, window_start, window_end, min_snr: float |
     return ~(snr < min_snr)  # NaN (unknown) passes
 
 
-def _campaign_verdict(model, record, start, end):
-    from vivbench.regimes import campaign_window_verdicts
-
-    return campaign_window_verdicts(model, record.t, record.A, record.U, np.asarray(start, float), np.asarray(end, float))
-
-
-def _varying_verdict(model, record, start, end):
-    from vivbench.regimes import varying_window_verdicts
-
-    return varying_window_verdicts(model, record, start, end)
-
-
 class CampaignMethod:
     """A built-in campaign model (``PooledSINDy`` or ``VaryingCoefficientSINDy``) as a method with its verdict.
 
@@ -243,7 +235,7 @@ class CampaignMethod:
         from vivbench.models.campaign import PooledSINDy
 
         if self.kind == "pooled":
-            return VerdictModel(PooledSINDy(**self.params).fit(records), _campaign_verdict)
+            return VerdictModel(PooledSINDy(**self.params).fit(records), model_verdicts)
         # The options not given in params are chosen from the records' held-out evidence, as by vivbench pool.
         params = dict(self.params)
         selection_keys = ("n_folds", "criterion", "n_perturbations", "perturbation_timescale_s", "workers", "options")

@@ -51,6 +51,7 @@ import numpy as np
 
 from vivbench.analysis.identify import IdentifyConfig, identify_files
 from vivbench.core.errors import InputError, error_line
+from vivbench.models.protocol import model_change_inputs, model_evidence
 from vivbench.core.lock import exclusive_directory
 from vivbench.core.parallel import parse_scheduler, run_tasks
 from vivbench.core.regime import DEFAULT_TAU
@@ -274,11 +275,10 @@ def _score(method, records, truths, windows, tau: float) -> tuple[dict[str, Any]
 
 def _choice(fitted) -> dict[str, Any]:
     """The candidate a model chose from the campaign's evidence and its confidence set ("" without)."""
-    evidence = getattr(fitted, "evidence", None)
-    if not callable(evidence):
+    ev = model_evidence(fitted)
+    if ev is None:
         shown = getattr(fitted, "dynamics_shown", "")
         return {"chosen": "", "confidence_set": "", "dynamics_shown": "" if shown == "" else int(bool(shown))}
-    ev = evidence()
     return {"chosen": str(ev["chosen"]),
             "confidence_set": ";".join(c["name"] for c in ev["candidates"] if c["in_set"]),
             "dynamics_shown": int(bool(ev.get("dynamics_shown", True)))}
@@ -291,11 +291,10 @@ def _change_scan(fitted, records) -> dict[str, Any]:
     from vivbench.analysis.changes import statistics_change_scan
     from vivbench.models.model_input import measured_input
 
-    stats_of = getattr(fitted, "event_statistics", None)
-    if not callable(stats_of):
+    inputs = model_change_inputs(fitted, [measured_input(fitted, r) for r in records])
+    if inputs is None:
         return {"change_p_value": math.nan, "change_detected": 0, "change_index": -1}
-    scan = statistics_change_scan(stats_of([measured_input(fitted, r) for r in records]),
-                                  seed=int(getattr(fitted, "seed", 0)))
+    scan = statistics_change_scan(inputs["statistics"], seed=int(getattr(fitted, "seed", 0)))
     return {"change_p_value": float(scan["p_value"]), "change_detected": int(bool(scan["detected"])),
             "change_index": int(scan["change_index"]) if scan["detected"] else -1}
 
