@@ -2,6 +2,7 @@
 
 from vivbench.models.campaign import PooledSINDy, amplitude_ratios, RATIO_LEVEL
 from vivbench.models.binned import BinnedPolynomial
+from vivbench.models.campaign_files import campaign_model_file, load_campaign_model
 from vivbench.models.curve_support import (EXTRAPOLATED, curves_inside_data, data_wind_range, extrapolated_mask,
                                            mark_extrapolated)
 from vivbench.models.greybox import BridgeProperties, GreyBoxRefit, curves_to_functions
@@ -68,7 +69,7 @@ from vivbench.models.window import WindowProblem, EventWindowSINDy
 from vivbench.models.window_model import WindowSINDy, nearest_window
 
 __all__ = [
-    "QuasiSteadyAmplitude",
+    "QuasiSteadyAmplitude", "campaign_model_file", "load_campaign_model",
     "BridgeProperties", "GreyBoxRefit", "curves_to_functions", "BinnedPolynomial",
     "EXTRAPOLATED", "curves_inside_data", "data_wind_range", "extrapolated_mask", "mark_extrapolated",
     "PooledSINDy", "WindowRecord", "amplitude_ratios", "pooled_window_stats",
