@@ -147,8 +147,15 @@ def pool_results(result_files: Sequence, model=None, *,
     Parameters
     ----------
     result_files : paths of ``<event_id>.identify.nc`` (their A, U, segments and windows are used)
-    model : PooledSINDy or VaryingCoefficientSINDy, optional
-        The campaign model, fitted here in place (default: ``PooledSINDy()``).
+    model : campaign model of the protocol, optional
+        Fitted here in place (default: ``PooledSINDy()``): a ``PooledSINDy``, a
+        ``VaryingCoefficientSINDy``, a :class:`vivbench.analysis.ModelSelection`
+        or a user's model (docs/methods.md). Everything model-specific is asked
+        through the protocol: its verdict (:func:`vivbench.regimes.measured_verdicts`),
+        what is written of it (:func:`vivbench.models.model_summary`), its
+        wind (:func:`vivbench.models.transforms_wind`), the records it takes
+        (:func:`vivbench.models.model_for_records`) and its change scan
+        (:func:`vivbench.models.model_change_inputs`).
     derivative : Derivative or None
         dA/dt of the campaign model, recomputed from each result's A
         (default :data:`CAMPAIGN_DERIVATIVE`); None uses the results' own dA.
@@ -165,7 +172,7 @@ def pool_results(result_files: Sequence, model=None, *,
         Gaussian smoothing of U (and yaw) before the fit and the verdicts of a
         ``PooledSINDy`` (:func:`vivbench.preprocess.smooth_wind`; 0: none). A
         ``VaryingCoefficientSINDy`` smooths its own wind (its
-        ``wind_smoothing_s``): must be 0 with it.
+        ``wind_smoothing_s``; any model with ``measured_wind``): must be 0 with it.
 
     Returns
     -------
@@ -203,7 +210,8 @@ def pool_results(result_files: Sequence, model=None, *,
         attribute ``model = "VaryingCoefficientSINDy"`` and per equation
         ``n_basis``, ``penalty``, ``edf``, ``rss`` instead (no library
         coefficients: the splines are in the model's own file,
-        ``campaign.model.nc``). Written by :func:`write_campaign_regimes` as
+        ``campaign.model.nc``). Another model gives what its ``campaign_summary``
+        names, and the attributes ``model`` and ``model_class``. Written by :func:`write_campaign_regimes` as
         ``campaign.regimes.nc``.
     """
     from vivbench.analysis.changes import (FLAG_FDR, change_point_scan, change_relative_flags, event_residual_checks,
