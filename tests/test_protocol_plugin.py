@@ -16,7 +16,6 @@ import pytest
 import xarray as xr
 
 from vivbench.cli import main
-from vivbench.core.record import Record
 from vivbench.io.campaign_model import MODEL_NAME, read_campaign_regimes, regimes_file
 from vivbench.models import Simulation, StopRule, nmse, rk4, section_names
 

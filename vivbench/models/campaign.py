@@ -47,7 +47,7 @@ from vivbench.regression.stlsq import aicc, stlsq_path
 from vivbench.library.basis import window_library
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.core.terms import evaluate_library, feature_exponents, feature_names, section_exponents
+from vivbench.core.terms import evaluate_library, feature_exponents, feature_names
 from vivbench.core.errors import InputError
 from vivbench.models.protocol import (
     ModelBase,
