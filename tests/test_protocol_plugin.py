@@ -196,3 +196,30 @@ def test_validate_forecast_report_take_the_plugin(pooled_plugin, tmp_path):
                  "--out-root", str(tmp_path / "reports")]) == 0
     text = (tmp_path / "reports" / "plugin" / "report.md").read_text()
     assert "BinnedCubic" in text
+
+
+def test_model_verdicts_default_is_the_rule_without_flags(short_event):
+    """A model without window_verdicts gets the regime rule on its order contributions and no flag; with
+    ``identifiable`` its own flags."""
+    from vivbench.regimes import model_verdicts, model_window_regimes
+    from vivbench.testing import event_records
+
+    record = event_records([short_event])[0]  # the truth's A > 0: every window regime 1 under r_1 = -0.02 A
+
+    class Damped:
+        def order_contributions(self, rec):
+            r = np.zeros(rec.A.shape + (N_COEF,))
+            r[..., 1] = -0.02 * rec.A
+            return r
+
+    start = record.t[0] + np.array([0.0, 50.0])
+    end = start + 50.0
+    out = model_verdicts(Damped(), record, start, end)
+    np.testing.assert_array_equal(out["regime"], model_window_regimes(Damped(), record, start, end)["regime"])
+    assert (out["regime"] == 1).all() and not out["identifiable"].any()
+
+    class Flagged(Damped):
+        def identifiable(self, rec, s, e):
+            return np.ones((len(s), rec.n_sections), dtype=bool)
+
+    assert model_verdicts(Flagged(), record, start, end)["identifiable"].all()
