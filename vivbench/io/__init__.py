@@ -85,7 +85,8 @@ from vivbench.io.quality import (
     check_wind_magnitude,
     check_wind_varies,
 )
-from vivbench.io.fieldimport import import_event, load_mapping, export_csv, export_mat, TIME_FORMATS
+from vivbench.io.fieldimport import import_event, load_mapping, TIME_FORMATS
+from vivbench.io.field_export import export_csv, export_mat
 
 __all__ = [
     "NETCDF_ENGINE", "atomic_path", "write_netcdf_atomic", "EventFormatError", "FORMAT", "FORMAT_VERSION",
