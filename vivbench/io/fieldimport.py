@@ -61,6 +61,7 @@ import numpy as np
 import pandas as pd
 
 from vivbench.io.event import NOMINAL_RATES, EventFormatError, build_event, write_event
+from vivbench.io.field_resample import RATE_TOLERANCE, measured_rate, regular_grid, resample_to_grid
 from vivbench.io.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
 from vivbench.core.errors import InputError
 
@@ -74,11 +75,10 @@ __all__ = ["import_event", "load_mapping", "TIME_FORMATS"]
 TIME_FORMATS = ("seconds", "iso8601")
 _GROUPS = {"wind": ("u", "v", "w"), "accel": ("acc",)}
 _UNITS = {"wind": WIND_UNITS, "accel": ACC_UNITS}
-_SETTINGS = ("file", "time", "time_format", "units")
+_SETTINGS = ("file", "time", "time_format", "units", "rate")
 _ROOT_KEYS = ("event_id", "start_time", "span_azimuth_deg", "source", "wind", "accel")
 # Sorting is a repair for a few swapped rows; a clock that goes back more often is refused.
 _MAX_REORDER_FRACTION = 0.01
-_RATE_TOLERANCE = 0.10
 
 
 @dataclass(frozen=True)
@@ -92,6 +92,7 @@ class _Channel:
     time_format: str
     units: str
     index: int | None
+    rate: float | None
 
 
 # --------------------------------------------------------------------- mapping
@@ -220,10 +221,15 @@ def _resolve(mapping: Path, group: str, sec: str, var: str, spec, level: dict, b
     index = spec.get("index")
     if index is not None and (isinstance(index, bool) or not isinstance(index, int) or index < 1):
         raise bad(f"{where} has index {index!r}; expected a 1-based column number of a MATLAB matrix")
+    rate = s.get("rate")
+    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float)) or not rate > 0
+                             or not math.isfinite(rate)):
+        raise bad(f"{where} has rate {rate!r}; expected the sampling rate in Hz, a positive number")
     file = Path(s["file"])
     if not file.is_absolute():
         file = mapping.parent / file
-    return _Channel(group, var, sec, file, spec["column"], time, fmt, units, index)
+    return _Channel(group, var, sec, file, spec["column"], time, fmt, units, index,
+                    None if rate is None else float(rate))
 
 
 # --------------------------------------------------------------------- sources
@@ -391,9 +397,18 @@ def import_event(mapping_path, out_path=None):
     for group in _GROUPS:
         chans = [c for c in m["channels"] if c.group == group]
         keys = list(dict.fromkeys((c.file, c.time, c.time_format) for c in chans))
-        for k in keys:
-            _check_rate(sources[k][0], str(k[0]), group)
-        t_union, rows = _merge_times([sources[k][0] for k in keys], [str(k[0]) for k in keys], group)
+        rates = {}
+        for c in chans:
+            k = (c.file, c.time, c.time_format)
+            rates[k] = measured_rate(sources[k][0], str(c.file), group, c.rate)
+        nominal = NOMINAL_RATES[group]
+        on_grid = all(abs(r / nominal - 1.0) <= RATE_TOLERANCE for r in rates.values())
+        if on_grid:
+            t_group, rows = _merge_times([sources[k][0] for k in keys], [str(k[0]) for k in keys], group)
+        else:
+            t_group = regular_grid(min(sources[k][0][0] for k in keys), max(sources[k][0][-1] for k in keys), nominal)
+        attrs[f"import_rate_{group}_hz"] = float(min(rates.values()))
+        attrs[f"import_resampled_{group}"] = int(not on_grid)
         group_data = {}
         for c in chans:
             k = (c.file, c.time, c.time_format)
@@ -401,10 +416,13 @@ def import_event(mapping_path, out_path=None):
             raw = tab.values(c.column, c.index)
             if raw.shape[0] != raw_times[k].shape[0]:
                 raise InputError(f"{tab.name}: {c.column!r} has {raw.shape[0]} values but the time {c.time!r} has {raw_times[k].shape[0]}")
-            vals = np.full(t_union.size, np.nan)
-            vals[rows[keys.index(k)]] = raw[sources[k][1]]
+            if on_grid:
+                vals = np.full(t_group.size, np.nan)
+                vals[rows[keys.index(k)]] = raw[sources[k][1]]
+            else:
+                vals = resample_to_grid(sources[k][0], raw[sources[k][1]], rates[k], t_group, tab.name)
             group_data[(c.var, c.section)] = (vals, c)
-        data[group] = (t_union, group_data)
+        data[group] = (t_group, group_data)
 
     sections = m["sections"]
     arrays = {}
@@ -470,18 +488,6 @@ def _repair_time(t: np.ndarray, name: str):
     ts = t[order]
     keep = np.concatenate(([True], np.diff(ts) > 0))
     return order, keep, n_reordered, int(n - keep.sum())
-
-
-def _check_rate(t: np.ndarray, name: str, group: str) -> None:
-    if t.size < 2:
-        raise InputError(f"{name}: {t.size} distinct time(s); at least 2 needed")
-    rate = 1.0 / float(np.median(np.diff(t)))
-    nominal = NOMINAL_RATES[group]
-    if abs(rate / nominal - 1.0) > _RATE_TOLERANCE:
-        raise InputError(
-            f"{name}: sampling rate {rate:.4g} Hz (median step) is more than {_RATE_TOLERANCE:.0%} from the nominal "
-            f"{nominal:g} Hz of {group} records; check the time column and its format"
-        )
 
 
 def _merge_times(times: list[np.ndarray], names: list[str], group: str):
