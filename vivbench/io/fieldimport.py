@@ -61,6 +61,7 @@ import numpy as np
 import pandas as pd
 
 from vivbench.io.event import NOMINAL_RATES, EventFormatError, build_event, write_event
+from vivbench.io.field_wind import WIND_FORMATS, WIND_RULES, span_weights, to_east_north_up
 from vivbench.io.field_resample import RATE_TOLERANCE, measured_rate, regular_grid, resample_to_grid
 from vivbench.io.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
 from vivbench.core.errors import InputError
@@ -73,10 +74,12 @@ except ModuleNotFoundError:  # Python < 3.11
 __all__ = ["import_event", "load_mapping", "TIME_FORMATS"]
 
 TIME_FORMATS = ("seconds", "iso8601")
-_GROUPS = {"wind": ("u", "v", "w"), "accel": ("acc",)}
+_GROUPS = ("wind", "accel")
 _UNITS = {"wind": WIND_UNITS, "accel": ACC_UNITS}
 _SETTINGS = ("file", "time", "time_format", "units", "rate")
-_ROOT_KEYS = ("event_id", "start_time", "span_azimuth_deg", "source", "wind", "accel")
+_ROOT_KEYS = ("event_id", "start_time", "span_azimuth_deg", "source", "span_length_m", "wind_rule", "wind", "accel")
+# Settings of the wind group or an anemometer (not of a channel).
+_WIND_KEYS = ("format", "heading_deg")
 # Sorting is a repair for a few swapped rows; a clock that goes back more often is refused.
 _MAX_REORDER_FRACTION = 0.01
 
@@ -151,41 +154,89 @@ def load_mapping(path) -> dict:
         raise bad(f"start_time must be an ISO 8601 string such as \"2026-01-01T00:00:00Z\"; got {start!r}")
     source = raw.get("source", "field")
 
+    positioned = "span_length_m" in raw or any(
+        isinstance(raw[g], dict) and any(isinstance(t, dict) and "position_m" in t for t in raw[g].values())
+        for g in _GROUPS)
+    span = _number(raw, "span_length_m", "the span's length in m", bad, required=positioned, positive=True)
+    rule = raw.get("wind_rule", "nearest")
+    if rule not in WIND_RULES:
+        raise bad(f"wind_rule {rule!r} is not one of {', '.join(WIND_RULES)}")
     channels: list[_Channel] = []
-    sections_of = {}
-    for group, variables in _GROUPS.items():
+    sections_of, tables_of = {}, {}
+    for group in _GROUPS:
         table = raw[group]
         if not isinstance(table, dict):
             raise bad(f"[{group}] must be a table")
-        sec_names = [k for k in table if k not in _SETTINGS]
+        group_keys = _SETTINGS + (_WIND_KEYS if group == "wind" else ())
+        sec_names = [k for k in table if k not in group_keys]
         wrong = [k for k in sec_names if not isinstance(table[k], dict)]
         if wrong:
-            raise bad(f"unknown key(s) {wrong} in [{group}]; allowed: {list(_SETTINGS)} and section tables S1..Sn")
+            raise bad(f"unknown key(s) {wrong} in [{group}]; allowed: {list(group_keys)} and sensor tables")
         expected = [f"S{k + 1}" for k in range(len(sec_names))]
-        if not sec_names or sorted(sec_names, key=_section_order) != expected:
+        if group == "wind" and positioned:
+            expected = sec_names  # anemometers: any names when positions are declared
+        elif sorted(sec_names, key=_section_order) != expected:
+            sec_names = []
+        if not sec_names:
             raise bad(f"[{group}] has sections {sec_names}; expected tables S1..Sn, e.g. [{group}.S1], [{group}.S2], [{group}.S3]")
         sections_of[group] = expected
-        base = {k: table[k] for k in _SETTINGS if k in table}
+        base = {k: table[k] for k in group_keys if k in table}
         for sec in expected:
             st = table[sec]
-            extra = sorted(set(st) - set(_SETTINGS) - set(variables))
+            level = {**base, **{k: st[k] for k in group_keys if k in st}}
+            where = f"[{group}.{sec}]"
+            info = {"name": sec, "position_m": None}
+            if positioned:
+                pos = _number(st, "position_m", "its position along the span in m", bad, required=True, where=where)
+                if not 0.0 <= pos <= span:
+                    raise bad(f"{where} position_m = {pos:g} m is outside the span (0 to span_length_m = {span:g} m)")
+                info["position_m"] = pos
+            if group == "wind":
+                fmt = level.get("format", "enu")
+                if fmt not in WIND_FORMATS:
+                    raise bad(f"{where} has format {fmt!r}; allowed: {', '.join(WIND_FORMATS)}")
+                info["format"] = fmt
+                info["heading_deg"] = _number(level, "heading_deg", "the instrument's x axis, degrees from north",
+                                              bad, required=fmt == "instrument", where=where)
+                required, optional = WIND_FORMATS[fmt]
+            else:
+                required, optional = ("acc",), ()
+            extra = sorted(set(st) - set(group_keys) - {"position_m"} - set(required) - set(optional))
             if extra:
-                raise bad(f"unknown key(s) {extra} in [{group}.{sec}]; allowed: {list(variables)} and {list(_SETTINGS)}")
-            level = {**base, **{k: st[k] for k in _SETTINGS if k in st}}
-            for var in variables:
+                raise bad(f"unknown key(s) {extra} in {where}; allowed: {list(required + optional)}, position_m "
+                          f"and {list(group_keys)}")
+            for var in required + tuple(v for v in optional if v in st):
                 if var not in st:
-                    raise bad(f"[{group}.{sec}] lacks the channel {var!r}; every section needs {', '.join(variables)}")
+                    raise bad(f"{where} lacks the channel {var!r}; every section needs {', '.join(required)}")
                 channels.append(_resolve(path, group, sec, var, st[var], level, bad))
-    if sections_of["wind"] != sections_of["accel"]:
-        raise bad(f"[wind] has sections {sections_of['wind']} but [accel] has {sections_of['accel']}; they must be the same")
+            tables_of.setdefault(group, []).append(info)
+    if not positioned and sections_of["wind"] != sections_of["accel"]:
+        raise bad(f"[wind] has sections {sections_of['wind']} but [accel] has {sections_of['accel']}; they must be "
+                  f"the same, or declare span_length_m and position_m of every anemometer and section")
     return {
         "event_id": raw["event_id"],
         "start_time": start,
         "span_azimuth_deg": float(az),
         "source": source,
-        "sections": sections_of["wind"],
+        "sections": sections_of["accel"],
+        "anemometers": tables_of["wind"],
+        "positions_m": [t["position_m"] for t in tables_of["accel"]] if positioned else None,
+        "span_length_m": span,
+        "wind_rule": rule,
         "channels": channels,
     }
+
+
+def _number(table: dict, key: str, what: str, bad, *, required: bool, positive: bool = False, where: str = ""):
+    """A finite number from a mapping table (None when absent and not required)."""
+    if key not in table:
+        if required:
+            raise bad(f"{where or 'the mapping'} needs {key} ({what})".strip())
+        return None
+    x = table[key]
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or (positive and x <= 0):
+        raise bad(f"{where} {key} must be a finite{' positive' if positive else ''} number ({what}); got {x!r}".strip())
+    return float(x)
 
 
 def _section_order(label: str):
@@ -206,11 +257,11 @@ def _resolve(mapping: Path, group: str, sec: str, var: str, spec, level: dict, b
         raise bad(f"{where} needs a column (name of the column or variable)")
     if "file" not in s or not isinstance(s["file"], str):
         raise bad(f"{where} has no file: give file in [{group}], [{group}.{sec}] or the channel")
-    units = s.get("units")
+    units = "deg" if var == "direction" else s.get("units")
     allowed = ", ".join(_UNITS[group])
     if units is None:
         raise bad(f"{where} has no units: give units in [{group}] or below (one of {allowed})")
-    if units not in _UNITS[group]:
+    if units not in _UNITS[group] and var != "direction":
         raise bad(f"{where} has units {units!r}; allowed for {group}: {allowed}")
     fmt = s.get("time_format", "seconds")
     if fmt not in TIME_FORMATS:
@@ -426,31 +477,38 @@ def import_event(mapping_path, out_path=None):
 
     sections = m["sections"]
     arrays = {}
-    for group, variables in _GROUPS.items():
+    for group in _GROUPS:
         t, gd = data[group]
-        for sec in sections:
-            if group == "wind":
-                (u, cu), (v, cv) = gd[("u", sec)], gd[("v", sec)]
-                if cu.units == cv.units:
-                    check_wind_magnitude(u, v, cu.units, where=f"{cu.file}: columns {cu.column!r}, {cv.column!r}", labels=[f"({sec})"])
-                else:
-                    check_wind_magnitude(u * WIND_UNITS[cu.units], v * WIND_UNITS[cv.units], "m/s",
-                                         where=f"{cu.file}: columns {cu.column!r}, {cv.column!r}", labels=[f"({sec})"])
-            else:
-                a, ca = gd[("acc", sec)]
-                check_acc_magnitude(a, ca.units, where=f"{ca.file}: column {ca.column!r}", labels=[f"({sec})"])
-        for var in variables:
-            cols = []
-            for sec in sections:
-                vals, c = gd[(var, sec)]
-                factor = _UNITS[group][c.units]
-                cols.append(vals * factor if factor != 1.0 else vals)
-                attrs[f"import_units_{var}_{sec}"] = c.units
-                attrs[f"import_factor_{var}_{sec}"] = float(factor)
-            arrays[var] = np.column_stack(cols)
         arrays[f"{group}_time"] = t
-        n_missing = int(sum(np.isnan(arrays[v]).sum() for v in variables))
-        quality[f"quality_missing_{group}"] = n_missing
+        quality[f"quality_missing_{group}"] = int(sum(np.isnan(vals).sum() for vals, _ in gd.values()))
+        for (var, sec), (_, c) in gd.items():
+            if var != "direction":
+                attrs[f"import_units_{var}_{sec}"] = c.units
+                attrs[f"import_factor_{var}_{sec}"] = float(_UNITS[group][c.units])
+    cols = []
+    for sec in sections:
+        a, ca = data["accel"][1][("acc", sec)]
+        check_acc_magnitude(a, ca.units, where=f"{ca.file}: column {ca.column!r}", labels=[f"({sec})"])
+        cols.append(a * ACC_UNITS[ca.units])
+    arrays["acc"] = np.column_stack(cols)
+    anem = [_anemometer_wind(data["wind"][1], info) for info in m["anemometers"]]
+    if m["positions_m"] is None:  # one anemometer per section, in order
+        weights = np.eye(len(sections))
+    else:
+        weights, distance = span_weights([i["position_m"] for i in m["anemometers"]], m["positions_m"], m["wind_rule"])
+        attrs["import_span_length_m"] = m["span_length_m"]
+        attrs["import_wind_rule"] = m["wind_rule"]
+        for info in m["anemometers"]:
+            attrs[f"import_anemometer_position_m_{info['name']}"] = info["position_m"]
+        for sec, pos, d in zip(sections, m["positions_m"], distance):
+            attrs[f"import_position_m_{sec}"] = pos
+            attrs[f"wind_distance_m_{sec}"] = float(d)
+    for k, var in enumerate(("u", "v", "w")):
+        out = np.zeros((arrays["wind_time"].size, len(sections)))
+        for j in range(len(sections)):
+            for i in np.flatnonzero(weights[:, j]):
+                out[:, j] += weights[i, j] * anem[i][k]
+        arrays[var] = out
     attrs["import_sources"] = "; ".join(sorted({p.name for p in tables}))
     attrs.update(quality)
     label = str(mapping_path)
@@ -465,6 +523,23 @@ def import_event(mapping_path, out_path=None):
     if out_path is not None:
         write_event(tree, out_path)
     return tree
+
+
+def _anemometer_wind(gd: dict, info: dict):
+    """East, north and up wind (m/s) of one anemometer, its magnitude checked in the declared unit."""
+    name = info["name"]
+    chans = {var: vc for (var, sec), vc in gd.items() if sec == name}
+    speed_vars = [v for v in chans if v != "direction"]
+    units = {chans[v][1].units for v in speed_vars}
+    one_unit = len(units) == 1
+    vals = {v: (x if one_unit or v == "direction" else x * WIND_UNITS[chans[v][1].units]) for v, (x, _) in chans.items()}
+    east, north, up = to_east_north_up(info["format"], vals, info["heading_deg"])
+    unit = units.pop() if one_unit else "m/s"
+    first, second = (chans["u"][1], chans["v"][1]) if "u" in chans else (chans["speed"][1], chans["direction"][1])
+    check_wind_magnitude(east, north, unit, where=f"{first.file}: columns {first.column!r}, {second.column!r}",
+                         labels=[f"({name})"])
+    factor = WIND_UNITS[unit]
+    return east * factor, north * factor, up * factor
 
 
 def _repair_time(t: np.ndarray, name: str):

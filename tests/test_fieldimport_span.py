@@ -1,0 +1,108 @@
+"""Field import with sensor positions along the span and anemometers in their own formats."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.helpers import assert_close
+from vivbench.analysis.identify import identify_event
+from vivbench.cli import main
+from vivbench.io import event_arrays
+from vivbench.io.field_wind import span_weights, to_east_north_up
+from vivbench.io.fieldimport import import_event
+from tests.test_fieldimport_rates import CONFIG
+
+
+def _write(tree, out, *, anemometers: dict, wind_head: str = "", rule: str | None = None, span: float = 1000.0,
+           positions=(250.0, 500.0, 750.0)):
+    """Acceleration of every section in one CSV; each anemometer a CSV of the given event section's wind (m/s).
+
+    ``anemometers``: name -> (section index of the event whose wind it records, position m, extra TOML lines).
+    """
+    arr = {k: np.asarray(v, dtype=np.float64) if k != "sections" else v for k, v in event_arrays(tree).items()}
+    acc = {"time": arr["accel_time"], **{f"acc_S{i + 1}": arr["acc"][:, i] for i in range(arr["acc"].shape[1])}}
+    pd.DataFrame(acc).to_csv(out / "accel.csv", index=False)
+    lines = [f'event_id = "P1"', f'start_time = "{tree.attrs["start_time"]}"',
+             f"span_azimuth_deg = {float(tree.attrs['span_azimuth_deg'])!r}", f"span_length_m = {span!r}"]
+    lines += [f'wind_rule = "{rule}"'] if rule else []
+    lines += ["", "[wind]", 'units = "m/s"', wind_head, ""]
+    for name, (i, pos, extra, frame) in anemometers.items():
+        frame = frame if frame is not None else {"time": arr["wind_time"], "u": arr["u"][:, i], "v": arr["v"][:, i],
+                                                 "w": arr["w"][:, i]}
+        pd.DataFrame(frame).to_csv(out / f"wind_{name}.csv", index=False)
+        lines += [f"[wind.{name}]", f'file = "wind_{name}.csv"', f"position_m = {pos!r}", *extra, ""]
+    lines += ["[accel]", 'file = "accel.csv"', 'units = "m/s^2"', ""]
+    for k, pos in enumerate(positions):
+        lines += [f"[accel.S{k + 1}]", f'acc = "acc_S{k + 1}"', f"position_m = {pos!r}", ""]
+    mapping = out / "mapping.toml"
+    mapping.write_text("\n".join(lines))
+    return mapping
+
+
+ENU = ['u = "u"', 'v = "v"', 'w = "w"']
+
+
+def test_one_mid_span_anemometer_for_three_sections_imports_and_identifies(short_event, tmp_path):
+    mapping = _write(short_event, tmp_path, anemometers={"mid": (1, 500.0, ENU, None)})
+    tree = import_event(mapping)
+    a, b = event_arrays(tree), event_arrays(short_event)
+    b = {k: np.asarray(b[k], dtype=np.float64) for k in ("u", "v", "acc")}
+    assert list(a["sections"]) == ["S1", "S2", "S3"]
+    for j in range(3):  # every section gets the mid-span wind
+        np.testing.assert_array_equal(a["u"][:, j], b["u"][:, 1])
+    np.testing.assert_array_equal(a["acc"], b["acc"])
+    assert [tree.attrs[f"wind_distance_m_S{k}"] for k in (1, 2, 3)] == [250.0, 0.0, 250.0]
+    assert tree.attrs["import_wind_rule"] == "nearest" and tree.attrs["import_anemometer_position_m_mid"] == 500.0
+    res = identify_event(tree, CONFIG)
+    ref = identify_event(short_event, CONFIG)
+    assert res.sizes["window"] == ref.sizes["window"] > 0 and res.sizes["section"] == 3
+    assert np.isfinite(res["U"].values).mean() > 0.5
+    # The acceleration is the event's own, so is the envelope.
+    assert_close(res["A"].values, ref["A"].values, rtol=1e-9, atol=1e-12, reason="float32 event vs float64 import")
+    # Every section's U comes from one anemometer: across sections they differ only by the projection, i.e. not at all.
+    assert_close(res["U"].values[:, 0], res["U"].values[:, 2], rtol=1e-12, atol=1e-12, reason="same wind record")
+
+
+def test_interpolation_between_two_anemometers(short_event, tmp_path):
+    mapping = _write(short_event, tmp_path, rule="interpolation",
+                     anemometers={"west": (0, 100.0, ENU, None), "east": (2, 900.0, ENU, None)})
+    tree = import_event(mapping)
+    a, b = event_arrays(tree), event_arrays(short_event)
+    b = {k: np.asarray(b[k], dtype=np.float64) for k in ("u", "v", "acc")}
+    # S1 at 250 m: 150/800 of the way from 100 m to 900 m; S2 at 500 m: half way.
+    assert_close(a["v"][:, 0], (1 - 0.1875) * b["v"][:, 0] + 0.1875 * b["v"][:, 2], rtol=1e-12, atol=1e-12,
+                 reason="two multiplications and a sum in float64")
+    assert_close(a["v"][:, 1], 0.5 * (b["v"][:, 0] + b["v"][:, 2]), rtol=1e-12, atol=1e-12,
+                 reason="two multiplications and a sum in float64")
+    assert [tree.attrs[f"wind_distance_m_S{k}"] for k in (1, 2, 3)] == [150.0, 400.0, 150.0]
+
+
+def test_span_weights_rules():
+    w, d = span_weights([500.0], [0.0, 500.0, 1000.0], "interpolation")
+    np.testing.assert_array_equal(w, [[1.0, 1.0, 1.0]])
+    np.testing.assert_array_equal(d, [500.0, 0.0, 500.0])
+    w, d = span_weights([800.0, 200.0], [100.0, 350.0, 900.0], "interpolation")
+    np.testing.assert_allclose(w, [[0.0, 0.25, 1.0], [1.0, 0.75, 0.0]])
+    np.testing.assert_allclose(w.sum(axis=0), 1.0)
+    w, _ = span_weights([800.0, 200.0], [100.0, 350.0, 900.0], "nearest")
+    np.testing.assert_array_equal(w, [[0.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
+
+
+@pytest.mark.parametrize("edit, file, words", [
+    (lambda t: t.replace("position_m = 500.0", "position_m = 1200.0", 1), "mapping.toml",
+     "[wind.mid] position_m = 1200 m is outside the span (0 to span_length_m = 1000 m)"),
+    (lambda t: t.replace("span_length_m = 1000.0\n", ""), "mapping.toml", "needs span_length_m"),
+    (lambda t: t.replace('acc = "acc_S2"\nposition_m = 500.0', 'acc = "acc_S2"'), "mapping.toml",
+     "[accel.S2] needs position_m"),
+    (lambda t: t.replace("[wind]", 'wind_rule = "cubic"\n[wind]'), "mapping.toml", "wind_rule 'cubic' is not one of"),
+])
+def test_bad_positions_are_one_line_naming_the_mapping(short_event, tmp_path, capsys, edit, file, words):
+    mapping = _write(short_event, tmp_path, anemometers={"mid": (1, 500.0, ENU, None)})
+    mapping.write_text(edit(mapping.read_text()))
+    out = tmp_path / "o" / "F.nc"
+    assert main(["import", str(mapping), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and file in err and words in err, err
+    assert not out.exists()
