@@ -97,6 +97,9 @@ def test_span_weights_rules():
     (lambda t: t.replace('acc = "acc_S2"\nposition_m = 500.0', 'acc = "acc_S2"'), "mapping.toml",
      "[accel.S2] needs position_m"),
     (lambda t: t.replace("[wind]", 'wind_rule = "cubic"\n[wind]'), "mapping.toml", "wind_rule 'cubic' is not one of"),
+    (lambda t: t.replace('u = "u"', 'format = "instrument"\nu = "u"'), "mapping.toml",
+     "[wind.mid] needs heading_deg (the instrument's x axis, degrees from north)"),
+    (lambda t: t.replace('u = "u"', 'format = "polar"\nu = "u"'), "mapping.toml", "[wind.mid] has format 'polar'; allowed"),
 ])
 def test_bad_positions_are_one_line_naming_the_mapping(short_event, tmp_path, capsys, edit, file, words):
     mapping = _write(short_event, tmp_path, anemometers={"mid": (1, 500.0, ENU, None)})
@@ -106,3 +109,43 @@ def test_bad_positions_are_one_line_naming_the_mapping(short_event, tmp_path, ca
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and file in err and words in err, err
     assert not out.exists()
+
+
+def test_known_rotations():
+    one, zero = np.array([5.0]), np.array([0.0])
+    # Instrument with its x axis towards east (heading 90): x is east, y is north.
+    e, n, _ = to_east_north_up("instrument", {"u": one, "v": zero, "w": zero}, 90.0)
+    assert_close(np.r_[e, n], [5.0, 0.0], atol=1e-12, reason="sin and cos of 90 degrees in float64")
+    e, n, _ = to_east_north_up("instrument", {"u": zero, "v": one, "w": zero}, 90.0)
+    assert_close(np.r_[e, n], [0.0, 5.0], atol=1e-12, reason="sin and cos of 90 degrees in float64")
+    # Heading 0: x north, y west.
+    e, n, _ = to_east_north_up("instrument", {"u": zero, "v": one, "w": zero}, 0.0)
+    assert_close(np.r_[e, n], [-5.0, 0.0], atol=1e-12, reason="sin and cos of 0 degrees in float64")
+    # Wind from the north blows southwards; from the east (90) westwards; from the south-west (225) to the north-east.
+    e, n, w = to_east_north_up("speed_direction", {"speed": np.full(3, 10.0), "direction": np.array([0.0, 90.0, 225.0])})
+    assert_close(e, [0.0, -10.0, 10 / np.sqrt(2)], atol=1e-12, reason="sin and cos in float64")
+    assert_close(n, [-10.0, 0.0, 10 / np.sqrt(2)], atol=1e-12, reason="sin and cos in float64")
+    assert np.isnan(w).all()
+
+
+def test_instrument_frame_and_speed_direction_files_import_to_east_north_up(short_event, tmp_path):
+    arr = {k: np.asarray(v, dtype=np.float64) for k, v in event_arrays(short_event).items() if k != "sections"}
+    east, north, up = arr["u"][:, 1], arr["v"][:, 1], arr["w"][:, 1]
+    h = np.deg2rad(30.0)
+    sonic = {"time": arr["wind_time"], "ux": east * np.sin(h) + north * np.cos(h),
+             "uy": -east * np.cos(h) + north * np.sin(h), "uz": up}
+    cup = {"time": arr["wind_time"], "spd": np.hypot(east, north) * 3.6,  # km/h
+           "dir": np.mod(np.rad2deg(np.arctan2(-east, -north)), 360.0)}
+    mapping = _write(short_event, tmp_path, anemometers={
+        "sonic": (1, 300.0, ['format = "instrument"', "heading_deg = 30.0", 'u = "ux"', 'v = "uy"', 'w = "uz"'], sonic),
+        "cup": (1, 700.0, ['format = "speed_direction"', 'units = "km/h"', 'speed = "spd"', 'direction = "dir"'], cup),
+    }, positions=(250.0, 400.0, 750.0))
+    tree = import_event(mapping)
+    a = event_arrays(tree)
+    for j in (0, 1, 2):  # S1, S2 nearest the sonic at 300 m, S3 nearest the cup at 700 m
+        assert_close(a["u"][:, j], east, rtol=1e-9, atol=1e-9, reason="rotation and back, km/h and back")
+        assert_close(a["v"][:, j], north, rtol=1e-9, atol=1e-9, reason="rotation and back, km/h and back")
+    assert_close(a["w"][:, 0], up, rtol=1e-12, atol=1e-12, reason="w is not rotated")
+    assert np.isnan(a["w"][:, 2]).all()  # a cup anemometer does not measure w
+    assert tree.attrs["import_units_speed_cup"] == "km/h" and "import_units_direction_cup" not in tree.attrs
+    assert [tree.attrs[f"wind_distance_m_S{k}"] for k in (1, 2, 3)] == [50.0, 100.0, 50.0]
