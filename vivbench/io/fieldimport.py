@@ -50,6 +50,7 @@ unit) and ``import_factor_<var>_<section>`` (the factor to SI).
 
 from __future__ import annotations
 
+import glob
 import math
 import warnings
 from dataclasses import dataclass
@@ -85,11 +86,22 @@ _MAX_REORDER_FRACTION = 0.01
 
 
 @dataclass(frozen=True)
+class _Source:
+    """The files of one source: one, or several to concatenate in time order."""
+
+    paths: tuple
+
+    def __str__(self) -> str:
+        first = str(self.paths[0])
+        return first if len(self.paths) == 1 else f"{first} (and {len(self.paths) - 1} more files)"
+
+
+@dataclass(frozen=True)
 class _Channel:
     group: str
     var: str
     section: str
-    file: Path
+    file: _Source
     column: str
     time: str
     time_format: str
@@ -255,7 +267,7 @@ def _resolve(mapping: Path, group: str, sec: str, var: str, spec, level: dict, b
     s = {**level, **{k: spec[k] for k in _SETTINGS if k in spec}}
     if "column" not in spec or not isinstance(spec["column"], str) or not spec["column"]:
         raise bad(f"{where} needs a column (name of the column or variable)")
-    if "file" not in s or not isinstance(s["file"], str):
+    if "file" not in s:
         raise bad(f"{where} has no file: give file in [{group}], [{group}.{sec}] or the channel")
     units = "deg" if var == "direction" else s.get("units")
     allowed = ", ".join(_UNITS[group])
@@ -276,17 +288,60 @@ def _resolve(mapping: Path, group: str, sec: str, var: str, spec, level: dict, b
     if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float)) or not rate > 0
                              or not math.isfinite(rate)):
         raise bad(f"{where} has rate {rate!r}; expected the sampling rate in Hz, a positive number")
-    file = Path(s["file"])
-    if not file.is_absolute():
-        file = mapping.parent / file
+    file = _Source(_expand_files(mapping, s["file"], where, bad))
     return _Channel(group, var, sec, file, spec["column"], time, fmt, units, index,
                     None if rate is None else float(rate))
+
+
+def _expand_files(mapping: Path, spec, where: str, bad) -> tuple:
+    """Paths of a ``file`` setting: a path, a glob pattern (``*``, ``?``, ``[``) or a list of either."""
+    items = [spec] if isinstance(spec, str) else spec
+    if not isinstance(items, list) or not items or not all(isinstance(x, str) and x for x in items):
+        raise bad(f"{where} has file {spec!r}; expected a path, a glob pattern or a list of them")
+    paths = []
+    for item in items:
+        full = item if Path(item).is_absolute() else str(mapping.parent / item)
+        if any(ch in item for ch in "*?["):
+            found = sorted(glob.glob(full))
+            if not found:
+                raise bad(f"{where}: the file pattern {item!r} matches no file")
+            paths += [Path(f) for f in found]
+        else:
+            paths.append(Path(full))
+    if len(set(paths)) != len(paths):
+        raise bad(f"{where} names a file twice in {spec!r}")
+    return tuple(paths)
 
 
 # --------------------------------------------------------------------- sources
 
 
 class _Table:
+    """The files of one source, concatenated in time order; values read once."""
+
+    def __init__(self, source: _Source):
+        self.name = str(source)
+        self.parts = [_File(p) for p in source.paths]
+        self.order = list(range(len(self.parts)))
+
+    def values(self, column: str, index: int | None = None) -> np.ndarray:
+        return np.concatenate([self.parts[i].values(column, index) for i in self.order])
+
+    def times(self, column: str, fmt: str) -> np.ndarray:
+        """Times of the rows, the files put in the order of their first time; overlapping files are refused."""
+        ts = [part.times(column, fmt) for part in self.parts]
+        if len(ts) > 1:
+            self.order = sorted(range(len(ts)), key=lambda i: ts[i].min())
+            for a, b in zip(self.order, self.order[1:]):
+                if ts[b].min() <= ts[a].max():
+                    first, then = self.parts[a].name, self.parts[b].name
+                    raise InputError(f"{first}, {then}: the files overlap in time ({Path(then).name} starts before "
+                                     f"{Path(first).name} ends); "
+                                     f"each instant must be in one file")
+        return np.concatenate([ts[i] for i in self.order])
+
+
+class _File:
     """One source file: columns or variables as float arrays, read once."""
 
     def __init__(self, path: Path):
@@ -406,9 +461,9 @@ def import_event(mapping_path, out_path=None):
         One line naming the mapping or data file and the problem.
     """
     m = load_mapping(mapping_path)
-    tables: dict[Path, _Table] = {}
+    tables: dict[_Source, _Table] = {}
 
-    def table(p: Path) -> _Table:
+    def table(p: _Source) -> _Table:
         if p not in tables:
             tables[p] = _Table(p)
         return tables[p]
@@ -509,7 +564,7 @@ def import_event(mapping_path, out_path=None):
             for i in np.flatnonzero(weights[:, j]):
                 out[:, j] += weights[i, j] * anem[i][k]
         arrays[var] = out
-    attrs["import_sources"] = "; ".join(sorted({p.name for p in tables}))
+    attrs["import_sources"] = "; ".join(sorted({p.name for src in tables for p in src.paths}))
     attrs.update(quality)
     label = str(mapping_path)
     try:
