@@ -149,3 +149,25 @@ def test_instrument_frame_and_speed_direction_files_import_to_east_north_up(shor
     assert np.isnan(a["w"][:, 2]).all()  # a cup anemometer does not measure w
     assert tree.attrs["import_units_speed_cup"] == "km/h" and "import_units_direction_cup" not in tree.attrs
     assert [tree.attrs[f"wind_distance_m_S{k}"] for k in (1, 2, 3)] == [50.0, 100.0, 50.0]
+
+
+def test_the_complete_example_of_the_docs_parses(tmp_path):
+    from pathlib import Path
+
+    from vivbench.io.fieldimport import load_mapping
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "field_import.md").read_text()
+    toml = page.split("### A complete example", 1)[1].split("```toml\n", 1)[1].split("```", 1)[0]
+    for name in ("wind/mid_0800.csv", "wind/mid_0900.csv", "wind/tower_0800.csv", "wind/tower_0900.csv",
+                 "acc/deck_0800.csv"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("time\n")
+    (tmp_path / "mapping.toml").write_text(toml)
+    m = load_mapping(tmp_path / "mapping.toml")
+    assert m["sections"] == ["S1", "S2", "S3"] and m["positions_m"] == [272.0, 544.0, 900.0]
+    assert [(a["name"], a["format"], a["position_m"]) for a in m["anemometers"]] == [
+        ("mid", "instrument", 544.0), ("tower", "speed_direction", 1088.0)]
+    mid_u = next(c for c in m["channels"] if c.section == "mid" and c.var == "u")
+    assert [p.name for p in mid_u.file.paths] == ["mid_0800.csv", "mid_0900.csv"] and mid_u.rate == 20.0
+    _, distance = span_weights([544.0, 1088.0], m["positions_m"], m["wind_rule"])
+    np.testing.assert_array_equal(distance, [272.0, 0.0, 188.0])

@@ -17,13 +17,13 @@ from scipy.signal import resample_poly
 
 from vivbench.core.errors import InputError
 
-__all__ = ["PLAUSIBLE_RATES", "RATE_TOLERANCE", "measured_rate", "regular_grid", "resample_to_grid"]
+__all__ = ["PLAUSIBLE_RATES", "FIELD_RATE_TOLERANCE", "measured_rate", "regular_grid", "resample_to_grid"]
 
 #: Sampling rates (Hz) field systems record at, per sensor group; others are refused.
 PLAUSIBLE_RATES = {"wind": (1.0, 50.0), "accel": (20.0, 1000.0)}
 #: Relative tolerance of a rate against a declared rate, of the plausible range's ends, and under
 #: which a record counts as already on the nominal grid (kept as it is, not resampled).
-RATE_TOLERANCE = 0.01
+FIELD_RATE_TOLERANCE = 0.01
 # Largest denominator of the fraction up/down: polyphase filters stay short (at most 64 phases)
 # and the remaining mismatch of rates (below 1/64^2 relative) is taken up by the interpolation.
 _MAX_DENOMINATOR = 64
@@ -60,13 +60,13 @@ def measured_rate(t: np.ndarray, name: str, group: str, declared: float | None =
         raise InputError(f"{name}: {t.size} distinct time(s); at least 2 needed")
     step = float(np.median(np.diff(t)))
     rate = 1.0 / step
-    if declared is not None and abs(rate / declared - 1.0) > RATE_TOLERANCE:
+    if declared is not None and abs(rate / declared - 1.0) > FIELD_RATE_TOLERANCE:
         raise InputError(
             f"{name}: the mapping declares rate = {declared:g} Hz but the time stamps step every {step:.6g} s "
             f"(median), i.e. {rate:.6g} Hz; fix the rate or the time column"
         )
     lo, hi = PLAUSIBLE_RATES[group]
-    if not lo * (1.0 - RATE_TOLERANCE) <= rate <= hi * (1.0 + RATE_TOLERANCE):
+    if not lo * (1.0 - FIELD_RATE_TOLERANCE) <= rate <= hi * (1.0 + FIELD_RATE_TOLERANCE):
         raise InputError(
             f"{name}: sampling rate {rate:.4g} Hz (median step) is outside the {lo:g}-{hi:g} Hz of {group} "
             f"records; check the time column and its format"

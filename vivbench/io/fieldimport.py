@@ -1,4 +1,4 @@
-"""Field data import: CSV and MATLAB files to the event format (docs/formats.md), and back to CSV.
+"""Field data import: CSV and MATLAB files to the event format (docs/formats.md).
 
 A mapping file (TOML) says where each channel is and in which unit::
 
@@ -26,26 +26,39 @@ A mapping file (TOML) says where each channel is and in which unit::
     acc = "acc_S1"
 
 A channel is a column name or an inline table ``{column = "...", file = ...,
-units = ..., time = ..., time_format = ..., index = k}`` (``index``: 1-based
-column of a MATLAB matrix); a setting of the channel overrides its section's,
-which overrides its group's. Every section needs ``u``, ``v``, ``w`` and
-``acc``; the wind and acceleration sections must be the same.
+units = ..., time = ..., time_format = ..., rate = ..., index = k}``
+(``index``: 1-based column of a MATLAB matrix); a setting of the channel
+overrides its section's, which overrides its group's. ``file`` may be a glob
+pattern or a list: the files are concatenated in time order.
+
+Without positions, every section S1..Sn needs ``u``, ``v``, ``w`` and
+``acc``, and the wind and acceleration sections are the same. With
+``span_length_m`` at the root and ``position_m`` in every wind and
+acceleration table, the wind tables are anemometers (any names, any number
+>= 1) and each section's wind comes from them by ``wind_rule`` (``nearest``
+or ``interpolation``, :mod:`vivbench.io.field_wind`); an anemometer reports
+``format = "enu"`` (u, v, w), ``"instrument"`` (u, v, w in its frame, with
+``heading_deg``) or ``"speed_direction"`` (speed, direction, optional w).
+Records at other rates than the event grid's are resampled onto it
+(:mod:`vivbench.io.field_resample`). docs/field_import.md has the full syntax.
 
 Sources: CSV with a header row (empty cells and NaN are missing values); MAT
 files v4-v7 (:func:`scipy.io.loadmat`) and v7.3 (HDF5, read with h5py).
-ISO 8601 times are read from CSV only; a timestamp without an offset is UTC.
+ISO 8601 times (with their offset; none means UTC) are read from CSV only.
 
 Repairs, counted in root attributes of the event (``quality_*``): rows out of
 time order (at most 1 % of a file) are sorted; rows that repeat a time stamp
 are dropped (the first is kept); files of one group whose time stamps differ
 are merged on the union of their times, each channel NaN where its file has no
-row. Refused with a one-line :class:`ValueError` naming the file: a mapping
-error, a missing file, column or variable, a cell that is not a number, a
-missing time, a clock that goes back more often, a sampling rate more than
-10 % from nominal, files of one group whose clocks do not line up, and
-magnitudes that betray a wrong unit (see :mod:`vivbench.io.quality`). Unit
-conversions are recorded as ``import_units_<var>_<section>`` (the declared
-unit) and ``import_factor_<var>_<section>`` (the factor to SI).
+row. Refused with a one-line :class:`~vivbench.core.errors.InputError` naming
+the file: a mapping error (a position outside the span among them), a missing
+file, column or variable, a cell that is not a number, a missing time, a clock
+that goes back more often, an implausible rate or one that contradicts the
+declared rate, files that overlap in time, files of one group whose clocks do
+not line up, and magnitudes that betray a wrong unit (see
+:mod:`vivbench.io.quality`). Unit conversions are recorded as
+``import_units_<var>_<sensor>`` (the declared unit) and
+``import_factor_<var>_<sensor>`` (the factor to SI).
 """
 
 from __future__ import annotations
@@ -63,7 +76,7 @@ import pandas as pd
 
 from vivbench.io.event import NOMINAL_RATES, EventFormatError, build_event, write_event
 from vivbench.io.field_wind import WIND_FORMATS, WIND_RULES, span_weights, to_east_north_up
-from vivbench.io.field_resample import RATE_TOLERANCE, measured_rate, regular_grid, resample_to_grid
+from vivbench.io.field_resample import FIELD_RATE_TOLERANCE, measured_rate, regular_grid, resample_to_grid
 from vivbench.io.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
 from vivbench.core.errors import InputError
 
@@ -508,7 +521,7 @@ def import_event(mapping_path, out_path=None):
             k = (c.file, c.time, c.time_format)
             rates[k] = measured_rate(sources[k][0], str(c.file), group, c.rate)
         nominal = NOMINAL_RATES[group]
-        on_grid = all(abs(r / nominal - 1.0) <= RATE_TOLERANCE for r in rates.values())
+        on_grid = all(abs(r / nominal - 1.0) <= FIELD_RATE_TOLERANCE for r in rates.values())
         if on_grid:
             t_group, rows = _merge_times([sources[k][0] for k in keys], [str(k[0]) for k in keys], group)
         else:
