@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tests.helpers import assert_close
 from vivbench.analysis.identify import identify_event
@@ -171,3 +173,33 @@ def test_the_complete_example_of_the_docs_parses(tmp_path):
     assert [p.name for p in mid_u.file.paths] == ["mid_0800.csv", "mid_0900.csv"] and mid_u.rate == 20.0
     _, distance = span_weights([544.0, 1088.0], m["positions_m"], m["wind_rule"])
     np.testing.assert_array_equal(distance, [272.0, 0.0, 188.0])
+
+
+_pos = st.floats(0.0, 2000.0, allow_nan=False)
+
+
+@settings(max_examples=100, deadline=None)
+@given(anem=st.lists(_pos, min_size=1, max_size=5), secs=st.lists(_pos, min_size=1, max_size=6),
+       rule=st.sampled_from(["nearest", "interpolation"]))
+def test_span_weights_are_a_convex_combination_and_exact_at_an_anemometer(anem, secs, rule):
+    w, d = span_weights(anem, secs, rule)
+    assert w.shape == (len(anem), len(secs)) and (w >= 0).all()
+    assert_close(w.sum(axis=0), 1.0, atol=1e-12, reason="weights 1 - f and f in float64")
+    np.testing.assert_array_equal(d, np.min(np.abs(np.subtract.outer(anem, secs)), axis=0))
+    # A linear wind profile along the span is reproduced between the outermost anemometers.
+    if rule == "interpolation":
+        inside = (np.asarray(secs) >= min(anem)) & (np.asarray(secs) <= max(anem))
+        assert_close((np.asarray(anem) @ w)[inside], np.asarray(secs)[inside], rtol=1e-9, atol=1e-9,
+                     reason="interpolated positions in float64")
+
+
+@settings(max_examples=100, deadline=None)
+@given(e=st.floats(-60, 60), n=st.floats(-60, 60), heading=st.floats(-720, 720))
+def test_instrument_and_meteorological_formats_invert(e, n, heading):
+    h = np.deg2rad(heading)
+    ux, uy = e * np.sin(h) + n * np.cos(h), -e * np.cos(h) + n * np.sin(h)
+    got = to_east_north_up("instrument", {"u": np.array([ux]), "v": np.array([uy]), "w": np.zeros(1)}, heading)
+    assert_close(np.r_[got[0], got[1]], [e, n], atol=1e-9, reason="rotation and back in float64")
+    d = np.rad2deg(np.arctan2(-e, -n))
+    got = to_east_north_up("speed_direction", {"speed": np.array([np.hypot(e, n)]), "direction": np.array([d])})
+    assert_close(np.r_[got[0], got[1]], [e, n], atol=1e-9, reason="polar and back in float64")
