@@ -466,11 +466,14 @@ def import_event(mapping_path, out_path=None):
     -------
     xarray.DataTree
         The event, ``source = "field"`` unless the mapping says otherwise,
-        with the unit conversions and the repairs in root attributes.
+        on the event grid (records at other rates resampled), with the unit
+        conversions, the original rates, the sensor positions and each
+        section's distance to its nearest anemometer (when the mapping gives
+        positions) and the repairs in root attributes.
 
     Raises
     ------
-    ValueError
+    InputError
         One line naming the mapping or data file and the problem.
     """
     m = load_mapping(mapping_path)
