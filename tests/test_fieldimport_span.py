@@ -86,8 +86,8 @@ def test_span_weights_rules():
     np.testing.assert_array_equal(w, [[1.0, 1.0, 1.0]])
     np.testing.assert_array_equal(d, [500.0, 0.0, 500.0])
     w, d = span_weights([800.0, 200.0], [100.0, 350.0, 900.0], "interpolation")
-    np.testing.assert_allclose(w, [[0.0, 0.25, 1.0], [1.0, 0.75, 0.0]])
-    np.testing.assert_allclose(w.sum(axis=0), 1.0)
+    assert_close(w, [[0.0, 0.25, 1.0], [1.0, 0.75, 0.0]])
+    assert_close(w.sum(axis=0), 1.0)
     w, _ = span_weights([800.0, 200.0], [100.0, 350.0, 900.0], "nearest")
     np.testing.assert_array_equal(w, [[0.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
 
