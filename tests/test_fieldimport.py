@@ -13,7 +13,8 @@ import xarray as xr
 
 from tests.helpers import assert_close
 from vivbench.cli import main
-from vivbench.io.fieldimport import export_csv, export_mat, import_event, load_mapping
+from vivbench.io.field_export import export_csv, export_mat
+from vivbench.io.fieldimport import import_event, load_mapping
 from vivbench.analysis.identify import IdentifyConfig, identify_files
 from vivbench.io.event import event_arrays, read_event
 from vivbench.io.quality import ACC_UNITS, G, WIND_UNITS

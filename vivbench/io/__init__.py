@@ -85,7 +85,10 @@ from vivbench.io.quality import (
     check_wind_magnitude,
     check_wind_varies,
 )
-from vivbench.io.fieldimport import import_event, load_mapping, export_csv, export_mat, TIME_FORMATS
+from vivbench.io.fieldimport import import_event, load_mapping, TIME_FORMATS
+from vivbench.io.field_resample import PLAUSIBLE_RATES, FIELD_RATE_TOLERANCE, measured_rate, regular_grid, resample_to_grid
+from vivbench.io.field_wind import WIND_FORMATS, WIND_RULES, span_weights, to_east_north_up
+from vivbench.io.field_export import export_csv, export_mat
 
 __all__ = [
     "NETCDF_ENGINE", "atomic_path", "write_netcdf_atomic", "EventFormatError", "FORMAT", "FORMAT_VERSION",
@@ -104,4 +107,6 @@ __all__ = [
     "varying_model_dataset", "write_varying_model", "read_varying_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
     "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude",
     "check_wind_varies", "import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
+    "PLAUSIBLE_RATES", "FIELD_RATE_TOLERANCE", "measured_rate", "regular_grid", "resample_to_grid",
+    "WIND_FORMATS", "WIND_RULES", "span_weights", "to_east_north_up",
 ]

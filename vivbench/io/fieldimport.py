@@ -1,4 +1,4 @@
-"""Field data import: CSV and MATLAB files to the event format (docs/formats.md), and back to CSV.
+"""Field data import: CSV and MATLAB files to the event format (docs/formats.md).
 
 A mapping file (TOML) says where each channel is and in which unit::
 
@@ -26,31 +26,44 @@ A mapping file (TOML) says where each channel is and in which unit::
     acc = "acc_S1"
 
 A channel is a column name or an inline table ``{column = "...", file = ...,
-units = ..., time = ..., time_format = ..., index = k}`` (``index``: 1-based
-column of a MATLAB matrix); a setting of the channel overrides its section's,
-which overrides its group's. Every section needs ``u``, ``v``, ``w`` and
-``acc``; the wind and acceleration sections must be the same.
+units = ..., time = ..., time_format = ..., rate = ..., index = k}``
+(``index``: 1-based column of a MATLAB matrix); a setting of the channel
+overrides its section's, which overrides its group's. ``file`` may be a glob
+pattern or a list: the files are concatenated in time order.
+
+Without positions, every section S1..Sn needs ``u``, ``v``, ``w`` and
+``acc``, and the wind and acceleration sections are the same. With
+``span_length_m`` at the root and ``position_m`` in every wind and
+acceleration table, the wind tables are anemometers (any names, any number
+>= 1) and each section's wind comes from them by ``wind_rule`` (``nearest``
+or ``interpolation``, :mod:`vivbench.io.field_wind`); an anemometer reports
+``format = "enu"`` (u, v, w), ``"instrument"`` (u, v, w in its frame, with
+``heading_deg``) or ``"speed_direction"`` (speed, direction, optional w).
+Records at other rates than the event grid's are resampled onto it
+(:mod:`vivbench.io.field_resample`). docs/field_import.md has the full syntax.
 
 Sources: CSV with a header row (empty cells and NaN are missing values); MAT
 files v4-v7 (:func:`scipy.io.loadmat`) and v7.3 (HDF5, read with h5py).
-ISO 8601 times are read from CSV only; a timestamp without an offset is UTC.
+ISO 8601 times (with their offset; none means UTC) are read from CSV only.
 
 Repairs, counted in root attributes of the event (``quality_*``): rows out of
 time order (at most 1 % of a file) are sorted; rows that repeat a time stamp
 are dropped (the first is kept); files of one group whose time stamps differ
 are merged on the union of their times, each channel NaN where its file has no
-row. Refused with a one-line :class:`ValueError` naming the file: a mapping
-error, a missing file, column or variable, a cell that is not a number, a
-missing time, a clock that goes back more often, a sampling rate more than
-10 % from nominal, files of one group whose clocks do not line up, and
-magnitudes that betray a wrong unit (see :mod:`vivbench.io.quality`). Unit
-conversions are recorded as ``import_units_<var>_<section>`` (the declared
-unit) and ``import_factor_<var>_<section>`` (the factor to SI).
+row. Refused with a one-line :class:`~vivbench.core.errors.InputError` naming
+the file: a mapping error (a position outside the span among them), a missing
+file, column or variable, a cell that is not a number, a missing time, a clock
+that goes back more often, an implausible rate or one that contradicts the
+declared rate, files that overlap in time, files of one group whose clocks do
+not line up, and magnitudes that betray a wrong unit (see
+:mod:`vivbench.io.quality`). Unit conversions are recorded as
+``import_units_<var>_<sensor>`` (the declared unit) and
+``import_factor_<var>_<sensor>`` (the factor to SI).
 """
 
 from __future__ import annotations
 
-import json
+import glob
 import math
 import warnings
 from dataclasses import dataclass
@@ -61,8 +74,9 @@ import h5py
 import numpy as np
 import pandas as pd
 
-from vivbench.io.event import NOMINAL_RATES, EventFormatError, build_event, event_arrays, write_event
-from vivbench.io.netcdf import atomic_path
+from vivbench.io.event import NOMINAL_RATES, EventFormatError, build_event, write_event
+from vivbench.io.field_wind import WIND_FORMATS, WIND_RULES, span_weights, to_east_north_up
+from vivbench.io.field_resample import FIELD_RATE_TOLERANCE, measured_rate, regular_grid, resample_to_grid
 from vivbench.io.quality import ACC_UNITS, WIND_UNITS, check_acc_magnitude, check_wind_magnitude
 from vivbench.core.errors import InputError
 
@@ -71,16 +85,28 @@ try:
 except ModuleNotFoundError:  # Python < 3.11
     import tomli as tomllib
 
-__all__ = ["import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS"]
+__all__ = ["import_event", "load_mapping", "TIME_FORMATS"]
 
 TIME_FORMATS = ("seconds", "iso8601")
-_GROUPS = {"wind": ("u", "v", "w"), "accel": ("acc",)}
+_GROUPS = ("wind", "accel")
 _UNITS = {"wind": WIND_UNITS, "accel": ACC_UNITS}
-_SETTINGS = ("file", "time", "time_format", "units")
-_ROOT_KEYS = ("event_id", "start_time", "span_azimuth_deg", "source", "wind", "accel")
+_SETTINGS = ("file", "time", "time_format", "units", "rate")
+_ROOT_KEYS = ("event_id", "start_time", "span_azimuth_deg", "source", "span_length_m", "wind_rule", "wind", "accel")
+# Settings of the wind group or an anemometer (not of a channel).
+_WIND_KEYS = ("format", "heading_deg")
 # Sorting is a repair for a few swapped rows; a clock that goes back more often is refused.
 _MAX_REORDER_FRACTION = 0.01
-_RATE_TOLERANCE = 0.10
+
+
+@dataclass(frozen=True)
+class _Source:
+    """The files of one source: one, or several to concatenate in time order."""
+
+    paths: tuple
+
+    def __str__(self) -> str:
+        first = str(self.paths[0])
+        return first if len(self.paths) == 1 else f"{first} (and {len(self.paths) - 1} more files)"
 
 
 @dataclass(frozen=True)
@@ -88,12 +114,13 @@ class _Channel:
     group: str
     var: str
     section: str
-    file: Path
+    file: _Source
     column: str
     time: str
     time_format: str
     units: str
     index: int | None
+    rate: float | None
 
 
 # --------------------------------------------------------------------- mapping
@@ -152,41 +179,89 @@ def load_mapping(path) -> dict:
         raise bad(f"start_time must be an ISO 8601 string such as \"2026-01-01T00:00:00Z\"; got {start!r}")
     source = raw.get("source", "field")
 
+    positioned = "span_length_m" in raw or any(
+        isinstance(raw[g], dict) and any(isinstance(t, dict) and "position_m" in t for t in raw[g].values())
+        for g in _GROUPS)
+    span = _number(raw, "span_length_m", "the span's length in m", bad, required=positioned, positive=True)
+    rule = raw.get("wind_rule", "nearest")
+    if rule not in WIND_RULES:
+        raise bad(f"wind_rule {rule!r} is not one of {', '.join(WIND_RULES)}")
     channels: list[_Channel] = []
-    sections_of = {}
-    for group, variables in _GROUPS.items():
+    sections_of, tables_of = {}, {}
+    for group in _GROUPS:
         table = raw[group]
         if not isinstance(table, dict):
             raise bad(f"[{group}] must be a table")
-        sec_names = [k for k in table if k not in _SETTINGS]
+        group_keys = _SETTINGS + (_WIND_KEYS if group == "wind" else ())
+        sec_names = [k for k in table if k not in group_keys]
         wrong = [k for k in sec_names if not isinstance(table[k], dict)]
         if wrong:
-            raise bad(f"unknown key(s) {wrong} in [{group}]; allowed: {list(_SETTINGS)} and section tables S1..Sn")
+            raise bad(f"unknown key(s) {wrong} in [{group}]; allowed: {list(group_keys)} and sensor tables")
         expected = [f"S{k + 1}" for k in range(len(sec_names))]
-        if not sec_names or sorted(sec_names, key=_section_order) != expected:
+        if group == "wind" and positioned:
+            expected = sec_names  # anemometers: any names when positions are declared
+        elif sorted(sec_names, key=_section_order) != expected:
+            sec_names = []
+        if not sec_names:
             raise bad(f"[{group}] has sections {sec_names}; expected tables S1..Sn, e.g. [{group}.S1], [{group}.S2], [{group}.S3]")
         sections_of[group] = expected
-        base = {k: table[k] for k in _SETTINGS if k in table}
+        base = {k: table[k] for k in group_keys if k in table}
         for sec in expected:
             st = table[sec]
-            extra = sorted(set(st) - set(_SETTINGS) - set(variables))
+            level = {**base, **{k: st[k] for k in group_keys if k in st}}
+            where = f"[{group}.{sec}]"
+            info = {"name": sec, "position_m": None}
+            if positioned:
+                pos = _number(st, "position_m", "its position along the span in m", bad, required=True, where=where)
+                if not 0.0 <= pos <= span:
+                    raise bad(f"{where} position_m = {pos:g} m is outside the span (0 to span_length_m = {span:g} m)")
+                info["position_m"] = pos
+            if group == "wind":
+                fmt = level.get("format", "enu")
+                if fmt not in WIND_FORMATS:
+                    raise bad(f"{where} has format {fmt!r}; allowed: {', '.join(WIND_FORMATS)}")
+                info["format"] = fmt
+                info["heading_deg"] = _number(level, "heading_deg", "the instrument's x axis, degrees from north",
+                                              bad, required=fmt == "instrument", where=where)
+                required, optional = WIND_FORMATS[fmt]
+            else:
+                required, optional = ("acc",), ()
+            extra = sorted(set(st) - set(group_keys) - {"position_m"} - set(required) - set(optional))
             if extra:
-                raise bad(f"unknown key(s) {extra} in [{group}.{sec}]; allowed: {list(variables)} and {list(_SETTINGS)}")
-            level = {**base, **{k: st[k] for k in _SETTINGS if k in st}}
-            for var in variables:
+                raise bad(f"unknown key(s) {extra} in {where}; allowed: {list(required + optional)}, position_m "
+                          f"and {list(group_keys)}")
+            for var in required + tuple(v for v in optional if v in st):
                 if var not in st:
-                    raise bad(f"[{group}.{sec}] lacks the channel {var!r}; every section needs {', '.join(variables)}")
+                    raise bad(f"{where} lacks the channel {var!r}; every section needs {', '.join(required)}")
                 channels.append(_resolve(path, group, sec, var, st[var], level, bad))
-    if sections_of["wind"] != sections_of["accel"]:
-        raise bad(f"[wind] has sections {sections_of['wind']} but [accel] has {sections_of['accel']}; they must be the same")
+            tables_of.setdefault(group, []).append(info)
+    if not positioned and sections_of["wind"] != sections_of["accel"]:
+        raise bad(f"[wind] has sections {sections_of['wind']} but [accel] has {sections_of['accel']}; they must be "
+                  f"the same, or declare span_length_m and position_m of every anemometer and section")
     return {
         "event_id": raw["event_id"],
         "start_time": start,
         "span_azimuth_deg": float(az),
         "source": source,
-        "sections": sections_of["wind"],
+        "sections": sections_of["accel"],
+        "anemometers": tables_of["wind"],
+        "positions_m": [t["position_m"] for t in tables_of["accel"]] if positioned else None,
+        "span_length_m": span,
+        "wind_rule": rule,
         "channels": channels,
     }
+
+
+def _number(table: dict, key: str, what: str, bad, *, required: bool, positive: bool = False, where: str = ""):
+    """A finite number from a mapping table (None when absent and not required)."""
+    if key not in table:
+        if required:
+            raise bad(f"{where or 'the mapping'} needs {key} ({what})".strip())
+        return None
+    x = table[key]
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or (positive and x <= 0):
+        raise bad(f"{where} {key} must be a finite{' positive' if positive else ''} number ({what}); got {x!r}".strip())
+    return float(x)
 
 
 def _section_order(label: str):
@@ -205,13 +280,13 @@ def _resolve(mapping: Path, group: str, sec: str, var: str, spec, level: dict, b
     s = {**level, **{k: spec[k] for k in _SETTINGS if k in spec}}
     if "column" not in spec or not isinstance(spec["column"], str) or not spec["column"]:
         raise bad(f"{where} needs a column (name of the column or variable)")
-    if "file" not in s or not isinstance(s["file"], str):
+    if "file" not in s:
         raise bad(f"{where} has no file: give file in [{group}], [{group}.{sec}] or the channel")
-    units = s.get("units")
+    units = "deg" if var == "direction" else s.get("units")
     allowed = ", ".join(_UNITS[group])
     if units is None:
         raise bad(f"{where} has no units: give units in [{group}] or below (one of {allowed})")
-    if units not in _UNITS[group]:
+    if units not in _UNITS[group] and var != "direction":
         raise bad(f"{where} has units {units!r}; allowed for {group}: {allowed}")
     fmt = s.get("time_format", "seconds")
     if fmt not in TIME_FORMATS:
@@ -222,16 +297,64 @@ def _resolve(mapping: Path, group: str, sec: str, var: str, spec, level: dict, b
     index = spec.get("index")
     if index is not None and (isinstance(index, bool) or not isinstance(index, int) or index < 1):
         raise bad(f"{where} has index {index!r}; expected a 1-based column number of a MATLAB matrix")
-    file = Path(s["file"])
-    if not file.is_absolute():
-        file = mapping.parent / file
-    return _Channel(group, var, sec, file, spec["column"], time, fmt, units, index)
+    rate = s.get("rate")
+    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float)) or not rate > 0
+                             or not math.isfinite(rate)):
+        raise bad(f"{where} has rate {rate!r}; expected the sampling rate in Hz, a positive number")
+    file = _Source(_expand_files(mapping, s["file"], where, bad))
+    return _Channel(group, var, sec, file, spec["column"], time, fmt, units, index,
+                    None if rate is None else float(rate))
+
+
+def _expand_files(mapping: Path, spec, where: str, bad) -> tuple:
+    """Paths of a ``file`` setting: a path, a glob pattern (``*``, ``?``, ``[``) or a list of either."""
+    items = [spec] if isinstance(spec, str) else spec
+    if not isinstance(items, list) or not items or not all(isinstance(x, str) and x for x in items):
+        raise bad(f"{where} has file {spec!r}; expected a path, a glob pattern or a list of them")
+    paths = []
+    for item in items:
+        full = item if Path(item).is_absolute() else str(mapping.parent / item)
+        if any(ch in item for ch in "*?["):
+            found = sorted(glob.glob(full))
+            if not found:
+                raise bad(f"{where}: the file pattern {item!r} matches no file")
+            paths += [Path(f) for f in found]
+        else:
+            paths.append(Path(full))
+    if len(set(paths)) != len(paths):
+        raise bad(f"{where} names a file twice in {spec!r}")
+    return tuple(paths)
 
 
 # --------------------------------------------------------------------- sources
 
 
 class _Table:
+    """The files of one source, concatenated in time order; values read once."""
+
+    def __init__(self, source: _Source):
+        self.name = str(source)
+        self.parts = [_File(p) for p in source.paths]
+        self.order = list(range(len(self.parts)))
+
+    def values(self, column: str, index: int | None = None) -> np.ndarray:
+        return np.concatenate([self.parts[i].values(column, index) for i in self.order])
+
+    def times(self, column: str, fmt: str) -> np.ndarray:
+        """Times of the rows, the files put in the order of their first time; overlapping files are refused."""
+        ts = [part.times(column, fmt) for part in self.parts]
+        if len(ts) > 1:
+            self.order = sorted(range(len(ts)), key=lambda i: ts[i].min())
+            for a, b in zip(self.order, self.order[1:]):
+                if ts[b].min() <= ts[a].max():
+                    first, then = self.parts[a].name, self.parts[b].name
+                    raise InputError(f"{first}, {then}: the files overlap in time ({Path(then).name} starts before "
+                                     f"{Path(first).name} ends); "
+                                     f"each instant must be in one file")
+        return np.concatenate([ts[i] for i in self.order])
+
+
+class _File:
     """One source file: columns or variables as float arrays, read once."""
 
     def __init__(self, path: Path):
@@ -343,17 +466,20 @@ def import_event(mapping_path, out_path=None):
     -------
     xarray.DataTree
         The event, ``source = "field"`` unless the mapping says otherwise,
-        with the unit conversions and the repairs in root attributes.
+        on the event grid (records at other rates resampled), with the unit
+        conversions, the original rates, the sensor positions and each
+        section's distance to its nearest anemometer (when the mapping gives
+        positions) and the repairs in root attributes.
 
     Raises
     ------
-    ValueError
+    InputError
         One line naming the mapping or data file and the problem.
     """
     m = load_mapping(mapping_path)
-    tables: dict[Path, _Table] = {}
+    tables: dict[_Source, _Table] = {}
 
-    def table(p: Path) -> _Table:
+    def table(p: _Source) -> _Table:
         if p not in tables:
             tables[p] = _Table(p)
         return tables[p]
@@ -393,9 +519,18 @@ def import_event(mapping_path, out_path=None):
     for group in _GROUPS:
         chans = [c for c in m["channels"] if c.group == group]
         keys = list(dict.fromkeys((c.file, c.time, c.time_format) for c in chans))
-        for k in keys:
-            _check_rate(sources[k][0], str(k[0]), group)
-        t_union, rows = _merge_times([sources[k][0] for k in keys], [str(k[0]) for k in keys], group)
+        rates = {}
+        for c in chans:
+            k = (c.file, c.time, c.time_format)
+            rates[k] = measured_rate(sources[k][0], str(c.file), group, c.rate)
+        nominal = NOMINAL_RATES[group]
+        on_grid = all(abs(r / nominal - 1.0) <= FIELD_RATE_TOLERANCE for r in rates.values())
+        if on_grid:
+            t_group, rows = _merge_times([sources[k][0] for k in keys], [str(k[0]) for k in keys], group)
+        else:
+            t_group = regular_grid(min(sources[k][0][0] for k in keys), max(sources[k][0][-1] for k in keys), nominal)
+        attrs[f"import_rate_{group}_hz"] = float(min(rates.values()))
+        attrs[f"import_resampled_{group}"] = int(not on_grid)
         group_data = {}
         for c in chans:
             k = (c.file, c.time, c.time_format)
@@ -403,39 +538,49 @@ def import_event(mapping_path, out_path=None):
             raw = tab.values(c.column, c.index)
             if raw.shape[0] != raw_times[k].shape[0]:
                 raise InputError(f"{tab.name}: {c.column!r} has {raw.shape[0]} values but the time {c.time!r} has {raw_times[k].shape[0]}")
-            vals = np.full(t_union.size, np.nan)
-            vals[rows[keys.index(k)]] = raw[sources[k][1]]
+            if on_grid:
+                vals = np.full(t_group.size, np.nan)
+                vals[rows[keys.index(k)]] = raw[sources[k][1]]
+            else:
+                vals = resample_to_grid(sources[k][0], raw[sources[k][1]], rates[k], t_group, tab.name)
             group_data[(c.var, c.section)] = (vals, c)
-        data[group] = (t_union, group_data)
+        data[group] = (t_group, group_data)
 
     sections = m["sections"]
     arrays = {}
-    for group, variables in _GROUPS.items():
+    for group in _GROUPS:
         t, gd = data[group]
-        for sec in sections:
-            if group == "wind":
-                (u, cu), (v, cv) = gd[("u", sec)], gd[("v", sec)]
-                if cu.units == cv.units:
-                    check_wind_magnitude(u, v, cu.units, where=f"{cu.file}: columns {cu.column!r}, {cv.column!r}", labels=[f"({sec})"])
-                else:
-                    check_wind_magnitude(u * WIND_UNITS[cu.units], v * WIND_UNITS[cv.units], "m/s",
-                                         where=f"{cu.file}: columns {cu.column!r}, {cv.column!r}", labels=[f"({sec})"])
-            else:
-                a, ca = gd[("acc", sec)]
-                check_acc_magnitude(a, ca.units, where=f"{ca.file}: column {ca.column!r}", labels=[f"({sec})"])
-        for var in variables:
-            cols = []
-            for sec in sections:
-                vals, c = gd[(var, sec)]
-                factor = _UNITS[group][c.units]
-                cols.append(vals * factor if factor != 1.0 else vals)
-                attrs[f"import_units_{var}_{sec}"] = c.units
-                attrs[f"import_factor_{var}_{sec}"] = float(factor)
-            arrays[var] = np.column_stack(cols)
         arrays[f"{group}_time"] = t
-        n_missing = int(sum(np.isnan(arrays[v]).sum() for v in variables))
-        quality[f"quality_missing_{group}"] = n_missing
-    attrs["import_sources"] = "; ".join(sorted({p.name for p in tables}))
+        quality[f"quality_missing_{group}"] = int(sum(np.isnan(vals).sum() for vals, _ in gd.values()))
+        for (var, sec), (_, c) in gd.items():
+            if var != "direction":
+                attrs[f"import_units_{var}_{sec}"] = c.units
+                attrs[f"import_factor_{var}_{sec}"] = float(_UNITS[group][c.units])
+    cols = []
+    for sec in sections:
+        a, ca = data["accel"][1][("acc", sec)]
+        check_acc_magnitude(a, ca.units, where=f"{ca.file}: column {ca.column!r}", labels=[f"({sec})"])
+        cols.append(a * ACC_UNITS[ca.units])
+    arrays["acc"] = np.column_stack(cols)
+    anem = [_anemometer_wind(data["wind"][1], info) for info in m["anemometers"]]
+    if m["positions_m"] is None:  # one anemometer per section, in order
+        weights = np.eye(len(sections))
+    else:
+        weights, distance = span_weights([i["position_m"] for i in m["anemometers"]], m["positions_m"], m["wind_rule"])
+        attrs["import_span_length_m"] = m["span_length_m"]
+        attrs["import_wind_rule"] = m["wind_rule"]
+        for info in m["anemometers"]:
+            attrs[f"import_anemometer_position_m_{info['name']}"] = info["position_m"]
+        for sec, pos, d in zip(sections, m["positions_m"], distance):
+            attrs[f"import_position_m_{sec}"] = pos
+            attrs[f"wind_distance_m_{sec}"] = float(d)
+    for k, var in enumerate(("u", "v", "w")):
+        out = np.zeros((arrays["wind_time"].size, len(sections)))
+        for j in range(len(sections)):
+            for i in np.flatnonzero(weights[:, j]):
+                out[:, j] += weights[i, j] * anem[i][k]
+        arrays[var] = out
+    attrs["import_sources"] = "; ".join(sorted({p.name for src in tables for p in src.paths}))
     attrs.update(quality)
     label = str(mapping_path)
     try:
@@ -449,6 +594,23 @@ def import_event(mapping_path, out_path=None):
     if out_path is not None:
         write_event(tree, out_path)
     return tree
+
+
+def _anemometer_wind(gd: dict, info: dict):
+    """East, north and up wind (m/s) of one anemometer, its magnitude checked in the declared unit."""
+    name = info["name"]
+    chans = {var: vc for (var, sec), vc in gd.items() if sec == name}
+    speed_vars = [v for v in chans if v != "direction"]
+    units = {chans[v][1].units for v in speed_vars}
+    one_unit = len(units) == 1
+    vals = {v: (x if one_unit or v == "direction" else x * WIND_UNITS[chans[v][1].units]) for v, (x, _) in chans.items()}
+    east, north, up = to_east_north_up(info["format"], vals, info["heading_deg"])
+    unit = units.pop() if one_unit else "m/s"
+    first, second = (chans["u"][1], chans["v"][1]) if "u" in chans else (chans["speed"][1], chans["direction"][1])
+    check_wind_magnitude(east, north, unit, where=f"{first.file}: columns {first.column!r}, {second.column!r}",
+                         labels=[f"({name})"])
+    factor = WIND_UNITS[unit]
+    return east * factor, north * factor, up * factor
 
 
 def _repair_time(t: np.ndarray, name: str):
@@ -474,18 +636,6 @@ def _repair_time(t: np.ndarray, name: str):
     return order, keep, n_reordered, int(n - keep.sum())
 
 
-def _check_rate(t: np.ndarray, name: str, group: str) -> None:
-    if t.size < 2:
-        raise InputError(f"{name}: {t.size} distinct time(s); at least 2 needed")
-    rate = 1.0 / float(np.median(np.diff(t)))
-    nominal = NOMINAL_RATES[group]
-    if abs(rate / nominal - 1.0) > _RATE_TOLERANCE:
-        raise InputError(
-            f"{name}: sampling rate {rate:.4g} Hz (median step) is more than {_RATE_TOLERANCE:.0%} from the nominal "
-            f"{nominal:g} Hz of {group} records; check the time column and its format"
-        )
-
-
 def _merge_times(times: list[np.ndarray], names: list[str], group: str):
     """Union of the sources' times (matched to the microsecond) and each source's rows in it."""
     if len(times) == 1:
@@ -501,174 +651,3 @@ def _merge_times(times: list[np.ndarray], names: list[str], group: str):
             f"{step_union / 1e6:.4g} s instead of {step_min / 1e6:.4g} s); the files of one group must share one sample clock"
         )
     return t_union, [np.searchsorted(all_keys, k) for k in keys]
-
-
-# ---------------------------------------------------------------------- export
-
-
-def _toml_value(v) -> str:
-    if isinstance(v, str):
-        return json.dumps(v)
-    return repr(float(v)) if isinstance(v, float) else str(v)
-
-
-def _write_text(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text)
-
-
-def _mapping_text(tree, *, groups: dict, event_id: str | None = None) -> str:
-    lines = [
-        f"event_id = {_toml_value(event_id or str(tree.attrs['event_id']))}",
-        f"start_time = {_toml_value(str(tree.attrs['start_time']))}",
-        f"span_azimuth_deg = {_toml_value(float(tree.attrs['span_azimuth_deg']))}",
-        "",
-    ]
-    for group, (settings, sections) in groups.items():
-        lines.append(f"[{group}]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in settings.items()]
-        lines.append("")
-        for sec, entries in sections.items():
-            lines.append(f"[{group}.{sec}]")
-            lines += [f"{k} = {v}" for k, v in entries.items()]
-            lines.append("")
-    return "\n".join(lines)
-
-
-def _time_strings(t: np.ndarray, start_time: str) -> np.ndarray:
-    start = pd.Timestamp(start_time).tz_convert("UTC").tz_localize(None)
-    stamps = np.datetime64(start.to_datetime64(), "ns") + np.round(t * 1e9).astype("timedelta64[ns]")
-    return np.char.add(np.datetime_as_string(stamps, unit="us"), "Z")
-
-
-def export_csv(tree, out_dir, *, layout: str = "per_section", wind_units: str = "m/s", acc_units: str = "m/s^2",
-               time_format: str = "seconds", event_id: str | None = None):
-    """Write an event as CSV files plus a mapping that imports them back.
-
-    Parameters
-    ----------
-    tree : xarray.DataTree
-        A valid event (e.g. synthetic); its truth is not exported.
-    out_dir : str or os.PathLike
-        Directory for the files (created).
-    layout : {"per_section", "single"}
-        One file per sensor (``wind_S1.csv`` with time, u, v, w;
-        ``accel_S1.csv`` with time, acc) or one file per group (``wind.csv``
-        with time, u_S1, v_S1, w_S1, ...; ``accel.csv`` with time, acc_S1, ...).
-    wind_units, acc_units : str
-        Units written (keys of ``vivbench.io.quality.WIND_UNITS`` / ``ACC_UNITS``).
-    time_format : {"seconds", "iso8601"}
-        Times as seconds since start_time or as ISO 8601 UTC timestamps (microseconds).
-    event_id : str, optional
-        Event id written in the mapping (default: the event's own).
-
-    Returns
-    -------
-    pathlib.Path
-        The mapping file ``mapping.toml`` in ``out_dir``.
-    """
-    if layout not in ("per_section", "single"):
-        raise InputError(f"layout must be 'per_section' or 'single'; got {layout!r}")
-    if wind_units not in WIND_UNITS or acc_units not in ACC_UNITS:
-        raise InputError(f"units must be one of {list(WIND_UNITS)} (wind) and {list(ACC_UNITS)} (acc); got {wind_units!r}, {acc_units!r}")
-    if time_format not in TIME_FORMATS:
-        raise InputError(f"time_format must be one of {TIME_FORMATS}; got {time_format!r}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    arr = event_arrays(tree)
-    sections = list(arr["sections"])
-    groups = {}
-    for group, variables, units, factor in (
-        ("wind", ("u", "v", "w"), wind_units, WIND_UNITS[wind_units]),
-        ("accel", ("acc",), acc_units, ACC_UNITS[acc_units]),
-    ):
-        t = arr[f"{group}_time"]
-        tcol = _time_strings(t, str(tree.attrs["start_time"])) if time_format == "iso8601" else t
-        settings = {"time": "time", "time_format": time_format, "units": units}
-        sec_entries = {}
-        if layout == "single":
-            fname = f"{group}.csv"
-            settings = {"file": fname, **settings}
-            frame = {"time": tcol}
-            for sec_i, sec in enumerate(sections):
-                for var in variables:
-                    frame[f"{var}_{sec}"] = np.asarray(arr[var][:, sec_i], dtype=np.float64) / factor
-                sec_entries[sec] = {var: json.dumps(f"{var}_{sec}") for var in variables}
-            _write_csv(out / fname, frame)
-        else:
-            for sec_i, sec in enumerate(sections):
-                fname = f"{group}_{sec}.csv"
-                frame = {"time": tcol}
-                for var in variables:
-                    frame[var] = np.asarray(arr[var][:, sec_i], dtype=np.float64) / factor
-                _write_csv(out / fname, frame)
-                sec_entries[sec] = {"file": json.dumps(fname), **{var: json.dumps(var) for var in variables}}
-        groups[group] = (settings, sec_entries)
-    mapping = out / "mapping.toml"
-    _write_text(mapping, _mapping_text(tree, groups=groups, event_id=event_id))
-    return mapping
-
-
-def _write_csv(path: Path, frame: dict) -> None:
-    with atomic_path(path) as tmp:
-        # float_format=None writes the shortest repr: the float64 values read back exactly.
-        pd.DataFrame(frame).to_csv(tmp, index=False, na_rep="NaN")
-
-
-def export_mat(tree, out_dir, *, version: str = "5", acc_units: str = "m/s^2"):
-    """Write an event as one MATLAB file ``event.mat`` plus a mapping that imports it.
-
-    Variables: ``wind_time`` (n_w, 1) s; ``u``, ``v``, ``w`` (n_w, n_sec) m/s;
-    ``accel_time`` (n_a, 1) s; ``acc`` (n_a, n_sec) in ``acc_units``.
-
-    Parameters
-    ----------
-    version : {"5", "7.3"}
-        MAT v5 (scipy.io.savemat) or v7.3 (HDF5 with MATLAB's 512-byte header,
-        arrays stored transposed as MATLAB does).
-
-    Returns
-    -------
-    pathlib.Path
-        The mapping file ``mapping.toml`` in ``out_dir``.
-    """
-    if version not in ("5", "7.3"):
-        raise InputError(f"version must be '5' or '7.3'; got {version!r}")
-    if acc_units not in ACC_UNITS:
-        raise InputError(f"acc_units must be one of {list(ACC_UNITS)}; got {acc_units!r}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    arr = event_arrays(tree)
-    sections = list(arr["sections"])
-    variables = {
-        "wind_time": arr["wind_time"][:, None],
-        "u": np.asarray(arr["u"], dtype=np.float64),
-        "v": np.asarray(arr["v"], dtype=np.float64),
-        "w": np.asarray(arr["w"], dtype=np.float64),
-        "accel_time": arr["accel_time"][:, None],
-        "acc": np.asarray(arr["acc"], dtype=np.float64) / ACC_UNITS[acc_units],
-    }
-    target = out / "event.mat"
-    with atomic_path(target, suffix=".mat") as tmp:
-        if version == "5":
-            from scipy.io import savemat
-
-            savemat(tmp, variables, format="5")
-        else:
-            with h5py.File(tmp, "w", userblock_size=512) as f:
-                for k, v in variables.items():
-                    ds = f.create_dataset(k, data=np.ascontiguousarray(v.T))
-                    ds.attrs["MATLAB_class"] = np.bytes_("double")
-            header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created by: vivbench. HDF5 schema 1.00 ."
-            with open(tmp, "r+b") as fh:
-                fh.write(header.ljust(116) + b"\x00" * 8 + b"\x00\x02IM")
-    groups = {
-        "wind": ({"file": "event.mat", "time": "wind_time", "units": "m/s"},
-                 {sec: {var: f"{{ column = \"{var}\", index = {i + 1} }}" for var in ("u", "v", "w")}
-                  for i, sec in enumerate(sections)}),
-        "accel": ({"file": "event.mat", "time": "accel_time", "units": acc_units},
-                  {sec: {"acc": f"{{ column = \"acc\", index = {i + 1} }}"} for i, sec in enumerate(sections)}),
-    }
-    mapping = out / "mapping.toml"
-    _write_text(mapping, _mapping_text(tree, groups=groups))
-    return mapping
