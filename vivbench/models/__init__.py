@@ -54,6 +54,8 @@ from vivbench.models.simulate import (
     window_in_force,
 )
 from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
+from vivbench.models.pysindy_variants import (ENSEMBLE_AGGREGATES, PySINDyEnsemble, PySINDySBR, PySINDyWeak,
+                                              sbr_available)
 from vivbench.models.varying import VaryingCoefficientSINDy
 from vivbench.models.wind_weights import modal_wind_weights, weighted_section_mean
 from vivbench.models.model_input import measured_input
@@ -76,4 +78,5 @@ __all__ = [
     "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "modal_wind_weights", "weighted_section_mean",
     "measured_input", "Integration", "StopRule", "rk4",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
+    "ENSEMBLE_AGGREGATES", "PySINDyEnsemble", "PySINDySBR", "PySINDyWeak", "sbr_available",
 ]
