@@ -34,7 +34,8 @@ from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.pysindy_adapter import PySINDyCampaign, term_a_exponents
 from vivbench.preprocess.noise_floor import window_amplitude_snr
 
-__all__ = ["PySINDyEnsemble", "PySINDySBR", "PySINDyWeak", "ENSEMBLE_AGGREGATES", "ensemble", "sbr", "weak",
+__all__ = ["PySINDyEnsemble", "PySINDySBR", "PySINDyWeak", "ENSEMBLE_AGGREGATES", "ensemble", "ensemble_median", "sbr",
+           "stlsq", "weak",
            "sbr_available"]
 
 #: How the bags' coefficients become the ensemble model: their mean (bagging) or median (bragging).
@@ -386,3 +387,13 @@ def sbr() -> PySINDySBR:
 def weak() -> PySINDyWeak:
     """``PySINDyWeak()`` with its defaults (the ``--methods`` factory)."""
     return PySINDyWeak()
+
+
+def ensemble_median() -> PySINDyEnsemble:
+    """``PySINDyEnsemble(aggregate="median")``: pysindy's default aggregation, for comparison (the ``--methods`` factory)."""
+    return PySINDyEnsemble(aggregate="median")
+
+
+def stlsq() -> PySINDyCampaign:
+    """``PySINDyCampaign()``: plain STLSQ on the same library, the baseline of the variants (the ``--methods`` factory)."""
+    return PySINDyCampaign()
