@@ -22,6 +22,7 @@ noise floor (``Record.noise_std``; unknown floors pass).
 from __future__ import annotations
 
 import importlib.util
+import warnings
 from collections.abc import Sequence
 from types import SimpleNamespace
 
@@ -31,6 +32,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU, classify_regime
 from vivbench.models.campaign import amplitude_ratios
+from vivbench.models.protocol import ModelBase
 from vivbench.models.pysindy_adapter import PySINDyCampaign, term_a_exponents
 from vivbench.preprocess.noise_floor import window_amplitude_snr
 
@@ -67,6 +69,9 @@ def _seeded(seed: int):
 
 class _DrawsVerdict(PySINDyCampaign):
     """A PySINDyCampaign with coefficient draws ``coef_draws_`` (D, S, p) and the verdict of the module docstring."""
+
+    # the parameters, not the SINDy they build (building SBR's needs numpyro)
+    __repr__ = ModelBase.__repr__
 
     def _check_verdict_params(self) -> None:
         if not 0.5 < self.agreement <= 1.0:
@@ -327,6 +332,7 @@ class PySINDyWeak(PySINDyCampaign):
 
     sindy = None
     use_record_derivative = False  # the weak form needs no dA/dt
+    __repr__ = ModelBase.__repr__
 
     def fit(self, records: Sequence[Record]) -> "PySINDyWeak":
         """Fit the stacked weak system of every run of valid samples of every record; returns self."""
@@ -341,7 +347,9 @@ class PySINDyWeak(PySINDyCampaign):
         if not pieces:
             raise ValueError(f"no run of valid samples lasts 4 H = {4 * self.H:g} s, the weak form's shortest")
         rows, lhs = [], []
-        with _seeded(self.seed):
+        with _seeded(self.seed), warnings.catch_warnings():
+            # pysindy 2.1's WeakPDELibrary.fit labels a one-sample slice with two axes and warns about it
+            warnings.filterwarnings("ignore", message=r"\d+ axes labeled for array with \d+ axes")
             for t, A, U, _dA in pieces:
                 x, u = self._inputs(A, U)
                 K = max(1, int(round((t[-1] - t[0]) / self.H * self.per_H)))
