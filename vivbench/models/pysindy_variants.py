@@ -274,7 +274,8 @@ class PySINDySBR(_DrawsVerdict):
         self._check_verdict_params()
         if not 1 <= self.n_draws <= self.num_samples:
             raise ValueError(f"n_draws must be in 1..num_samples ({self.num_samples}); got {self.n_draws}")
-        self.sindy  # refuse before any work when numpyro is missing
+        if not sbr_available():  # refuse before any work
+            raise InputError(_SBR_MISSING)
         super().fit(records)
         beta = np.asarray(self.sindy_.optimizer.mcmc_.get_samples()["beta"], dtype=float)  # (num_samples, S, p)
         pick = np.linspace(0, beta.shape[0] - 1, self.n_draws).round().astype(int)
