@@ -152,7 +152,7 @@ class PySINDyEnsemble(_DrawsVerdict):
     ----------
     coef_draws_ : ndarray, shape (n_models, S, p)
         Every bag's coefficients (pysindy's ``coef_list``), on the scaled variables.
-    coef_, sindy_, feature_names_, term_orders_, ... : as :class:`vivbench.models.PySINDyCampaign`
+    coef_, sindy_, feature_names_, term_orders_, a_scale_ : as :class:`vivbench.models.PySINDyCampaign`
     """
 
     def __init__(self, *, threshold: float = 1e-3, degree: int = 3, n_models: int = 20, aggregate: str = "mean",
@@ -315,7 +315,7 @@ class PySINDyWeak(PySINDyCampaign):
     ----------
     n_test_functions_ : int
         Rows of the stacked weak system.
-    coef_, feature_names_, term_orders_, ... : as :class:`vivbench.models.PySINDyCampaign`
+    coef_, feature_names_, term_orders_, a_scale_ : as :class:`vivbench.models.PySINDyCampaign`
     """
 
     def __init__(self, *, degree: int = 3, threshold: float = 1e-3, H: float = 10.0, per_H: float = 1.0,
