@@ -57,6 +57,8 @@ from vivbench.models.simulate import (
     window_in_force,
 )
 from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
+from vivbench.models.pysindy_variants import (ENSEMBLE_AGGREGATES, PySINDyEnsemble, PySINDySBR, PySINDyWeak,
+                                              sbr_available)
 from vivbench.models.varying import VaryingCoefficientSINDy
 from vivbench.models.campaign_verdicts import (WindowRecord, campaign_window_verdicts, pooled_window_stats,
                                                window_record, window_stats, window_sums)
@@ -86,4 +88,5 @@ __all__ = [
     "model_class_path", "model_description", "chosen_model", "model_evidence", "IDENTIFIABLE_LONG_NAME", "varying_description", "campaign_window_verdicts", "gram_order_stats", "varying_summary",
     "varying_window_verdicts", "window_grams", "window_order_stats",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
+    "ENSEMBLE_AGGREGATES", "PySINDyEnsemble", "PySINDySBR", "PySINDyWeak", "sbr_available",
 ]

@@ -45,6 +45,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.integrate import StopRule, rk4
@@ -145,6 +146,10 @@ class _PySINDyBase(ModelBase):
             raise ValueError(f"other_terms must be one of {', '.join(OTHER_TERMS)}; got {self.other_terms!r}")
         if self.sindy is not None and not hasattr(self.sindy, "fit"):
             raise TypeError(f"sindy must be a pysindy.SINDy (an object with fit); got {type(self.sindy).__name__}")
+        if type(getattr(self.sindy, "feature_library", None)).__name__ == "WeakPDELibrary":
+            raise InputError("pysindy's WeakPDELibrary holds one time grid (spatiotemporal_grid) for all data, but "
+                             "records and their runs of valid samples have grids of their own; use "
+                             "vivbench.models.PySINDyWeak, which builds the weak form per run (docs/methods.md)")
 
     def _new_sindy(self):
         # deepcopy, not sklearn.clone: ParameterizedLibrary cannot be cloned in pysindy 2.1.
@@ -171,6 +176,14 @@ class _PySINDyBase(ModelBase):
 
     def _records(self, records) -> list[Record]:
         return fit_records(records, need_dA=self.use_record_derivative, why="use_record_derivative=True needs it")
+
+    def _pieces(self, records: list[Record]) -> list[tuple]:
+        """(t, A, U, dA) of every run of at least ``min_samples`` valid samples of every record."""
+        out = []
+        for rec in records:
+            for run in _finite_runs(rec.t, rec.valid(need_dA=self.use_record_derivative), self.min_samples):
+                out.append((rec.t[run], rec.A[run], rec.U[run], None if rec.dA is None else rec.dA[run]))
+        return out
 
     def _fit_sindy(self, pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]):
         """Fit a fresh copy on (t, A, U, dA) pieces (one trajectory each); returns it."""
@@ -271,10 +284,7 @@ class PySINDyCampaign(_PySINDyBase):
         self._check_params()
         records = self._records(records)
         self._set_scales(records)
-        pieces = []
-        for rec in records:
-            for run in _finite_runs(rec.t, rec.valid(need_dA=self.use_record_derivative), self.min_samples):
-                pieces.append((rec.t[run], rec.A[run], rec.U[run], None if rec.dA is None else rec.dA[run]))
+        pieces = self._pieces(records)
         if not pieces:
             raise ValueError(f"no run of at least {self.min_samples} valid samples to fit")
         model = self._fit_sindy(pieces)
