@@ -115,6 +115,7 @@ def test_accepted_variants_are_scored_through_their_specs(name, small_measured):
     assert (s["coverage"] == 0.0) == (name == "weak"), "the ensemble has a verdict, the weak form none"
 
 
+@pytest.mark.slow  # about 45 s of MCMC
 @pytest.mark.skipif(not sbr_available(), reason="numpyro is not installed")
 def test_sbr_gives_a_verdict_from_its_posterior_draws(small_measured):
     records, truths = small_measured
