@@ -224,7 +224,7 @@ class PySINDySBR(_DrawsVerdict):
     coef_draws_ : ndarray, shape (n_draws, S, p)
         Posterior samples of the coefficients on the scaled variables.
     thinning_ : int
-        Every thinning_-th sample of each run was fitted.
+        The step between the fitted samples of each run (every k-th sample, k this value).
 
     Raises
     ------
