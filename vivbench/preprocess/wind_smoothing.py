@@ -10,6 +10,7 @@ measured U closer to the felt one.
 from __future__ import annotations
 
 import dataclasses
+import weakref
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
@@ -18,6 +19,11 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 
 __all__ = ["smooth_wind"]
+
+#: Smoothed records by input record and time scale, while the input record lives: a campaign model's
+#: selection fits and simulates the same records many times (every candidate, fold and held-out run),
+#: and records are never changed in place.
+_SMOOTHED: "weakref.WeakKeyDictionary[Record, dict[float, Record]]" = weakref.WeakKeyDictionary()
 
 
 def smooth_wind(record: Record, sigma_s: float) -> Record:
@@ -39,6 +45,9 @@ def smooth_wind(record: Record, sigma_s: float) -> Record:
         raise InputError(f"the wind smoothing must be a number of seconds >= 0; got {sigma_s!r}")
     if sigma_s == 0 or record.n_samples < 2:
         return record
+    done = _SMOOTHED.get(record, {}).get(float(sigma_s))
+    if done is not None:
+        return done
     width = sigma_s / float(np.median(np.diff(record.t)))
 
     def smooth(x):
@@ -48,4 +57,6 @@ def smooth_wind(record: Record, sigma_s: float) -> Record:
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(ok, num / np.maximum(den, 1e-12), np.nan)
 
-    return dataclasses.replace(record, U=smooth(record.U), yaw=None if record.yaw is None else smooth(record.yaw))
+    out = dataclasses.replace(record, U=smooth(record.U), yaw=None if record.yaw is None else smooth(record.yaw))
+    _SMOOTHED.setdefault(record, {})[float(sigma_s)] = out
+    return out
