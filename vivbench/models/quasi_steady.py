@@ -25,6 +25,7 @@ from vivbench.models.protocol import as_record
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.library.splines import bspline_basis, difference_penalty, uniform_knots
 from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.regression.penalised import penalised_solve, penalty_scale, quadratic_error
 
 __all__ = ["QuasiSteadyAmplitude"]
 
@@ -126,17 +127,14 @@ class QuasiSteadyAmplitude:
                 raise InputError(f"section {k}: {n} valid samples, too few for a map of {M} B-splines")
             Bk, y = B[ok], A[ok, k]
             G, b, yy = Bk.T @ Bk, Bk.T @ y, float(y @ y)
-            scale = np.trace(G) / np.trace(P)
-            best = None
-            for lam in pen:  # generalised cross-validation over the penalty grid (a handful of M x M solves)
-                H = G + lam * scale * P
-                c = np.linalg.solve(H, b)
-                edf = float(np.trace(np.linalg.solve(H, G)))
-                rss = max(yy - 2.0 * c @ b + c @ G @ c, 0.0)
-                gcv = n * rss / max(n - edf, 1.0) ** 2
-                if best is None or gcv < best[0]:
-                    best = (gcv, lam, c)
-            self.penalty_[k], self.coef_[k] = best[1], best[2]
+            # Generalised cross-validation over the penalty grid, every penalty's solve at once.
+            lam = pen * penalty_scale(G, P)
+            c = penalised_solve(G, b, P, lam, ridge=0.0)  # (n_pen, M)
+            H = G + lam[:, None, None] * P
+            edf = np.trace(np.linalg.solve(H, np.broadcast_to(G, H.shape)), axis1=-2, axis2=-1)
+            rss = np.maximum(quadratic_error(c, G, b, yy), 0.0)
+            best = int(np.argmin(n * rss / np.maximum(n - edf, 1.0) ** 2))
+            self.penalty_[k], self.coef_[k] = pen[best], c[best]
         self.n_sections_ = S
         return self
 
