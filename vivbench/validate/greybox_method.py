@@ -78,13 +78,6 @@ def structural_properties(structure: StructureConfig) -> BridgeProperties:
     return BridgeProperties(**{name: getattr(structure, name) for name in STRUCTURAL_FIELDS})
 
 
-def _dynamics_shown(fitted) -> bool:
-    """Whether a fitted campaign method's held-out evidence shows the dynamics (its selection's null test;
-    True for a model without held-out evidence)."""
-    evidence = model_evidence(fitted)
-    return True if evidence is None else bool(evidence.get("dynamics_shown", True))
-
-
 def _greybox_verdict(model: GreyBoxRefit, record: Record, window_start, window_end, *, reference,
                      wind_smoothing_s: float, tau: float, agreement: float, n_draws: int,
                      dynamics_shown: bool = True) -> dict:
@@ -114,21 +107,27 @@ class GreyBoxVerdictModel(MeasuredWindVerdictModel):
     wind_smoothing_s : float, s
     tau, agreement, n_draws : the verdict's settings (:func:`greybox_window_verdicts`)
     reference_seconds : wall time of the reference's fit, s (NaN: given fitted)
-    dynamics_shown : bool
-        False when the campaign's held-out evidence does not show its dynamics (the default campaign
-        model's null test, :class:`vivbench.analysis.ModelSelection`): no window is flagged.
+    evidence : dict or None
+        The reference's held-out evidence (:meth:`vivbench.analysis.ModelSelection.evidence`), returned by
+        :meth:`evidence`; when it does not show the campaign's dynamics (``dynamics_shown`` False, the
+        null test) no window is flagged.
     """
 
     def __init__(self, model: GreyBoxRefit, reference=None, *, wind_smoothing_s: float = 30.0,
                  tau: float = DEFAULT_TAU, agreement: float = 0.95, n_draws: int = 100,
-                 reference_seconds: float = math.nan, dynamics_shown: bool = True):
+                 reference_seconds: float = math.nan, evidence: dict | None = None):
+        shown = True if evidence is None else bool(evidence.get("dynamics_shown", True))
         super().__init__(model, functools.partial(_greybox_verdict, reference=reference,
                                                   wind_smoothing_s=wind_smoothing_s, tau=tau, agreement=agreement,
-                                                  n_draws=n_draws, dynamics_shown=bool(dynamics_shown)))
-        self.dynamics_shown = bool(dynamics_shown)
+                                                  n_draws=n_draws, dynamics_shown=shown))
+        self._evidence = evidence
         self.reference = reference
         self.wind_smoothing_s = wind_smoothing_s
         self.reference_seconds = reference_seconds
+
+    def evidence(self) -> dict | None:
+        """The reference's held-out evidence the verdict rests on (None without a reference that has one)."""
+        return self._evidence
 
     def simulate(self, record: Record, *args, **kwargs):
         """The grey-box ``simulate`` on the measured record's wind smoothed as at fit."""
@@ -189,7 +188,7 @@ class GreyBoxMethod:
             t0 = time.perf_counter()
             reference = CampaignMethod("varying").fit(records)
             seconds = time.perf_counter() - t0
-        shown = True if reference is None else _dynamics_shown(reference)
+        evidence = None if reference is None else model_evidence(reference)
         reference = None if reference is None else chosen_model(reference)
         smoothed = [smooth_wind(r, self.wind_smoothing_s) for r in records]
         warm = None
@@ -204,4 +203,4 @@ class GreyBoxMethod:
         model.fit(smoothed)
         return GreyBoxVerdictModel(model, reference, wind_smoothing_s=self.wind_smoothing_s, tau=self.tau,
                                    agreement=self.agreement, n_draws=self.n_draws, reference_seconds=seconds,
-                                   dynamics_shown=shown)
+                                   evidence=evidence)

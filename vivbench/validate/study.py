@@ -277,8 +277,7 @@ def _choice(fitted) -> dict[str, Any]:
     """The candidate a model chose from the campaign's evidence and its confidence set ("" without)."""
     ev = model_evidence(fitted)
     if ev is None:
-        shown = getattr(fitted, "dynamics_shown", "")
-        return {"chosen": "", "confidence_set": "", "dynamics_shown": "" if shown == "" else int(bool(shown))}
+        return {"chosen": "", "confidence_set": "", "dynamics_shown": ""}
     return {"chosen": str(ev["chosen"]),
             "confidence_set": ";".join(c["name"] for c in ev["candidates"] if c["in_set"]),
             "dynamics_shown": int(bool(ev.get("dynamics_shown", True)))}
