@@ -273,3 +273,34 @@ def test_too_few_events_for_the_null_test_flag_nothing():
                          verdict=_always_flag, null_model=QuasiSteadyAmplitude(wind_smoothing_s=0.0)).fit(recs)
     assert not sel.identifiable(recs[0], np.array([0.0]), np.array([50.0])).any()
     assert "no window is flagged" in sel.evidence_text()
+
+
+def _step_records(step: bool) -> list[Record]:
+    """Twelve events of one lock-in bell; with ``step`` the last six have a0 = -0.01 m/s instead of 0.002 m/s
+    (a change of the balance that the wind does not carry)."""
+    kw = dict(duration_s=900.0, dt_s=1.0, mode_shape=np.array([1.0]), wind_period_s=(500.0, 80.0),
+              amplitude_period_s=250.0, a3=-2.0, noise_m_s=1e-4)
+    first = bell_records(6, seed=5, a0=0.002, **kw)
+    later = bell_records(6, seed=6, a0=-0.01 if step else 0.002, **kw)
+    return first + [Record(event_id=f"E{6 + e:03d}", t=r.t, A=r.A, U=r.U, dA=r.dA) for e, r in enumerate(later)]
+
+
+@pytest.mark.parametrize("step", [True, False])
+def test_a_change_located_by_the_chosen_models_scan_withholds_every_flag(step):
+    recs = _step_records(step)
+    sel = varying_selection(criterion="derivative", options={"yaw_degree": (0,)}, n_perturbations=0, null=False,
+                            n_basis=(8,), n_bootstrap=0, wind_smoothing_s=0.0)
+    sel.verdict = _always_flag
+    sel.fit(recs)
+    ev = sel.evidence()
+    assert ev["change"]["tested"] and ev["change"]["detected"] is step and ev["stationary"] is (not step)
+    flags = sel.identifiable(recs[0], np.array([0.0, 100.0]), np.array([50.0, 150.0]))
+    assert bool(flags.any()) is (not step)
+    if step:
+        assert ev["change"]["event"] in ("E005", "E006", "E007"), ev["change"]
+        assert "locates a change from" in sel.evidence_text()
+    unscanned = varying_selection(criterion="derivative", options={"yaw_degree": (0,)}, n_perturbations=0,
+                                  null=False, change_scan=False, n_basis=(8,), n_bootstrap=0, wind_smoothing_s=0.0)
+    unscanned.verdict = _always_flag
+    assert unscanned.fit(recs).identifiable(recs[0], np.array([0.0]), np.array([50.0])).all()
+    assert unscanned.evidence()["change"]["tested"] is False

@@ -186,3 +186,22 @@ def test_summary_counts_wins_choices_and_change_alarms():
     assert summary["methods"]["b"]["all"]["changes"]["draws_without_change"] == 0  # never scanned
     page = study_markdown(summary)
     assert "| a vs b | 2 | 1 | 0.500 |" in page and "## Changes the wind does not carry" in page
+
+
+def test_summary_splits_the_draws_by_what_their_own_evidence_let_the_verdict_do():
+    from vivbench.validate.study_report import study_markdown, study_summary
+
+    def row(draw, err, shown, stationary):
+        return {"draw": str(draw), "method": "a", "rhs_error_true_AU_energy": str(err), "yaw_effect": "absent",
+                "change": "none", "dynamics_shown": str(shown), "stationary": str(stationary), "error": ""}
+
+    rows = [row(0, 0.1, 1, 1), row(1, 0.3, 1, 1), row(2, 0.9, 0, 1), row(3, 0.5, 1, 0), row(4, 0.7, 0, "")]
+    summary = study_summary({"split": "development", "draws": [0, 1, 2, 3, 4], "methods": ["a"]}, rows)
+    block = summary["methods"]["a"]["all"]
+    assert block["withheld"]["withheld"] == 2 and block["withheld"]["withheld_for_change"] == 1
+    allowed, withheld = block["by_evidence"].values()
+    assert allowed["n_draws"] == 2 and withheld["n_draws"] == 3
+    assert_close(allowed["energy_error"]["median"], 0.2, rtol=1e-12, reason="float arithmetic")
+    assert withheld["energy_error"]["worst"] == 0.9 and withheld["energy_error"]["worst_draw"] == 2
+    page = study_markdown(summary)
+    assert "## By the campaign's own evidence" in page and "| a | regimes withheld | 3 | 0.700 |" in page

@@ -40,6 +40,14 @@ follows the wind with no dynamics (a forced response, an envelope driven by buff
 the wind that drown the amplitude's own changes), any split of the dynamics between the orders of A
 fits, and the regimes are not identified from the campaign. With too few events for held-out
 evidence (fewer than :data:`MIN_EVENTS`) nothing is flagged either.
+
+With the **stationarity test** (``change_scan=True``, the default of :func:`varying_selection`), the
+chosen model's own change scan (:func:`vivbench.analysis.changes.statistics_change_scan`: refits before
+and after every split of the events in time order, permutation p-value) is run once it is fitted to
+every event. A located change means that one function of (A, U) does not hold for the whole campaign:
+the model averages over a structural change (a damping step) or misfits some events differently from
+the others, so its regimes are not those of any one period, and no window is flagged. The alarm, its
+p-value and the first event after the located change are recorded in the evidence.
 """
 
 from __future__ import annotations
@@ -58,7 +66,7 @@ from vivbench.core.parallel import run_tasks
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.models.model_input import measured_input
-from vivbench.models.protocol import as_record, model_summary
+from vivbench.models.protocol import as_record, model_change_inputs, model_summary
 from vivbench.preprocess.runs import mask_runs
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
@@ -316,6 +324,10 @@ class ModelSelection:
     null_model : object or None
         An unfitted model with ``fit`` and ``simulate`` (``predict`` for the derivative criterion) that
         has no dynamics of its own, scored on the same folds (module docstring); None: no null test.
+    change_scan : bool
+        Run the chosen model's change scan once it is fitted to every event, and flag no window when it
+        locates a change (module docstring); models without per-event statistics
+        (:func:`vivbench.models.model_change_inputs` gives None) are not scanned.
 
     Attributes
     ----------
@@ -331,16 +343,20 @@ class ModelSelection:
     wind_error_ : ndarray, shape (E, S), m/s, the estimated wind error of every event
     null_loss_ : ndarray, shape (E,), the null model's held-out loss (NaN without one or without folds)
     null_in_set_ : bool or None, whether the null is in the confidence set (None: not tested)
-    dynamics_shown_ : bool, whether the verdict may flag windows (module docstring)
+    dynamics_shown_ : bool, whether the null test lets the verdict flag windows (module docstring)
+    change_ : dict, the chosen model's change scan: ``tested``, ``detected``, ``p_value``, ``event``
+        (the first event after the located change, "" when none)
+    stationary_ : bool, whether the change scan lets the verdict flag windows (True when not tested)
     event_ids_ : list of str
     """
 
     def __init__(self, *, candidates: Sequence[Candidate], n_folds: int = 5, criterion: str = "output",
                  n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, tau: float = DEFAULT_TAU,
                  verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None,
-                 null_model=None):
+                 null_model=None, change_scan: bool = False):
         self.candidates = tuple(candidates)
         self.null_model = null_model
+        self.change_scan = change_scan
         self.n_folds = n_folds
         self.criterion = criterion
         self.n_perturbations = n_perturbations
@@ -448,7 +464,27 @@ class ModelSelection:
         self.model_ = fitted[0]
         self.set_models_ = fitted[1:1 + len(others)]
         self.perturbed_models_ = fitted[1 + len(others):]
+        self.change_ = self._change_scan(records)
+        self.stationary_ = not self.change_["detected"]
         return self
+
+    def _change_scan(self, records: list[Record]) -> dict:
+        """The chosen model's change scan on the campaign's events (module docstring)."""
+        from vivbench.analysis.changes import statistics_change_scan
+
+        out = {"tested": False, "detected": False, "p_value": float("nan"), "event": ""}
+        if not self.change_scan:
+            return out
+        inputs = model_change_inputs(self.model_, records)
+        if inputs is None:
+            return out
+        scan = statistics_change_scan(inputs["statistics"], seed=int(self.seed))
+        out["tested"] = bool(np.isfinite(scan["p_value"]))
+        out["detected"] = bool(scan["detected"])
+        out["p_value"] = float(scan["p_value"])
+        if scan["detected"]:
+            out["event"] = str(self.event_ids_[int(scan["change_index"])])
+        return out
 
     # -- the protocol, through the chosen model ------------------------------------------------------
 
@@ -546,7 +582,7 @@ class ModelSelection:
         self._check_fitted()
         own = self._own_verdict(record, window_start, window_end)
         flag = np.asarray(own["identifiable"], dtype=bool)
-        if not getattr(self, "dynamics_shown_", True):
+        if not (getattr(self, "dynamics_shown_", True) and getattr(self, "stationary_", True)):
             return np.zeros(flag.shape, dtype=bool)
         return flag & self.agreement(record, window_start, window_end, own["regime"])
 
@@ -606,6 +642,9 @@ class ModelSelection:
                       "se": float(getattr(self, "null_se_", np.nan)),
                       "in_set": self.null_in_set_}),
             "dynamics_shown": bool(getattr(self, "dynamics_shown_", True)),
+            "change": dict(getattr(self, "change_", {"tested": False, "detected": False,
+                                                     "p_value": float("nan"), "event": ""})),
+            "stationary": bool(getattr(self, "stationary_", True)),
         }
 
     def evidence_text(self) -> str:
@@ -631,6 +670,12 @@ class ModelSelection:
                          "regimes may be flagged" if ev["dynamics_shown"] else
                          "  the null model predicts held-out events as well as the dynamic models: the dynamics, "
                          "and so the regimes, are not identified from this campaign; no window is flagged")
+        change = ev["change"]
+        if change["tested"]:
+            lines.append(f"  the chosen model's change scan locates a change from {change['event']} on "
+                         f"(p = {change['p_value']:.3g}): one model does not hold for the whole campaign; "
+                         "no window is flagged" if change["detected"] else
+                         f"  the chosen model's change scan locates no change (p = {change['p_value']:.3g})")
         return "\n".join(lines)
 
     def to_dataset(self) -> xr.Dataset:
@@ -666,7 +711,7 @@ VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0}
 def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterion: str = "output",
                       n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, seed: int = 0,
                       workers: int = 1, scheduler: str | None = None, null: bool = True,
-                      **params) -> ModelSelection:
+                      change_scan: bool = True, **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -681,6 +726,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     null : bool
         Test the candidates against the quasi-steady map :class:`vivbench.models.QuasiSteadyAmplitude`
         (with the candidates' wind smoothing) before any window is flagged.
+    change_scan : bool
+        Flag no window when the chosen model's change scan locates a change (:class:`ModelSelection`).
     **params
         Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given).
 
@@ -712,7 +759,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                           tau=fixed.get("tau", DEFAULT_TAU), verdict=varying_window_verdicts, seed=seed,
                           workers=workers, scheduler=scheduler,
                           null_model=(QuasiSteadyAmplitude(wind_smoothing_s=fixed.get("wind_smoothing_s", 30.0))
-                                      if null else None))
+                                      if null else None),
+                          change_scan=change_scan)
 
 
 def _option_label(name: str, value) -> str:

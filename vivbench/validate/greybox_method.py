@@ -110,13 +110,15 @@ class GreyBoxVerdictModel(MeasuredWindVerdictModel):
     evidence : dict or None
         The reference's held-out evidence (:meth:`vivbench.analysis.ModelSelection.evidence`), returned by
         :meth:`evidence`; when it does not show the campaign's dynamics (``dynamics_shown`` False, the
-        null test) no window is flagged.
+        null test) or its chosen model's change scan locates a change (``stationary`` False), no window
+        is flagged.
     """
 
     def __init__(self, model: GreyBoxRefit, reference=None, *, wind_smoothing_s: float = 30.0,
                  tau: float = DEFAULT_TAU, agreement: float = 0.95, n_draws: int = 100,
                  reference_seconds: float = math.nan, evidence: dict | None = None):
-        shown = True if evidence is None else bool(evidence.get("dynamics_shown", True))
+        shown = True if evidence is None else bool(evidence.get("dynamics_shown", True)
+                                                   and evidence.get("stationary", True))
         super().__init__(model, functools.partial(_greybox_verdict, reference=reference,
                                                   wind_smoothing_s=wind_smoothing_s, tau=tau, agreement=agreement,
                                                   n_draws=n_draws, dynamics_shown=shown))

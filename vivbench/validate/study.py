@@ -75,7 +75,7 @@ METHOD_ALIASES: dict[str, str] = {}
 #: Study methods built from each draw's structural properties (not :func:`resolve_method` names).
 DRAW_METHODS = ("greybox",)
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
-_FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set", "dynamics_shown",
+_FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set", "dynamics_shown", "stationary",
                  "change_p_value", "change_detected", "change_index")
 _SCORES = tuple(k for k in SCORE_KEYS if k != "fit_time_s")
 #: Columns of ``study.csv``: one row per draw and method.
@@ -277,10 +277,11 @@ def _choice(fitted) -> dict[str, Any]:
     """The candidate a model chose from the campaign's evidence and its confidence set ("" without)."""
     ev = model_evidence(fitted)
     if ev is None:
-        return {"chosen": "", "confidence_set": "", "dynamics_shown": ""}
+        return {"chosen": "", "confidence_set": "", "dynamics_shown": "", "stationary": ""}
     return {"chosen": str(ev["chosen"]),
             "confidence_set": ";".join(c["name"] for c in ev["candidates"] if c["in_set"]),
-            "dynamics_shown": int(bool(ev.get("dynamics_shown", True)))}
+            "dynamics_shown": int(bool(ev.get("dynamics_shown", True))),
+            "stationary": int(bool(ev.get("stationary", True)))}
 
 
 def _change_scan(fitted, records) -> dict[str, Any]:

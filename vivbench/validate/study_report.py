@@ -104,7 +104,10 @@ def _withheld(rows: Sequence[dict]) -> dict[str, Any]:
     the null model predicted held-out events as well, and no window was flagged."""
     tested = [r for r in rows if str(r.get("dynamics_shown", "")).strip() not in ("", "nan")]
     withheld = [r for r in tested if not int(_number(r.get("dynamics_shown")))]
-    return {"draws": len(tested), "withheld": len(withheld),
+    # a located change withholds the flags too (the model's stationarity test), where the null did not
+    changed = [r for r in tested if int(_number(r.get("dynamics_shown")))
+               and str(r.get("stationary", "")).strip() not in ("", "nan") and not int(_number(r.get("stationary")))]
+    return {"draws": len(tested), "withheld": len(withheld), "withheld_for_change": len(changed),
             "forced_only_withheld": sum(1 for r in withheld if str(r.get("forced_only")) == "True"),
             "forced_only": sum(1 for r in tested if str(r.get("forced_only")) == "True")}
 
@@ -134,7 +137,25 @@ def _block(rows: Sequence[dict]) -> dict[str, Any]:
             "by_size": {label: {"n_draws": len(sub),
                                 "energy_error_median": _distribution(sub, "rhs_error_true_AU_energy", "high")["median"],
                                 "promise": _promise(sub)}
-                        for label, sub in _by_size(rows)}}
+                        for label, sub in _by_size(rows)},
+            "by_evidence": {label: {"n_draws": len(sub),
+                                    "energy_error": _distribution(sub, "rhs_error_true_AU_energy", "high")}
+                            for label, sub in _by_evidence(rows)}}
+
+
+def _by_evidence(rows: Sequence[dict]) -> list[tuple[str, list[dict]]]:
+    """The rows whose own held-out evidence let the verdict flag (dynamics shown, no change located) and the
+    rows where it withheld the regimes; empty for a method that records no such evidence."""
+    def known(r, key):
+        return str(r.get(key, "")).strip() not in ("", "nan")
+
+    tested = [r for r in rows if known(r, "dynamics_shown")]
+    if not tested:
+        return []
+    allowed = [r for r in tested if int(_number(r["dynamics_shown"]))
+               and not (known(r, "stationary") and not int(_number(r["stationary"])))]
+    withheld = [r for r in tested if r not in allowed]
+    return [("dynamics shown, one model for the campaign", allowed), ("regimes withheld", withheld)]
 
 
 def _by_size(rows: Sequence[dict]) -> list[tuple[str, list[dict]]]:
@@ -264,17 +285,20 @@ def study_markdown(summary: dict[str, Any]) -> str:
             f = block["forced_only"]
             lines.append(f"| {name} | {_subset(subset, block)} | {f['draws']} | {f['self_excited_flags']} | "
                          f"{f['draws_with_self_excited_flags']} |")
-    lines += ["", "## Regimes withheld for want of evidence of the dynamics", "",
-              "Draws on which the dynamic models did not predict held-out events significantly better than the "
-              "quasi-steady map A = g(U) (or the campaign had too few events to tell): no window is flagged there.",
-              "", "| method | draws | draws tested | withheld | forced-only draws | forced-only withheld |",
-              "|---|---|---|---|---|---|"]
+    lines += ["", "## Regimes withheld for want of evidence", "",
+              "Withheld: draws on which the dynamic models did not predict held-out events significantly better "
+              "than the quasi-steady map A = g(U) (or the campaign had too few events to tell). Withheld for a "
+              "change: draws whose dynamics were shown but whose chosen model's change scan located a change (one "
+              "model does not hold for the whole campaign). No window is flagged on either.",
+              "", "| method | draws | draws tested | withheld | forced-only draws | forced-only withheld | "
+              "withheld for a change |",
+              "|---|---|---|---|---|---|---|"]
     for name, blocks in summary["methods"].items():
         for subset, block in blocks.items():
             w = block.get("withheld", {})
             if w.get("draws"):
                 lines.append(f"| {name} | {_subset(subset, block)} | {w['draws']} | {w['withheld']} | "
-                             f"{w['forced_only']} | {w['forced_only_withheld']} |")
+                             f"{w['forced_only']} | {w['forced_only_withheld']} | {w.get('withheld_for_change', 0)} |")
     lines += ["", "## By campaign size", "",
               "| method | campaigns | draws | energy-weighted dA/dt error, median | draws with enough flags | "
               "promise kept |", "|---|---|---|---|---|---|"]
@@ -282,6 +306,17 @@ def study_markdown(summary: dict[str, Any]) -> str:
         for label, b in blocks["all"].get("by_size", {}).items():
             lines.append(f"| {name} | {label} | {b['n_draws']} | {_fmt(b['energy_error_median'])} | "
                          f"{b['promise']['draws_with_enough_flags']} | {b['promise']['draws_kept']} |")
+    lines += ["", "## By the campaign's own evidence", "",
+              "The energy-weighted dA/dt error on the true (A, U) on the draws whose held-out evidence let the "
+              "verdict flag windows (the dynamics beat the quasi-steady map and the change scan located no change) "
+              "and on the draws where it withheld the regimes: what a user can expect from what the campaign itself "
+              "shows, with no truth.", "",
+              "| method | campaigns | draws | median | p90 | worst (draw) |", "|---|---|---|---|---|---|"]
+    for name, blocks in summary["methods"].items():
+        for label, b in blocks["all"].get("by_evidence", {}).items():
+            e = b["energy_error"]
+            worst = "–" if e["worst"] is None else f"{e['worst']:.3f} ({e['worst_draw']})"
+            lines.append(f"| {name} | {label} | {b['n_draws']} | {_fmt(e['median'])} | {_fmt(e['p90'])} | {worst} |")
     lines += ["", "## Against each other", "",
               "Draws on which the first method's energy-weighted dA/dt error on the true (A, U) is below the "
               "second's.", "", "| methods | draws with both | first lower | share |", "|---|---|---|---|"]
