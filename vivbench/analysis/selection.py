@@ -475,7 +475,8 @@ class ModelSelection:
         out = {"tested": False, "detected": False, "p_value": float("nan"), "event": ""}
         if not self.change_scan:
             return out
-        inputs = model_change_inputs(self.model_, records)
+        # on the wind as the model saw it at fit, as vivbench pool's own scan of the model
+        inputs = model_change_inputs(self.model_, [measured_input(self.model_, r) for r in records])
         if inputs is None:
             return out
         scan = statistics_change_scan(inputs["statistics"], seed=int(self.seed))
