@@ -56,7 +56,7 @@ bench-quick: $(VENV)/.installed-test,bench
 docs: $(VENV)/.installed-docs
 	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
 
-# The README's headline table, from the committed reference report (tests/test_readme.py
+# The README's headline table, from the committed reference report (tests/project/test_readme.py
 # checks that the README holds what this writes).
 readme: $(VENV)/.installed-test
 	$(BIN)/python tools/update_readme.py README.md reports/default/report.md

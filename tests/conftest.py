@@ -98,7 +98,7 @@ def bell_campaign():
     """Four two-section records (600 s at 1 s, noise 1e-4 m/s) of a lock-in bell a_1(U): a small campaign in memory.
 
     The records of :func:`tests.helpers.bell_records` (dA/dt = a_1(U) A - 2 A^3 with a_1 a bell
-    centred at 10 m/s), for checks every campaign model must pass (tests/test_conformance.py).
+    centred at 10 m/s), for checks every campaign model must pass (tests/models/test_conformance.py).
     """
     import numpy as np
 

@@ -6,7 +6,12 @@ A tolerance looser than the defaults must come with a ``reason`` saying why
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+
+#: The repository's root (this file is tests/helpers.py): where docs/, examples/ and reports/ are found.
+REPO = Path(__file__).resolve().parents[1]
 
 DEFAULT_RTOL = 1e-9
 DEFAULT_ATOL = 0.0

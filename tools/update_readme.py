@@ -2,7 +2,7 @@
 
 Usage: ``python tools/update_readme.py [README.md] [reports/default/report.md]``. The table
 goes between the README's markers (:data:`vivbench.report.HEADLINE_BEGIN` and ``_END``);
-``tests/test_readme.py`` fails when the README's table differs from what this writes.
+``tests/project/test_readme.py`` fails when the README's table differs from what this writes.
 """
 
 from __future__ import annotations

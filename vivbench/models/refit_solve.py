@@ -132,7 +132,7 @@ class RefitConfig:
         measured A): on event E001 (seed 0), 300-900 s, a 5-term support per
         section, the free-state fit scored NMSE 0.039 from the measured A,
         the fixed-state fit 0.00026. For coefficient estimation from noisy A
-        the free state is better (tests/test_refit.py: with 1.5 % noise the
+        the free state is better (tests/models/test_refit.py: with 1.5 % noise the
         fixed state beat the equation-error fit in 5 of 8 seeds, the free
         state in 7 of 8).
     bound_factor, negative_tolerance : float

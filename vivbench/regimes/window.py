@@ -21,7 +21,7 @@ gives the same regime. The competitors are
 Not a proof: the competitors are the models the method itself finds, so an
 equally good model that no threshold reaches is not seen. The flag is
 checked on windows whose truth is known to be unidentifiable (plateaus) and on
-windows that are (strong growth), see ``tests/test_identify.py``.
+windows that are (strong growth), see ``tests/analysis/test_identify.py``.
 """
 
 from __future__ import annotations

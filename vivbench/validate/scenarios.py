@@ -6,7 +6,7 @@ of ``vivbench synth --config`` (a TOML-like dict read by
 and a seed, with a version number. The same scenario name and version always
 gives the same campaign, byte for byte. Changing anything in a scenario means
 bumping its version: :data:`SCENARIO_FINGERPRINTS` pins the fingerprint of every
-built-in (name, version) and ``tests/test_scenarios.py`` fails when the content
+built-in (name, version) and ``tests/validate/test_scenarios.py`` fails when the content
 changes under an unchanged version. The leaderboard caches each scenario's
 campaign with its record and regenerates it when the record differs.
 
