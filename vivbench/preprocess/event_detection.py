@@ -36,7 +36,8 @@ from vivbench.preprocess.vibration import displacement, envelope, modal_frequenc
 
 __all__ = ["EventDetectionConfig", "EventDetection", "detect_events"]
 
-# Samples per period of the band's upper edge after decimation.
+# Samples per period of the upper edge of the search band, then of the mode's band, after decimation.
+_SEARCH_SAMPLES_PER_PERIOD = 4.0
 _SAMPLES_PER_PERIOD = 10.0
 # Stamps further than this fraction of a step from the regular clock are refused.
 _CLOCK_TOLERANCE = 0.25
@@ -162,28 +163,38 @@ def _regular(t: np.ndarray, acc: np.ndarray, name: str) -> tuple[np.ndarray, flo
     return out, fs
 
 
-def _amplitude(x: np.ndarray, fs: float, f_mode: float, config: EventDetectionConfig) -> tuple[np.ndarray, float]:
-    """Smoothed envelope of the mode's displacement (m) on the decimated grid, and that grid's rate."""
-    f_hi = f_mode * (1.0 + config.half_width)
-    if f_hi >= 0.5 * fs:
-        raise InputError(f"the band around the mode ({f_mode:.4g} Hz +- {100 * config.half_width:g} %) must lie below "
-                         f"the Nyquist frequency {0.5 * fs:g} Hz")
-    q = max(1, int(fs // (_SAMPLES_PER_PERIOD * f_hi)))
-    fs_d = fs / q
-    n_d = -(-x.shape[0] // q)
-    amp = np.full((n_d, x.shape[1]), np.nan)
-    _, starts, ends = valid_runs(fs, x, 0.0)
-    shortest = int(math.ceil(4.0 * fs / (f_mode * (1.0 - config.half_width))))  # four periods
-    width = max(1, int(round(config.smoothing_s * fs_d)))
+def _decimate(x: np.ndarray, q: int) -> np.ndarray:
+    """Every gap-free run of at least two output samples decimated by q (anti-aliasing polyphase filter); NaN elsewhere.
+
+    Decimated sample j stands for input sample j * q.
+    """
+    if q == 1:
+        return x
+    out = np.full((-(-x.shape[0] // q), x.shape[1]), np.nan)
+    _, starts, ends = valid_runs(1.0, x, 0.0)
     for i0, i1 in zip(starts, ends):
         j0 = -(-int(i0) // q)  # first decimated sample inside the run
-        if i1 - j0 * q < max(shortest, 2 * q):
+        if i1 - j0 * q < 2 * q:
             continue
         run = x[j0 * q:i1]
-        xd = signal.resample_poly(run - run.mean(axis=0), 1, q, axis=0) if q > 1 else run
-        env = envelope(displacement(xd, fs_d, f_mode, config.half_width * f_mode))
-        amp[j0:j0 + env.shape[0]] = uniform_filter1d(env, width, axis=0, mode="nearest") if width > 1 else env
-    return amp, fs_d
+        mean = run.mean(axis=0)
+        y = signal.resample_poly(run - mean, 1, q, axis=0) + mean
+        out[j0:j0 + y.shape[0]] = y
+    return out
+
+
+def _amplitude(x: np.ndarray, fs: float, f_mode: float, config: EventDetectionConfig) -> np.ndarray:
+    """Smoothed envelope of the mode's displacement (m) of every gap-free run of four periods; NaN elsewhere."""
+    shortest = int(math.ceil(4.0 * fs / (f_mode * (1.0 - config.half_width))))  # four periods
+    width = max(1, int(round(config.smoothing_s * fs)))
+    amp = np.full(x.shape, np.nan)
+    _, starts, ends = valid_runs(fs, x, 0.0)
+    for i0, i1 in zip(starts, ends):
+        if i1 - i0 < shortest:
+            continue
+        env = envelope(displacement(x[i0:i1], fs, f_mode, config.half_width * f_mode))
+        amp[i0:i1] = uniform_filter1d(env, width, axis=0, mode="nearest") if width > 1 else env
+    return amp
 
 
 def detect_events(t, acc, config: EventDetectionConfig | None = None, *, name: str = "acc") -> EventDetection:
@@ -216,12 +227,21 @@ def detect_events(t, acc, config: EventDetectionConfig | None = None, *, name: s
     if t.ndim != 1 or t.shape[0] != acc.shape[0]:
         raise InputError(f"{name}: t has shape {t.shape} but acc has {acc.shape}; expected (n,) and (n, S)")
     x, fs = _regular(t, acc, name)
+    # Two decimations keep a long record small: to the search band, then to the mode's band.
+    hi = config.band_hz[1] if config.frequency_hz is None else config.frequency_hz * (1.0 + config.half_width)
+    if hi >= 0.5 * fs:
+        raise InputError(f"{name}: the band up to {hi:.4g} Hz must lie below the Nyquist frequency {0.5 * fs:g} Hz; "
+                         f"lower band_hz")
+    q0 = max(1, int(fs // (_SEARCH_SAMPLES_PER_PERIOD * hi)))
+    x, fs = _decimate(x, q0), fs / q0
     try:
         f_mode = config.frequency_hz or modal_frequency(fs, x, config.band_hz, segment_s=config.segment_s)
     except InputError as exc:
         raise InputError(f"{name}: {exc}") from None
-    amp, fs_d = _amplitude(x, fs, f_mode, config)
-    t_d = t[0] + np.arange(amp.shape[0]) / fs_d
+    q1 = max(1, int(fs // (_SAMPLES_PER_PERIOD * f_mode * (1.0 + config.half_width))))
+    x, fs = _decimate(x, q1), fs / q1
+    amp = _amplitude(x, fs, f_mode, config)
+    t_d = t[0] + np.arange(amp.shape[0]) / fs
     finite = np.isfinite(amp)
     if not finite.any(axis=0).all():
         raise InputError(f"{name}: no gap-free run of four periods of the {f_mode:.4g} Hz mode at some section")

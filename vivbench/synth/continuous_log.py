@@ -13,10 +13,10 @@ ended:
   range held 10 to 60 min, a fall back to quiet wind and a quiet tail long
   enough for the vibration to decay.
 
-The truth of an event is the true amplitude (``/truth`` ``A``, the largest
-over the sections) above ``event_factor`` times its median over the log, with
-the same merging of short gaps and the same shortest duration as the detector
-(:func:`vivbench.core.threshold_intervals`). :func:`write_continuous_log` writes
+A true event is where the true vibration amplitude (``/truth`` ``A`` of the
+averaged model, the largest over the sections; it leaves out buffeting and
+sensor noise) exceeds ``event_amplitude_m``, with the detector's rule for
+short gaps and short events (:func:`vivbench.core.threshold_intervals`). :func:`write_continuous_log` writes
 the log as a monitoring system would: CSV files of a given length (a day by
 default) with local-time ISO 8601 stamps, in field units, and the mapping that
 reads them.
@@ -69,7 +69,7 @@ class ContinuousLogConfig:
         Seed of the schedule and of every episode's simulation.
     viv_per_day, gusts_per_day : float
         Rates of VIV events and of wind-only gusts; a log has
-        ``max(1, round(rate * duration_s / 86400))`` of each.
+        ``max(1, round(rate * duration_s / 86400))`` of each (none at a rate of 0).
     quiet_speed : (float, float)
         Range of the quiet mean wind, m/s (below the bridge's lock-in).
     lock_in_speed : (float, float)
@@ -78,9 +78,11 @@ class ContinuousLogConfig:
         Range of the gusts' mean wind, m/s (above lock-in).
     viv_plateau_s, gust_hold_s : (float, float)
         Ranges of the plateau and gust durations, s.
-    event_factor : float
-        A true event is where the true amplitude exceeds this multiple of its
-        median over the log.
+    event_amplitude_m : float
+        A true event is where the true amplitude exceeds this, m. Default
+        5 mm: above what the gusts' locked shedding and quick passages through
+        lock-in give the default bridge (at most about 3 mm), below the
+        plateaus of its VIV events (1.5 to 14 cm).
     merge_gap_s, min_duration_s : float
         The truth's merging of gaps shorter than this, and its shortest event, s.
     generator : GeneratorConfig
@@ -97,7 +99,7 @@ class ContinuousLogConfig:
     gust_speed: tuple[float, float] = (12.0, 16.0)
     viv_plateau_s: tuple[float, float] = (600.0, 3600.0)
     gust_hold_s: tuple[float, float] = (120.0, 1200.0)
-    event_factor: float = 10.0
+    event_amplitude_m: float = 0.005
     merge_gap_s: float = 300.0
     min_duration_s: float = 60.0
     generator: GeneratorConfig = field(default_factory=GeneratorConfig)
@@ -119,7 +121,8 @@ class ContinuousLogConfig:
             object.__setattr__(self, name, _pair(name, getattr(self, name), 60.0))
         require(self.quiet_speed[1] < self.lock_in_speed[0] and self.lock_in_speed[1] < self.gust_speed[0],
                 f"speeds must order quiet < lock-in < gust; got {self.quiet_speed}, {self.lock_in_speed}, {self.gust_speed}")
-        require(self.event_factor > 1, f"event_factor must be > 1; got {self.event_factor!r}")
+        require(math.isfinite(self.event_amplitude_m) and self.event_amplitude_m > 0,
+                f"event_amplitude_m must be a positive amplitude in m; got {self.event_amplitude_m!r}")
         require(self.merge_gap_s >= 0 and self.min_duration_s >= 0,
                 f"merge_gap_s and min_duration_s must be >= 0 s; got {self.merge_gap_s!r}, {self.min_duration_s!r}")
 
@@ -127,7 +130,7 @@ class ContinuousLogConfig:
     def counts(self) -> tuple[int, int]:
         """Numbers of VIV episodes and of gusts."""
         days = self.duration_s / 86400.0
-        return max(1, round(self.viv_per_day * days)), max(1, round(self.gusts_per_day * days))
+        return tuple(max(1, round(rate * days)) if rate > 0 else 0 for rate in (self.viv_per_day, self.gusts_per_day))
 
 
 @dataclass(frozen=True)
@@ -246,8 +249,7 @@ def generate_continuous_log(config: ContinuousLogConfig | None = None, *, progre
         if progress is not None:
             progress(i + 1, len(pieces))
     arrays = {k: np.concatenate(v) for k, v in out.items()}
-    peak = arrays["A"].max(axis=1)
-    events = threshold_intervals(arrays["truth_time"], peak > config.event_factor * np.median(peak),
+    events = threshold_intervals(arrays["truth_time"], arrays["A"].max(axis=1) > config.event_amplitude_m,
                                  merge_gap_s=config.merge_gap_s, min_duration_s=config.min_duration_s)
     return ContinuousLog(config=config, episodes=episodes, events=events, **arrays)
 
