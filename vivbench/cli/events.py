@@ -31,8 +31,8 @@ def register(sub) -> None:
     s.add_argument("mapping", help="mapping file (TOML) of the log's files, as for vivbench import; its event_id "
                                    "prefixes the events' ids; see docs/event_detection.md")
     s.add_argument("--out", required=True, help="directory for <event_id>.nc and catalogue.csv")
-    s.add_argument("--threshold-factor", type=float, default=10.0,
-                   help="threshold as a multiple of each section's noise floor (median amplitude); default 10")
+    s.add_argument("--threshold-factor", type=float, default=12.0,
+                   help="threshold as a multiple of each section's noise floor (median amplitude); default 12")
     s.add_argument("--threshold", type=float, default=None, metavar="M",
                    help="absolute amplitude threshold in m (replaces --threshold-factor)")
     s.add_argument("--min-duration", type=float, default=60.0, metavar="S", help="shortest event, s; default 60")

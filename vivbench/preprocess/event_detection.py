@@ -55,7 +55,7 @@ class EventDetectionConfig:
     ----------
     threshold_factor : float
         The threshold as a multiple of each section's noise floor (the median
-        of its amplitude over the log), > 1. Default 10.
+        of its amplitude over the log), > 1. Default 12.
     threshold_m : float or None
         An absolute amplitude threshold, m, for every section; replaces
         ``threshold_factor`` when given.
@@ -78,7 +78,7 @@ class EventDetectionConfig:
         Length of the centred moving average of the envelope, s. Default 20 s.
     """
 
-    threshold_factor: float = 10.0
+    threshold_factor: float = 12.0
     threshold_m: float | None = None
     min_duration_s: float = 60.0
     merge_gap_s: float = 300.0
