@@ -59,8 +59,8 @@ def test_detection_with_gaps_and_an_absolute_threshold(small_log):
     acc[100_000:100_500] = np.nan  # 10 s of NaN
     keep = np.ones(acc.shape[0], bool)
     keep[200_000:201_000] = False  # 20 s of missing stamps
-    det = detect_events(small_log.accel_time[keep], acc[keep], EventDetectionConfig(threshold_m=0.005))
-    assert np.all(det.threshold_m == 0.005)
+    det = detect_events(small_log.accel_time[keep], acc[keep], EventDetectionConfig(threshold_m=0.005, frequency_hz=0.327))
+    assert np.all(det.threshold_m == 0.005) and det.frequency_hz == 0.327
     assert np.isnan(det.amplitude[(det.t > 2001) & (det.t < 2009)]).all()
     assert det.intervals.shape[0] == 1
 

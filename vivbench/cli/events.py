@@ -4,6 +4,7 @@ from __future__ import annotations
 
 
 def run(args) -> int:
+    from vivbench.cli.common import progress
     from vivbench.preprocess.event_detection import EventDetectionConfig
     from vivbench.preprocess.event_log import find_events
 
@@ -12,7 +13,12 @@ def run(args) -> int:
         merge_gap_s=args.merge_gap, margin_s=args.margin, frequency_hz=args.frequency,
         band_hz=tuple(args.band), half_width=args.half_width, smoothing_s=args.smoothing,
     )
-    result = find_events(args.mapping, args.out, config)
+    with progress(None, "events", unit="step") as bar:
+        def step(what: str) -> None:
+            bar.set_postfix_str(what)
+            bar.update()
+
+        result = find_events(args.mapping, args.out, config, progress=step)
     d = result.detection
     floors = ", ".join(f"{x:.3g}" for x in d.noise_floor_m)
     thresholds = ", ".join(f"{x:.3g}" for x in d.threshold_m)

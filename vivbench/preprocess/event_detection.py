@@ -6,8 +6,9 @@ The steps (docs/event_detection.md):
    band (all sections and all gap-free runs averaged,
    :func:`~vivbench.preprocess.modal_frequency`), unless given;
 2. the amplitude at the mode: the acceleration decimated (anti-aliasing
-   polyphase filter) to about ten samples per period of the band's upper
-   edge, integrated twice in a band of +-``half_width`` around the mode
+   polyphase filter; before the spectrum, to four samples per period of the
+   search band's upper edge) to about ten samples per period of the mode
+   band's upper edge, integrated twice in a band of +-``half_width`` around the mode
    (:func:`~vivbench.preprocess.displacement`), its Hilbert envelope
    (:func:`~vivbench.preprocess.envelope`) averaged over a centred window of
    ``smoothing_s``: the vibration amplitude of each section, in m;
@@ -232,7 +233,8 @@ def detect_events(t, acc, config: EventDetectionConfig | None = None, *, name: s
     if hi >= 0.5 * fs:
         raise InputError(f"{name}: the band up to {hi:.4g} Hz must lie below the Nyquist frequency {0.5 * fs:g} Hz; "
                          f"lower band_hz")
-    q0 = max(1, int(fs // (_SEARCH_SAMPLES_PER_PERIOD * hi)))
+    per_period = _SEARCH_SAMPLES_PER_PERIOD if config.frequency_hz is None else _SAMPLES_PER_PERIOD
+    q0 = max(1, int(fs // (per_period * hi)))
     x, fs = _decimate(x, q0), fs / q0
     try:
         f_mode = config.frequency_hz or modal_frequency(fs, x, config.band_hz, segment_s=config.segment_s)
