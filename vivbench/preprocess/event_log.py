@@ -132,7 +132,7 @@ def cut_events(tree: xr.DataTree, detection: EventDetection, config: EventDetect
         omega2 = (2.0 * np.pi * detection.frequency_hz) ** 2
         row = {"event_id": eid, "start": _iso(origin, start), "end": _iso(origin, end),
                "duration_s": f"{end - start:.1f}", "file_start": _iso(origin, t0), "file_end": _iso(origin, ta[ia[-1]]),
-               "frequency_hz": f"{f_event:.4f}", "peak_amplitude_m": f"{peak:.5f}", "peak_section": sections[k],
+               "frequency_hz": f"{f_event:.4f}" if np.isfinite(f_event) else "", "peak_amplitude_m": f"{peak:.5f}", "peak_section": sections[k],
                "peak_acceleration_m_s2": f"{peak * omega2:.5f}", "mean_wind_m_s": f"{speed:.2f}",
                "wind_direction_deg": f"{direction:.1f}",
                "missing_fraction": f"{float(np.isnan(acc[core_a]).any(axis=1).mean()):.4f}"}
