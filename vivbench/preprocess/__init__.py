@@ -36,6 +36,8 @@ from vivbench.preprocess.wind import (
 from vivbench.preprocess.windows import window_bounds
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.preprocess.yaw import event_yaw, mean_yaw
+from vivbench.preprocess.event_detection import EventDetection, EventDetectionConfig, detect_events
+from vivbench.preprocess.event_log import CATALOGUE_COLUMNS, EventCatalogue, cut_events, find_events
 
 __all__ = [
     "band_gain", "Preprocessed", "preprocess_arrays", "PreprocessConfig", "DERIVATIVE_METHODS", "Derivative",
@@ -44,5 +46,6 @@ __all__ = [
     "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid", "welch_psd",
     "spectral_peak", "modal_frequency", "displacement", "envelope", "wind_speed_direction",
     "perpendicular_speed", "mean_wind", "perpendicular_wind", "mean_wind_runs", "window_bounds", "mean_yaw",
-    "event_yaw", "smooth_wind",
+    "event_yaw", "smooth_wind", "EventDetection", "EventDetectionConfig", "detect_events", "CATALOGUE_COLUMNS",
+    "EventCatalogue", "cut_events", "find_events",
 ]

@@ -48,6 +48,7 @@ from vivbench.synth.family import (
     family_seed,
     generate_family_campaign,
 )
+from vivbench.synth.continuous_log import ContinuousLog, ContinuousLogConfig, generate_continuous_log, write_continuous_log
 from vivbench.synth.event import EventSpec, SimulatedEvent, generate_event, simulate_event
 from vivbench.synth.turbulence import TurbulenceConfig, davenport_coherence, kaimal_psd, simulate_turbulence
 from vivbench.synth.wind import MeanWind, WindScript, anemometer_records, mean_wind
@@ -62,5 +63,6 @@ __all__ = [
     "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
     "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
     "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "family_seed",
-    "generate_family_campaign",
+    "generate_family_campaign", "ContinuousLog", "ContinuousLogConfig", "generate_continuous_log",
+    "write_continuous_log",
 ]

@@ -12,6 +12,7 @@ from vivbench.validate.compare import (
     plan,
     run_comparison,
 )
+from vivbench.validate.event_scores import BoundaryScore, boundary_f1
 from vivbench.validate.greybox import greybox_recovery, truth_y1, truth_yaw_factor
 from vivbench.validate.greybox_method import (
     STRUCTURAL_FIELDS,
@@ -139,6 +140,7 @@ from vivbench.validate.study_report import (
 )
 
 __all__ = [
+    "BoundaryScore", "boundary_f1",
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
     "STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",
