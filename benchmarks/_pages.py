@@ -6,6 +6,7 @@ import ast
 import math
 import os
 import platform
+import resource
 import sys
 from datetime import datetime, timezone
 from pathlib import Path
@@ -72,13 +73,28 @@ def rows_table(rows: list[dict]) -> list[str]:
 
 
 def run_metadata(wall_s: float) -> dict:
-    """Where and when a run was made: Python, machine, CPUs, date (UTC), wall time."""
+    """Where and when a run was made: Python, machine, CPUs, date (UTC), wall and CPU time, load average.
+
+    The CPU time is this process's and its finished children's (user + system); on a machine
+    shared with other work it is what the run itself cost, the wall time what it waited too.
+    """
+    self_, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = self_.ru_utime + self_.ru_stime + children.ru_utime + children.ru_stime
     return {"python": sys.version.split()[0], "machine": platform.machine(), "cpus": os.cpu_count(),
-            "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "wall_s": wall_s}
+            "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "wall_s": wall_s,
+            "cpu_s": cpu, "load_average_1min": os.getloadavg()[0]}
 
 
 def written_by(command: str, meta: dict) -> str:
     """The sentence that opens a results page: the command, the machine and the run's wall time."""
     return (f"Written by `{command}` on {meta['date']} ({meta['cpus']} CPUs, {meta['machine']}, Python "
-            f"{meta['python']}; BLAS single-threaded), in {meta['wall_s']:.0f} s. Every figure below was measured "
-            "by that run; run the command again to update this page.")
+            f"{meta['python']}; BLAS single-threaded), in {meta['wall_s']:.0f} s{_cpu(meta)}. Every figure below "
+            "was measured by that run; run the command again to update this page.")
+
+
+def _cpu(meta: dict) -> str:
+    if "cpu_s" not in meta:
+        return ""
+    return (f" (CPU time {meta['cpu_s']:.0f} s; load average {meta['load_average_1min']:.1f} on "
+            f"{meta['cpus']} CPUs at the end: the machine was shared)" if meta["load_average_1min"] > meta["cpus"]
+            else f" (CPU time {meta['cpu_s']:.0f} s)")
