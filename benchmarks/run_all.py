@@ -174,11 +174,8 @@ def results_page(results: dict, *, quick: bool, command: str) -> str:
               "Not run by `make bench`: each is its own command, `python benchmarks/run_study.py NAME [ARGS ...]`, "
               "which writes the page `docs/results/studies/NAME.md` (`python benchmarks/run_study.py NAME --help` says "
               "what each takes; most need a campaign and its identification results, for example `make demo`'s).", "",
-              "| study | what | page |", "|---|---|---|"]
-    for name, path in STUDIES.items():
-        page = ROOT / "docs" / "results" / "studies" / f"{name}.md"
-        lines.append(f"| `{name}` | {first_line(path)} | "
-                     f"{'`docs/results/studies/' + name + '.md`' if page.is_file() else 'not run yet'} |")
+              "| study | what |", "|---|---|"]
+    lines += [f"| `{name}` | {first_line(path)} |" for name, path in STUDIES.items()]
     return "\n".join(lines) + "\n"
 
 

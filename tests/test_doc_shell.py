@@ -60,7 +60,9 @@ def commands(page: str) -> list[str]:
         for line in block.replace("\\\n", " ").splitlines():
             words = shlex.split(line, comments=True)
             if words and words[0] in ("vivbench", "python"):
-                out.append(shlex.join(words) if words[0] == "vivbench" else line.split(" #")[0].strip())
+                command = re.sub(r"\s+#(?=\s|$).*$", "", line).strip()  # as typed: the shell expands its globs
+                assert shlex.split(command) == words, f"{page}: cannot strip the comment of `{line}`"
+                out.append(" ".join(command.split()) if "\"" not in command else command)
     return out
 
 
