@@ -62,12 +62,17 @@ def study_page(name: str, figures: dict, command: str) -> str:
     """The Markdown page of a study's run."""
     lines = [f"# Study `{name}`", "", first_line(STUDIES[name]), "", written_by(command, figures["_run"]), "",
              f"What the study does and how to read its figures: the docstring of `benchmarks/{STUDIES[name].name}`. "
-             f"Every figure of the run, with rows too many for this page, is in `docs/results/studies/{name}.json`.", "", "## Figures", ""]
-    scalars = {k: v for k, v in figures.items() if k != "_run" and not is_rows(v)}
+             f"Every figure of the run is also in `docs/results/studies/{name}.json`.", "", "## Figures", ""]
+    figures = {k: v for k, v in figures.items() if k != "_run"}
+    cases = {k: v for k, v in figures.items() if isinstance(v, dict) and is_rows([v])}
+    if len(cases) >= 2:  # flat dicts of figures, one per case: one table of the cases
+        figures = {**{k: v for k, v in figures.items() if k not in cases},
+                   "cases": [{"case": k, **v} for k, v in cases.items()]}
+    scalars = {k: v for k, v in figures.items() if not is_rows(v)}
     if scalars:
         lines += figures_table(scalars)
     for key, value in figures.items():
-        if key != "_run" and is_rows(value):
+        if is_rows(value):
             lines += ([""] if lines[-1] else []) + [f"### {key}", ""] + rows_table(value)
     return "\n".join(lines) + "\n"
 
