@@ -55,6 +55,14 @@ def test_every_study_imports_and_answers_help(scripts, capsys):
         assert "usage:" in capsys.readouterr().out, name
 
 
+def test_varying_settings_factories_build_campaign_methods(scripts, monkeypatch):
+    from vivbench.validate import CampaignMethod
+
+    module = _load(BENCH / "varying_settings.py", monkeypatch)
+    for name in ("modal_cv", "modal_least", "modal_loeo", "equal_least"):
+        assert isinstance(getattr(module, name)(), CampaignMethod), name
+
+
 def test_study_page_tables(scripts):
     """A study's figures on its page: cases of flat figures as one table, rows as a table, the rest as figures."""
     _run_all, run_study = scripts
