@@ -8,11 +8,11 @@ runs through ``bash`` in the page's folder, ``vivbench`` and ``python`` being th
 interpreter, and must exit 0. The files a page says the user brings (field mappings, the
 bridge's properties, a package of methods) are made first from a synthetic campaign.
 
-The field import's worked example runs in ``make test`` (about 15 s); the pages whose
-commands take minutes run in the slow tests, with the settings the pages print: the README's
-quickstart (6 events of 30 min), the field workflow (import to report on three events) and the
+The field import's worked example runs in ``make test`` (one 20 min event: under a minute); the
+pages whose commands take minutes run in the slow tests, with the settings the pages print: the README's
+quickstart (6 events of 30 min), the field workflow (import to report on the two events it imports) and the
 contributed-methods commands of docs/methods.md (a comparison grid and the leaderboard's whole
-scenario suite, tens of minutes on 2 cores).
+scenario suite, the longest).
 """
 
 from __future__ import annotations
