@@ -190,4 +190,5 @@ def test_contributed_methods_commands_run_as_written(tmp_path):
     campaign = (ROOT / "examples" / "compare_methods.toml").read_text(encoding="utf-8").split("[base]")[0]
     (tmp_path / "my_grid.toml").write_text(campaign + grid.replace("] method", "]\nmethod") + "\n", encoding="utf-8")
     run_commands(cmds, tmp_path, timeout=4 * 3600.0)
-    assert (tmp_path / "board").is_dir()
+    assert "my_methods.damped:make" in (tmp_path / "out" / "compare.csv").read_text(encoding="utf-8")
+    assert "my_methods.damped:make" in (tmp_path / "board" / "leaderboard.md").read_text(encoding="utf-8")
