@@ -45,6 +45,8 @@ test-slow: $(VENV)/.installed-test
 # The benchmark suite: speed against the reference packages (pysindy, pynumdiff, pyconturb,
 # pydpc) and the chain's own timings; writes benchmarks/results.md (bench-quick: a reduced
 # set on small workloads, under 10 min on 2 cores, writes benchmarks/results_quick.md).
+# The accuracy studies are separate commands, each writing its own page under
+# docs/results/studies/: python benchmarks/run_study.py NAME [ARGS ...].
 bench: $(VENV)/.installed-test,bench
 	$(BIN)/python benchmarks/run_all.py
 

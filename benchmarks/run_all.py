@@ -12,8 +12,9 @@ missing is reported as skipped, one that needs inputs that are absent (``make de
 outputs) too, and one that fails is reported with its error; the others still run, and
 nothing is faked. The figures go to ``benchmarks/out/results[_quick].json`` and the page
 ``benchmarks/results[_quick].md``, with the speed ratios against the reference packages
-first. The accuracy studies (:data:`STUDIES`) need a campaign and its results and are run
-as their own commands; the page lists them.
+first. The accuracy studies (``study_<name>.py``) are not part of the suite: each is its own
+command, ``python benchmarks/run_study.py NAME [ARGS ...]``, that writes its own page; the
+suite's page lists them.
 """
 
 from __future__ import annotations
@@ -24,17 +25,16 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-import ast  # noqa: E402
 import importlib.util  # noqa: E402
 import json  # noqa: E402
-import math  # noqa: E402
-import platform  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
-from datetime import datetime, timezone  # noqa: E402
 from pathlib import Path  # noqa: E402
+
+from _pages import figures_table, first_line, flatten, run_metadata, written_by  # noqa: E402
+from run_study import STUDIES  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -51,26 +51,17 @@ class Bench:
 
 
 SUITE = (
-    Bench(name="sindy", full={}, quick={"n_reference": 20}),
+    Bench(name="sindy", full={}, quick={}),  # 31 events x 100 windows, pysindy on 100 of them
     Bench(name="identify", full={"n_events": 31}, quick={"n_events": 3}),
-    Bench(name="derivative", full={}),  # about 8 min even with one repeat: not in the quick set
+    Bench(name="derivative", full={}, quick={"noise_kinds": ("white",), "n_events": 2}),  # full: about 5 min
     Bench(name="turbulence", full={}, quick={"repeats": 1}),
     Bench(name="felt_wind", full={}, quick={"repeats": 1}),
     Bench(name="varying_speed", full={}, quick={"samples": 20_000}),
-    Bench(name="clustering"),
+    Bench(name="clustering", full={}, quick={"blobs_only": True}),  # quick: no 31-event campaign to make
     Bench(name="campaign"),
-    Bench(name="derivative_campaign"),
     Bench(name="sweep"),
-    Bench(name="testing_example"),
     Bench(name="greybox", full={"argv": []}, needs=("demo/identify", "demo/campaign")),
 )
-
-#: Lists of rows longer than this are left out of the results page (they stay in the JSON file).
-LIST_ROWS = 12
-
-#: Accuracy studies: separate commands on a given campaign and its results (``--help`` of each).
-STUDIES = ("campaign_simulation", "change_calibration", "change_flags", "floor", "greybox_substitution",
-           "greybox_verdict_bounds", "misspecification", "refit", "tied_wind", "wind_input_cv")
 
 
 def _load(name: str):
@@ -102,39 +93,6 @@ def run_one(bench: Bench, kwargs: dict) -> dict:
     return out
 
 
-def _first_line(name: str) -> str:
-    doc = ast.get_docstring(ast.parse((HERE / f"bench_{name}.py").read_text(encoding="utf-8"))) or ""
-    return doc.splitlines()[0] if doc else ""
-
-
-def _fmt(x) -> str:
-    if isinstance(x, bool) or x is None:
-        return str(x)
-    if isinstance(x, int):
-        return str(x)
-    if isinstance(x, float):
-        if math.isnan(x) or math.isinf(x):
-            return str(x)
-        return f"{x:.3g}"
-    text = str(x)
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
-def _flatten(d, prefix: str = ""):
-    for key, value in d.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            yield from _flatten(value, name + ".")
-        elif isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-            if len(value) > LIST_ROWS:  # per-event rows: in the JSON file, not on the page
-                yield name, f"{len(value)} rows (in the JSON results file)"
-                continue
-            for i, v in enumerate(value):
-                yield from _flatten(v, f"{name}[{i}].")
-        else:
-            yield name, value
-
-
 def _get(results: dict, *keys):
     for key in keys:
         if not isinstance(results, dict) or key not in results:
@@ -157,12 +115,13 @@ def speed_rows(results: dict) -> list[tuple[str, str, str, str, str]]:
                          f"{fig['speedup_vs_sindy_loop']:.3g}x"))
     derivative = _get(results, "derivative")
     if isinstance(derivative, dict):
-        flat = dict(_flatten(derivative))
+        flat = dict(flatten(derivative))
         ours = [v for k, v in flat.items() if k.endswith(".time_ours_s")]
         ref = [v for k, v in flat.items() if k.endswith(".time_ref_s")]
         if ours and ref and len(ours) == len(ref):
             total_ours, total_ref = sum(ours), sum(ref)
-            rows.append(("TV derivative vs pynumdiff", f"{len(ours)} cases", f"{total_ours:.3g} s",
+            rows.append(("TV derivative vs pynumdiff `iterative_velocity` (tuned settings)", f"{len(ours)} cases",
+                         f"{total_ours:.3g} s",
                          f"{total_ref:.3g} s", f"{total_ref / total_ours:.3g}x"))
     turbulence = _get(results, "turbulence")
     if isinstance(turbulence, dict) and "speedup" in turbulence:
@@ -176,16 +135,21 @@ def speed_rows(results: dict) -> list[tuple[str, str, str, str, str]]:
             rows.append((f"density peaks vs pydpc ({part} features)", "the default campaign's window models",
                          f"{fig['t_ours_gaussian_s']:.3g} s", f"{fig['t_pydpc_s']:.3g} s",
                          f"{1.0 / fig['ratio_ours_over_pydpc']:.3g}x"))
+    fig = _get(results, "clustering", "blobs")
+    if fig and "ratio_ours_over_pydpc" in fig:
+        rows.append(("density peaks vs pydpc (synthetic blobs)", f"{fig['n_points']} points in {fig['dim']} dimensions",
+                     f"{fig['t_ours_gaussian_s']:.3g} s", f"{fig['t_pydpc_s']:.3g} s",
+                     f"{1.0 / fig['ratio_ours_over_pydpc']:.3g}x"))
     return rows
 
 
 def results_page(results: dict, *, quick: bool, command: str) -> str:
     """The Markdown results page of a run."""
     meta = results["_run"]
-    lines = [f"# Benchmark results{' (quick)' if quick else ''}", "",
-             f"Written by `{command}` on {meta['date']} ({meta['cpus']} CPUs, {meta['machine']}, Python "
-             f"{meta['python']}; BLAS single-threaded), in {meta['wall_s']:.0f} s. Every figure below was measured "
-             "by that run; run the command again to update this page.", ""]
+    lines = [f"# Benchmark results{' (quick)' if quick else ''}", "", written_by(command, meta), "",
+             "The machine may be shared with other work while the suite runs: the wall times say what one run took, "
+             "the ratios (vivbench and its reference timed side by side, in the same run) are the figures to compare.",
+             ""]
     rows = speed_rows(results)
     lines += ["## Speed against the reference packages", ""]
     if rows:
@@ -200,17 +164,18 @@ def results_page(results: dict, *, quick: bool, command: str) -> str:
             continue
         status = "skipped: " + fig["skipped"] if "skipped" in fig else ("error: " + fig["error"] if "error" in fig
                                                                          else "ran")
-        lines.append(f"| `{name}` | {_first_line(name)} | {status.replace('|', '/')} | {fig['wall_s']:.0f} |")
+        what = first_line(HERE / f"bench_{name}.py")
+        lines.append(f"| `{name}` | {what} | {status.replace('|', '/')} | {fig['wall_s']:.0f} |")
     for name, fig in results.items():
         if name.startswith("_") or "skipped" in fig or "error" in fig:
             continue
-        lines += ["", f"### `{name}`", "", "| figure | value |", "|---|---|"]
-        lines += [f"| {key} | {_fmt(value).replace('|', '/')} |" for key, value in _flatten(fig) if key != "wall_s"]
+        lines += ["", f"### `{name}`", ""] + figures_table(fig)
     lines += ["", "## Accuracy studies (separate commands)", "",
-              "These need a campaign and its identification results (for example `make demo`'s) and are not run by "
-              "`make bench`; `python benchmarks/bench_<name>.py --help` says what each takes.", "",
+              "Not run by `make bench`: each is its own command, `python benchmarks/run_study.py NAME [ARGS ...]`, "
+              "which writes the page `docs/results/studies/NAME.md` (`python benchmarks/run_study.py NAME --help` says "
+              "what each takes; most need a campaign and its identification results, for example `make demo`'s).", "",
               "| study | what |", "|---|---|"]
-    lines += [f"| `{name}` | {_first_line(name)} |" for name in STUDIES]
+    lines += [f"| `{name}` | {first_line(path)} |" for name, path in STUDIES.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -231,9 +196,7 @@ def main(argv: list[str]) -> int:
         print(f"\n=== {bench.name} ===", flush=True)
         results[bench.name] = run_one(bench, kwargs)
         print(f"--- {bench.name}: {results[bench.name]['wall_s']:.0f} s", flush=True)
-    results["_run"] = {"python": sys.version.split()[0], "machine": platform.machine(), "cpus": os.cpu_count(),
-                       "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-                       "quick": quick, "wall_s": time.perf_counter() - t0}
+    results["_run"] = {**run_metadata(time.perf_counter() - t0), "quick": quick}
     suffix = "_quick" if quick else ""
     out = HERE / "out"
     out.mkdir(exist_ok=True)

@@ -62,7 +62,7 @@ def _fmt(x) -> str:
     return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.3f}"
 
 
-def main(argv=None) -> int:
+def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--campaign", type=Path, required=True, help="directory of the events (<event_id>.nc, with /truth)")
     ap.add_argument("--results", type=Path, required=True, help="directory of their <event_id>.identify.nc")
@@ -73,8 +73,7 @@ def main(argv=None) -> int:
     results = sorted(args.results.glob("*.identify.nc"))
     events = [args.campaign / (p.name.removesuffix(".identify.nc") + ".nc") for p in results]
     if not results:
-        print(f"{args.results}: no <event_id>.identify.nc", file=sys.stderr)
-        return 2
+        raise SystemExit(f"{args.results}: no <event_id>.identify.nc")
     records, truths, windows = scoring_inputs(events, results, derivative=CAMPAIGN_DERIVATIVE)
     U = np.concatenate([tr["U"].values for tr in truths])
     A = np.concatenate([tr["A"].values for tr in truths])
@@ -107,8 +106,8 @@ def main(argv=None) -> int:
     args.out.with_suffix(".json").write_text(json.dumps(scores, indent=2, default=float) + "\n")
     print("\n".join(lines))
     print(f"wrote {args.out.with_suffix('.md')} and {args.out.with_suffix('.json')}", file=sys.stderr)
-    return 0
+    return scores
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()

@@ -1,13 +1,11 @@
 """Method factories for ``vivbench leaderboard`` / ``vivbench compare``: the varying model with other settings.
 
-The README's table of the wind weights and penalty choices on the leaderboard's
-8-event scenarios was made with::
+The wind weights and penalty choices side by side on the leaderboard's scenarios::
 
     PYTHONPATH=benchmarks vivbench leaderboard --out DIR --workers 2 \\
         --methods varying,varying_settings:modal_cv,varying_settings:modal_least,varying_settings:modal_loeo,varying_settings:equal_least
 
-(``DIR`` a copy of the reference pipeline's ``demo/leaderboard`` reuses its
-scenario campaigns). Each factory returns
+(``DIR`` a copy of ``make demo``'s ``demo/leaderboard`` reuses its scenario campaigns). Each factory returns
 :class:`vivbench.validate.CampaignMethod`, the built-in ``"varying"`` method
 with other parameters, so the leaderboard scores its verdict too (a bare
 model would be scored without one: coverage 0).

@@ -65,7 +65,7 @@ def _own_section_mask(spec: str, features) -> np.ndarray:
 
 DEPRECATION = ("the refit on an identified support is deprecated (issue 14): on a realistic VIV segment "
                "(69 terms per equation, rank deficient) neither Gauss-Newton nor IPOPT gives a model that simulates "
-               "the segment (README, benchmarks/bench_refit.py); for reference coefficients use "
+               "the segment (README, benchmarks/study_refit.py); for reference coefficients use "
                "`vivbench greybox RESULTS_DIR --out DIR`. True or small supports (--support truth, --terms) are "
                "refitted by Gauss-Newton.")
 

@@ -28,7 +28,7 @@ Method (multiple shooting through CasADi; Gauss-Newton by default):
   of the vectorised RK4 step; the step control is shared with the grey-box
   refit (:mod:`vivbench.models.gauss_newton`). Continuity holds as a heavy
   penalty, not exactly: ``RefitResult.max_defect`` reports the largest
-  defect. Measured (``benchmarks/bench_refit.py``, README): on the true
+  defect. Measured (``benchmarks/study_refit.py``, README): on the true
   40-term support of an in-library event (800 s) NMSE 1e-5 in 94 s and
   0.34 GB, where IPOPT stopped at 5 minutes and 2.7 GB with NMSE 4.6. On
   the identified (rank-deficient) support of a realistic VIV segment no
@@ -145,7 +145,7 @@ class RefitConfig:
         Gauss-Newton matrix (:mod:`vivbench.models.refit_shooting`), the
         continuity conditions as a heavily weighted penalty. ``"ipopt"``: the
         NLP with exact continuity constraints; kept for comparison (see
-        ``benchmarks/bench_refit.py``), it does not converge on large supports.
+        ``benchmarks/study_refit.py``), it does not converge on large supports.
     continuity_weight : float
         Gauss-Newton only: final weight of a squared continuity defect
         relative to one grid sample's squared residual (reached by 100-fold

@@ -106,7 +106,7 @@ YAW_INSIDE_DEG = 2.0
 
 
 #: Settings of ``wind_input="additive"``: 10 unpenalised B-splines per curve and 15 s of wind smoothing
-#: (``benchmarks/bench_misspecification.py`` measures them).
+#: (``benchmarks/study_misspecification.py`` measures them).
 ADDITIVE_SETTINGS = {"n_basis": (10,), "penalties": (1e-8,), "wind_smoothing_s": 15.0}
 
 

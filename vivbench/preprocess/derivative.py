@@ -92,7 +92,7 @@ campaign model uses; ``time_scale = 20``, ``huber = 10``, ``noise_scale = 10``
 is the setting for band-limited envelope noise (:meth:`Derivative.for_envelope`),
 the identification chain's default, chosen on synthetic campaigns by the
 relative RMS error of dA/dt against the true averaged dA/dt
-(``benchmarks/bench_derivative_campaign.py`` measures it). With ``huber =
+(``benchmarks/study_derivative_campaign.py`` measures it). With ``huber =
 10`` most changes of slope fall below the Huber threshold and the fit behaves
 as a second-difference (Whittaker) smoother whose cut-off is set by
 ``time_scale`` alone (about 0.024 Hz at 20 s), while large changes still cost
@@ -143,7 +143,7 @@ _FD_ORDER = 2
 
 # The band-limited-noise setting of the TV derivative (Derivative.for_envelope):
 # chosen on 8 events of the default campaign against the true dA/dt, checked on
-# the other 23 (benchmarks/bench_derivative_campaign.py).
+# the other 23 (benchmarks/study_derivative_campaign.py).
 _ENVELOPE_TV = {"time_scale": 20.0, "huber": 10.0, "noise_scale": 10.0}
 
 _METHOD_OPTIONS = {

@@ -34,7 +34,7 @@ window the grey-box regime at every plausible penalty as well, the rule of its
 own verdict: its point estimate is one member of that set. The share of
 flagged windows with the true regime and the coverage are reported by
 ``vivbench validate`` and ``vivbench greybox`` on a synthetic campaign, and
-compared over bounds and references by benchmarks/bench_greybox_verdict_bounds.py.
+compared over bounds and references by benchmarks/study_greybox_verdict_bounds.py.
 """
 
 from __future__ import annotations

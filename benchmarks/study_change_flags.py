@@ -7,24 +7,10 @@ the model change scan (p, located event), the flags of
 :mod:`vivbench.analysis.changes` (``event_after_change`` when the scan
 detects, :func:`change_relative_flags` at the scan's best split whether or not
 it detects, :func:`offset_flags`, the held-out misfit flags) and, with a
-known change, the events flagged before and after it. Run:
+known change, the events flagged before and after it. Run (``DRIFT``: a campaign
+with a change at its 10th event, e.g. of ``examples/drift.toml``, and its results)::
 
-    python benchmarks/bench_change_flags.py --case drift:/tmp/vdrift-drift-id:10 --case nodrift:/tmp/vdrift-nodrift-id
-
-Measured (2026-11-23, 99 orderings; drift = examples/drift.toml with the
-retrofit at E010, 20 events; step = a damping step x2 from E007, 14 events,
-seed 3; A, S1, B = the 31-event realistic campaigns):
-
-case     E  scan p (event)  after-change  per-event (at best split)  offset flags  misfit flags
-drift   20  0.02 (E010)     11/11, 0 pre  0/11                       1 (E020 post) 1 (E008 pre)
-step    14  0.01 (E007)      8/8,  0 pre  0/8                        0             0
-nodrift 20  0.01 (E007)     14 false      2/14 false                 0             0
-A       31  0.94 (E028)      0            (0/4, not detected)        0             0
-S1      31  0.89 (E007)      0            (0/25, not detected)       0             0
-B       31  0.68 (E024)      0            (2/8, not detected)        4 false       0
-
-(The offset flags above are the former rule's; with the stratified posterior
-rule of :func:`offset_flags` see the docstring of :mod:`vivbench.analysis.changes`.)
+    python benchmarks/run_study.py change_flags --case drift:DRIFT/identify:10 --case demo:demo/identify
 """
 
 from __future__ import annotations
@@ -46,7 +32,8 @@ from vivbench.analysis.changes import (change_relative_flags, event_residual_che
 from vivbench.models import VaryingCoefficientSINDy  # noqa: E402
 
 
-def run_case(results: Path, change: int | None) -> str:
+def run_case(results: Path, change: int | None) -> dict:
+    """The scan and the flags of one campaign's results (``change``: first event number after a known change)."""
     t0 = time.perf_counter()
     recs = records_from_results(sorted(results.glob("*.identify.nc")), derivative=CAMPAIGN_DERIVATIVE)
     model = VaryingCoefficientSINDy(n_bootstrap=0).fit(recs)
@@ -64,29 +51,33 @@ def run_case(results: Path, change: int | None) -> str:
                        stratum=offset_strata(checks["residual_rel_rms"]))
     after = np.arange(ids.size) >= k if scan["detected"] else np.zeros(ids.size, dtype=bool)
 
-    def show(flag):
-        flagged = ",".join(ids[flag]) or "-"
-        if change is None:
-            return f"{flagged} ({int(flag.sum())} false)"
-        post = np.array([int(e[1:]) >= change for e in ids])
-        return f"{flagged} ({int((flag & post).sum())}/{int(post.sum())} after, {int((flag & ~post).sum())} before)"
+    post = (np.array([int(e[1:]) >= change for e in ids]) if change is not None
+            else np.zeros(ids.size, dtype=bool))
 
-    return (f"  scan p = {scan['p_value']:.2f} at {ids[k] if k >= 0 else '-'} (scan {t2 - t1:.1f} s, fit {t1 - t0:.1f} s)\n"
-            f"  after change:  {show(after)}\n  per event:     {show(rel['flag'])}  z = "
-            f"{' '.join(f'{z:+.1f}' for z in rel['z'][k:]) if k >= 0 else '-'}\n"
-            f"  offset flags:  {show(off['flag'])}\n  misfit flags:  {show(scan['misfit_flag'])}")
+    def show(flag) -> dict:
+        flag = np.asarray(flag, dtype=bool)
+        return {"events": ",".join(ids[flag]) or "-", "after_change": int((flag & post).sum()),
+                "before_change_or_false": int((flag & ~post).sum())}
+
+    return {"n_events": int(ids.size), "known_change_event": change, "n_after_change": int(post.sum()),
+            "scan_p": float(scan["p_value"]), "scan_event": str(ids[k]) if k >= 0 else "-",
+            "scan_detected": bool(scan["detected"]), "fit_s": t1 - t0, "scan_s": t2 - t1,
+            "after_change_flags": show(after), "per_event_flags": show(rel["flag"]),
+            "offset_flags": show(off["flag"]), "misfit_flags": show(scan["misfit_flag"])}
 
 
-def main(argv=None) -> None:
+def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--case", action="append", required=True, help="NAME:RESULTS[:FIRST_CHANGED_EVENT_NUMBER]")
     args = parser.parse_args(argv)
+    out = {}
     for case in args.case:
         parts = case.split(":")
         if len(parts) not in (2, 3):
             parser.error(f"--case {case!r}: give NAME:RESULTS[:FIRST_CHANGED_EVENT_NUMBER]")
-        print(parts[0], flush=True)
-        print(run_case(Path(parts[1]), int(parts[2]) if len(parts) == 3 else None), flush=True)
+        out[parts[0]] = run_case(Path(parts[1]), int(parts[2]) if len(parts) == 3 else None)
+        print(parts[0], out[parts[0]], flush=True)
+    return out
 
 
 if __name__ == "__main__":

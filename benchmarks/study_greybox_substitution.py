@@ -1,6 +1,6 @@
 """Truth substitution for the grey-box refit: which input errors cost a_k1, and where the fit's minimum lies.
 
-Run: ``.venv/bin/python benchmarks/bench_greybox_substitution.py --results R --campaign CAMP
+Run: ``.venv/bin/python benchmarks/study_greybox_substitution.py --results R --campaign CAMP
 [--substitute none,U,A,U+A] [--truth-start]``. For every entry of ``--substitute`` the
 grey-box model is refitted (defaults of ``vivbench greybox``: campaign-model
 warm start, multi-start, GCV penalty) on the measured records with the named
@@ -12,8 +12,7 @@ for comparison then): a start-independent minimum gives both the same a_k1;
 the data RSS (unpenalised, ``band_info["rss"]``) says which minimum the data
 prefer. Scored like ``vivbench greybox --campaign``: relative RMS error of the
 reference section's a_k1 over the lock-in winds, dA/dt from the curves, band
-coverage. Validation only (reads the truth); nothing is asserted. Measured on
-bridge C (seed 11), see :mod:`vivbench.models.greybox`'s docstring.
+coverage. Validation only (reads the truth); nothing is asserted.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Benchmark: dA/dt of the identification chain against the true averaged dA/dt, on campaign envelopes.
 
-Run: ``.venv/bin/python benchmarks/bench_derivative_campaign.py [--campaign DIR]
+Run: ``.venv/bin/python benchmarks/study_derivative_campaign.py [--campaign DIR]
 [--events N] [--clean N]``. The default campaign (31 events, seed 0) is read
 from ``--campaign`` or from ``benchmarks/out/campaign`` (gitignored; made with
 ``python -m vivbench.cli synth --out benchmarks/out/campaign --workers 2``
@@ -174,8 +174,14 @@ def _print_table(title: str, summary: dict) -> None:
             print(f"{key}: {value}/{summary['n_events']}")
 
 
-def main(campaign: str | Path | None = None, n_events: int = 31, n_clean: int = 8) -> dict:
+def main(argv=None) -> dict:
     """Score every method on the default campaign and on a noise-free variant; print and return the figures."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--campaign", default=None, help="campaign directory (default benchmarks/out/campaign)")
+    parser.add_argument("--events", type=int, default=31, help="first N events (default 31)")
+    parser.add_argument("--clean", type=int, default=8, help="noise-free events generated (default 8; 0: none)")
+    args = parser.parse_args(argv)
+    campaign, n_events, n_clean = args.campaign, args.events, args.clean
     camp = Path(campaign) if campaign is not None else CAMPAIGN
     if campaign is None and not (camp / "catalogue.csv").exists():
         subprocess.run([sys.executable, "-m", "vivbench.cli", "synth", "--out", str(camp), "--workers", "2"], check=True)
@@ -198,9 +204,4 @@ def main(campaign: str | Path | None = None, n_events: int = 31, n_clean: int = 
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--campaign", default=None, help="campaign directory (default benchmarks/out/campaign)")
-    parser.add_argument("--events", type=int, default=31, help="first N events (default 31)")
-    parser.add_argument("--clean", type=int, default=8, help="noise-free events generated (default 8; 0: none)")
-    args = parser.parse_args()
-    main(args.campaign, args.events, args.clean)
+    main()

@@ -2,8 +2,8 @@
 
 Run::
 
-    .venv/bin/python benchmarks/bench_change_calibration.py \\
-        --case A:/tmp/campA:/tmp/realism2-a-id --case drift:/tmp/realism-drift/campaign:/tmp/realism-drift/identify:10 \\
+    python benchmarks/run_study.py change_calibration \\
+        --case A:demo/campaign:demo/identify --case drift:DRIFT/campaign:DRIFT/identify:10 \\
         [--subsets 20 --subset-size 12 --permutations 99 --null permutation \\
          --statistic max,standardised --yaw-terms 1,0]
 
@@ -29,33 +29,8 @@ given with the number of campaigns as well as of scans.
 Reported per case: the p-values, the share of scans with p < 0.05 (false alarms
 without a change, power with one), the share of detections that locate the
 change within one event, and the events flagged as not predicted (misfit flags).
-Nothing is asserted; the table is printed and written as JSON (``--json``).
-
-Measured (15 subsets of 12 events per campaign, 99 orderings; nodrift is /tmp/realism-nodrift,
-20 shorter events of seed 0: A's kinds and start times, other draws; drift /tmp/realism-drift):
-
-=========  ======  ==========================  ==========================
-campaign   events  free permutation            stratified (4 per stratum)
-=========  ======  ==========================  ==========================
-A seed 0   31      whole p 0.91, subsets 1/15  whole p 0.94, subsets 1/15
-S1 seed 1  31      0.92, 0/15                  0.89, 0/15
-B seed 7   31      0.76, 1/15                  0.68, 1/15
-in-library 31      0.37, 1/15                  0.49, 1/15
-nodrift    20      0.02 (E007), 1/15           0.01 (E007), 2/15
-drift E010 20      0.02 at E010, 2/15 (all     0.02 at E010, 1/15 (located)
-                   located)
-=========  ======  ==========================  ==========================
-
-False alarms at 0.05: 4/75 subsets and 1/5 whole campaigns (free), 5/75 and 1/5
-(stratified). Power on 12-event subsets of the drift campaign is low (2/15, 1/15).
-
-Options of the scan (10 subsets, 99 stratified orderings; ``--null stratified --statistic
-max,standardised --yaw-terms 1,0``, cases nodrift, C (/tmp/gbband-c-camp), drift, step
-(/tmp/vdrift-step-camp, change 7), S1, B, A with the yaw-carrying results): whole-campaign p
-in the table of :mod:`vivbench.analysis.changes`; subsets with p < 0.05 without change
-(nodrift, C, S1, B, A): max 1, 3, 0, 0, 0; max without yaw terms 1, 1, 1, 0, 0; standardised
-1, 2, 0, 0, 0; both 1, 1, 1, 0, 0. Power on subsets: step 8/10 (7/10 with both), drift 1/10,
-1/10, 3/10, 2/10; every detection at the true change.
+Nothing is asserted; the table is printed and written as JSON (``--json``), and
+``run_study.py`` writes it as the page ``docs/results/studies/change_calibration.md``.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ does not: three sections (the truth's dA_k/dt depends on every section's wind), 
 aerodynamics (not polynomials), or both. Per event: the median relative dA/dt error over
 windows with dynamics and the share of windows with the true regime (docs/concepts.md (regimes)).
 
-Run: ``.venv/bin/python benchmarks/bench_testing_example.py``.
+Run: ``.venv/bin/python benchmarks/study_testing_example.py``.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
+import argparse  # noqa: E402
 import json  # noqa: E402
 import re  # noqa: E402
 import warnings  # noqa: E402
@@ -31,7 +32,8 @@ EXAMPLES = 10
 _FIGURES = re.compile(r"median dA/dt error (\S+) .*regime accuracy (\S+) on")
 
 
-def main() -> dict:
+def main(argv=None) -> dict:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args(argv)
     code = "\n".join(re.findall(r"^```python\n(.*?)^```", DOC.read_text(), flags=re.S | re.M))
     ns: dict = {}
     exec(compile(code, str(DOC), "exec"), ns)  # noqa: S102 - our own documentation

@@ -1,6 +1,6 @@
 """The library-coefficient refit on a large support: IPOPT against Gauss-Newton on the same segment (issue 14).
 
-Run: ``.venv/bin/python benchmarks/bench_refit.py --result RESULTS/E013.identify.nc --t0 589 --t1 1389
+Run: ``.venv/bin/python benchmarks/study_refit.py --result RESULTS/E013.identify.nc --t0 589 --t1 1389
 [--event CAMPAIGN/E013.nc --support truth] [--ipopt-wall 300] [--figure refit_benchmark.png] [--json OUT]``.
 
 Each solver runs in its own child process (so each peak resident memory is

@@ -2,7 +2,7 @@
 
 Run::
 
-    .venv/bin/python benchmarks/bench_floor.py --campaign demo/campaign --results demo/identify
+    .venv/bin/python benchmarks/study_floor.py --campaign demo/campaign --results demo/identify
 
 The varying-coefficient model fitted on the truth's OWN (A, U, dA) still had a
 median dA/dt error of about 0.17 on realistic campaigns, so the floor is a
@@ -40,7 +40,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_misspecification import _window_sums, load_campaign  # noqa: E402
+from study_misspecification import _window_sums, load_campaign  # noqa: E402
 
 from vivbench.models import VaryingCoefficientSINDy  # noqa: E402
 

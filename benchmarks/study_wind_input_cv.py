@@ -1,6 +1,6 @@
 """What the data say about the varying model's wind input: held-out prediction of the measured dA/dt.
 
-Run: ``.venv/bin/python benchmarks/bench_wind_input_cv.py RESULTS_DIR``
+Run: ``.venv/bin/python benchmarks/study_wind_input_cv.py RESULTS_DIR``
 (``RESULTS_DIR``: the ``<event_id>.identify.nc`` of a campaign).
 
 Fits ``VaryingCoefficientSINDy`` twice on the same records as ``vivbench pool``
@@ -11,7 +11,7 @@ leave-one-event-out squared prediction error of each event's measured dA/dt
 (``subset_loeo_event_`` of the model with every order): its median over the
 events and its sum. No truth is read: this is what a user can score. The
 truth's side (dA/dt error on the true (A, U)) is in
-``benchmarks/bench_misspecification.py`` and ``vivbench validate``. It asserts
+``benchmarks/study_misspecification.py`` and ``vivbench validate``. It asserts
 nothing.
 """
 

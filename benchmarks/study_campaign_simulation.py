@@ -2,7 +2,7 @@
 
 Run::
 
-    .venv/bin/python benchmarks/bench_campaign_simulation.py RESULTS_DIR [RESULTS_DIR ...]
+    .venv/bin/python benchmarks/study_campaign_simulation.py RESULTS_DIR [RESULTS_DIR ...]
 
 For each directory (results with ``campaign.model.nc`` beside them, as
 ``vivbench pool`` leaves them), every event is simulated as ``vivbench
@@ -53,11 +53,14 @@ def simulation_scores(results_dir) -> dict:
             "median_nmse": float(np.median(nmse)), "p90_nmse": float(np.percentile(nmse, 90)), "stopped": stopped}
 
 
-def main() -> None:
+def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("results", nargs="+", help="results directories pooled by vivbench pool")
-    for directory in parser.parse_args().results:
-        print(json.dumps(simulation_scores(directory)))
+    rows = []
+    for directory in parser.parse_args(argv).results:
+        rows.append(simulation_scores(directory))
+        print(json.dumps(rows[-1]), flush=True)
+    return {"directories": rows}
 
 
 if __name__ == "__main__":

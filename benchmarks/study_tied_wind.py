@@ -2,7 +2,7 @@
 
 Run::
 
-    .venv/bin/python benchmarks/bench_tied_wind.py --campaign CAMP --results ID [--n-basis 15]
+    .venv/bin/python benchmarks/study_tied_wind.py --campaign CAMP --results ID [--n-basis 15]
 
 The averaged truth (docs/concepts.md (the truth)) sums every section's force, each a function
 of that section's own felt wind: Q' = sum_j w_j g(U_j) Q + ... with one
@@ -19,15 +19,11 @@ with a minimal penalised least-squares fitter of its own (cubic B-splines,
 second-difference penalty chosen by 5-fold cross-validation over events,
 the yaw covariate sin^2 psi to the first power, no effective-variance
 weights, no bootstrap, every 4th measured sample), and scores the median
-dA/dt error on the truth's (A, U) as ``bench_misspecification.py`` does.
+dA/dt error on the truth's (A, U) as ``study_misspecification.py`` does.
 
-It is a feasibility check, not the varying model: its "mean" rows differ
-from ``VaryingCoefficientSINDy`` (seed 0, modal: 0.084 here, 0.101 there).
-Measured: seed 0, modal, measured records: mean 0.084, tied 0.070 (truth's own
-data 0.058 and 0.041); bridge B (seed 7): 0.093 and 0.080 (0.066 and 0.048);
-but bridge C (seed 11): 0.104 and 0.450, the tied fit blowing up there
-(penalty 1e-3 chosen; its truth-data fit 0.053). Nothing is asserted; the
-table is printed.
+It is a feasibility check, not the varying model: its "mean" rows differ from
+``VaryingCoefficientSINDy``'s. Nothing is asserted; ``python benchmarks/run_study.py tied_wind
+--campaign CAMP --results ID`` writes the rows as a results page.
 """
 
 from __future__ import annotations
@@ -44,7 +40,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import bench_misspecification as bm  # noqa: E402
+import study_misspecification as bm  # noqa: E402
 
 from vivbench.models.varying import bspline_basis, difference_penalty, uniform_knots  # noqa: E402
 from vivbench.models.wind_weights import modal_wind_weights  # noqa: E402
@@ -130,7 +126,7 @@ def score(model, events, w: np.ndarray, mode: str) -> float:
     return float(np.median(np.concatenate(errs)))
 
 
-def main(argv=None) -> None:
+def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campaign", required=True, type=Path)
     parser.add_argument("--results", required=True, type=Path)
@@ -143,13 +139,16 @@ def main(argv=None) -> None:
     data = {"truth": _stack([ev["truth_rec"] for ev in events], truth_step),
             "measured": _stack([smooth_wind(r, 30.0) for r in measured], 4)}
     print(f"{args.campaign}: modal weights {np.round(weights['modal'], 3)}")
-    print("| weights | design | data | dA/dt error | penalty per section |\n|---|---|---|---|---|")
+    rows = []
     for wname, w in weights.items():
         for mode in ("mean", "tied"):
             for dname, d in data.items():
                 model = fit(d, w, mode, args.n_basis)
-                pens = ", ".join(f"{c[2]:.0e}" for c in model[2])
-                print(f"| {wname} | {mode} | {dname} | {score(model, events, w, mode):.4f} | {pens} |", flush=True)
+                rows.append({"weights": wname, "design": mode, "data": dname,
+                             "dA_error_median": score(model, events, w, mode),
+                             "penalty_per_section": ", ".join(f"{c[2]:.0e}" for c in model[2])})
+                print(rows[-1], flush=True)
+    return {"campaign": str(args.campaign), "modal_weights": [float(x) for x in weights["modal"]], "rows": rows}
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ Run::
 
     vivbench synth --events 31 --seed 1 --config realistic.toml --out CAMP --workers 2
     vivbench identify CAMP --out ID --workers 2
-    .venv/bin/python benchmarks/bench_misspecification.py --campaign CAMP --results ID [--campaign ... --results ...]
+    .venv/bin/python benchmarks/study_misspecification.py --campaign CAMP --results ID [--campaign ... --results ...]
 
 (``realistic.toml``: ``[aero] mode = "realistic"`` and ``[wind] felt_wind = "tributary"``.)
 
@@ -218,7 +218,7 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         ("PooledSINDy", lambda: PooledSINDy(n_bootstrap=100 if pooled_verdicts else 0), "pooled"),
         # The default evaluates the curves at the mean wind over the sections (chosen on the seed-0 campaign).
         ("VaryingCoefficientSINDy(mean U)", lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=0, **vary), "varying"),
-        # The wind's yaw as a second covariate (chosen on the seed-0 campaign, benchmarks/bench_floor.py).
+        # The wind's yaw as a second covariate (chosen on the seed-0 campaign, benchmarks/study_floor.py).
         ("VaryingCoefficientSINDy(mean U, yaw)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1, **vary), "varying"),
         # Every section's wind and yaw in every equation, summed over the sections like the truth's forces,

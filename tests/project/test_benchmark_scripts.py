@@ -1,0 +1,78 @@
+"""The scripts of benchmarks/ stay runnable: every suite benchmark and study imports, every study answers --help.
+
+A renamed or moved library name breaks a script that no other test imports (as
+``window_order_stats`` did when it moved to ``vivbench.models``); these checks catch it in
+seconds without running the workloads (``make bench`` and ``run_study.py`` do that).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import inspect
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.helpers import REPO
+
+BENCH = REPO / "benchmarks"
+
+
+@pytest.fixture
+def scripts(monkeypatch):
+    """run_all and run_study imported as ``make bench`` runs them (benchmarks/ first on the path)."""
+    monkeypatch.syspath_prepend(str(BENCH))
+    for name in ("run_all", "run_study", "_pages"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    return _load(BENCH / "run_all.py", monkeypatch), _load(BENCH / "run_study.py", monkeypatch)
+
+
+def _load(path: Path, monkeypatch):
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, path.stem, module)  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_suite_benchmark_imports_and_takes_its_mode_arguments(scripts, monkeypatch):
+    run_all, run_study = scripts
+    assert {b.name for b in run_all.SUITE}.isdisjoint(run_study.STUDIES)
+    for bench in run_all.SUITE:
+        main = _load(BENCH / f"bench_{bench.name}.py", monkeypatch).main
+        params = inspect.signature(main).parameters
+        for mode in (bench.full, bench.quick):
+            assert mode is None or set(mode) <= set(params), f"bench_{bench.name}.main does not take {mode}"
+
+
+def test_every_study_imports_and_answers_help(scripts, capsys):
+    _run_all, run_study = scripts
+    assert {"campaign_simulation", "greybox_verdict_bounds", "testing_example", "derivative_campaign"} <= set(
+        run_study.STUDIES)
+    for name in run_study.STUDIES:
+        with pytest.raises(SystemExit) as exc:
+            run_study.run_study(name, ["--help"])
+        assert exc.value.code == 0, name
+        assert "usage:" in capsys.readouterr().out, name
+
+
+def test_varying_settings_factories_build_campaign_methods(scripts, monkeypatch):
+    from vivbench.validate import CampaignMethod
+
+    module = _load(BENCH / "varying_settings.py", monkeypatch)
+    for name in ("modal_cv", "modal_least", "modal_loeo", "equal_least"):
+        assert isinstance(getattr(module, name)(), CampaignMethod), name
+
+
+def test_study_page_tables(scripts):
+    """A study's figures on its page: cases of flat figures as one table, rows as a table, the rest as figures."""
+    _run_all, run_study = scripts
+    meta = {"python": "3", "machine": "x", "cpus": 2, "date": "d", "wall_s": 1.0, "cpu_s": 1.0,
+            "load_average_1min": 0.5}
+    page = run_study.study_page("campaign_simulation", {
+        "a": {"error": 0.5, "n": 3}, "b": {"error": 0.25, "n": 4}, "total": 7,
+        "rows": [{"event": "E001", "nmse": 0.125}, {"event": "E002", "nmse": float("nan")}], "_run": meta}, "cmd")
+    assert "| case | error | n |\n|---|---|---|\n| a | 0.5 | 3 |\n| b | 0.25 | 4 |" in page
+    assert "| event | nmse |\n|---|---|\n| E001 | 0.125 |\n| E002 | nan |" in page
+    assert "| total | 7 |" in page and "Written by `cmd`" in page and "CPU time 1 s" in page
