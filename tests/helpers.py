@@ -233,3 +233,24 @@ def bell_records(n_events: int, *, seed: int, duration_s: float, dt_s: float, mo
             dA = dA + noise_m_s * rng.standard_normal(A.shape)
         out.append(Record(event_id=f"E{e:03d}", t=t, A=A, U=U, dA=dA, yaw=yaw))
     return out
+
+
+def run_cli(*argv):
+    """``vivbench <argv>`` in this process (no interpreter start-up): its exit code and its output.
+
+    Returns an object with ``returncode``, ``stdout`` and ``stderr`` as ``subprocess.run(...,
+    capture_output=True, text=True)`` gives them. argparse's refusals (SystemExit) give their exit code.
+    """
+    import contextlib
+    import io
+    from types import SimpleNamespace
+
+    from vivbench.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else 1
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())

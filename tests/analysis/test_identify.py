@@ -27,7 +27,7 @@ from vivbench.synth import (
 from vivbench.validate import regime_scores, rhs_relative_error
 from vivbench.regimes.truth import truth_window_regimes
 from vivbench.regimes.window import label_windows
-from tests.helpers import assert_close
+from tests.helpers import assert_close, run_cli
 
 PHI = np.array([0.707, 1.0, 0.707])
 T_WIN = np.arange(0.0, 50.0, 0.25)
@@ -164,8 +164,7 @@ def test_cli_identify_reports_bad_file_and_finishes_others(small_campaign, tmp_p
     write_event(good, camp / "E001.nc")
     (camp / "E002.nc").write_bytes(b"not a netcdf file")
     out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "vivbench.cli", "identify", str(camp), "--out", str(out), "--workers", "1"],
-                         capture_output=True, text=True)
+    run = run_cli("identify", camp, "--out", out, "--workers", "1")
     assert run.returncode == 1
     lines = [ln for ln in run.stderr.splitlines() if ln.startswith("vivbench identify:")]
     assert len(lines) == 1 and "E002.nc" in lines[0], run.stderr

@@ -9,8 +9,6 @@ are small (two 10-minute events) so that the whole file stays quick.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import re
 from urllib.parse import unquote
@@ -19,10 +17,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from vivbench.cli import main
 from vivbench.core.terms import reference_section
 from vivbench.synth import AeroConfig, GeneratorConfig, StructureConfig, config_from_dict, exact_coefficients
-from tests.helpers import REPO, assert_close
+from tests.helpers import REPO, assert_close, run_cli
 
 # Mode shapes of a half-sine (odd number of half-waves) at k / (n + 1) of the span, tributary lengths span / n.
 _SPAN = 1650.0
@@ -40,13 +37,8 @@ def _structure_toml(n: int) -> str:
 
 def _run(argv: list[str]) -> tuple[int, str]:
     """Run one subcommand in-process; its exit code and stdout + stderr."""
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
-        try:
-            code = main(argv)
-        except SystemExit as exc:  # argparse errors
-            code = exc.code if isinstance(exc.code, int) else 1
-    return code, buf.getvalue()
+    run = run_cli(*argv)
+    return run.returncode, run.stdout + run.stderr
 
 
 @pytest.fixture(scope="session", params=[1, 2, 4], ids=lambda n: f"{n}sec")

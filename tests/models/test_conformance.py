@@ -42,9 +42,6 @@ def _known_failures(check: str) -> dict[str, str]:
 
 
 KNOWN_FAILURES: dict[str, dict[str, str]] = {
-    "save_load": {name: "has no save/load: the protocol's persistence is not implemented for it"
-                  for name in ("binned", "pysindy-campaign", "pysindy-windows", "pysindy-cp", "pysindy-ensemble",
-                               "pysindy-weak")},
     # the bell records prescribe A and take dA from the equation, so dA is not the derivative of A: the
     # weak form fits d/dt of the A it integrates, never the records' dA (tests/models/test_pysindy_variants.py
     # checks it on an integrated ODE)
@@ -151,5 +148,10 @@ def test_save_and_load_give_the_same_predictions(name, fitted, bell_campaign, tm
     path = tmp_path / f"{name}.nc"
     model.save(path)
     back = type(model).load(path)
+    assert back.get_params().keys() == model.get_params().keys()
     for rec in bell_campaign[:2]:
         np.testing.assert_array_equal(back.order_contributions(rec), model.order_contributions(rec))
+        np.testing.assert_array_equal(back.predict(rec), model.predict(rec))
+    if callable(getattr(model, "curves", None)):
+        wind = np.linspace(6.0, 14.0, 9)
+        np.testing.assert_array_equal(back.curves(wind)["curves"].values, model.curves(wind)["curves"].values)

@@ -117,12 +117,18 @@ def test_accepted_variants_are_scored_through_their_specs(name, small_measured):
 
 @pytest.mark.slow  # about 45 s of MCMC
 @pytest.mark.skipif(not sbr_available(), reason="numpyro is not installed")
-def test_sbr_gives_a_verdict_from_its_posterior_draws(small_measured):
+def test_sbr_gives_a_verdict_from_its_posterior_draws(small_measured, tmp_path):
     records, truths = small_measured
     assert isinstance(resolve_method(SPEC + "sbr"), PySINDySBR)
     m = PySINDySBR(degree=2, num_warmup=60, num_samples=60, n_draws=30, max_samples=300)
     s = score_method(m, records, truths)
     assert s["n_scored"] > 0 and np.isfinite(s["rhs_error_true_AU_median"]) and 0.0 <= s["coverage"] <= 1.0
+    # its file keeps the posterior draws the verdict uses (vivbench.io.pysindy_model)
+    back = PySINDySBR.load(m.save(tmp_path / "sbr.nc"))
+    assert back.thinning_ == m.thinning_
+    for rec in records:
+        np.testing.assert_array_equal(back.draw_contributions(rec), m.draw_contributions(rec))
+        np.testing.assert_array_equal(back.predict(rec), m.predict(rec))
 
 
 def test_sbr_without_numpyro_is_refused_in_one_line(monkeypatch, ode_records):

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.signal import welch
 
-from tests.helpers import assert_close, relative_rms
+from tests.helpers import assert_close, relative_rms, run_cli
 from vivbench.io.event import read_event
 from vivbench.core.regime import classify_regime
 from vivbench.synth import (
@@ -275,8 +275,7 @@ def test_cli_synth_and_bad_config(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["E001.nc", "E002.nc", "catalogue.csv"]
     bad = tmp_path / "bad.toml"
     bad.write_text("[structure]\nfrequency = 'fast'\n")
-    run = subprocess.run([sys.executable, "-m", "vivbench.cli", "synth", "--events", "1", "--config", str(bad),
-                          "--out", str(tmp_path / "x")], capture_output=True, text=True)
+    run = run_cli("synth", "--events", "1", "--config", bad, "--out", tmp_path / "x")  # in this process
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "bad.toml" in lines[0], run.stderr

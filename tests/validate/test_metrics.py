@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from tests.helpers import assert_close
+from tests.helpers import assert_close, run_cli
 from vivbench.models.simulate import forecast_table
 from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
 from vivbench.io.event import read_event, write_event
@@ -244,6 +244,7 @@ def identified(small_results_in_library):
 
 
 def _cli(*args):
+    """``python -m vivbench.cli validate`` in a fresh interpreter (the entry point's exit code and stderr)."""
     return subprocess.run([sys.executable, "-m", "vivbench.cli", "validate", *map(str, args)], capture_output=True, text=True)
 
 
@@ -329,14 +330,14 @@ def test_cli_validate_writes_every_file(identified, tmp_path):
 
 def test_cli_validate_bad_inputs_give_one_line(identified, tmp_path):
     camp, res_dir, results = identified
-    run = _cli(camp.files[0].parent, tmp_path / "missing", "--out", tmp_path / "o1")
+    run = run_cli("validate", camp.files[0].parent, tmp_path / "missing", "--out", tmp_path / "o1")
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
     assert run.stderr.startswith("vivbench validate:") and "missing" in run.stderr
     # a result without its event file
     lonely = tmp_path / "lonely"
     lonely.mkdir()
     shutil.copy(results[0], lonely / "E999.identify.nc")
-    run = _cli(camp.files[0].parent, lonely, "--out", tmp_path / "o2")
+    run = run_cli("validate", camp.files[0].parent, lonely, "--out", tmp_path / "o2")
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
     assert "E999.identify.nc" in run.stderr and "E999.nc" in run.stderr
 
@@ -354,7 +355,7 @@ def test_validate_field_events_are_skipped_with_a_message(identified, tmp_path):
         validate_campaign(field, res)
     # the field event beside a synthetic one: skipped with a line, the other is scored
     shutil.copy(results[1], res / results[1].name)
-    run = _cli(field, res, "--out", tmp_path / "o")
+    run = run_cli("validate", field, res, "--out", tmp_path / "o")
     assert run.returncode == 0, run.stderr
     assert "no /truth group (field data)" in run.stderr and camp.files[0].name in run.stderr
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["n_events"] == 1

@@ -73,6 +73,20 @@ from vivbench.io.varying_model import (
     write_varying_model,
     read_varying_model,
 )
+from vivbench.io.pysindy_model import (
+    PYSINDY_MODEL_FORMAT,
+    PYSINDY_MODEL_VERSION,
+    pysindy_model_dataset,
+    write_pysindy_model,
+    read_pysindy_model,
+)
+from vivbench.io.binned_model import (
+    BINNED_MODEL_FORMAT,
+    BINNED_MODEL_VERSION,
+    binned_model_dataset,
+    write_binned_model,
+    read_binned_model,
+)
 from vivbench.io.quality import (
     G,
     MAX_ACC_RMS,
@@ -104,7 +118,10 @@ __all__ = [
     "GREYBOX_NAME", "GREYBOX_FORMAT", "GREYBOX_VERSION", "write_greybox", "read_greybox",
     "WINDOW_MODEL_FORMAT",
     "WINDOW_MODEL_VERSION", "write_window_model", "read_window_model", "VARYING_MODEL_FORMAT", "VARYING_MODEL_VERSION",
-    "varying_model_dataset", "write_varying_model", "read_varying_model", "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
+    "varying_model_dataset", "write_varying_model", "read_varying_model", "PYSINDY_MODEL_FORMAT",
+    "PYSINDY_MODEL_VERSION", "pysindy_model_dataset", "write_pysindy_model", "read_pysindy_model",
+    "BINNED_MODEL_FORMAT", "BINNED_MODEL_VERSION", "binned_model_dataset", "write_binned_model", "read_binned_model",
+    "G", "MAX_ACC_RMS", "MAX_WIND_SPEED",
     "MIN_WIND_STD", "ACC_UNITS", "WIND_UNITS", "despike", "check_acc_magnitude", "check_wind_magnitude",
     "check_wind_varies", "import_event", "load_mapping", "export_csv", "export_mat", "TIME_FORMATS",
     "PLAUSIBLE_RATES", "FIELD_RATE_TOLERANCE", "measured_rate", "regular_grid", "resample_to_grid",

@@ -7,12 +7,14 @@ that within a narrow band of wind speeds dA_k/dt is a function of A_k.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 
 import numpy as np
 import xarray as xr
 
 from vivbench.core.record import Record
+from vivbench.io.binned_model import binned_model_dataset, read_binned_model, write_binned_model
 from vivbench.models.protocol import ModelBase, fit_records, section_names
 
 __all__ = ["BinnedPolynomial"]
@@ -170,6 +172,22 @@ class BinnedPolynomial(ModelBase):
                 rhs = "nan" if not np.all(np.isfinite(c)) else (terms[2:] if terms[0] == "+" else "-" + terms[2:])
                 out.append(f"U in [{b * w:g}, {(b + 1) * w:g}) m/s: dA{k + 1}/dt = {rhs}")
         return out
+
+    def save(self, path):
+        """Write the fitted model (:mod:`vivbench.io.binned_model`, with its format version) atomically; returns the path."""
+        self._check_fitted()
+        ds = binned_model_dataset(vars(self), params_json=json.dumps(self.get_params(), sort_keys=True),
+                                  equations=section_names(self.n_sections_))
+        return write_binned_model(ds, path)
+
+    @classmethod
+    def load(cls, path) -> "BinnedPolynomial":
+        """A fitted model from a file written by :meth:`save`."""
+        params, fitted = read_binned_model(path)
+        model = cls(**params)
+        for name, value in fitted.items():
+            setattr(model, name, value)
+        return model
 
 
 def _cubic_lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:

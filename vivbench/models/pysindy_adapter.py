@@ -35,18 +35,27 @@ reported in ``other_share_``.
 Neither adapter gives an identifiability verdict: scored by
 :func:`vivbench.validate.score_method` they get coverage 0, their regimes
 scored on all windows.
+
+``save`` and ``load`` (:mod:`vivbench.io.pysindy_model`) keep what a model needs to predict: its
+coefficients, the names of its library's terms and the library's settings (of a user's ``sindy``: the
+classes and plain parameters of its library, optimiser and differentiation); ``load`` rebuilds the library
+and refuses a file whose settings do not give its terms.
 """
 
 from __future__ import annotations
 
 import copy
+import json
 import re
 from collections.abc import Sequence
+from types import SimpleNamespace
 
 import numpy as np
 
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
+from vivbench.io.model_file import ModelFileError
+from vivbench.io.pysindy_model import pysindy_model_dataset, read_pysindy_model, write_pysindy_model
 from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, fit_records, section_names
@@ -125,6 +134,34 @@ def _default_sindy():
     import pysindy as ps
 
     return ps.SINDy(feature_library=ps.PolynomialLibrary(degree=3), optimizer=ps.STLSQ(threshold=1e-3))
+
+
+#: The parts of a user's ``pysindy.SINDy`` that a model file keeps (its constructor's arguments).
+_SINDY_PARTS = ("feature_library", "optimizer", "differentiation_method")
+
+
+def _part_settings(obj, part: str) -> dict:
+    """``{"class": name, "params": ...}`` of a pysindy object whose class is ``pysindy.<name>`` and whose
+    parameters are plain JSON values; ValueError otherwise (the file could not rebuild it)."""
+    import pysindy as ps
+
+    name = type(obj).__name__
+    try:
+        params = obj.get_params(deep=False)
+        plain = getattr(ps, name, None) is type(obj) and json.loads(json.dumps(params)) == params
+    except (AttributeError, TypeError, ValueError):
+        plain = False
+    if not plain:
+        raise ValueError(f"cannot save this model: its sindy's {part} ({name}) is not a pysindy class with plain "
+                         "parameters, so a file could not rebuild it (a PolynomialLibrary and STLSQ can be saved)")
+    return {"class": name, "params": params}
+
+
+def _sindy_from_settings(settings: dict):
+    """The ``pysindy.SINDy`` of :func:`_part_settings`' entries (unfitted)."""
+    import pysindy as ps
+
+    return ps.SINDy(**{part: getattr(ps, s["class"])(**s["params"]) for part, s in settings.items()})
 
 
 class _PySINDyBase(ModelBase):
@@ -224,6 +261,67 @@ class _PySINDyBase(ModelBase):
         if ok.any():
             theta[ok] = np.asarray(model.feature_library.transform(np.hstack([x, u])), dtype=float)
         return theta, ok
+
+    # ------------------------------------------------------------------ files (vivbench.io.pysindy_model)
+
+    def _prediction_library(self):
+        """A fresh (unfitted) copy of the feature library whose terms the coefficients multiply."""
+        return self._new_sindy().feature_library
+
+    def save(self, path):
+        """Write what the fitted model needs to predict (:mod:`vivbench.io.pysindy_model`) atomically; returns the path.
+
+        The coefficients, the library's term names and its settings (a user's ``sindy``: the classes and
+        parameters of its library, optimiser and differentiation) are written, not the pysindy objects.
+
+        Raises
+        ------
+        ValueError
+            The model's ``sindy`` holds a part that is not a pysindy class with plain parameters.
+        """
+        self._check_fitted()
+        params = self.get_params()
+        given = params.pop("sindy", None)  # a user's SINDy (the variants build their own from their parameters)
+        settings = None if given is None else {part: _part_settings(getattr(given, part), part) for part in _SINDY_PARTS}
+        ds = pysindy_model_dataset(type(self).__name__, vars(self), params_json=json.dumps(params, sort_keys=True),
+                                   sindy_json=json.dumps(settings, sort_keys=True))
+        return write_pysindy_model(ds, path)
+
+    @classmethod
+    def load(cls, path):
+        """A fitted model from a file written by :meth:`save`: its library rebuilt, its predictions the saved model's.
+
+        Raises
+        ------
+        InputError
+            One line naming the file: not such a file, or a library rebuilt from the file's settings whose
+            terms are not the file's.
+        """
+        params, settings, fitted = read_pysindy_model(path, model_name=cls.__name__)
+        if settings is not None:
+            params["sindy"] = _sindy_from_settings(settings)
+        model = cls(**params)
+        for name, value in fitted.items():
+            setattr(model, name, value)
+        S = model.n_sections_
+        model.state_names_ = [f"A{k + 1}" for k in range(S)]
+        model.input_names_ = [f"U{k + 1}" for k in range(S)]
+        library = model._prediction_library()
+        library.fit(np.zeros((1, 2 * S)))
+        names = [str(n) for n in library.get_feature_names(model.state_names_ + model.input_names_)]
+        if names != model.feature_names_:
+            raise ModelFileError(f"{path}: the library rebuilt from the file's settings has the terms {names}, "
+                                 f"not the file's {model.feature_names_}")
+        model.term_orders_ = term_orders(names, model.state_names_, model.input_names_)
+        model.a_exponents_ = term_a_exponents(names, model.state_names_, model.input_names_)
+        holder = SimpleNamespace(feature_library=library, get_feature_names=lambda: list(names),
+                                 coefficients=lambda: model.coef_)
+        model._set_library(holder)
+        return model
+
+    def _set_library(self, holder) -> None:
+        """Keep a loaded model's library where its predictions look for it."""
+        self.sindy_ = holder
 
     def equations(self, precision: int = 3) -> list[str]:
         """pysindy-like equations of the fitted model(s), in the scaled variables (see the module docstring)."""
@@ -520,6 +618,9 @@ class PySINDyWindows(_PySINDyBase):
         self.window_end_ = np.asarray(ends, dtype=float)
         self.window_event_ = np.asarray(events, dtype=int)
         return self
+
+    def _set_library(self, holder) -> None:
+        self._library = holder
 
     def coef_at(self, record: Record) -> np.ndarray:
         """Coefficients in force at each sample (nearest window centre), shape (n_samples, S, p)."""

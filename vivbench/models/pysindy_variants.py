@@ -261,6 +261,11 @@ class PySINDySBR(_DrawsVerdict):
                      num_samples=int(self.num_samples), mcmc_kwargs={"seed": int(self.seed), "progress_bar": False})
         return ps.SINDy(feature_library=ps.PolynomialLibrary(degree=self.degree), optimizer=opt)
 
+    def _prediction_library(self):
+        import pysindy as ps
+
+        return ps.PolynomialLibrary(degree=self.degree)  # the SINDy's own (building the SINDy needs numpyro)
+
     def _pieces(self, records: list[Record]) -> list[tuple]:
         pieces = super()._pieces(records)
         total = sum(p[0].size for p in pieces)
@@ -334,6 +339,11 @@ class PySINDyWeak(PySINDyCampaign):
     sindy = None
     use_record_derivative = False  # the weak form needs no dA/dt
     __repr__ = ModelBase.__repr__
+
+    def _prediction_library(self):
+        import pysindy as ps
+
+        return ps.PolynomialLibrary(degree=self.degree)  # the pointwise library of the fitted coefficients
 
     def fit(self, records: Sequence[Record]) -> "PySINDyWeak":
         """Fit the stacked weak system of every run of valid samples of every record; returns self."""
