@@ -6,8 +6,9 @@ properties from a small TOML file, and draws its aerodynamics from the field run
 within its bands (:mod:`vivbench.validate.twin_aero`). Each of ``n_draws`` draws generates such a
 campaign, runs the chain with the field run's own settings (:mod:`vivbench.validate.twin_chain`)
 and scores the campaign model against the draw's truth. The spread over draws is the expected
-recovery on this bridge: median and a 90 % range (5th to 95th percentile, linear interpolation
-between draws) of each figure.
+recovery on this bridge: the median of each figure, its 90 % range for one more campaign (a
+normal-theory prediction interval over the draws, honest with few draws) and the draws' 5th to
+95th percentiles.
 
 Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics,
 the others the events. One task is one draw; finished draws are journalled (``OUT/twin.jsonl``),
@@ -167,18 +168,36 @@ def run_twin_task(task: TwinTask) -> dict[str, Any]:
                      "e1": dataclasses.asdict(aero.e1), "e2": dataclasses.asdict(aero.e2)}}
 
 
-def _spread(values: Sequence[float]) -> dict[str, float]:
+def _spread(values: Sequence[float], bounds: tuple[float, float]) -> dict[str, float]:
+    """Median, 5th-95th percentiles of the draws, and the 90 % prediction range of one more campaign.
+
+    The prediction range is the normal-theory interval mean +- t(0.95, K - 1) s sqrt(1 + 1/K) of K draws
+    (clipped to the figure's bounds): with few draws the draws' own percentiles understate where another
+    campaign's figure may fall; with many draws the two agree.
+    """
+    from scipy.stats import t as student_t
+
     x = np.array([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    out = {"median": math.nan, "low": math.nan, "high": math.nan, "predict_low": math.nan, "predict_high": math.nan,
+           "n": int(x.size)}
     if x.size == 0:
-        return {"median": math.nan, "low": math.nan, "high": math.nan, "n": 0}
+        return out
     lo, med, hi = np.percentile(x, [5.0, 50.0, 95.0])
-    return {"median": float(med), "low": float(lo), "high": float(hi), "n": int(x.size)}
+    out.update(median=float(med), low=float(lo), high=float(hi))
+    if x.size >= 2:
+        half = float(student_t.ppf(0.95, x.size - 1) * np.std(x, ddof=1) * math.sqrt(1.0 + 1.0 / x.size))
+        out.update(predict_low=float(max(np.mean(x) - half, bounds[0])),
+                   predict_high=float(min(np.mean(x) + half, bounds[1])))
+    return out
+
+
+_BOUNDS = {"coverage": (0.0, 1.0), "flagged_right_share": (0.0, 1.0)}
 
 
 def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], failed: Sequence[int]) -> dict:
     """The content of ``twin.json``: the inputs, each draw's scores and the expected recovery."""
     draws = [rows[d] for d in sorted(rows)]
-    expected = {m: _spread([r["scores"][m] for r in draws]) for m in TWIN_METRICS}
+    expected = {m: _spread([r["scores"][m] for r in draws], _BOUNDS.get(m, (0.0, math.inf))) for m in TWIN_METRICS}
     return {
         "format": "vivbench-twin", "format_version": 1, "config": config,
         "mirror": {"sections": list(mirror.sections), "n_events": len(mirror.events),
@@ -188,7 +207,8 @@ def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], fa
                    "anemometer_offset_m": mirror.anemometer_offset, "frequency_hz": mirror.frequency,
                    "mode_shape_measured": list(mirror.mode_shape)},
         "draws": draws, "failed": sorted(int(d) for d in failed), "expected": expected,
-        "range": "5th to 95th percentile over draws (linear interpolation)",
+        "range": "low/high: 5th and 95th percentiles of the draws; predict_low/predict_high: 90 % prediction "
+                 "range of one more campaign, mean +- t(0.95, K-1) s sqrt(1 + 1/K) over K draws",
     }
 
 
@@ -208,18 +228,20 @@ def twin_markdown(summary: dict) -> str:
         f"micro-g/sqrt(Hz), mode {m['frequency_hz']:.4g} Hz." + (" Failed draws: "
                                                                    + ", ".join(map(str, summary["failed"])) + "."
                                                                    if summary["failed"] else ""), "",
-        "| figure | median | 90 % range | draws |", "|---|---|---|---|",
+        "| figure | median | 90 % range of a campaign | 5th-95th percentile of draws | draws |",
+        "|---|---|---|---|---|",
     ]
     for key, s in summary["expected"].items():
-        lines.append(f"| {METRIC_NAMES[key]} | {_fmt(s['median'])} | {_fmt(s['low'])} - {_fmt(s['high'])} | {s['n']} |")
+        lines.append(f"| {METRIC_NAMES[key]} | {_fmt(s['median'])} | {_fmt(s['predict_low'])} - "
+                     f"{_fmt(s['predict_high'])} | {_fmt(s['low'])} - {_fmt(s['high'])} | {s['n']} |")
     lines += ["", "Mirrored: sections, rates, events (number, start times, durations), each event's measured mean "
               "wind and yaw (knots every " f"{cfg['knot_step']:g} s), turbulence intensity, sections' wind spread, "
               "noise floor, the identification's and the campaign model's settings. Assumed: the bridge file's "
               "structural properties; aerodynamic functions of the generator's shapes fitted to the campaign "
               "model's curves drawn within their bands, without a yaw effect; the generator's defaults for "
               "everything else (buffeting, Strouhal number, anemometer errors, one anemometer per section).", ""]
-    if n < 10:
-        lines += [f"With {n} draws the 90 % range is close to the smallest and largest draw: a rough range.", ""]
+    lines += ["The 90 % range of a campaign is where one more campaign's figure falls with 90 % probability if the "
+              "draws' figures are normal (mean +- t s sqrt(1 + 1/K)); with few draws it is wide, as it should be.", ""]
     return "\n".join(lines)
 
 

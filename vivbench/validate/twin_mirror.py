@@ -6,10 +6,11 @@ identification results:
 
 - the sections, the rates of the anemometers and accelerometers, the span's azimuth;
 - the number of events, their start times and durations;
-- each event's mean wind perpendicular to the span and its yaw (the identification's smoothed
-  ``U`` and ``yaw``, averaged over the sections), as knots of a wind script
+- each event's mean wind perpendicular to the span and its yaw (low-passed from the anemometers as
+  the identification forms them, averaged over the sections, smoothed over a quarter of the knots'
+  spacing), as knots of a wind script
   (:class:`vivbench.synth.WindScript` with ``yaws``), and the side the wind comes from;
-- the turbulence intensity of the anemometers (detrended 10-minute blocks) and the relative
+- the turbulence intensity of the anemometers (10-minute blocks less a quadratic trend) and the relative
   spread of the sections' mean winds;
 - the accelerometers' noise floor, from the spectrum above the mode.
 
@@ -34,6 +35,8 @@ from vivbench.core.toml import load_toml
 from vivbench.io.event import read_event
 from vivbench.io.result import read_result
 from vivbench.models.greybox import BridgeProperties
+from vivbench.preprocess.wind import mean_wind
+from vivbench.preprocess.yaw import mean_yaw
 from vivbench.synth.config import AeroConfig, GeneratorConfig, SensorConfig, StructureConfig, WindConfig
 from vivbench.synth.event import EventSpec
 from vivbench.synth.turbulence import TurbulenceConfig
@@ -196,7 +199,8 @@ def _side(u: np.ndarray, v: np.ndarray, azimuth: float) -> int:
 
 
 def _turbulence(t: np.ndarray, u: np.ndarray, v: np.ndarray) -> list[float]:
-    """sigma / mean of the horizontal speed in linearly detrended 10-minute blocks, per block and section."""
+    """sigma / mean of the horizontal speed in 10-minute blocks less a quadratic trend (the mean wind's course), per
+    block and section."""
     V = np.hypot(u, v)
     rate = 1.0 / np.median(np.diff(t))
     n = max(int(round(_BLOCK_S * rate)), 16)
@@ -209,7 +213,7 @@ def _turbulence(t: np.ndarray, u: np.ndarray, v: np.ndarray) -> list[float]:
             ok = np.isfinite(y)
             if ok.sum() < 16 or not np.mean(y[ok]) > 0.5:
                 continue
-            fit = np.polyval(np.polyfit(x[ok], y[ok], 1), x[ok])
+            fit = np.polyval(np.polyfit(x[ok], y[ok], 2), x[ok])
             out.append(float(np.std(y[ok] - fit) / np.mean(y[ok])))
     return out
 
@@ -231,16 +235,16 @@ def _noise_density(t: np.ndarray, acc: np.ndarray, f_mode: float) -> list[float]
     return out
 
 
-def _knots(t_res: np.ndarray, x: np.ndarray, duration: float, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """Knots every ``step`` s from 0 to ``duration`` of x(t) (NaNs bridged, Gaussian-smoothed over step / 2)."""
+def _knots(t: np.ndarray, x: np.ndarray, duration: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Knots every ``step`` s from 0 to ``duration`` of x(t) (NaNs bridged, Gaussian-smoothed over step / 4)."""
     ok = np.isfinite(x)
     if ok.sum() < 2:
         raise InputError("no finite samples")
-    filled = np.interp(t_res, t_res[ok], x[ok])
-    dt = float(np.median(np.diff(t_res)))
-    smooth = gaussian_filter1d(filled, sigma=max(step / 2.0 / dt, 1.0), mode="nearest")
+    grid = np.arange(0.0, duration + 0.5, 1.0)  # 1 Hz is plenty for a wind low-passed at minutes
+    filled = np.interp(grid, t[ok], x[ok])
+    smooth = gaussian_filter1d(filled, sigma=max(step / 4.0, 1.0), mode="nearest")
     times = np.unique(np.append(np.arange(0.0, duration, step), duration))
-    return times, np.interp(times, t_res, smooth)
+    return times, np.interp(times, grid, smooth)
 
 
 def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step: float = 120.0) -> CampaignMirror:
@@ -269,7 +273,7 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
         eid = str(tree.attrs["event_id"])
         if eid not in by_id:
             continue
-        res_path, res = by_id[eid]
+        _, res = by_id[eid]
         wind, accel = tree["wind"].ds, tree["accel"].ds
         secs = tuple(str(s) for s in accel["section"].values)
         if sections is None:
@@ -291,19 +295,17 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
             freqs.append(f_mode)
         noise += _noise_density(ta, accel["acc"].values.astype(float), f_mode if math.isfinite(f_mode) else 0.3)
         distances += [float(tree.attrs[f"wind_distance_m_{s}"]) for s in secs if f"wind_distance_m_{s}" in tree.attrs]
-        t_res = res["time"].values
-        U = res["U"].values
-        A = res["A"].values
+        U = mean_wind(tw, u, v, azimuth)  # the whole record's low-passed wind, as the identification forms it
+        yaw = mean_yaw(tw, u, v, azimuth)
         means = np.nanmean(U, axis=0)
         if np.all(np.isfinite(means)) and np.nanmean(means) > 0:
             offsets += list(means / np.mean(means) - 1.0)
-        energy.append(np.nansum(A**2, axis=0))
-        yaw = res["yaw"].values if "yaw" in res else np.zeros_like(U)
+        energy.append(np.nansum(res["A"].values ** 2, axis=0))
         try:
-            times, speeds = _knots(t_res, np.nanmean(U, axis=1), duration, knot_step)
-            _, yaws = _knots(t_res, np.nanmean(yaw, axis=1), duration, knot_step)
+            times, speeds = _knots(tw, np.nanmean(U, axis=1), duration, knot_step)
+            _, yaws = _knots(tw, np.nanmean(yaw, axis=1), duration, knot_step)
         except InputError:
-            raise InputError(f"{res_path}: no finite mean wind to mirror") from None
+            raise InputError(f"{path}: no finite mean wind to mirror") from None
         events.append(EventMirror(event_id=eid, start_time=str(tree.attrs["start_time"]), duration=float(duration),
                                   times=tuple(float(x) for x in times),
                                   speeds=tuple(float(x) for x in np.maximum(speeds, 0.5)),
