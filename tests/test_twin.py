@@ -15,6 +15,7 @@ from vivbench.cli import main
 from vivbench.core.errors import InputError
 from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 from vivbench.io.event import read_event, write_event
+from vivbench.report import twin_section
 from vivbench.synth import AeroConfig, CampaignConfig, generate_campaign, generate_event
 from vivbench.validate.twin import TwinConfig, read_twin, run_twin
 from vivbench.validate.twin_mirror import (TwinBridge, measure_campaign, mirror_generator, mirror_specs,
@@ -90,6 +91,9 @@ def test_twin_is_deterministic_and_resumes(field, tmp_path):
             assert stats["predict_low"] <= stats["median"] <= stats["predict_high"]
             assert stats["low"] <= stats["median"] <= stats["high"]
     assert 0.0 <= summary["expected"]["coverage"]["median"] <= 1.0
+    section = "\n".join(twin_section(a))
+    assert section.startswith("## How far to trust this")
+    assert "3 events" in section and "dA/dt error, energy-weighted" in section
 
 
 def test_a_journalled_draw_survives_a_failed_run(field, tmp_path):

@@ -137,8 +137,55 @@ from vivbench.validate.study_report import (
     study_markdown,
     study_summary,
 )
+from vivbench.validate.twin import (
+    METRIC_NAMES,
+    TWIN_FILE,
+    TwinConfig,
+    TwinResult,
+    TwinTask,
+    read_twin,
+    run_twin,
+    run_twin_task,
+    twin_inputs,
+    twin_markdown,
+    twin_summary,
+)
+from vivbench.validate.twin_aero import band_curves, draw_aero, fit_aero, perturbed_curves
+from vivbench.validate.twin_chain import (
+    TWIN_METRICS,
+    PoolSettings,
+    chain_scores,
+    identify_config_from_json,
+    pool_method,
+    pool_settings,
+    run_chain,
+)
+from vivbench.validate.twin_check import (
+    CHECKED_METRICS,
+    TwinCheckConfig,
+    run_twin_check,
+    run_twin_check_task,
+    twin_check_markdown,
+)
+from vivbench.validate.twin_mirror import (
+    BRIDGE_KEYS,
+    CampaignMirror,
+    EventMirror,
+    TwinBridge,
+    measure_campaign,
+    mirror_generator,
+    mirror_specs,
+    mirror_structure,
+    read_bridge,
+)
 
 __all__ = [
+    "METRIC_NAMES", "TWIN_FILE", "TwinConfig", "TwinResult", "TwinTask", "read_twin", "run_twin", "run_twin_task",
+    "twin_inputs", "twin_markdown", "twin_summary", "band_curves", "draw_aero", "fit_aero", "perturbed_curves",
+    "TWIN_METRICS", "PoolSettings", "chain_scores", "identify_config_from_json", "pool_method", "pool_settings",
+    "run_chain", "CHECKED_METRICS", "TwinCheckConfig", "run_twin_check", "run_twin_check_task", "twin_check_markdown",
+    "BRIDGE_KEYS", "CampaignMirror", "EventMirror", "TwinBridge", "measure_campaign", "mirror_generator",
+    "mirror_specs", "mirror_structure", "read_bridge",
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
     "STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",
