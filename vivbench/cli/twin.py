@@ -5,14 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from vivbench.cli.common import DEFAULT_WORKERS, progress, record_command
-
-
-def _bar_callback(bar):
-    def advance(done: int, _total: int) -> None:
-        bar.update(done - bar.n)
-
-    return advance
+from vivbench.cli.common import DEFAULT_WORKERS, record_command, run_resumable
 
 
 def run(args) -> int:
@@ -21,17 +14,12 @@ def run(args) -> int:
 
     bridge = read_bridge(args.bridge)  # a bad or missing file is reported before anything runs
     config = TwinConfig(n_draws=args.draws, seed=args.seed, knot_step=args.knot_step, max_events=args.max_events)
-    bar = progress(config.n_draws, "twin", unit="draw")
-    try:
-        result = run_twin(args.campaign, args.results, bridge, args.out, config=config, model_dir=args.model,
-                          workers=args.workers, progress=_bar_callback(bar))
-    except KeyboardInterrupt:
-        bar.close()
-        print(f"vivbench twin: interrupted; the finished draws are saved in {Path(args.out) / 'twin.jsonl'}: "
-              "run the same command again to resume", file=sys.stderr)
+    saved = f"the finished draws are saved in {Path(args.out) / 'twin.jsonl'}"
+    result = run_resumable("twin", config.n_draws, "draw", saved,
+                           lambda advance: run_twin(args.campaign, args.results, bridge, args.out, config=config,
+                                                    model_dir=args.model, workers=args.workers, progress=advance))
+    if result is None:
         return 130
-    finally:
-        bar.close()
     record_command(args.out, args)
     for draw, message in sorted(result.failures.items()):
         print(f"vivbench twin: draw {draw}: {message}", file=sys.stderr)
@@ -47,16 +35,12 @@ def run_check(args) -> int:
     config = TwinCheckConfig(split=args.split, draws=parse_draws(args.draws), n_twins=args.twins,
                              max_events=args.max_events, bootstrap=args.bootstrap,
                              max_duration=None if args.max_duration is None else args.max_duration * 60.0)
-    bar = progress(len(config.draws), "twin-check", unit="draw")
-    try:
-        path, page, failures = run_twin_check(config, args.out, workers=args.workers, progress=_bar_callback(bar))
-    except KeyboardInterrupt:
-        bar.close()
-        print(f"vivbench twin-check: interrupted; finished draws are saved in {Path(args.out)}: run the same "
-              "command again to resume", file=sys.stderr)
+    saved = f"the finished draws are saved in {Path(args.out)}"
+    outcome = run_resumable("twin-check", len(config.draws), "draw", saved,
+                            lambda advance: run_twin_check(config, args.out, workers=args.workers, progress=advance))
+    if outcome is None:
         return 130
-    finally:
-        bar.close()
+    path, page, failures = outcome
     record_command(args.out, args)
     for draw, message in sorted(failures.items()):
         print(f"vivbench twin-check: draw {draw}: {message}", file=sys.stderr)

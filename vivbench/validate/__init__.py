@@ -120,6 +120,7 @@ from vivbench.validate.study import (
     METHOD_ALIASES,
     STUDY_COLUMNS,
     StudyConfig,
+    check_draws,
     StudyResult,
     StudyTask,
     method_spec,
@@ -237,7 +238,7 @@ __all__ = [
     "record_yaw_on",
     "write_validation",
     "upgrade_metrics",
-    "DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "method_spec",
+    "DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "check_draws", "method_spec",
     "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks",
     "LABEL_COLUMNS", "PROMISE_MIN_FLAGS", "PROMISE_SHARE", "SUMMARY_SCORES", "study_markdown", "study_summary",
 ]

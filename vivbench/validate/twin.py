@@ -26,7 +26,6 @@ import math
 import shutil
 import tempfile
 from collections.abc import Callable
-from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -35,14 +34,12 @@ import numpy as np
 
 from vivbench.core.errors import InputError, error_line
 from vivbench.core.lock import exclusive_directory
-from vivbench.core.parallel import run_tasks
 from vivbench.io.event import list_events, write_event
 from vivbench.io.netcdf import atomic_path
 from vivbench.io.result import list_results
 from vivbench.models.campaign_files import load_campaign_model
 from vivbench.synth.event import generate_event
-from vivbench.validate.journal import append as journal_append
-from vivbench.validate.journal import check_record
+from vivbench.validate.journal import check_record, counting_progress, run_journalled
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.twin_aero import draw_aero
 from vivbench.validate.twin_chain import (TWIN_METRICS, PoolSettings, chain_scores, identify_config_from_json,
@@ -304,21 +301,11 @@ def run_twin(campaign_dir, results_dir, bridge, out_dir, *, config: TwinConfig =
                    for d in range(config.n_draws) if d not in done]
         if progress is not None:
             progress(len(resumed), config.n_draws)
-        computed, failures = [], {}
         try:
-            with closing(run_tasks(run_twin_task, pending, workers=workers)) as outcomes:
-                for outcome in outcomes:
-                    task = pending[outcome.index]
-                    if outcome.ok:
-                        row = {"task_id": task.draw, **outcome.value}
-                        done[task.draw] = row
-                        computed.append(task.draw)
-                    else:
-                        row = {"task_id": task.draw, "draw": task.draw, "scores": {}, "error": outcome.error}
-                        failures[task.draw] = outcome.error
-                    journal_append(journal, task.draw, outcome.ok, row)
-                    if progress is not None:
-                        progress(len(resumed) + len(computed) + len(failures), config.n_draws)
+            computed, failures = run_journalled(
+                run_twin_task, pending, journal, done, task_id=lambda t: t.draw,
+                failed_row=lambda t: {"draw": t.draw, "scores": {}}, workers=workers,
+                progress=None if progress is None else counting_progress(progress, len(resumed), config.n_draws))
         finally:
             shutil.rmtree(work, ignore_errors=True)
         rows = {d: {k: v for k, v in r.items() if k != "task_id"} for d, r in done.items()}

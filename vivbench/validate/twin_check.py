@@ -23,7 +23,6 @@ import math
 import shutil
 import tempfile
 from collections.abc import Callable
-from contextlib import closing
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -33,15 +32,14 @@ from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE, pool_results
 from vivbench.analysis.selection import varying_selection
 from vivbench.core.errors import InputError, error_line
 from vivbench.core.lock import exclusive_directory
-from vivbench.core.parallel import run_tasks
 from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 from vivbench.io.netcdf import atomic_path
 from vivbench.synth.campaign import generate_campaign
 from vivbench.synth.family import SPLITS, draw_bridge
-from vivbench.validate.journal import append as journal_append
-from vivbench.validate.journal import check_record
+from vivbench.validate.journal import check_record, counting_progress, run_journalled
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import scoring_inputs
+from vivbench.validate.study import check_draws
 from vivbench.validate.twin import METRIC_NAMES, TwinConfig, read_twin, run_twin
 from vivbench.validate.twin_chain import chain_scores
 from vivbench.validate.twin_mirror import TwinBridge
@@ -77,10 +75,7 @@ class TwinCheckConfig:
     def __post_init__(self) -> None:
         if self.split not in SPLITS:
             raise InputError(f"split must be one of {', '.join(SPLITS)}; got {self.split!r}")
-        draws = tuple(int(d) for d in self.draws)
-        if not draws or list(draws) != sorted(set(draws)) or draws[0] < 0:
-            raise InputError(f"draws must be distinct draw numbers >= 0 in increasing order; got {self.draws!r}")
-        object.__setattr__(self, "draws", draws)
+        object.__setattr__(self, "draws", check_draws(self.draws))
         TwinConfig(n_draws=self.n_twins)
         if not (isinstance(self.bootstrap, int) and self.bootstrap >= 2):
             raise InputError(f"bootstrap must be an integer >= 2; got {self.bootstrap!r}")
@@ -189,23 +184,14 @@ def run_twin_check(config: TwinCheckConfig, out_dir, *, workers: int = 1,
         pending = [_Task(split=config.split, draw=d, n_twins=config.n_twins, max_events=config.max_events,
                          max_duration=config.max_duration, bootstrap=config.bootstrap, work_root=str(work))
                    for d in config.draws if d not in done]
-        failures: dict[int, str] = {}
         if progress is not None:
             progress(len(config.draws) - len(pending), len(config.draws))
         try:
-            with closing(run_tasks(run_twin_check_task, pending, workers=workers)) as outcomes:
-                for outcome in outcomes:
-                    task = pending[outcome.index]
-                    if outcome.ok:
-                        row = {"task_id": task.draw, **outcome.value}
-                        done[task.draw] = row
-                    else:
-                        row = {"task_id": task.draw, "draw": task.draw, "actual": {}, "inside": {},
-                               "error": outcome.error}
-                        failures[task.draw] = outcome.error
-                    journal_append(journal, task.draw, outcome.ok, row)
-                    if progress is not None:
-                        progress(sum(d in done for d in config.draws) + len(failures), len(config.draws))
+            _, failures = run_journalled(
+                run_twin_check_task, pending, journal, done, task_id=lambda t: t.draw,
+                failed_row=lambda t: {"draw": t.draw, "actual": {}, "inside": {}}, workers=workers,
+                progress=None if progress is None else
+                counting_progress(progress, len(config.draws) - len(pending), len(config.draws)))
         finally:
             shutil.rmtree(work, ignore_errors=True)
         rows = {d: {k: v for k, v in r.items() if k != "task_id"} for d, r in done.items()}
