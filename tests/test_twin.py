@@ -150,3 +150,29 @@ def test_twin_json_is_refused_when_not_a_twin(tmp_path):
     (tmp_path / "twin.json").write_text(json.dumps({"format": "other"}))
     with pytest.raises(InputError, match="not a twin summary"):
         read_twin(tmp_path)
+
+
+@pytest.mark.parametrize("kwargs", [{"split": "test"}, {"draws": (2, 1)}, {"n_twins": 0}, {"bootstrap": 1}])
+def test_twin_check_config_refuses_bad_values(kwargs):
+    from vivbench.validate import TwinCheckConfig
+
+    with pytest.raises(InputError):
+        TwinCheckConfig(**kwargs)
+
+
+@pytest.mark.slow
+def test_twin_check_compares_actual_figures_with_the_twin_range(tmp_path):
+    from vivbench.validate import CHECKED_METRICS, TwinCheckConfig, run_twin_check
+
+    config = TwinCheckConfig(split="development", draws=(0,), n_twins=2, max_events=3, max_duration=300.0,
+                             bootstrap=10)
+    path, page, failures = run_twin_check(config, tmp_path)
+    assert not failures
+    summary = json.loads(path.read_text())
+    (row,) = summary["draws"]
+    for m in CHECKED_METRICS:
+        lo, hi, a = row["expected"][m]["predict_low"], row["expected"][m]["predict_high"], row["actual"][m]
+        if row["inside"][m] is not None:
+            assert row["inside"][m] == (lo <= a <= hi)
+        assert summary["share_inside"][m]["assessed"] == int(row["inside"][m] is not None)
+    assert "Does the twin predict?" in page.read_text()

@@ -15,6 +15,7 @@ import io
 import json
 import math
 import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ from vivbench.core.parallel import run_tasks
 from vivbench.io.netcdf import atomic_path
 
 __all__ = ["load", "append", "write_table", "format_value", "check_record", "run_journalled",
-           "counting_progress"]
+           "counting_progress", "task_directory"]
 
 
 def _valid(record: Any, n_tasks: int, columns) -> bool:
@@ -173,3 +174,10 @@ def counting_progress(progress: Callable[[int, int], None], start: int, total: i
         progress(count[0], total)
 
     return advance
+
+
+def task_directory(work_root: str | None, prefix: str) -> Path:
+    """A new scratch directory for one task: under ``work_root`` (created) or the system's temporary one."""
+    if work_root is not None:
+        Path(work_root).mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=prefix, dir=work_root))

@@ -39,7 +39,6 @@ import hashlib
 import json
 import math
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -60,7 +59,7 @@ from vivbench.synth.family import SPLITS, draw_bridge
 from vivbench.synth.campaign import generate_campaign
 from vivbench.validate.journal import check_record
 from vivbench.validate.journal import format_value
-from vivbench.validate.journal import counting_progress, run_journalled
+from vivbench.validate.journal import counting_progress, run_journalled, task_directory
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_spec, fit_method, resolve_method
 from vivbench.validate.methods import score_fitted, scoring_inputs
@@ -316,9 +315,7 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
     start = time.perf_counter()
     draw = draw_bridge(task.split, task.draw)
     campaign = draw.campaign_config(max_events=task.max_events, max_duration=task.max_duration)
-    if task.work_root is not None:
-        Path(task.work_root).mkdir(parents=True, exist_ok=True)
-    root = Path(tempfile.mkdtemp(prefix=f"d{task.draw:05d}-", dir=task.work_root))
+    root = task_directory(task.work_root, f"d{task.draw:05d}-")
     try:
         made = generate_campaign(campaign, root / "campaign", workers=1)
         generated = time.perf_counter()

@@ -24,7 +24,6 @@ import hashlib
 import json
 import math
 import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +38,7 @@ from vivbench.io.netcdf import atomic_path
 from vivbench.io.result import list_results
 from vivbench.models.campaign_files import load_campaign_model
 from vivbench.synth.event import generate_event
-from vivbench.validate.journal import check_record, counting_progress, run_journalled
+from vivbench.validate.journal import check_record, counting_progress, run_journalled, task_directory
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.twin_aero import draw_aero
 from vivbench.validate.twin_chain import (TWIN_METRICS, PoolSettings, chain_scores, identify_config_from_json,
@@ -143,9 +142,7 @@ def run_twin_task(task: TwinTask) -> dict[str, Any]:
     structure = mirror_structure(task.mirror, task.bridge)
     aero, misfit = draw_aero(model, structure, task.wind_range, np.random.default_rng(children[0]))
     generator = mirror_generator(task.mirror, structure, aero)
-    if task.work_root is not None:
-        Path(task.work_root).mkdir(parents=True, exist_ok=True)
-    root = Path(tempfile.mkdtemp(prefix=f"twin{task.draw:04d}-", dir=task.work_root))
+    root = task_directory(task.work_root, f"twin{task.draw:04d}-")
     try:
         files = []
         for spec, seed in zip(mirror_specs(task.mirror), children[1:]):

@@ -21,7 +21,6 @@ import hashlib
 import json
 import math
 import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,7 +35,7 @@ from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 from vivbench.io.netcdf import atomic_path
 from vivbench.synth.campaign import generate_campaign
 from vivbench.synth.family import SPLITS, draw_bridge
-from vivbench.validate.journal import check_record, counting_progress, run_journalled
+from vivbench.validate.journal import check_record, counting_progress, run_journalled, task_directory
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import scoring_inputs
 from vivbench.validate.study import check_draws
@@ -96,9 +95,7 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
     """One family draw: the field chain, its actual figures, its twin and whether they agree."""
     draw = draw_bridge(task.split, task.draw)
     campaign = draw.campaign_config(max_events=task.max_events, max_duration=task.max_duration)
-    if task.work_root is not None:
-        Path(task.work_root).mkdir(parents=True, exist_ok=True)
-    root = Path(tempfile.mkdtemp(prefix=f"check{task.draw:05d}-", dir=task.work_root))
+    root = task_directory(task.work_root, f"check{task.draw:05d}-")
     try:
         made = generate_campaign(campaign, root / "campaign", workers=1)
         identify = IdentifyConfig()
