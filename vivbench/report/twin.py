@@ -46,7 +46,7 @@ def twin_section(directory, command: str | None = None) -> list[str]:
         "with aerodynamic functions drawn from this campaign's model within its bands, were put through the same "
         "chain with the same settings and scored against their known truth. The figures below are what to expect of "
         "the chain on this bridge; the 90 % range is where one more campaign's figure falls (normal-theory "
-        "prediction over the draws).", "",
+        "prediction over the draws, of the logarithm for the errors).", "",
         md_table(["figure", "expected (median)", "90 % range of a campaign", "draws"], rows), "",
     ]
     if right.get("n", 0) and math.isfinite(right.get("predict_low", math.nan)):

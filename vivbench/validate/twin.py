@@ -7,8 +7,8 @@ within its bands (:mod:`vivbench.validate.twin_aero`). Each of ``n_draws`` draws
 campaign, runs the chain with the field run's own settings (:mod:`vivbench.validate.twin_chain`)
 and scores the campaign model against the draw's truth. The spread over draws is the expected
 recovery on this bridge: the median of each figure, its 90 % range for one more campaign (a
-normal-theory prediction interval over the draws, honest with few draws) and the draws' 5th to
-95th percentiles.
+normal-theory prediction interval over the draws, of the logarithm for the errors; honest with few
+draws) and the draws' 5th to 95th percentiles.
 
 Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics,
 the others the events. One task is one draw; finished draws are journalled (``OUT/twin.jsonl``),
@@ -162,12 +162,13 @@ def run_twin_task(task: TwinTask) -> dict[str, Any]:
                      "e1": dataclasses.asdict(aero.e1), "e2": dataclasses.asdict(aero.e2)}}
 
 
-def _spread(values: Sequence[float], bounds: tuple[float, float]) -> dict[str, float]:
+def _spread(values: Sequence[float], bounds: tuple[float, float], log: bool) -> dict[str, float]:
     """Median, 5th-95th percentiles of the draws, and the 90 % prediction range of one more campaign.
 
-    The prediction range is the normal-theory interval mean +- t(0.95, K - 1) s sqrt(1 + 1/K) of K draws
-    (clipped to the figure's bounds): with few draws the draws' own percentiles understate where another
-    campaign's figure may fall; with many draws the two agree.
+    The prediction range is the normal-theory interval mean +- t(0.95, K - 1) s sqrt(1 + 1/K) of K draws,
+    on the logarithm of the figure when ``log`` (relative errors, positive and skewed: the range is then
+    a factor either side of the geometric mean) and clipped to the figure's bounds: with few draws the
+    draws' own percentiles understate where another campaign's figure may fall; with many the two agree.
     """
     from scipy.stats import t as student_t
 
@@ -179,19 +180,24 @@ def _spread(values: Sequence[float], bounds: tuple[float, float]) -> dict[str, f
     lo, med, hi = np.percentile(x, [5.0, 50.0, 95.0])
     out.update(median=float(med), low=float(lo), high=float(hi))
     if x.size >= 2:
-        half = float(student_t.ppf(0.95, x.size - 1) * np.std(x, ddof=1) * math.sqrt(1.0 + 1.0 / x.size))
-        out.update(predict_low=float(max(np.mean(x) - half, bounds[0])),
-                   predict_high=float(min(np.mean(x) + half, bounds[1])))
+        log = log and bool(np.all(x > 0))
+        y = np.log(x) if log else x
+        half = float(student_t.ppf(0.95, y.size - 1) * np.std(y, ddof=1) * math.sqrt(1.0 + 1.0 / y.size))
+        a, b = np.mean(y) - half, np.mean(y) + half
+        a, b = (math.exp(a), math.exp(b)) if log else (a, b)
+        out.update(predict_low=float(max(a, bounds[0])), predict_high=float(min(b, bounds[1])))
     return out
 
 
-_BOUNDS = {"coverage": (0.0, 1.0), "flagged_right_share": (0.0, 1.0)}
+#: Figures that are shares (a linear range within [0, 1]) or counts; the others are relative errors (log range).
+_BOUNDS = {"coverage": (0.0, 1.0), "flagged_right_share": (0.0, 1.0), "n_flagged": (0.0, math.inf)}
 
 
 def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], failed: Sequence[int]) -> dict:
     """The content of ``twin.json``: the inputs, each draw's scores and the expected recovery."""
     draws = [rows[d] for d in sorted(rows)]
-    expected = {m: _spread([r["scores"][m] for r in draws], _BOUNDS.get(m, (0.0, math.inf))) for m in TWIN_METRICS}
+    expected = {m: _spread([r["scores"][m] for r in draws], _BOUNDS.get(m, (0.0, math.inf)), log=m not in _BOUNDS)
+                for m in TWIN_METRICS}
     return {
         "format": "vivbench-twin", "format_version": 1, "config": config,
         "mirror": {"sections": list(mirror.sections), "n_events": len(mirror.events),
@@ -202,7 +208,8 @@ def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], fa
                    "mode_shape_measured": list(mirror.mode_shape)},
         "draws": draws, "failed": sorted(int(d) for d in failed), "expected": expected,
         "range": "low/high: 5th and 95th percentiles of the draws; predict_low/predict_high: 90 % prediction "
-                 "range of one more campaign, mean +- t(0.95, K-1) s sqrt(1 + 1/K) over K draws",
+                 "range of one more campaign, mean +- t(0.95, K-1) s sqrt(1 + 1/K) over K draws (of the "
+                 "logarithm for the errors)",
     }
 
 
@@ -235,7 +242,8 @@ def twin_markdown(summary: dict) -> str:
               "model's curves drawn within their bands, without a yaw effect; the generator's defaults for "
               "everything else (buffeting, Strouhal number, anemometer errors, one anemometer per section).", ""]
     lines += ["The 90 % range of a campaign is where one more campaign's figure falls with 90 % probability if the "
-              "draws' figures are normal (mean +- t s sqrt(1 + 1/K)); with few draws it is wide, as it should be.", ""]
+              "draws' figures (the logarithms of the errors) are normal (mean +- t s sqrt(1 + 1/K)); with few draws "
+              "it is wide, as it should be.", ""]
     return "\n".join(lines)
 
 

@@ -117,7 +117,9 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
                             span_length=s.span_length)
         run_twin(root / "campaign", root / "identify", bridge, root / "twin",
                  config=TwinConfig(n_draws=task.n_twins, seed=task.draw))
-        expected = read_twin(root / "twin")["expected"]
+        twin = read_twin(root / "twin")
+        expected = twin["expected"]
+        twin_values = {m: [d["scores"][m] for d in twin["draws"]] for m in CHECKED_METRICS}
     except Exception as exc:
         raise RuntimeError(error_line(exc).replace(str(root), "<draw>")) from None
     finally:
@@ -127,7 +129,7 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
         lo, hi, a = expected[m]["predict_low"], expected[m]["predict_high"], actual[m]
         inside[m] = None if not all(math.isfinite(x) for x in (lo, hi, a)) else bool(lo <= a <= hi)
     return {"draw": task.draw, "n_events": campaign.n_events, "labels": draw.labels, "actual": actual,
-            "expected": {m: expected[m] for m in CHECKED_METRICS}, "inside": inside}
+            "expected": {m: expected[m] for m in CHECKED_METRICS}, "twin_values": twin_values, "inside": inside}
 
 
 def _summary(config: TwinCheckConfig, done: dict[int, dict], failed) -> dict:
