@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -72,11 +73,20 @@ def test_mirror_reproduces_the_campaign_layout(field, tmp_path):
                  reason="amplitude ratios of noisy envelopes")
 
 
-def test_twin_is_deterministic_and_resumes(field, tmp_path):
+@pytest.fixture(scope="module")
+def one_draw(field, tmp_path_factory):
+    """A twin of ``field`` with one draw (not to be written to: tests copy it)."""
+    root, _, _ = field
+    out = tmp_path_factory.mktemp("twin_one") / "twin"
+    result = run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1))
+    assert result.computed == (0,) and not result.failures
+    return out
+
+
+def test_twin_is_deterministic_and_resumes(field, one_draw, tmp_path):
     root, _, _ = field
     a, b = tmp_path / "a", tmp_path / "b"
-    first = run_twin(root / "campaign", root / "identify", BRIDGE, a, config=TwinConfig(n_draws=1))
-    assert first.computed == (0,) and not first.failures
+    shutil.copytree(one_draw, a)
     both = run_twin(root / "campaign", root / "identify", BRIDGE, b, config=TwinConfig(n_draws=2), workers=2)
     assert both.computed == (0, 1)
     assert read_twin(a)["draws"][0] == read_twin(b)["draws"][0]  # the same draw whatever the worker count
@@ -96,16 +106,17 @@ def test_twin_is_deterministic_and_resumes(field, tmp_path):
     assert "3 events" in section and "dA/dt error, energy-weighted" in section
 
 
-def test_a_journalled_draw_survives_a_failed_run(field, tmp_path):
+def test_a_journalled_draw_survives_a_failed_run(field, one_draw, tmp_path):
     root, _, _ = field
     out = tmp_path / "t"
-    run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1))
+    shutil.copytree(one_draw, out)
     journal = (out / "twin.jsonl").read_text()
     with (out / "twin.jsonl").open("a") as fh:
         fh.write('{"task_id": 1, "ok": tr')  # a run killed while writing its next line
     again = run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1))
     assert again.resumed == (0,) and again.computed == ()
     assert (out / "twin.jsonl").read_text() == journal
+    assert (out / "twin.json").read_bytes() == (one_draw / "twin.json").read_bytes()
     with pytest.raises(InputError, match="twin of another"):
         run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1, seed=1))
 
