@@ -187,3 +187,10 @@ def test_twin_check_compares_actual_figures_with_the_twin_range(tmp_path):
             assert row["inside"][m] == (lo <= a <= hi)
         assert summary["share_inside"][m]["assessed"] == int(row["inside"][m] is not None)
     assert "Does the twin predict?" in page.read_text()
+
+
+def test_the_greybox_bridge_example_is_a_twin_bridge_file():
+    from pathlib import Path
+
+    bridge = read_bridge(Path(__file__).parent.parent / "examples" / "greybox_bridge_default.toml")
+    assert (bridge.mass, bridge.depth, bridge.frequency, bridge.mode_shape) == (27700.0, 3.5, 0.327, (0.707, 1.0, 0.707))
