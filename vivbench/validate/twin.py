@@ -193,8 +193,9 @@ def _spread(values: Sequence[float], bounds: tuple[float, float], log: bool) -> 
 _BOUNDS = {"coverage": (0.0, 1.0), "flagged_right_share": (0.0, 1.0), "n_flagged": (0.0, math.inf)}
 
 
-def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], failed: Sequence[int]) -> dict:
-    """The content of ``twin.json``: the inputs, each draw's scores and the expected recovery."""
+def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], failed: dict[int, str]) -> dict:
+    """The content of ``twin.json``: the inputs, each draw's scores, the failed draws' errors and the expected
+    recovery."""
     draws = [rows[d] for d in sorted(rows)]
     expected = {m: _spread([r["scores"][m] for r in draws], _BOUNDS.get(m, (0.0, math.inf)), log=m not in _BOUNDS)
                 for m in TWIN_METRICS}
@@ -206,7 +207,8 @@ def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], fa
                    "section_offset": mirror.section_offset, "noise_density_ug_rthz": mirror.noise_density,
                    "anemometer_offset_m": mirror.anemometer_offset, "frequency_hz": mirror.frequency,
                    "mode_shape_measured": list(mirror.mode_shape)},
-        "draws": draws, "failed": sorted(int(d) for d in failed), "expected": expected,
+        "draws": draws, "failed": sorted(int(d) for d in failed),
+        "errors": {str(d): failed[d] for d in sorted(failed)}, "expected": expected,
         "range": "low/high: 5th and 95th percentiles of the draws; predict_low/predict_high: 90 % prediction "
                  "range of one more campaign, mean +- t(0.95, K-1) s sqrt(1 + 1/K) over K draws (of the "
                  "logarithm for the errors)",

@@ -129,7 +129,8 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
         lo, hi, a = expected[m]["predict_low"], expected[m]["predict_high"], actual[m]
         inside[m] = None if not all(math.isfinite(x) for x in (lo, hi, a)) else bool(lo <= a <= hi)
     return {"draw": task.draw, "n_events": campaign.n_events, "labels": draw.labels, "actual": actual,
-            "expected": {m: expected[m] for m in CHECKED_METRICS}, "twin_values": twin_values, "inside": inside}
+            "expected": {m: expected[m] for m in CHECKED_METRICS}, "twin_values": twin_values,
+            "twin_errors": twin.get("errors", {}), "inside": inside}
 
 
 def _summary(config: TwinCheckConfig, done: dict[int, dict], failed) -> dict:
