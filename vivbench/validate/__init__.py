@@ -139,6 +139,7 @@ from vivbench.validate.study_report import (
     study_summary,
 )
 from vivbench.validate.twin import (
+    AERO_TRIES,
     METRIC_NAMES,
     TWIN_FILE,
     TwinConfig,
@@ -181,7 +182,7 @@ from vivbench.validate.twin_mirror import (
 )
 
 __all__ = [
-    "METRIC_NAMES", "TWIN_FILE", "TwinConfig", "TwinResult", "TwinTask", "read_twin", "run_twin", "run_twin_task",
+    "AERO_TRIES", "METRIC_NAMES", "TWIN_FILE", "TwinConfig", "TwinResult", "TwinTask", "read_twin", "run_twin", "run_twin_task",
     "twin_inputs", "twin_markdown", "twin_summary", "band_curves", "draw_aero", "fit_aero", "perturbed_curves",
     "TWIN_METRICS", "PoolSettings", "chain_scores", "identify_config_from_json", "pool_method", "pool_settings",
     "run_chain", "CHECKED_METRICS", "TwinCheckConfig", "run_twin_check", "run_twin_check_task", "twin_check_markdown",

@@ -10,8 +10,9 @@ recovery on this bridge: the median of each figure, its 90 % range for one more 
 normal-theory prediction interval over the draws, of the logarithm for the errors; honest with few
 draws) and the draws' 5th to 95th percentiles.
 
-Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics,
-the others the events. One task is one draw; finished draws are journalled (``OUT/twin.jsonl``),
+Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics
+(redrawn from the same stream, up to :data:`AERO_TRIES` times, while an event's averaged truth
+grows without bound and cannot be generated), the others the events. One task is one draw; finished draws are journalled (``OUT/twin.jsonl``),
 so a run stopped part-way keeps them and the next run resumes; ``OUT/twin.json`` and
 ``OUT/twin.md`` are rewritten atomically from the journal alone (no wall times), so the same
 inputs and seed give the same bytes whatever the worker count.
@@ -46,7 +47,7 @@ from vivbench.validate.twin_chain import (TWIN_METRICS, PoolSettings, chain_scor
 from vivbench.validate.twin_mirror import (CampaignMirror, TwinBridge, measure_campaign, mirror_generator,
                                            mirror_specs, mirror_structure, read_bridge)
 
-__all__ = ["TwinConfig", "TwinTask", "TwinResult", "twin_inputs", "run_twin", "run_twin_task", "twin_summary",
+__all__ = ["AERO_TRIES", "TwinConfig", "TwinTask", "TwinResult", "twin_inputs", "run_twin", "run_twin_task", "twin_summary",
            "twin_markdown", "read_twin", "TWIN_FILE", "METRIC_NAMES"]
 
 #: The summary file of a twin's output directory.
@@ -134,20 +135,37 @@ def twin_inputs(campaign_dir, results_dir, *, max_events: int | None = None) -> 
     return events, [r for r in sorted(results, key=lambda p: p.name) if r.name.removesuffix(".identify.nc") in keep]
 
 
+#: Draws of the aerodynamics tried per twin draw before it fails: a draw whose averaged truth grows without bound
+#: in some event (a large nonlinear term where Y1 < 0) cannot be generated and is redrawn.
+AERO_TRIES = 5
+
+
+def _twin_campaign(task: TwinTask, model, structure, children, root: Path):
+    """The twin's aerodynamics and event files: redrawn (from the same stream) while an event cannot be generated."""
+    rng = np.random.default_rng(children[0])
+    for attempt in range(1, AERO_TRIES + 1):
+        aero, misfit = draw_aero(model, structure, task.wind_range, rng)
+        generator = mirror_generator(task.mirror, structure, aero)
+        try:
+            files = [write_event(generate_event(spec, generator, seed, campaign_seed=task.seed),
+                                 root / "campaign" / f"{spec.event_id}.nc")
+                     for spec, seed in zip(mirror_specs(task.mirror), children[1:])]
+            return aero, misfit, attempt, files
+        except InputError:
+            shutil.rmtree(root / "campaign", ignore_errors=True)
+            if attempt == AERO_TRIES:
+                raise
+
+
 def run_twin_task(task: TwinTask) -> dict[str, Any]:
     """Generate one twin campaign, run the chain on it and score it; runs in a worker."""
     root_seed = np.random.SeedSequence(task.seed, spawn_key=(task.draw,))
     children = root_seed.spawn(len(task.mirror.events) + 1)
     model = load_campaign_model(task.pool.model_path)
     structure = mirror_structure(task.mirror, task.bridge)
-    aero, misfit = draw_aero(model, structure, task.wind_range, np.random.default_rng(children[0]))
-    generator = mirror_generator(task.mirror, structure, aero)
     root = task_directory(task.work_root, f"twin{task.draw:04d}-")
     try:
-        files = []
-        for spec, seed in zip(mirror_specs(task.mirror), children[1:]):
-            files.append(write_event(generate_event(spec, generator, seed, campaign_seed=task.seed),
-                                     root / "campaign" / f"{spec.event_id}.nc"))
+        aero, misfit, tries, files = _twin_campaign(task, model, structure, children, root)
         identify = identify_config_from_json(task.mirror.identify_json)
         fitted, records, truths, windows = run_chain(files, root / "identify", identify, pool_method(task.pool),
                                                      wind_smoothing_s=task.pool.wind_smoothing_s)
@@ -157,7 +175,7 @@ def run_twin_task(task: TwinTask) -> dict[str, Any]:
         raise RuntimeError(error_line(exc).replace(str(root), "<draw>")) from None
     finally:
         shutil.rmtree(root, ignore_errors=True)
-    return {"draw": task.draw, "scores": scores, "n_events": n_events, "aero_misfit": misfit,
+    return {"draw": task.draw, "scores": scores, "n_events": n_events, "aero_misfit": misfit, "aero_tries": tries,
             "aero": {"Y1": dataclasses.asdict(aero.Y1), "C_L": dataclasses.asdict(aero.C_L),
                      "e1": dataclasses.asdict(aero.e1), "e2": dataclasses.asdict(aero.e2)}}
 

@@ -13,8 +13,9 @@ A draw of the twin's aerodynamics:
 2. fits the generator's shapes to the perturbed curves over the data's wind range by weighted
    least squares (weights the band's width, floored at 5 % of each curve's largest value): a
    Gaussian bell of the reduced velocity for Y1 and for C_L (C_L >= 0), logistic steps for e1 and
-   e2 centred on Y1's bell (width 1.5 in reduced velocity), e1, e2 >= 0 (they limit the amplitude,
-   as in the generator family; a negative one can make the truth grow without bound), no yaw factor.
+   e2 centred on Y1's bell (width 1.5 in reduced velocity), 0 <= e1 <= 100 and 0 <= e2 <= 1500 (they
+   limit the amplitude, as in the generator family, whose values stay below 50 and 700; a negative
+   one, or a large one where Y1 < 0, can make the truth grow without bound), no yaw factor.
 
 The twin's truth thus lies in the generator's class, outside the identification's, and within the
 field model's uncertainty where the data constrain it; outside the data's winds it follows the
@@ -39,7 +40,7 @@ __all__ = ["band_curves", "perturbed_curves", "fit_aero", "draw_aero"]
 _E_WIDTH = 1.5
 #        Y1: peak centre width baseline | e1: start end | e2: start end | C_L: peak centre width baseline
 _LOWER = np.array([-50.0, 0.5, 0.05, -200.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.05, 0.0])
-_UPPER = np.array([500.0, 40.0, 20.0, 50.0, 2e3, 2e3, 1e5, 1e5, 5.0, 40.0, 20.0, 1.0])
+_UPPER = np.array([500.0, 40.0, 20.0, 50.0, 100.0, 100.0, 1500.0, 1500.0, 5.0, 40.0, 20.0, 1.0])
 
 
 def band_curves(model, wind: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
