@@ -162,6 +162,13 @@ def twin_check_markdown(summary: dict) -> str:
             e, a = r["expected"][m], r["actual"][m]
             lines.append(f"| {r['draw']} | {m} | {a:.3g} | {e['predict_low']:.3g} - {e['predict_high']:.3g} | "
                          f"{'n/a' if r['inside'][m] is None else ('yes' if r['inside'][m] else 'no')} |")
+    failed_twins = [f"draw {r['draw']}: {len(r.get('twin_errors', {}))} of {c['n_twins']}" for r in summary["draws"]
+                    if r.get("twin_errors")]
+    if failed_twins:
+        lines += ["", "Twin draws that failed (their figures are left out of the range): " + "; ".join(failed_twins) + "."]
+    lines += ["", "The twin's 90 % range is the normal-theory prediction interval of one more campaign over the twin "
+              "draws (of the logarithm for the errors); with few twin draws it is wide, so the share inside says "
+              "little about a twin with many draws."]
     if summary["failed"]:
         lines += ["", f"Failed draws (retried by the next run): {', '.join(map(str, summary['failed']))}."]
     return "\n".join(lines) + "\n"
