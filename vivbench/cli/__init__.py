@@ -32,7 +32,7 @@ EXIT_INPUT = 2  # bad input or an OSError: one line
 EXIT_INTERRUPTED = 130
 
 # Order of appearance in ``vivbench --help``.
-_COMMANDS = ("synth", "import_", "events", "identify", "pool", "cluster", "forecast", "refit", "greybox", "validate", "compare", "leaderboard", "sweep", "study", "plot_event", "report", "demo")
+_COMMANDS = ("synth", "import_", "events", "identify", "pool", "cluster", "forecast", "refit", "greybox", "validate", "compare", "leaderboard", "sweep", "study", "twin", "plot_event", "report", "demo")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -32,6 +32,27 @@ def progress(total: int, desc: str, unit: str = "event"):
     return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=None)
 
 
+def run_resumable(command: str, total: int, unit: str, saved: str, call):
+    """``call(advance)`` under a progress bar, ``advance(n_done, n_total)`` moving it.
+
+    Returns ``call``'s value, or None after Ctrl-C, which ends with one line on stderr saying that
+    ``saved`` (what was kept) lets the same command resume.
+    """
+    bar = progress(total, command, unit=unit)
+
+    def advance(done: int, _total: int) -> None:
+        bar.update(done - bar.n)
+
+    try:
+        return call(advance)
+    except KeyboardInterrupt:
+        bar.close()
+        print(f"vivbench {command}: interrupted; {saved}: run the same command again to resume", file=sys.stderr)
+        return None
+    finally:
+        bar.close()
+
+
 def event_paths(inputs: list[str]) -> list[Path]:
     """Expand campaign directories into their event files; keep files as given."""
     from vivbench.io.event import list_events

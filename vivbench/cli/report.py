@@ -12,7 +12,8 @@ def run(args) -> int:
 
     extra = {step: getattr(args, step) for step in EXTRA_STEPS}
     path = write_report(args.name, args.campaign, args.results, out_root=args.out_root, extra_dirs=extra,
-                        events=args.events, max_rows=args.max_rows, baseline=args.baseline)
+                        events=args.events, max_rows=args.max_rows, baseline=args.baseline,
+                        twin=args.twin)
     not_run = [step for step, d in extra.items() if d is None or not Path(d).is_dir()]
     print(f"wrote {path}" + (f" (not run: {', '.join(not_run)})" if not_run else ""))
     return 0
@@ -32,6 +33,9 @@ def register(sub) -> None:
                         "campaign (truth inside the model class: the inverse crime) of `vivbench demo --mode "
                         "in_library --out DIR` with the same seed: DIR holds campaign/ and identify/, and "
                         "optionally cluster/, forecast/, validate/ (default: none; the report is then unchanged)")
+    s.add_argument("--twin", default=None, metavar="DIR",
+                   help="output directory of `vivbench twin` on this campaign: adds the section \"How far to trust "
+                        "this\" with the recovery expected on this bridge (default: none; the report is then unchanged)")
     s.add_argument("--events", nargs="+", default=None, metavar="EVENT_ID",
                    help="events featured in the figures (default: the first three with results)")
     s.add_argument("--max-rows", type=int, default=30, help="rows shown of each embedded CSV (default 30)")

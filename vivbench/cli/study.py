@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from vivbench.cli.common import DEFAULT_WORKERS, progress, record_command
+from vivbench.cli.common import DEFAULT_WORKERS, record_command, run_resumable
 
 
 def run(args) -> int:
@@ -15,20 +15,12 @@ def run(args) -> int:
                          methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
                          max_events=args.max_events,
                          max_duration=None if args.max_duration is None else args.max_duration * 60.0)
-    bar = progress(len(config.draws), "study", unit="draw")
-
-    def advance(done: int, _total: int) -> None:
-        bar.update(done - bar.n)
-
-    try:
-        result = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, progress=advance)
-    except KeyboardInterrupt:
-        bar.close()
-        print(f"vivbench study: interrupted; the finished draws are saved in {Path(args.out) / 'study.jsonl'}: "
-              "run the same command again to resume", file=sys.stderr)
+    result = run_resumable("study", len(config.draws), "draw",
+                           f"the finished draws are saved in {Path(args.out) / 'study.jsonl'}",
+                           lambda advance: run_study(config, args.out, workers=args.workers, scheduler=args.scheduler,
+                                                     progress=advance))
+    if result is None:
         return 130
-    finally:
-        bar.close()
     record_command(args.out, args)
     for draw, message in sorted(result.failures.items()):
         print(f"vivbench study: draw {draw}: {message}", file=sys.stderr)

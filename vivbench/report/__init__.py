@@ -26,6 +26,7 @@ from vivbench.report.leaderboard import LEADERBOARD_TITLE, leaderboard_section
 from vivbench.report.markdown import EXTRA_STEPS, write_report
 from vivbench.report.pair_figures import PAIR_COLOURS, recovery_pair_figure
 from vivbench.report.tables import md_cell, md_table, produced_by
+from vivbench.report.twin import twin_section
 from vivbench.report.sidebyside import MODE_LABELS, CampaignRun, baseline_section, campaign_run, inverse_crime_paragraph
 
 __all__ = [
@@ -36,5 +37,5 @@ __all__ = [
     "greybox_section", "greybox_simulation_figure", "greybox_yaw_figure", "HEADLINE_BEGIN", "HEADLINE_END", "HEADLINE_ROWS",
     "HEADLINE_SECTION", "headline_table", "readme_with_headline", "SECTION_COLOURS", "count_word", "figure_file",
     "section_index", "curves_figure", "ReportFigures", "campaign_model_figures", "paper_figures", "md_cell", "md_table",
-    "produced_by",
+    "produced_by", "twin_section",
 ]

@@ -34,6 +34,7 @@ from vivbench.report.leaderboard import leaderboard_section
 from vivbench.report.figure_sections import ReportFigures, campaign_model_figures, paper_figures
 from vivbench.report.sidebyside import CampaignRun, baseline_section, campaign_run
 from vivbench.report.tables import md_table, produced_by
+from vivbench.report.twin import twin_section
 
 __all__ = ["EXTRA_STEPS", "write_report"]
 
@@ -147,7 +148,7 @@ def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
 def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                  extra_dirs: Mapping[str, Path | str | None] | None = None, events: Sequence[str] | None = None,
                  max_rows: int = 30, progress: Callable[[str], None] | None = None,
-                 baseline: Path | str | CampaignRun | None = None) -> Path:
+                 baseline: Path | str | CampaignRun | None = None, twin: Path | str | None = None) -> Path:
     """Write ``<out_root>/<name>/report.md`` with its figures.
 
     Parameters
@@ -182,6 +183,10 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
         :class:`vivbench.report.sidebyside.CampaignRun` naming them). Adds the section
         of :func:`vivbench.report.sidebyside.baseline_section` after the
         recovery tables. Without it the report is unchanged.
+    twin : path, optional
+        Output directory of ``vivbench twin`` on this campaign: adds the section "How far to
+        trust this" (:func:`vivbench.report.twin.twin_section`) after the recovery tables. Without
+        it the report is unchanged.
 
     Returns
     -------
@@ -217,7 +222,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
                              f"{results_dir}; available: {sorted(by_id)}")
     out_dir = Path(out_root) / name
     out_dir.mkdir(parents=True, exist_ok=True)
-    command = _report_command(name, campaign_dir, results_dir, Path(out_root), extra_dirs, baseline)
+    command = _report_command(name, campaign_dir, results_dir, Path(out_root), extra_dirs, baseline, twin)
     say = progress or (lambda _label: None)
 
     info = [_event_info(eid, ev, res) for eid, ev, res in pairs]
@@ -246,6 +251,9 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
 
     md += _recovery_section(info, command)
     say("recovery")
+    if twin is not None:
+        md += twin_section(twin)
+        say("twin")
     if baseline_run is not None:
         md += _side_by_side_section(campaign_dir, results_dir, extra_dirs, baseline_run, out_dir, command, written, say)
 
@@ -263,7 +271,7 @@ def write_report(name: str, campaign_dir, results_dir, *, out_root="reports",
     return report
 
 
-def _report_command(name, campaign_dir, results_dir, out_root, extra_dirs, baseline=None) -> str:
+def _report_command(name, campaign_dir, results_dir, out_root, extra_dirs, baseline=None, twin=None) -> str:
     parts = ["vivbench report", f"--campaign {campaign_dir}", f"--results {results_dir}", f"--name {name}",
              f"--out-root {out_root}"]
     for step in EXTRA_STEPS:
@@ -273,6 +281,8 @@ def _report_command(name, campaign_dir, results_dir, out_root, extra_dirs, basel
         parts.append(f"--baseline <run of {baseline.campaign} and {baseline.results}>")
     elif baseline is not None:
         parts.append(f"--baseline {baseline}")
+    if twin is not None:
+        parts.append(f"--twin {twin}")
     return " ".join(parts)
 
 

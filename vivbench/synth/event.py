@@ -370,6 +370,8 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
 def _script_dict(spec: EventSpec, with_place: bool) -> dict:
     """The spec as plain data; its place in the campaign only when slow changes use it."""
     data = json.loads(json.dumps(asdict(spec)))
+    if data["script"].get("yaws") is None:  # files without a scripted yaw history save as before it existed
+        data["script"].pop("yaws", None)
     if not with_place:
         del data["number"], data["campaign_time"]
     return data

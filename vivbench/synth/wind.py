@@ -55,12 +55,16 @@ class WindScript:
     speeds : mean perpendicular speed at the knots, m/s
     side : +1 if the wind comes from the span azimuth + 90 deg, -1 from azimuth - 90 deg
     yaw_deg : mean angle between the wind and the span's normal, degrees
+    yaws : angle between the wind and the span's normal at the knots, degrees, or None;
+        when given, the yaw follows these knots (a scripted yaw history, e.g. a measured one)
+        instead of the constant ``yaw_deg`` and the wind's ``event_yaw_scale``/``shared_yaw_deg``
     """
 
     times: tuple[float, ...]
     speeds: tuple[float, ...]
     side: int = 1
     yaw_deg: float = 0.0
+    yaws: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "times", tuple(float(x) for x in self.times))
@@ -76,6 +80,11 @@ class WindScript:
             raise InputError(f"WindScript side must be +1 or -1; got {self.side}")
         if abs(self.yaw_deg) >= 60:
             raise InputError(f"WindScript yaw_deg must be within +-60 degrees; got {self.yaw_deg}")
+        if self.yaws is not None:
+            object.__setattr__(self, "yaws", tuple(float(x) for x in self.yaws))
+            if len(self.yaws) != len(t) or not all(abs(y) < 60 for y in self.yaws):
+                raise InputError(f"WindScript yaws must give one angle within +-60 degrees per knot ({len(t)}); "
+                                 f"got {self.yaws}")
 
     @property
     def duration(self) -> float:
@@ -123,8 +132,8 @@ def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.rando
     """Evaluate the scripted mean wind with its random wander at times ``t`` (s) at ``n_sections`` sections.
 
     The yaw is the script's mean yaw times ``wind.event_yaw_scale`` (or ``wind.shared_yaw_deg``
-    when set) plus the slow random wander plus the shared swing
-    ``wind.yaw_swing_deg sin(2 pi t / wind.yaw_swing_period)``.
+    when set; or the script's ``yaws`` interpolated between its knots when given) plus the slow
+    random wander plus the shared swing ``wind.yaw_swing_deg sin(2 pi t / wind.yaw_swing_period)``.
     """
     t = np.asarray(t, dtype=float)
     base = PchipInterpolator(script.times, script.speeds)(np.clip(t, 0.0, script.duration))
@@ -134,6 +143,8 @@ def mean_wind(script: WindScript, t: np.ndarray, wind: WindConfig, rng: np.rando
     U = (base + common)[:, None] * (1.0 + offsets[None, :] + wander)
     U = np.maximum(U, wind.min_speed)
     mean_yaw = script.yaw_deg * wind.event_yaw_scale if wind.shared_yaw_deg is None else wind.shared_yaw_deg
+    if script.yaws is not None:
+        mean_yaw = PchipInterpolator(script.times, script.yaws)(np.clip(t, 0.0, script.duration))
     yaw = mean_yaw + slow_process(t, wind.direction_wander_deg, wind.slow_timescales, rng)
     if wind.yaw_swing_deg:
         yaw = yaw + wind.yaw_swing_deg * np.sin(2.0 * np.pi * t / wind.yaw_swing_period)

@@ -121,6 +121,7 @@ from vivbench.validate.study import (
     METHOD_ALIASES,
     STUDY_COLUMNS,
     StudyConfig,
+    check_draws,
     StudyResult,
     StudyTask,
     method_spec,
@@ -138,9 +139,57 @@ from vivbench.validate.study_report import (
     study_markdown,
     study_summary,
 )
+from vivbench.validate.twin import (
+    AERO_TRIES,
+    METRIC_NAMES,
+    TWIN_FILE,
+    TwinConfig,
+    TwinResult,
+    TwinTask,
+    read_twin,
+    run_twin,
+    run_twin_task,
+    twin_inputs,
+    twin_markdown,
+    twin_summary,
+)
+from vivbench.validate.twin_aero import band_curves, draw_aero, fit_aero, perturbed_curves
+from vivbench.validate.twin_chain import (
+    TWIN_METRICS,
+    PoolSettings,
+    chain_scores,
+    identify_config_from_json,
+    pool_method,
+    pool_settings,
+    run_chain,
+)
+from vivbench.validate.twin_check import (
+    CHECKED_METRICS,
+    TwinCheckConfig,
+    run_twin_check,
+    run_twin_check_task,
+    twin_check_markdown,
+)
+from vivbench.validate.twin_mirror import (
+    BRIDGE_KEYS,
+    CampaignMirror,
+    EventMirror,
+    TwinBridge,
+    measure_campaign,
+    mirror_generator,
+    mirror_specs,
+    mirror_structure,
+    read_bridge,
+)
 
 __all__ = [
     "BoundaryScore", "boundary_f1",
+    "AERO_TRIES", "METRIC_NAMES", "TWIN_FILE", "TwinConfig", "TwinResult", "TwinTask", "read_twin", "run_twin", "run_twin_task",
+    "twin_inputs", "twin_markdown", "twin_summary", "band_curves", "draw_aero", "fit_aero", "perturbed_curves",
+    "TWIN_METRICS", "PoolSettings", "chain_scores", "identify_config_from_json", "pool_method", "pool_settings",
+    "run_chain", "CHECKED_METRICS", "TwinCheckConfig", "run_twin_check", "run_twin_check_task", "twin_check_markdown",
+    "BRIDGE_KEYS", "CampaignMirror", "EventMirror", "TwinBridge", "measure_campaign", "mirror_generator",
+    "mirror_specs", "mirror_structure", "read_bridge",
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
     "STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",
@@ -192,7 +241,7 @@ __all__ = [
     "record_yaw_on",
     "write_validation",
     "upgrade_metrics",
-    "DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "method_spec",
+    "DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyResult", "StudyTask", "check_draws", "method_spec",
     "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks",
     "LABEL_COLUMNS", "PROMISE_MIN_FLAGS", "PROMISE_SHARE", "SUMMARY_SCORES", "study_markdown", "study_summary",
 ]

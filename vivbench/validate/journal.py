@@ -15,13 +15,19 @@ import io
 import json
 import math
 import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
+from collections.abc import Callable, Sequence
+from contextlib import closing
+
 from vivbench.core.errors import InputError
+from vivbench.core.parallel import run_tasks
 from vivbench.io.netcdf import atomic_path
 
-__all__ = ["load", "append", "write_table", "format_value", "check_record"]
+__all__ = ["load", "append", "write_table", "format_value", "check_record", "run_journalled",
+           "counting_progress", "task_directory"]
 
 
 def _valid(record: Any, n_tasks: int, columns) -> bool:
@@ -117,3 +123,61 @@ def check_record(record: Path, fingerprint: str, config: dict, refusal: str) -> 
     text = json.dumps({"fingerprint": fingerprint, "config": config}, indent=1, sort_keys=True) + "\n"
     with atomic_path(record) as tmp:
         tmp.write_text(text)
+
+
+def run_journalled(func: Callable[[Any], dict], tasks: Sequence[Any], journal: Path, done: dict[int, dict], *,
+                   task_id: Callable[[Any], int], failed_row: Callable[[Any], dict], workers: int = 1,
+                   scheduler: str | None = None, progress: Callable[[], None] | None = None
+                   ) -> tuple[list[int], dict[int, str]]:
+    """Run ``func`` on every task (:func:`vivbench.core.parallel.run_tasks`) and journal each outcome as it comes.
+
+    Parameters
+    ----------
+    func : picklable top-level function of one task, returning the task's row (a dict)
+    tasks : the pending tasks
+    journal : the journal file (:func:`append`)
+    done : task id -> row; finished tasks are added to it
+    task_id : the id of a task
+    failed_row : the journal row of a failed task (beside ``task_id`` and ``error``)
+    workers, scheduler : where the tasks run
+    progress : called after every task
+
+    Returns
+    -------
+    computed : ids of the tasks that finished; failures : id -> one-line error (retried by the next run)
+    """
+    computed: list[int] = []
+    failures: dict[int, str] = {}
+    with closing(run_tasks(func, tasks, workers=workers, scheduler=scheduler)) as outcomes:
+        for outcome in outcomes:
+            task = tasks[outcome.index]
+            tid = task_id(task)
+            if outcome.ok:
+                row = {"task_id": tid, **outcome.value}
+                done[tid] = row
+                computed.append(tid)
+            else:
+                row = {"task_id": tid, **failed_row(task), "error": outcome.error}
+                failures[tid] = outcome.error
+            append(journal, tid, outcome.ok, row)
+            if progress is not None:
+                progress()
+    return computed, failures
+
+
+def counting_progress(progress: Callable[[int, int], None], start: int, total: int) -> Callable[[], None]:
+    """A callback for :func:`run_journalled` that calls ``progress(n_done, total)``, counting from ``start``."""
+    count = [start]
+
+    def advance() -> None:
+        count[0] += 1
+        progress(count[0], total)
+
+    return advance
+
+
+def task_directory(work_root: str | None, prefix: str) -> Path:
+    """A new scratch directory for one task: under ``work_root`` (created) or the system's temporary one."""
+    if work_root is not None:
+        Path(work_root).mkdir(parents=True, exist_ok=True)
+    return Path(tempfile.mkdtemp(prefix=prefix, dir=work_root))

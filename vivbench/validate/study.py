@@ -39,10 +39,8 @@ import hashlib
 import json
 import math
 import shutil
-import tempfile
 import time
 from collections.abc import Callable, Sequence
-from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,22 +51,22 @@ from vivbench.analysis.identify import IdentifyConfig, identify_files
 from vivbench.core.errors import InputError, error_line
 from vivbench.models.protocol import model_change_inputs, model_evidence
 from vivbench.core.lock import exclusive_directory
-from vivbench.core.parallel import parse_scheduler, run_tasks
+from vivbench.core.parallel import parse_scheduler
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.netcdf import atomic_path
 from vivbench.regimes.model import model_window_regimes
 from vivbench.synth.family import SPLITS, draw_bridge
 from vivbench.synth.campaign import generate_campaign
-from vivbench.validate.journal import append as journal_append
 from vivbench.validate.journal import check_record
 from vivbench.validate.journal import format_value
+from vivbench.validate.journal import counting_progress, run_journalled, task_directory
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_spec, fit_method, resolve_method
 from vivbench.validate.methods import score_fitted, scoring_inputs
 from vivbench.validate.study_report import LABEL_COLUMNS, study_markdown, study_summary
 
-__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "StudyResult", "method_spec",
-           "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks"]
+__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "StudyResult", "check_draws",
+           "method_spec", "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks"]
 
 #: Short names of the study's methods that are not :func:`resolve_method` names.
 METHOD_ALIASES: dict[str, str] = {}
@@ -110,6 +108,14 @@ def parse_draws(text: str) -> tuple[int, ...]:
     return tuple(sorted(out))
 
 
+def check_draws(draws) -> tuple[int, ...]:
+    """Draw numbers as a tuple of ints; InputError unless distinct, >= 0 and increasing."""
+    out = tuple(int(d) for d in draws)
+    if not out or list(out) != sorted(set(out)) or out[0] < 0:
+        raise InputError(f"draws must be distinct draw numbers >= 0 in increasing order; got {draws!r}")
+    return out
+
+
 @dataclass(frozen=True, kw_only=True)
 class StudyConfig:
     """What a study runs.
@@ -138,10 +144,7 @@ class StudyConfig:
     def __post_init__(self) -> None:
         if self.split not in SPLITS:
             raise InputError(f"split must be one of {', '.join(SPLITS)}; got {self.split!r}")
-        draws = tuple(int(d) for d in self.draws)
-        if not draws or list(draws) != sorted(set(draws)) or draws[0] < 0:
-            raise InputError(f"draws must be distinct draw numbers >= 0 in increasing order; got {self.draws!r}")
-        object.__setattr__(self, "draws", draws)
+        object.__setattr__(self, "draws", check_draws(self.draws))
         methods = tuple(self.methods)
         if not methods or len(set(methods)) != len(methods):
             raise InputError(f"methods must be one or more distinct names; got {list(methods)}")
@@ -313,9 +316,7 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
     start = time.perf_counter()
     draw = draw_bridge(task.split, task.draw)
     campaign = draw.campaign_config(max_events=task.max_events, max_duration=task.max_duration)
-    if task.work_root is not None:
-        Path(task.work_root).mkdir(parents=True, exist_ok=True)
-    root = Path(tempfile.mkdtemp(prefix=f"d{task.draw:05d}-", dir=task.work_root))
+    root = task_directory(task.work_root, f"d{task.draw:05d}-")
     try:
         made = generate_campaign(campaign, root / "campaign", workers=1)
         generated = time.perf_counter()
@@ -448,21 +449,11 @@ def run_study(config: StudyConfig, out_dir: str | Path, *, workers: int = 1, sch
         pending = [dataclasses.replace(t, work_root=work_root) for t in study_tasks(config) if t.draw not in done]
         if progress is not None:
             progress(len(resumed), len(config.draws))
-        computed, failures = [], {}
         try:
-            with closing(run_tasks(run_study_task, pending, workers=workers, scheduler=scheduler)) as outcomes:
-                for outcome in outcomes:
-                    task = pending[outcome.index]
-                    if outcome.ok:
-                        row = {"task_id": task.draw, **outcome.value}
-                        done[task.draw] = row
-                        computed.append(task.draw)
-                    else:
-                        row = {"task_id": task.draw, "draw": task.draw, "methods": {}, "error": outcome.error}
-                        failures[task.draw] = outcome.error
-                    journal_append(journal, task.draw, outcome.ok, row)
-                    if progress is not None:
-                        progress(len(resumed) + len(computed) + len(failures), len(config.draws))
+            computed, failures = run_journalled(
+                run_study_task, pending, journal, done, task_id=lambda t: t.draw,
+                failed_row=lambda t: {"draw": t.draw, "methods": {}}, workers=workers, scheduler=scheduler,
+                progress=None if progress is None else counting_progress(progress, len(resumed), len(config.draws)))
         finally:
             shutil.rmtree(work, ignore_errors=True)
         rows = _csv_rows(config, done)

@@ -1,0 +1,196 @@
+"""The synthetic twin of a campaign (vivbench.validate.twin*): mirror, determinism, resumption, bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from tests.helpers import assert_close
+from vivbench.analysis.identify import identify_files
+from vivbench.analysis.pool import pool_results
+from vivbench.analysis.selection import varying_selection
+from vivbench.cli import main
+from vivbench.core.errors import InputError
+from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
+from vivbench.io.event import read_event, write_event
+from vivbench.report import twin_section
+from vivbench.synth import AeroConfig, CampaignConfig, generate_campaign, generate_event
+from vivbench.validate.twin import TwinConfig, read_twin, run_twin
+from vivbench.validate.twin_mirror import (TwinBridge, measure_campaign, mirror_generator, mirror_specs,
+                                           mirror_structure, read_bridge)
+
+BRIDGE = TwinBridge(mass=2.77e4, depth=3.5, damping_ratio=0.003)
+
+
+@pytest.fixture(scope="module")
+def field(tmp_path_factory):
+    """A tiny 'field' campaign (3 events of 5-6 min) identified and pooled as vivbench pool does."""
+    root = tmp_path_factory.mktemp("twin_field")
+    made = generate_campaign(CampaignConfig(n_events=3, seed=5, duration=(300.0, 360.0)), root / "campaign")
+    results, failures = identify_files(made.files, root / "identify")
+    assert not failures
+    model = varying_selection(n_bootstrap=10, n_perturbations=0)
+    write_campaign_regimes(pool_results(sorted(results), model), root / "identify")
+    model.save(root / "identify" / MODEL_NAME)
+    return root, sorted(made.files), sorted(results)
+
+
+def test_mirror_reproduces_the_campaign_layout(field, tmp_path):
+    root, events, results = field
+    mirror = measure_campaign(events, results, knot_step=60.0)  # short events: knots every minute
+    structure = mirror_structure(mirror, BRIDGE)
+    generator = mirror_generator(mirror, structure, AeroConfig())
+    twin_files = []
+    for i, spec in enumerate(mirror_specs(mirror)):
+        twin_files.append(write_event(generate_event(spec, generator, i), tmp_path / "campaign" / f"{spec.event_id}.nc"))
+    twin_results, failures = identify_files(twin_files, tmp_path / "identify")
+    assert not failures
+    again = measure_campaign(twin_files, sorted(twin_results), knot_step=60.0)
+    assert again.sections == mirror.sections
+    assert (again.wind_rate, again.accel_rate) == (mirror.wind_rate, mirror.accel_rate)
+    assert [e.event_id for e in again.events] == [e.event_id for e in mirror.events]
+    for field_path, twin_path in zip(events, twin_files):
+        f, t = read_event(field_path, truth=False), read_event(twin_path, truth=False)
+        assert f.attrs["start_time"] == t.attrs["start_time"]
+        assert f["accel"].ds.sizes["time"] == t["accel"].ds.sizes["time"]
+        assert f["wind"].ds.sizes["time"] == t["wind"].ds.sizes["time"]
+    for a, b in zip(mirror.events, again.events):
+        assert a.duration == b.duration and a.times == b.times
+        # the twin's measured mean wind follows the field's: its own turbulence and sections' spread differ
+        assert_close(np.array(b.speeds), np.array(a.speeds), rtol=0.1, atol=0.3,
+                     reason="a new turbulence realisation moves the smoothed mean wind by a few tenths of m/s")
+        assert_close(np.abs(b.yaws)[1:-1], np.abs(a.yaws)[1:-1], atol=4.0,
+                     reason="yaw of a new turbulence realisation, degrees; the end knots carry the low-pass "
+                            "filter's transients")
+        assert a.side == b.side
+    assert_close(again.turbulence_intensity, mirror.turbulence_intensity, rtol=0.25,
+                 reason="intensity of another realisation over a few 10-minute blocks")
+    assert_close(again.noise_density, mirror.noise_density, rtol=0.1, reason="noise floor from a finite spectrum")
+    assert_close(np.array(again.mode_shape), np.array(structure.mode_shape), atol=0.02,
+                 reason="amplitude ratios of noisy envelopes")
+
+
+@pytest.fixture(scope="module")
+def one_draw(field, tmp_path_factory):
+    """A twin of ``field`` with one draw (not to be written to: tests copy it)."""
+    root, _, _ = field
+    out = tmp_path_factory.mktemp("twin_one") / "twin"
+    result = run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1))
+    assert result.computed == (0,) and not result.failures
+    return out
+
+
+def test_twin_is_deterministic_and_resumes(field, one_draw, tmp_path):
+    root, _, _ = field
+    a, b = tmp_path / "a", tmp_path / "b"
+    shutil.copytree(one_draw, a)
+    both = run_twin(root / "campaign", root / "identify", BRIDGE, b, config=TwinConfig(n_draws=2), workers=2)
+    assert both.computed == (0, 1)
+    assert read_twin(a)["draws"][0] == read_twin(b)["draws"][0]  # the same draw whatever the worker count
+    resumed = run_twin(root / "campaign", root / "identify", BRIDGE, a, config=TwinConfig(n_draws=2))
+    assert resumed.resumed == (0,) and resumed.computed == (1,)
+    assert (a / "twin.json").read_bytes() == (b / "twin.json").read_bytes()
+    assert (a / "twin.md").read_bytes() == (b / "twin.md").read_bytes()
+    summary = read_twin(a)
+    assert summary["mirror"]["n_events"] == 3
+    for stats in summary["expected"].values():
+        if stats["n"] >= 2:
+            assert stats["predict_low"] <= stats["median"] <= stats["predict_high"]
+            assert stats["low"] <= stats["median"] <= stats["high"]
+    assert 0.0 <= summary["expected"]["coverage"]["median"] <= 1.0
+    section = "\n".join(twin_section(a))
+    assert section.startswith("## How far to trust this")
+    assert "3 events" in section and "dA/dt error, energy-weighted" in section
+
+
+def test_a_journalled_draw_survives_a_failed_run(field, one_draw, tmp_path):
+    root, _, _ = field
+    out = tmp_path / "t"
+    shutil.copytree(one_draw, out)
+    journal = (out / "twin.jsonl").read_text()
+    with (out / "twin.jsonl").open("a") as fh:
+        fh.write('{"task_id": 1, "ok": tr')  # a run killed while writing its next line
+    again = run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1))
+    assert again.resumed == (0,) and again.computed == ()
+    assert (out / "twin.jsonl").read_text() == journal
+    assert (out / "twin.json").read_bytes() == (one_draw / "twin.json").read_bytes()
+    with pytest.raises(InputError, match="twin of another"):
+        run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1, seed=1))
+
+
+def test_missing_bridge_file_is_one_line_naming_it(field, tmp_path, capsys):
+    root, _, _ = field
+    missing = tmp_path / "nope.toml"
+    code = main(["twin", str(root / "campaign"), str(root / "identify"), "--bridge", str(missing),
+                 "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and str(missing) in err[0] and "no such bridge file" in err[0]
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[bridge]\ndepth = 3.5\ndamping_ratio = 0.003\n", "mass"),
+    ("[bridge]\nmass = 2e4\ndepth = 3.5\ndamping_ratio = 0.003\nwidth = 30\n", "unknown bridge key"),
+    ("[bridge]\nmass = -2e4\ndepth = 3.5\ndamping_ratio = 0.003\n", "mass"),
+])
+def test_bad_bridge_file_names_the_file(tmp_path, text, message):
+    path = tmp_path / "bridge.toml"
+    path.write_text(text)
+    with pytest.raises(InputError, match=message) as err:
+        read_bridge(path)
+    assert str(path) in str(err.value)
+
+
+def test_bridge_mode_shape_must_match_the_sections(field):
+    _, events, results = field
+    mirror = measure_campaign(events[:1], results[:1])
+    with pytest.raises(InputError, match="mode_shape has 2 values for 3 sections"):
+        mirror_structure(mirror, TwinBridge(mass=2e4, depth=3.0, damping_ratio=0.005, mode_shape=(1.0, 0.5)))
+
+
+@pytest.mark.parametrize("kwargs", [{"n_draws": 0}, {"seed": -1}, {"knot_step": 1.0}, {"max_events": 0}])
+def test_twin_config_refuses_bad_values(kwargs):
+    with pytest.raises(InputError):
+        TwinConfig(**kwargs)
+
+
+def test_twin_json_is_refused_when_not_a_twin(tmp_path):
+    (tmp_path / "twin.json").write_text(json.dumps({"format": "other"}))
+    with pytest.raises(InputError, match="not a twin summary"):
+        read_twin(tmp_path)
+
+
+@pytest.mark.parametrize("kwargs", [{"split": "test"}, {"draws": (2, 1)}, {"n_twins": 0}, {"bootstrap": 1}])
+def test_twin_check_config_refuses_bad_values(kwargs):
+    from vivbench.validate import TwinCheckConfig
+
+    with pytest.raises(InputError):
+        TwinCheckConfig(**kwargs)
+
+
+@pytest.mark.slow
+def test_twin_check_compares_actual_figures_with_the_twin_range(tmp_path):
+    from vivbench.validate import CHECKED_METRICS, TwinCheckConfig, run_twin_check
+
+    config = TwinCheckConfig(split="development", draws=(0,), n_twins=2, max_events=3, max_duration=300.0,
+                             bootstrap=10)
+    path, page, failures = run_twin_check(config, tmp_path)
+    assert not failures
+    summary = json.loads(path.read_text())
+    (row,) = summary["draws"]
+    for m in CHECKED_METRICS:
+        lo, hi, a = row["expected"][m]["predict_low"], row["expected"][m]["predict_high"], row["actual"][m]
+        if row["inside"][m] is not None:
+            assert row["inside"][m] == (lo <= a <= hi)
+        assert summary["share_inside"][m]["assessed"] == int(row["inside"][m] is not None)
+    assert "Does the twin predict?" in page.read_text()
+
+
+def test_the_greybox_bridge_example_is_a_twin_bridge_file():
+    from pathlib import Path
+
+    bridge = read_bridge(Path(__file__).parent.parent / "examples" / "greybox_bridge_default.toml")
+    assert (bridge.mass, bridge.depth, bridge.frequency, bridge.mode_shape) == (27700.0, 3.5, 0.327, (0.707, 1.0, 0.707))

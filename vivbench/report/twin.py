@@ -1,0 +1,66 @@
+"""The report's "How far to trust this" section, from the output directory of ``vivbench twin``."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from vivbench.report.tables import md_table, produced_by
+from vivbench.validate.twin import METRIC_NAMES, read_twin
+
+__all__ = ["twin_section"]
+
+_HEADLINE = ("flagged_right_share", "coverage", "rhs_error_true_AU_energy", "rhs_error_true_AU_median",
+             "curve_error_linear", "curve_error_total", "curve_error_energy")
+
+
+def _fmt(x) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else f"{x:.3g}"
+
+
+def twin_section(directory, command: str | None = None) -> list[str]:
+    """Markdown lines: the twin's expected recovery on this campaign and what it mirrored and assumed.
+
+    Parameters
+    ----------
+    directory : output directory of ``vivbench twin`` (its ``twin.json``)
+    command : the command that wrote it (default: read from ``command.txt`` there, else its canonical form)
+    """
+    directory = Path(directory)
+    summary = read_twin(directory)
+    if command is None:
+        recorded = directory / "command.txt"
+        command = (recorded.read_text().strip() if recorded.is_file()
+                   else f"vivbench twin <campaign> <results> --bridge <bridge.toml> --out {directory}")
+    m, exp = summary["mirror"], summary["expected"]
+    n = len(summary["draws"])
+    rows = [[METRIC_NAMES[k], _fmt(exp[k]["median"]), f"{_fmt(exp[k]['predict_low'])} - {_fmt(exp[k]['predict_high'])}",
+             str(exp[k]["n"])] for k in _HEADLINE if k in exp]
+    right = exp.get("flagged_right_share", {})
+    lines = [
+        "## How far to trust this", "",
+        f"A synthetic twin of this campaign (`{directory}`): {n} synthetic campaign{'s' if n != 1 else ''} with "
+        f"its {m['n_events']} events, sections ({', '.join(m['sections'])}), rates ({m['wind_rate_hz']:g} Hz wind, "
+        f"{m['accel_rate_hz']:g} Hz acceleration), measured mean wind and yaw histories, turbulence intensity "
+        f"({m['turbulence_intensity']:.3f}) and noise floor ({m['noise_density_ug_rthz']:.3g} micro-g/sqrt(Hz)), "
+        "with aerodynamic functions drawn from this campaign's model within its bands, were put through the same "
+        "chain with the same settings and scored against their known truth. The figures below are what to expect of "
+        "the chain on this bridge; the 90 % range is where one more campaign's figure falls (normal-theory "
+        "prediction over the draws, of the logarithm for the errors).", "",
+        md_table(["figure", "expected (median)", "90 % range of a campaign", "draws"], rows), "",
+    ]
+    if right.get("n", 0) and math.isfinite(right.get("predict_low", math.nan)):
+        verdict = ("the flags keep the 95 % promise on the twins" if right["predict_low"] >= 0.95 else
+                   "the flags may fall short of the 95 % promise on this bridge: read the flagged regimes with care")
+        lines += [f"Flagged regimes: {verdict}.", ""]
+    elif exp.get("coverage", {}).get("n", 0) and exp["coverage"]["predict_high"] == 0:
+        lines += ["Flagged regimes: the twins flag no window; this campaign's regimes are not expected to be "
+                  "identifiable.", ""]
+    lines += ["What the twin assumes: the bridge file's structural properties, the generator's shapes for the "
+              "aerodynamic functions (no yaw effect) fitted to this campaign's curves, and the generator's defaults "
+              "for buffeting, shedding and anemometer errors. Where the campaign model is far from the bridge's "
+              "truth the twin inherits its error and is optimistic (docs/field_workflow.md).", "",
+              produced_by(command, "(twin.json)"), ""]
+    if summary["failed"]:
+        lines += [f"Twin draws that failed: {', '.join(map(str, summary['failed']))}.", ""]
+    return lines
