@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
-from tests.helpers import assert_close
+from tests.helpers import REPO, assert_close
 from vivbench.analysis.identify import identify_files
 from vivbench.analysis.pool import pool_results
 from vivbench.analysis.selection import varying_selection
@@ -190,7 +190,5 @@ def test_twin_check_compares_actual_figures_with_the_twin_range(tmp_path):
 
 
 def test_the_greybox_bridge_example_is_a_twin_bridge_file():
-    from pathlib import Path
-
-    bridge = read_bridge(Path(__file__).parent.parent / "examples" / "greybox_bridge_default.toml")
+    bridge = read_bridge(REPO / "examples" / "greybox_bridge_default.toml")
     assert (bridge.mass, bridge.depth, bridge.frequency, bridge.mode_shape) == (27700.0, 3.5, 0.327, (0.707, 1.0, 0.707))
