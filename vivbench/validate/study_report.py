@@ -99,15 +99,29 @@ def _choices(rows: Sequence[dict]) -> dict[str, Any]:
     return {"draws": len(chosen), "yaw_chosen": len(with_yaw)}
 
 
+def _recorded(row: dict, key: str) -> bool:
+    """Whether a method recorded ``key`` for the draw (an evidence column left empty by methods without one)."""
+    return str(row.get(key, "")).strip() not in ("", "nan")
+
+
+def _shown(row: dict) -> bool:
+    """The null test let the verdict flag (``dynamics_shown`` 1)."""
+    return bool(int(_number(row["dynamics_shown"])))
+
+
+def _changed(row: dict) -> bool:
+    """The chosen model's change scan located a change (``stationary`` 0), which withholds every flag."""
+    return _recorded(row, "stationary") and not int(_number(row["stationary"]))
+
+
 def _withheld(rows: Sequence[dict]) -> dict[str, Any]:
     """Draws on which the campaign's held-out evidence did not show its dynamics (``dynamics_shown`` 0):
-    the null model predicted held-out events as well, and no window was flagged."""
-    tested = [r for r in rows if str(r.get("dynamics_shown", "")).strip() not in ("", "nan")]
-    withheld = [r for r in tested if not int(_number(r.get("dynamics_shown")))]
-    # a located change withholds the flags too (the model's stationarity test), where the null did not
-    changed = [r for r in tested if int(_number(r.get("dynamics_shown")))
-               and str(r.get("stationary", "")).strip() not in ("", "nan") and not int(_number(r.get("stationary")))]
-    return {"draws": len(tested), "withheld": len(withheld), "withheld_for_change": len(changed),
+    the null model predicted held-out events as well, and no window was flagged; and the draws whose
+    dynamics were shown but whose chosen model's change scan located a change."""
+    tested = [r for r in rows if _recorded(r, "dynamics_shown")]
+    withheld = [r for r in tested if not _shown(r)]
+    return {"draws": len(tested), "withheld": len(withheld),
+            "withheld_for_change": sum(1 for r in tested if _shown(r) and _changed(r)),
             "forced_only_withheld": sum(1 for r in withheld if str(r.get("forced_only")) == "True"),
             "forced_only": sum(1 for r in tested if str(r.get("forced_only")) == "True")}
 
@@ -146,16 +160,12 @@ def _block(rows: Sequence[dict]) -> dict[str, Any]:
 def _by_evidence(rows: Sequence[dict]) -> list[tuple[str, list[dict]]]:
     """The rows whose own held-out evidence let the verdict flag (dynamics shown, no change located) and the
     rows where it withheld the regimes; empty for a method that records no such evidence."""
-    def known(r, key):
-        return str(r.get(key, "")).strip() not in ("", "nan")
-
-    tested = [r for r in rows if known(r, "dynamics_shown")]
+    tested = [r for r in rows if _recorded(r, "dynamics_shown")]
     if not tested:
         return []
-    allowed = [r for r in tested if int(_number(r["dynamics_shown"]))
-               and not (known(r, "stationary") and not int(_number(r["stationary"])))]
-    withheld = [r for r in tested if r not in allowed]
-    return [("dynamics shown, one model for the campaign", allowed), ("regimes withheld", withheld)]
+    allowed = [_shown(r) and not _changed(r) for r in tested]
+    return [("dynamics shown, one model for the campaign", [r for r, a in zip(tested, allowed) if a]),
+            ("regimes withheld", [r for r, a in zip(tested, allowed) if not a])]
 
 
 def _by_size(rows: Sequence[dict]) -> list[tuple[str, list[dict]]]:
