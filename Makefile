@@ -9,7 +9,7 @@ export OMP_NUM_THREADS := 1
 export MKL_NUM_THREADS := 1
 export MPLBACKEND := Agg
 
-.PHONY: demo test test-slow test-wheel bench bench-quick docs readme install clean
+.PHONY: demo test test-slow test-docs test-wheel bench bench-quick docs readme install clean
 
 $(VENV)/.installed-%: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,12 @@ test-wheel: $(VENV)/.installed-test
 
 test-slow: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -m slow -q
+
+# The user paths as the pages print them: every shell command of the README, the field workflow,
+# the field import and the contributed-methods section of docs/methods.md, run in order in an
+# empty folder (tests/project/test_doc_shell.py; the fast page checks are part of `make test`).
+test-docs: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -m slow -q -p no:cacheprovider tests/project/test_doc_shell.py
 
 # The benchmark suite: speed against the reference packages (pysindy, pynumdiff, pyconturb,
 # pydpc) and the chain's own timings; writes benchmarks/results.md (bench-quick: a reduced

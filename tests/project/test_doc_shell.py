@@ -11,8 +11,8 @@ bridge's properties, a package of methods) are made first from a synthetic campa
 The field import's worked example runs in ``make test`` (one 20 min event: under a minute); the
 pages whose commands take minutes run in the slow tests, with the settings the pages print: the README's
 quickstart (6 events of 30 min), the field workflow (import to report on the two events it imports) and the
-contributed-methods commands of docs/methods.md (a comparison grid and the leaderboard's whole
-scenario suite, the longest).
+contributed-methods commands of docs/methods.md (a comparison grid and a leaderboard of two scenarios).
+`make test-docs` runs these, and CI runs it.
 """
 
 from __future__ import annotations
@@ -182,9 +182,9 @@ def test_contributed_methods_commands_run_as_written(tmp_path):
 
     The folder is the page's tree with the page's ``Damped`` in ``damped/__init__.py``; the grid is
     the page's comment (``[grid] method = [...]``) on the small campaign of
-    ``examples/compare_methods.toml``. The leaderboard runs the whole scenario suite: tens of minutes.
+    ``examples/compare_methods.toml``. The leaderboard scores the two scenarios the page names.
     """
-    from tests.test_doc_snippets import python_blocks
+    from tests.project.test_doc_snippets import python_blocks
 
     damped = next(code for module, code in python_blocks("methods.md") if module == "my_methods")
     package = tmp_path / "my_methods"
