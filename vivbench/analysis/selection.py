@@ -69,6 +69,7 @@ from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
 from vivbench.preprocess.runs import mask_runs
 from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.preprocess.unmeasured_wind import unmeasured_wind_rms
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
 __all__ = ["Candidate", "ModelSelection", "CRITERIA", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "VARYING_OPTIONS", "VARYING_PRIORS", "event_folds",
@@ -138,7 +139,7 @@ def _decimated(record: Record, step_s: float) -> Record:
     sl = slice(None, None, k)
     pick = (lambda x: None if x is None else np.asarray(x)[sl])
     return Record(event_id=record.event_id, t=record.t[sl], A=record.A[sl], U=record.U[sl], dA=record.dA[sl],
-                  yaw=pick(record.yaw), noise_std=record.noise_std)
+                  yaw=pick(record.yaw), noise_std=record.noise_std, wind_distance=record.wind_distance)
 
 
 def held_out_loss(model, record: Record, criterion: str = "output", min_samples: int = 20,
@@ -220,21 +221,31 @@ def wind_error_scale(record: Record, timescale_s: float, single_section_share: f
     ``timescale_s`` (rms over time of each section's deviation from the sections' mean,
     pooled over sections): independent anemometers' point turbulence and offsets. With one
     section there is nothing to compare with, and the error is taken as
-    ``single_section_share`` of the event's mean wind (a stated prior).
+    ``single_section_share`` of the event's mean wind (a stated prior). A section whose wind
+    was taken from an anemometer elsewhere on the span (``Record.wind_distance`` > 0) adds, in
+    quadrature, the rms over the event of its wind's error over that distance at this time scale
+    (:func:`vivbench.preprocess.unmeasured_wind_rms`): the spread of one anemometer copied to every
+    section is 0, yet the sections' winds differ by the turbulence not coherent over the distance.
     """
     rec = smooth_wind(record, float(timescale_s))
     U = rec.U
     S = U.shape[1]
     if S == 1:
         m = float(np.nanmean(U)) if np.isfinite(U).any() else 0.0
-        return np.array([single_section_share * m])
+        return _with_unmeasured(np.array([single_section_share * m]), rec, timescale_s)
     dev = U - np.nanmean(U, axis=1, keepdims=True)
     ok = np.isfinite(dev)
     if not ok.any():
-        return np.zeros(S)
+        return _with_unmeasured(np.zeros(S), rec, timescale_s)
     # pooled over sections, with the S/(S-1) correction for the mean taken over the same sections
     s = math.sqrt(float(np.mean(dev[ok] ** 2)) * S / (S - 1))
-    return np.full(S, s)
+    return _with_unmeasured(np.full(S, s), rec, timescale_s)
+
+
+def _with_unmeasured(scale: np.ndarray, rec: Record, timescale_s: float) -> np.ndarray:
+    """``scale`` (S,) with the error of winds taken away from their sections added in quadrature."""
+    e = unmeasured_wind_rms(rec, float(timescale_s))
+    return scale if e is None else np.hypot(scale, e)
 
 
 def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: np.random.Generator) -> Record:
@@ -250,7 +261,7 @@ def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: n
     smooth = smooth / np.where(sd > 0, sd, 1.0)
     U = record.U + smooth * np.asarray(scale, dtype=float)[None, :]
     return Record(event_id=record.event_id, t=record.t, A=record.A, U=U, dA=record.dA, yaw=record.yaw,
-                  noise_std=record.noise_std)
+                  noise_std=record.noise_std, wind_distance=record.wind_distance)
 
 
 def _unfitted(model, **params):
