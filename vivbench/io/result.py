@@ -403,20 +403,21 @@ def result_record(ds: xr.Dataset) -> Record:
 
 def result_wind_distance(attrs, n_sections: int) -> np.ndarray | None:
     """The result's distance from each section to its anemometer (attribute ``wind_distance_m``), m; None if absent."""
-    dist = attrs.get("wind_distance_m")
-    if dist is None:
-        return None
-    dist = np.atleast_1d(np.asarray(dist, dtype=float))
-    return dist if dist.shape == (n_sections,) else None
+    return _per_section(attrs, "wind_distance_m", n_sections)
 
 
 def result_noise_std(attrs, n_sections: int) -> np.ndarray | None:
     """The result's noise floor of A per section (attribute ``noise_std_m``), m; None if absent or malformed."""
-    noise = attrs.get("noise_std_m")
-    if noise is None:
+    return _per_section(attrs, "noise_std_m", n_sections)
+
+
+def _per_section(attrs, name: str, n_sections: int) -> np.ndarray | None:
+    """A float attribute with one value per section, shape (n_sections,); None if absent or of another length."""
+    value = attrs.get(name)
+    if value is None:
         return None
-    noise = np.atleast_1d(np.asarray(noise, dtype=float))
-    return noise if noise.shape == (n_sections,) else None
+    value = np.atleast_1d(np.asarray(value, dtype=float))
+    return value if value.shape == (n_sections,) else None
 
 
 class _Breach(Exception):
