@@ -10,7 +10,7 @@ from scipy.signal import butter, sosfiltfilt
 from tests.helpers import assert_close
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
-from vivbench.preprocess import unmeasured_wind_error, unmeasured_wind_rms, unmeasured_wind_samples
+from vivbench.preprocess import shifted_unmeasured_wind, unmeasured_wind_error, unmeasured_wind_rms
 from vivbench.synth import TurbulenceConfig, simulate_turbulence
 
 U, FS, HOURS = 8.0, 1.0, 24.0
@@ -53,14 +53,26 @@ def test_zero_where_measured_growing_with_distance_and_shrinking_with_smoothing(
 def test_records_without_a_distance_give_none():
     t = np.arange(100.0)
     U = np.full((100, 3), 8.0)
-    plain = Record(event_id="E", t=t, A=np.ones((100, 3)), U=U)
+    assert unmeasured_wind_rms(Record(event_id="E", t=t, A=np.ones((100, 3)), U=U), 30.0) is None
     measured = Record(event_id="E", t=t, A=np.ones((100, 3)), U=U, wind_distance=[0.0, 0.0, 0.0])
-    assert unmeasured_wind_samples([plain, measured], 30.0) is None
     assert unmeasured_wind_rms(measured, 30.0) is None
     mid = Record(event_id="F", t=t, A=np.ones((100, 3)), U=U, wind_distance=[400.0, 0.0, 400.0])
-    e = unmeasured_wind_samples([plain, mid], 30.0)
-    assert e.shape == (200, 3) and not e[:100].any() and not e[:, 1].any()
-    assert_close(e[100:, 0], unmeasured_wind_error(8.0, 400.0, 30.0), rtol=1e-12, atol=0, reason="same formula")
-    assert_close(unmeasured_wind_rms(mid, 30.0), e[100], rtol=1e-12, atol=0, reason="rms of a constant")
+    e = unmeasured_wind_error(8.0, 400.0, 30.0)
+    assert_close(unmeasured_wind_rms(mid, 30.0), [e, 0.0, e], rtol=1e-12, atol=0, reason="rms of a constant")
     with pytest.raises(ValueError, match="wind_distance"):
         Record(event_id="E", t=t, A=np.ones((100, 3)), U=U, wind_distance=[1.0, -2.0, 0.0])
+
+
+def test_the_shifted_wind_moves_only_the_sections_measured_elsewhere():
+    t = np.arange(100.0)
+    U = np.column_stack([np.full(100, 7.0), np.full(100, 8.0), np.full(100, 9.0)])
+    plain = Record(event_id="E", t=t, A=np.ones((100, 3)), U=U)
+    assert shifted_unmeasured_wind(plain, 30.0, 1.96) is None
+    mid = Record(event_id="E", t=t, A=np.ones((100, 3)), U=U, wind_distance=[400.0, 0.0, 200.0])
+    up, down = shifted_unmeasured_wind(mid, 30.0, 1.96), shifted_unmeasured_wind(mid, 30.0, -1.96)
+    assert np.array_equal(up.U[:, 1], U[:, 1]) and np.array_equal(down.U[:, 1], U[:, 1])
+    for k, d in ((0, 400.0), (2, 200.0)):
+        e = unmeasured_wind_error(U[0, k], d, 30.0)
+        assert_close(up.U[:, k], U[:, k] + 1.96 * e, rtol=1e-12, atol=0, reason="one multiplication and a sum")
+        assert_close(down.U[:, k], U[:, k] - 1.96 * e, rtol=1e-12, atol=0, reason="one multiplication and a sum")
+    assert up.wind_distance.tolist() == [400.0, 0.0, 200.0]

@@ -197,11 +197,7 @@ class VaryingCoefficientSINDy(ModelBase):
         fitted to the squared residuals.
         Needs ``wind_input`` "mean" or "additive" (there the variance sums
         every section's wind's, each with the anemometers' spread as its
-        error) and two or more sections (else no weights), unless the records
-        say that a section's wind was taken from an anemometer elsewhere on the
-        span (``Record.wind_distance`` > 0): that section's wind error over the
-        distance (:func:`vivbench.preprocess.unmeasured_wind_error`) is then
-        added in quadrature, for every ``wind_input``. Default True.
+        error) and two or more sections (else no weights). Default True.
         Costs a second weighted pass at the chosen basis only;
         :meth:`event_statistics` stays unweighted.
     wind_weights : {"modal", "equal"} or sequence of float

@@ -30,7 +30,6 @@ from vivbench.core.record import Record
 from vivbench.library.splines import DEGREE, difference_penalty, uniform_knots
 from vivbench.models.varying_design import block_stats, input_contributions
 from vivbench.models.wind_weights import WIND_WEIGHT_MODES, check_wind_weights, weighted_mean_standard_error
-from vivbench.preprocess.unmeasured_wind import unmeasured_wind_samples
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.model_set import MODEL_SET_TESTS, confidence_set
@@ -56,8 +55,7 @@ class CampaignSamples:
 
     ``U`` (n, S) the equations' wind inputs (m/s), ``Z`` (n, S) their yaw covariate sin^2(psi) (None without),
     ``A``, ``dA`` (n, S); ``event`` and ``block`` (n,) each sample's event and ``block_s`` block;
-    ``fold_of_event`` (E,); ``wind_se`` (n,) the wind inputs' standard error, (n, S) each section's when
-    winds were taken away from their sections (None: not estimable);
+    ``fold_of_event`` (E,); ``wind_se`` (n,) the wind inputs' standard error (None: not estimable);
     ``rng`` the generator of the folds, then of the bootstrap.
     """
 
@@ -199,9 +197,8 @@ def valid_samples(wind_input: str, A: np.ndarray, U: np.ndarray, dA: np.ndarray 
     return ok
 
 
-def wind_standard_error(wind_input: str, wind_weights: np.ndarray, U: np.ndarray,
-                        unmeasured: np.ndarray | None = None) -> np.ndarray | None:
-    """Standard error of each equation's wind input, m/s: shape (n,), or (n, S) with ``unmeasured`` (None: not estimable).
+def wind_standard_error(wind_input: str, wind_weights: np.ndarray, U: np.ndarray) -> np.ndarray | None:
+    """Standard error of each equation's wind input, shape (n,), m/s (None: not estimable).
 
     The spread of the S (smoothed) anemometers about their mean times
     sqrt(sum_j w_j^2) (``wind_weights``; 1/sqrt(S) for equal weights): the
@@ -209,38 +206,20 @@ def wind_standard_error(wind_input: str, wind_weights: np.ndarray, U: np.ndarray
     does not feel, is independent of the others'. With ``wind_input="additive"``
     each section's own anemometer is an input, whose error is the spread itself.
     Only for ``wind_input`` "mean" or "additive" with two or more sections.
-
-    ``unmeasured`` (n, S), m/s: the error of each section's wind where it was taken
-    from an anemometer elsewhere on the span (:func:`vivbench.preprocess.unmeasured_wind_error`),
-    independent of the spread and of the other sections'. It is added in quadrature: to
-    the mean's error as sum_j w_j^2 e_j^2, to each section's own input (``"additive"`` and
-    ``"section"``, shape (n, S) then) as e_j^2; the spread term is 0 with one section or
-    one anemometer for all.
     """
-    if unmeasured is None:
-        if wind_input == "section" or U.shape[1] < 2:
-            return None
-        if wind_input == "mean":
-            se = weighted_mean_standard_error(U, wind_weights)
-        else:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)  # rows with fewer than two winds: NaN
-                se = np.nanstd(U, axis=1, ddof=1)
-        return np.where(np.isfinite(se), se, np.nanmedian(se))
-    spread = wind_standard_error(wind_input, wind_weights, U)
-    spread = np.zeros(U.shape[0]) if spread is None else spread
-    e2 = np.nan_to_num(unmeasured) ** 2
+    if wind_input == "section" or U.shape[1] < 2:
+        return None
     if wind_input == "mean":
-        w = np.asarray(wind_weights, dtype=float)
-        return np.sqrt(spread**2 + e2 @ (w / w.sum()) ** 2)
-    return np.sqrt(spread[:, None] ** 2 + e2)
+        se = weighted_mean_standard_error(U, wind_weights)
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # rows with fewer than two winds: NaN
+            se = np.nanstd(U, axis=1, ddof=1)
+    return np.where(np.isfinite(se), se, np.nanmedian(se))
 
 
-def campaign_samples(model, records: list[Record], smoothing_s: float | None = None) -> CampaignSamples:
-    """The pooled samples, blocks and folds of (already smoothed) records; sets ``model.yaw_degree_``.
-
-    ``smoothing_s``: the records' wind smoothing, s (None: ``model.wind_smoothing_s``), for the error of
-    winds taken away from their sections (:func:`vivbench.preprocess.unmeasured_wind_samples`)."""
+def campaign_samples(model, records: list[Record]) -> CampaignSamples:
+    """The pooled samples, blocks and folds of (already smoothed) records; sets ``model.yaw_degree_``."""
     S = records[0].n_sections
     for rec in records:
         if rec.dA is None:
@@ -267,8 +246,7 @@ def campaign_samples(model, records: list[Record], smoothing_s: float | None = N
         block=block_all, fold_of_event=fold_of_event, A=np.concatenate([r.A for r in records]),
         U=model.wind_inputs(U_raw), dA=np.concatenate([r.dA for r in records]),
         Z=np.concatenate([model.yaw_covariate(r, r.n_samples) for r in records]) if J else None,
-        wind_se=wind_standard_error(model.wind_input, model.wind_weights_, U_raw, unmeasured_wind_samples(
-            records, model.wind_smoothing_s if smoothing_s is None else float(smoothing_s))))
+        wind_se=wind_standard_error(model.wind_input, model.wind_weights_, U_raw))
 
 
 def cv_error(G, b, yy, fold_of_block, K, P, pen, keep) -> np.ndarray:
@@ -373,10 +351,6 @@ def eiv_weight(model, samples: CampaignSamples, k: int, sec: SectionSamples, ste
     zk = None if not J else Zk / sec.yaw_ref
     res = np.empty(idx.size)
     slope2 = np.zeros(idx.size)  # sum over the wind inputs of the squared slopes
-    per_input = samples.wind_se.ndim == 2  # each input's own error (winds taken away from their sections)
-    if per_input:
-        se2 = (samples.wind_se[idx] if model.wind_input == "additive" else samples.wind_se[idx, k:k + 1]).T ** 2
-        v_wind = np.zeros(idx.size)
     for a in range(0, idx.size, chunk):  # the local design rows of a chunk at a time
         i = idx[a:a + chunk]
         z = None if zk is None else zk[i]
@@ -387,12 +361,8 @@ def eiv_weight(model, samples: CampaignSamples, k: int, sec: SectionSamples, ste
         # shifted at once and each one's own contribution differenced.
         fp = input_contributions(Uk[i] + step, A[i, k], best.knots, sec.a_ref, z, J, c)
         fm = input_contributions(Uk[i] - step, A[i, k], best.knots, sec.a_ref, z, J, c)
-        if per_input:
-            v_wind[a:a + chunk] = (((fp - fm) / (2.0 * step)) ** 2 * se2[:, a:a + chunk]).sum(axis=0)
-        else:
-            slope2[a:a + chunk] = (((fp - fm) / (2.0 * step)) ** 2).sum(axis=0)
-    if not per_input:
-        v_wind = slope2 * samples.wind_se[idx] ** 2
+        slope2[a:a + chunk] = (((fp - fm) / (2.0 * step)) ** 2).sum(axis=0)
+    v_wind = slope2 * samples.wind_se[idx] ** 2
     # The variance function E[res^2] = s0 + kappa v_wind by least squares on the squared residuals:
     # kappa calibrates se_U (the sections' felt winds differ too, so the spread over-states the error).
     ms = float(np.mean(res**2))
@@ -421,7 +391,7 @@ def choose_smoothing(model, records: list[Record], grid: list[float]):
     cv = np.full(len(grid), np.nan)
     chosen = None
     for g, sigma in enumerate(grid):
-        samples = campaign_samples(model, [smooth_wind(r, float(sigma)) for r in records], float(sigma))
+        samples = campaign_samples(model, [smooth_wind(r, float(sigma)) for r in records])
         secs = [select_basis(model, samples, k) for k in range(samples.n_sections)]
         cv[g] = float(sum(x.best.error for x in secs))
         if chosen is None or cv[g] < chosen[0]:

@@ -34,6 +34,7 @@ speeds are evaluated on a grid of speeds and interpolated.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -41,7 +42,7 @@ import numpy as np
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 
-__all__ = ["UNMEASURED_WIND_PRIORS", "unmeasured_wind_error", "unmeasured_wind_samples", "unmeasured_wind_rms"]
+__all__ = ["UNMEASURED_WIND_PRIORS", "unmeasured_wind_error", "unmeasured_wind_rms", "shifted_unmeasured_wind"]
 
 #: Stated priors of :func:`unmeasured_wind_error`: turbulence intensity I_u (-), Kaimal integral length
 #: L_u (m) and Davenport decay constant C_u (-) of the along-wind turbulence.
@@ -118,18 +119,6 @@ def unmeasured_wind_error(U, distance_m: float, smoothing_s: float = 0.0, *, cut
     return out
 
 
-def unmeasured_wind_samples(records, smoothing_s: float) -> np.ndarray | None:
-    """:func:`unmeasured_wind_error` at every sample's and section's wind of ``records``, shape (n, S), m/s.
-
-    Each section over its ``Record.wind_distance`` (0 where the distance is 0 or not recorded), the
-    records' samples one after the other; None when no record has a distance > 0 (every section's
-    wind measured there).
-    """
-    if not any(r.wind_distance is not None and np.any(r.wind_distance > 0) for r in records):
-        return None
-    return np.concatenate([_record_errors(r, smoothing_s) for r in records])
-
-
 def unmeasured_wind_rms(record: Record, smoothing_s: float) -> np.ndarray | None:
     """The rms over the record of :func:`unmeasured_wind_error` of each section, shape (S,), m/s.
 
@@ -140,6 +129,19 @@ def unmeasured_wind_rms(record: Record, smoothing_s: float) -> np.ndarray | None
     e = _record_errors(record, smoothing_s)
     ok = np.isfinite(e)
     return np.sqrt((np.where(ok, e, 0.0) ** 2).sum(axis=0) / np.maximum(ok.sum(axis=0), 1))
+
+
+def shifted_unmeasured_wind(record: Record, smoothing_s: float, z: float) -> Record | None:
+    """``record`` with each section's U shifted by ``z`` times its :func:`unmeasured_wind_error`, m/s.
+
+    Every section whose wind was taken from an anemometer elsewhere (``Record.wind_distance`` > 0)
+    moves at once, by z sigma_e at its own wind (``smoothing_s`` the smoothing the wind is used at);
+    the others stay. None when the record has no distance > 0.
+    """
+    if record.wind_distance is None or not np.any(record.wind_distance > 0):
+        return None
+    e = _record_errors(record, smoothing_s)
+    return dataclasses.replace(record, U=record.U + float(z) * np.nan_to_num(e))
 
 
 def _record_errors(record: Record, smoothing_s: float) -> np.ndarray:
