@@ -213,6 +213,9 @@ def identify_event(tree: xr.DataTree, config: IdentifyConfig | None = None, *, s
         "identify_config_json": config.to_json(),
         "vivbench_version": vivbench.__version__,
     }
+    distance = [tree.attrs.get(f"wind_distance_m_{sec}") for sec in sections]
+    if all(d is not None for d in distance):  # the wind was taken from anemometers elsewhere on the span
+        attrs["wind_distance_m"] = [float(d) for d in distance]
     # Repairs made when the event was imported travel with the result; this run's own come after.
     attrs.update({k: v for k, v in tree.attrs.items() if str(k).startswith("quality_") and k not in quality})
     attrs.update(quality)

@@ -19,7 +19,7 @@ from vivbench.models.campaign_files import campaign_model_file, load_campaign_mo
 from vivbench.models.curve_support import EXTRAPOLATED, data_wind_range, mark_extrapolated
 from vivbench.regimes.model import measured_verdicts
 from vivbench.preprocess.derivative import Derivative
-from vivbench.io.result import read_result, result_noise_std
+from vivbench.io.result import read_result, result_noise_std, result_wind_distance
 from vivbench.io.campaign_model import REGIMES_FORMAT
 from vivbench.core.errors import InputError
 from vivbench.analysis.wind_inputs import with_yaw
@@ -87,7 +87,8 @@ def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
     noise = result_noise_std(attrs, ds["A"].shape[1])
     yaw = ds["yaw"].values if "yaw" in ds else None  # results written before identify stored the yaw have none
     return Record(event_id=str(attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
-                  dA=_campaign_derivative(ds, derivative), noise_std=noise, yaw=yaw)
+                  dA=_campaign_derivative(ds, derivative), noise_std=noise, yaw=yaw,
+                  wind_distance=result_wind_distance(attrs, ds["A"].shape[1]))
 
 
 def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None,

@@ -69,10 +69,11 @@ from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
 from vivbench.preprocess.runs import mask_runs
 from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind, unmeasured_wind_rms
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
-__all__ = ["Candidate", "ModelSelection", "CRITERIA", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "VARYING_OPTIONS", "VARYING_PRIORS", "event_folds",
-           "held_out_loss", "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
+__all__ = ["Candidate", "ModelSelection", "CRITERIA", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z", "VARYING_OPTIONS",
+           "VARYING_PRIORS", "event_folds", "held_out_loss", "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
 
 #: Fewest events for a held-out choice among several candidates (every training set keeps two events).
 MIN_EVENTS = 3
@@ -138,7 +139,7 @@ def _decimated(record: Record, step_s: float) -> Record:
     sl = slice(None, None, k)
     pick = (lambda x: None if x is None else np.asarray(x)[sl])
     return Record(event_id=record.event_id, t=record.t[sl], A=record.A[sl], U=record.U[sl], dA=record.dA[sl],
-                  yaw=pick(record.yaw), noise_std=record.noise_std)
+                  yaw=pick(record.yaw), noise_std=record.noise_std, wind_distance=record.wind_distance)
 
 
 def held_out_loss(model, record: Record, criterion: str = "output", min_samples: int = 20,
@@ -220,21 +221,28 @@ def wind_error_scale(record: Record, timescale_s: float, single_section_share: f
     ``timescale_s`` (rms over time of each section's deviation from the sections' mean,
     pooled over sections): independent anemometers' point turbulence and offsets. With one
     section there is nothing to compare with, and the error is taken as
-    ``single_section_share`` of the event's mean wind (a stated prior).
+    ``single_section_share`` of the event's mean wind (a stated prior). A section whose wind was taken
+    from an anemometer elsewhere (``Record.wind_distance`` > 0; one copied to every section has no spread)
+    adds in quadrature its error over the distance (:func:`vivbench.preprocess.unmeasured_wind_rms`).
     """
     rec = smooth_wind(record, float(timescale_s))
     U = rec.U
     S = U.shape[1]
     if S == 1:
         m = float(np.nanmean(U)) if np.isfinite(U).any() else 0.0
-        return np.array([single_section_share * m])
+        return _with_unmeasured(np.array([single_section_share * m]), rec, timescale_s)
     dev = U - np.nanmean(U, axis=1, keepdims=True)
     ok = np.isfinite(dev)
     if not ok.any():
-        return np.zeros(S)
+        return _with_unmeasured(np.zeros(S), rec, timescale_s)
     # pooled over sections, with the S/(S-1) correction for the mean taken over the same sections
     s = math.sqrt(float(np.mean(dev[ok] ** 2)) * S / (S - 1))
-    return np.full(S, s)
+    return _with_unmeasured(np.full(S, s), rec, timescale_s)
+
+
+def _with_unmeasured(scale: np.ndarray, rec: Record, timescale_s: float) -> np.ndarray:
+    e = unmeasured_wind_rms(rec, float(timescale_s))  # winds taken away from their sections, in quadrature
+    return scale if e is None else np.hypot(scale, e)
 
 
 def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: np.random.Generator) -> Record:
@@ -250,7 +258,7 @@ def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: n
     smooth = smooth / np.where(sd > 0, sd, 1.0)
     U = record.U + smooth * np.asarray(scale, dtype=float)[None, :]
     return Record(event_id=record.event_id, t=record.t, A=record.A, U=U, dA=record.dA, yaw=record.yaw,
-                  noise_std=record.noise_std)
+                  noise_std=record.noise_std, wind_distance=record.wind_distance)
 
 
 def _unfitted(model, **params):
@@ -570,12 +578,19 @@ class ModelSelection:
 
     def agreement(self, record: Record, window_start, window_end, regime: np.ndarray | None = None) -> np.ndarray:
         """Windows (W, S) on which every other member of the confidence set and every perturbed refit give
-        ``regime`` (default: the chosen model's)."""
+        ``regime`` (default: the chosen model's), and, where the record's wind was taken from anemometers
+        elsewhere on the span (``Record.wind_distance`` > 0), the chosen model too with those sections'
+        winds shifted by -+ ``UNMEASURED_Z`` times their error (:func:`vivbench.preprocess.shifted_unmeasured_wind`)."""
         self._check_fitted()
         ref = self.window_regimes(record, window_start, window_end) if regime is None else np.asarray(regime)
         ok = np.ones(ref.shape, dtype=bool)
         for m in list(self.set_models_) + list(self.perturbed_models_):
             ok &= self._regimes(m, record, window_start, window_end) == ref
+        smoothing = float(getattr(self.model_, "fitted_wind_smoothing", lambda: 0.0)())
+        for z in (-UNMEASURED_Z, UNMEASURED_Z):  # winds not measured at their sections: the regime within their error
+            shifted = shifted_unmeasured_wind(record, smoothing, z)
+            if shifted is not None:
+                ok &= self._regimes(self.model_, shifted, window_start, window_end) == ref
         return ok
 
     def identifiable(self, record: Record, window_start, window_end) -> np.ndarray:
@@ -697,6 +712,9 @@ class ModelSelection:
 #: (none, or sin^2 of the yaw) and the roughness penalty (the 5-fold cross-validated one, or the least
 #: penalty of the leave-one-event-out confidence set, which gives rougher curves).
 VARYING_OPTIONS = {"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")}
+
+#: Errors by which winds measured elsewhere on the span are shifted in :meth:`ModelSelection.agreement` (95 %, two-sided).
+UNMEASURED_Z = 1.96
 
 #: Options that change what enters the model (a covariate): a candidate's complexity counts their positions in
 #: the grid, so the one-standard-error rule prefers leaving them out. The other options (regularisation levels)

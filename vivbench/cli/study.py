@@ -14,7 +14,8 @@ def run(args) -> int:
     config = StudyConfig(split=args.split, draws=parse_draws(args.draws),
                          methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()),
                          max_events=args.max_events,
-                         max_duration=None if args.max_duration is None else args.max_duration * 60.0)
+                         max_duration=None if args.max_duration is None else args.max_duration * 60.0,
+                         anemometer_span=_fractions(args.anemometers), wind_rule=args.wind_rule)
     result = run_resumable("study", len(config.draws), "draw",
                            f"the finished draws are saved in {Path(args.out) / 'study.jsonl'}",
                            lambda advance: run_study(config, args.out, workers=args.workers, scheduler=args.scheduler,
@@ -32,6 +33,19 @@ def run(args) -> int:
     return 1 if result.failures else 0
 
 
+def _fractions(text):
+    """``--anemometers``: comma-separated fractions of the span, or None."""
+    from vivbench.core.errors import InputError
+
+    if text is None:
+        return None
+    try:
+        return tuple(float(x) for x in text.split(","))
+    except ValueError:
+        raise InputError(f"--anemometers must be comma-separated fractions of the span length in [0, 1] "
+                         f"(e.g. 0.5 for one at mid-span); got {text!r}") from None
+
+
 def register(sub) -> None:
     s = sub.add_parser("study", help="score methods over draws of the generator family (study.csv, summary.json, "
                                      "study.md); resumable")
@@ -47,6 +61,13 @@ def register(sub) -> None:
                    help="cap each campaign at this many events (quick checks; recorded on the results page)")
     s.add_argument("--max-duration", type=float, default=None, metavar="MINUTES",
                    help="cap each event at this many minutes (quick checks; recorded on the results page)")
+    s.add_argument("--anemometers", default=None, metavar="F1,F2,...",
+                   help="anemometers at these fractions of the span length instead of one per section (e.g. 0.5: "
+                        "one at mid-span); each section's wind is taken from them by --wind-rule and the events "
+                        "record how far (wind_distance_m_<section>)")
+    s.add_argument("--wind-rule", default="nearest", choices=("nearest", "interpolation"),
+                   help="with --anemometers: the wind at a section is the nearest anemometer's (default) or "
+                        "interpolated between the two that bracket it")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                    help="local worker processes, one draw each (results do not depend on it)")
     s.add_argument("--scheduler", default=None,

@@ -47,6 +47,12 @@ class Record:
         (:func:`vivbench.preprocess.mean_yaw`); NaN where unknown, None: not
         measured. The realistic aerodynamics fall off with it, and
         U = V ``|sin theta|`` does not carry it.
+    wind_distance : array_like, shape (n_sections,), m, optional
+        Distance from each section to the anemometer its wind was taken from
+        (the event's ``wind_distance_m_<section>``; 0: measured there). None:
+        not recorded (one anemometer per section). The varying campaign
+        model's errors-in-variables treatment adds the wind's spanwise
+        decorrelation over this distance to the wind's error.
 
     Notes
     -----
@@ -63,6 +69,7 @@ class Record:
     dA: np.ndarray | None = None
     noise_std: np.ndarray | None = None
     yaw: np.ndarray | None = None
+    wind_distance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.event_id, str) or not self.event_id:
@@ -83,7 +90,11 @@ class Record:
         if noise is not None and np.any(noise < 0):
             raise ValueError("Record.noise_std must be >= 0 (m) or NaN (unknown)")
         yaw = None if self.yaw is None else _frozen_array("yaw", self.yaw, A.shape)
-        for name, value in (("t", t), ("A", A), ("U", U), ("dA", dA), ("noise_std", noise), ("yaw", yaw)):
+        dist = None if self.wind_distance is None else _frozen_array("wind_distance", self.wind_distance, (A.shape[1],))
+        if dist is not None and not np.all(np.isfinite(dist) & (dist >= 0)):
+            raise ValueError("Record.wind_distance must be finite distances >= 0 (m)")
+        for name, value in (("t", t), ("A", A), ("U", U), ("dA", dA), ("noise_std", noise), ("yaw", yaw),
+                            ("wind_distance", dist)):
             object.__setattr__(self, name, value)
 
     @property

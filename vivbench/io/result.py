@@ -45,7 +45,7 @@ from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "FEATURES_PER_SECTION", "VariableSpec", "VARIABLES", "COORDINATES", "ATTRIBUTES",
     "WINDOW_FIT_VARIABLES", "ResultFormatError", "build_result", "write_result", "read_result", "list_results",
-    "result_path", "result_record", "result_noise_std", "markdown_table", "markdown_attributes",
+    "result_path", "result_record", "result_noise_std", "result_wind_distance", "markdown_table", "markdown_attributes",
 ]
 
 FORMAT = "vivbench-identify"
@@ -150,6 +150,7 @@ ATTRIBUTES: dict[str, tuple[str, str, str]] = {
     "edge_s": ("float", "s", "edge dropped at each end of every valid run (filter settling)"),
     "noise_std_m": ("float[n_section]", "m", "accelerometer noise in the band as displacement: the noise floor of A (NaN: unknown)"),
     "span_azimuth_deg": ("float", "deg", "direction of the span axis, degrees clockwise from north"),
+    "wind_distance_m": ("float[n_section]", "m", "optional: each section's distance to the anemometer its wind was taken from (the event's wind_distance_m_<section>); absent when the event records none (one anemometer per section)"),
     "coverage": ("float", "1", "share of window-equations with a model that are flagged identifiable (NaN: none)"),
     "identify_config_json": ("str", "", "the IdentifyConfig as JSON (sorted keys)"),
     "vivbench_version": ("str", "", "version of vivbench that wrote the file"),
@@ -396,16 +397,27 @@ def result_record(ds: xr.Dataset) -> Record:
         raise InputError(f"{source}: cannot make a record of this result: it lacks {what}")
     return Record(event_id=str(ds.attrs["event_id"]), t=ds["time"].values, A=ds["A"].values, U=ds["U"].values,
                   dA=ds["dA"].values, noise_std=result_noise_std(ds.attrs, ds["A"].shape[1]),
-                  yaw=ds["yaw"].values if "yaw" in ds.data_vars else None)
+                  yaw=ds["yaw"].values if "yaw" in ds.data_vars else None,
+                  wind_distance=result_wind_distance(ds.attrs, ds["A"].shape[1]))
+
+
+def result_wind_distance(attrs, n_sections: int) -> np.ndarray | None:
+    """The result's distance from each section to its anemometer (attribute ``wind_distance_m``), m; None if absent."""
+    return _per_section(attrs, "wind_distance_m", n_sections)
 
 
 def result_noise_std(attrs, n_sections: int) -> np.ndarray | None:
     """The result's noise floor of A per section (attribute ``noise_std_m``), m; None if absent or malformed."""
-    noise = attrs.get("noise_std_m")
-    if noise is None:
+    return _per_section(attrs, "noise_std_m", n_sections)
+
+
+def _per_section(attrs, name: str, n_sections: int) -> np.ndarray | None:
+    """A float attribute with one value per section, shape (n_sections,); None if absent or of another length."""
+    value = attrs.get(name)
+    if value is None:
         return None
-    noise = np.atleast_1d(np.asarray(noise, dtype=float))
-    return noise if noise.shape == (n_sections,) else None
+    value = np.atleast_1d(np.asarray(value, dtype=float))
+    return value if value.shape == (n_sections,) else None
 
 
 class _Breach(Exception):

@@ -35,6 +35,8 @@ from vivbench.preprocess.wind import (
 )
 from vivbench.preprocess.windows import window_bounds
 from vivbench.preprocess.wind_smoothing import smooth_wind
+from vivbench.preprocess.unmeasured_wind import (UNMEASURED_WIND_PRIORS, shifted_unmeasured_wind, unmeasured_wind_error,
+                                                 unmeasured_wind_rms)
 from vivbench.preprocess.yaw import event_yaw, mean_yaw
 from vivbench.preprocess.event_detection import EventDetection, EventDetectionConfig, detect_events
 from vivbench.preprocess.event_log import CATALOGUE_COLUMNS, EventCatalogue, cut_events, find_events
@@ -46,6 +48,7 @@ __all__ = [
     "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid", "welch_psd",
     "spectral_peak", "modal_frequency", "displacement", "envelope", "wind_speed_direction",
     "perpendicular_speed", "mean_wind", "perpendicular_wind", "mean_wind_runs", "window_bounds", "mean_yaw",
-    "event_yaw", "smooth_wind", "EventDetection", "EventDetectionConfig", "detect_events", "CATALOGUE_COLUMNS",
+    "event_yaw", "smooth_wind", "UNMEASURED_WIND_PRIORS", "unmeasured_wind_error",
+    "unmeasured_wind_rms", "shifted_unmeasured_wind", "EventDetection", "EventDetectionConfig", "detect_events", "CATALOGUE_COLUMNS",
     "EventCatalogue", "cut_events", "find_events",
 ]

@@ -29,6 +29,7 @@ from vivbench.synth.curves import (
     curve_from_data,
 )
 from vivbench.core.errors import require
+from vivbench.io.field_wind import WIND_RULES
 from vivbench.synth.changes_config import ChangesConfig
 from vivbench.synth.sensor_config import DefectConfig, SensorConfig
 from vivbench.synth.turbulence import TurbulenceConfig
@@ -343,6 +344,18 @@ class WindConfig:
         value instead of its script's, so that (with a swing and little wander) the yaw is the
         same function of time in every event: yaw and time within an event are confounded.
         None: each event keeps its script's mean yaw
+    anemometer_span : tuple of float or None; positions of the anemometers along the span as
+        fractions of ``span_length`` (each in [0, 1], distinct; ``(0.5,)``: one anemometer at
+        mid-span). None (default): one anemometer per section, at the section (plus
+        ``anemometer_offset``). When given, the turbulence field is simulated at these points
+        instead (their mean wind is the sections' interpolated along the span), each records
+        as an anemometer does, and the event's wind at every section is taken from them by
+        ``wind_rule`` as field import does (:func:`vivbench.io.span_weights`); the event
+        records each section's distance to its nearest anemometer as ``wind_distance_m_<section>``.
+        The deck still feels its own section's wind. Not with ``felt_wind="anemometer"`` (there
+        the deck feels its anemometer's turbulence by definition) nor with a nonzero
+        ``anemometer_offset``
+    wind_rule : {"nearest", "interpolation"}; the rule of ``anemometer_span``
 
     The fields from ``point_intensity`` on are left out of :func:`config_to_dict` while they
     hold their defaults, so configurations that do not use them save as before they existed.
@@ -370,6 +383,8 @@ class WindConfig:
     yaw_swing_period: float = 1800.0
     event_yaw_scale: float = 1.0
     shared_yaw_deg: float | None = None
+    anemometer_span: tuple[float, ...] | None = None
+    wind_rule: str = "nearest"
 
     def __post_init__(self) -> None:
         if isinstance(self.turbulence, dict):
@@ -419,6 +434,26 @@ class WindConfig:
                    and abs(value) <= 45,
                    f"shared_yaw_deg must be None or a number of degrees within +-45; got {value!r}")
             object.__setattr__(self, "shared_yaw_deg", float(value))
+        self._check_anemometer_span()
+
+    def _check_anemometer_span(self) -> None:
+        require(self.wind_rule in WIND_RULES,
+                f"wind_rule must be one of {', '.join(repr(r) for r in WIND_RULES)}; got {self.wind_rule!r}")
+        span = self.anemometer_span
+        if span is None:
+            return
+        bad = (f"anemometer_span must be None (one anemometer per section) or one or more distinct "
+               f"fractions of the span length in [0, 1], e.g. [0.5] for mid-span; got {span!r}")
+        require(isinstance(span, (list, tuple)) and len(span) >= 1, bad)
+        require(all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and 0 <= x <= 1
+                    for x in span) and len(set(span)) == len(span), bad)
+        object.__setattr__(self, "anemometer_span", tuple(float(x) for x in span))
+        require(self.felt_wind != "anemometer",
+                "anemometer_span needs felt_wind 'tributary' or 'smooth': with 'anemometer' the deck feels its "
+                "section's own anemometer, so there must be one per section")
+        require(self.anemometer_offset == 0.0,
+                f"anemometer_span places the anemometers itself; anemometer_offset must then be 0, got "
+                f"{self.anemometer_offset}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -563,7 +598,7 @@ def _tuples(d: dict) -> dict:
 _LATER_FIELDS = {
     "YawFactor": ("strength", "cutoff_deg"),
     "WindConfig": ("point_intensity", "point_timescale", "yaw_swing_deg", "yaw_swing_period", "event_yaw_scale",
-                   "shared_yaw_deg"),
+                   "shared_yaw_deg", "anemometer_span", "wind_rule"),
 }
 
 

@@ -22,7 +22,8 @@ from vivbench.synth.aero import (
 from vivbench.synth.config import ChangesConfig, GeneratorConfig, StructureConfig, config_to_dict
 from vivbench.synth.sensors import accelerometer, add_dropouts, add_spikes, sample_times
 from vivbench.synth.structure import modal_acceleration, simulate_amplitude, simulate_modal
-from vivbench.synth.wind import MeanWind, WindScript, felt_mean_wind, mean_wind, measure_wind, wind_field
+from vivbench.synth.wind import (MeanWind, WindScript, anemometer_layout, at_anemometers, felt_mean_wind, mean_wind,
+                                 measure_wind, section_records, wind_field)
 from vivbench.core.terms import feature_exponents, feature_names
 from vivbench.core.errors import InputError
 
@@ -278,7 +279,10 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
     # plus the sensor errors, the deck (buffeting and the felt mean wind U_k of the aeroelastic
     # force and of the truth) the latter's average per section.
     field = wind_field(mw, s, wcfg, rng_turb)
-    u, v, w = measure_wind(mw, field.anemometer, wcfg, rng_turb)
+    # Each anemometer records its own point; the event's wind at a section is taken from them by the
+    # layout's rule (the identity with one anemometer per section).
+    layout = anemometer_layout(s, wcfg)
+    u, v, w = section_records(*measure_wind(at_anemometers(mw, layout), field.anemometer, wcfg, rng_turb), layout)
     turb = field.deck
     mw = felt_mean_wind(mw, turb, wcfg)
     f_shed = config.aero.strouhal * mw.U / s.depth
@@ -377,6 +381,15 @@ def _script_dict(spec: EventSpec, with_place: bool) -> dict:
     return data
 
 
+def _wind_distance_attrs(config: GeneratorConfig) -> dict:
+    """``wind_distance_m_<section>`` (m) of the event files, as field import records them: each section's
+    distance to its nearest anemometer when ``config.wind.anemometer_span`` places them; empty otherwise."""
+    layout = anemometer_layout(config.structure, config.wind)
+    if layout.per_section:
+        return {}
+    return {f"wind_distance_m_{sec}": float(d) for sec, d in zip(config.structure.sections, layout.distance)}
+
+
 def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.SeedSequence | int,
                    *, campaign_seed: int | None = None) -> xr.DataTree:
     """Simulate one event and assemble it in the event file format (docs/formats.md).
@@ -414,6 +427,6 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
         span_azimuth_deg=config.wind.span_azimuth_deg,
         wind_time=ev.wind_time, u=ev.u, v=ev.v, w=ev.w,
         accel_time=ev.accel_time, acc=ev.acc, truth=truth,
-        attrs={"scenario": spec.kind, "generator": "vivbench.synth"},
+        attrs={"scenario": spec.kind, "generator": "vivbench.synth", **_wind_distance_attrs(config)},
         sections=config.structure.sections,
     )

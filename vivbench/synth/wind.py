@@ -37,11 +37,13 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.signal import butter, lfilter, sosfiltfilt
 
+from vivbench.io.field_wind import span_weights
 from vivbench.synth.config import StructureConfig, WindConfig
 from vivbench.synth.turbulence import simulate_turbulence
 from vivbench.core.errors import InputError
 
-__all__ = ["WindScript", "MeanWind", "WindField", "mean_wind", "slow_process", "anemometer_positions",
+__all__ = ["WindScript", "MeanWind", "WindField", "AnemometerLayout", "mean_wind", "slow_process", "anemometer_positions",
+           "anemometer_layout", "at_anemometers", "section_records",
            "tributary_points", "wind_field", "measure_wind", "anemometer_records", "felt_mean_wind", "point_turbulence"]
 
 
@@ -164,10 +166,11 @@ class WindField:
 
     Attributes
     ----------
-    anemometer : ndarray, shape (n, S, 3), m/s
-        Turbulence at each section's anemometer, a single point (with
-        ``felt_wind = "smooth"``, its own :func:`point_turbulence`). The anemometer
-        records are the mean wind plus this plus the sensor errors.
+    anemometer : ndarray, shape (n, n_anem, 3), m/s
+        Turbulence at each anemometer, a single point (with ``felt_wind = "smooth"``,
+        its own :func:`point_turbulence`); one per section (n_anem = S) unless
+        ``WindConfig.anemometer_span`` places them (:func:`anemometer_layout`). The
+        anemometer records are the mean wind plus this plus the sensor errors.
     deck : ndarray, shape (n, S, 3), m/s
         Turbulence the deck of section k feels: with ``felt_wind = "tributary"``
         the average of the field over the points of the section's tributary
@@ -177,9 +180,9 @@ class WindField:
         wind U_k of the aeroelastic force and of the truth (:func:`felt_mean_wind`),
         except with ``"smooth"``.
     positions : ndarray, shape (n_points,), m
-        Spanwise coordinates simulated: the S anemometers first, then the
+        Spanwise coordinates simulated: the n_anem anemometers first, then the
         tributary points section by section (S * points_per_section); only the
-        S anemometers in ``"anemometer"`` mode.
+        S sections in ``"anemometer"`` and ``"smooth"`` modes.
     """
 
     anemometer: np.ndarray
@@ -188,14 +191,75 @@ class WindField:
 
 
 def anemometer_positions(structure: StructureConfig, wind: WindConfig) -> np.ndarray:
-    """Spanwise coordinates of the anemometers, m, shape (S,).
+    """Spanwise coordinates of the anemometers, m, shape (n_anem,).
 
-    The section's position (k / (n + 1) of the span) plus ``wind.anemometer_offset``
-    in ``"tributary"`` mode; the section's position in ``"anemometer"`` and ``"smooth"`` modes.
+    With ``wind.anemometer_span`` its fractions of the span length. Otherwise one per
+    section (n_anem = S): the section's position (k / (n + 1) of the span) plus
+    ``wind.anemometer_offset`` in ``"tributary"`` mode; the section's position in
+    ``"anemometer"`` and ``"smooth"`` modes.
     """
+    if wind.anemometer_span is not None:
+        return structure.span_length * np.asarray(wind.anemometer_span)
     if wind.felt_wind != "tributary":
         return structure.positions
     return structure.positions + wind.anemometer_offset
+
+
+@dataclass(frozen=True)
+class AnemometerLayout:
+    """Where the anemometers are and how the event's wind at each section is taken from them.
+
+    Attributes
+    ----------
+    positions : ndarray, shape (n_anem,), m
+    from_sections : ndarray, shape (S, n_anem)
+        The anemometers' mean wind from the sections': ``mean_anem = mean_sec @ from_sections``
+        (linear interpolation along the span, the nearest section beyond the outermost).
+    to_sections : ndarray, shape (n_anem, S)
+        The recorded wind at each section from the anemometers' records, by ``wind.wind_rule``
+        (:func:`vivbench.io.span_weights`, as field import does).
+    distance : ndarray, shape (S,), m
+        Each section's distance to its nearest anemometer.
+    per_section : bool
+        One anemometer per section (``wind.anemometer_span`` None): both maps are the identity
+        and no distance is recorded.
+    """
+
+    positions: np.ndarray
+    from_sections: np.ndarray
+    to_sections: np.ndarray
+    distance: np.ndarray
+    per_section: bool
+
+
+def anemometer_layout(structure: StructureConfig, wind: WindConfig) -> AnemometerLayout:
+    """The anemometers of ``wind.anemometer_span`` (or one per section) and their maps to and from the sections."""
+    positions = anemometer_positions(structure, wind)
+    S = structure.n_sections
+    if wind.anemometer_span is None:
+        eye = np.eye(S)
+        return AnemometerLayout(positions=positions, from_sections=eye, to_sections=eye, distance=np.zeros(S),
+                                per_section=True)
+    from_sections, _ = span_weights(structure.positions, positions, "interpolation")
+    to_sections, distance = span_weights(positions, structure.positions, wind.wind_rule)
+    return AnemometerLayout(positions=positions, from_sections=from_sections, to_sections=to_sections,
+                            distance=distance, per_section=False)
+
+
+def at_anemometers(mw: MeanWind, layout: AnemometerLayout) -> MeanWind:
+    """The mean wind at the anemometers of ``layout`` (``mw`` itself with one per section)."""
+    if layout.per_section:
+        return mw
+    W = layout.from_sections
+    return MeanWind(t=mw.t, U=mw.U @ W, V=mw.V @ W, direction=mw.direction,
+                    yaw=None if mw.yaw is None else mw.yaw @ W)
+
+
+def section_records(u: np.ndarray, v: np.ndarray, w: np.ndarray, layout: AnemometerLayout):
+    """The event's wind at each section, (n, S) float32 each, from the anemometers' records (n, n_anem)."""
+    if layout.per_section:
+        return u, v, w
+    return tuple((c.astype(np.float64) @ layout.to_sections).astype(np.float32) for c in (u, v, w))
 
 
 def tributary_points(structure: StructureConfig, wind: WindConfig) -> np.ndarray:
@@ -246,21 +310,26 @@ def wind_field(mw: MeanWind, structure: StructureConfig, wind: WindConfig, rng: 
     S = mw.V.shape[1]
     V_ref = float(np.mean(mw.V))
     scale = (mw.V / V_ref)[:, :, None]  # (n, S, 1)
-    anemo = anemometer_positions(structure, wind)
-    if wind.felt_wind != "tributary":
-        turb = simulate_turbulence(anemo, V_ref, n / wind.anemometer_rate, wind.anemometer_rate, wind.turbulence, rng)[:n]
+    layout = anemometer_layout(structure, wind)
+    mw_anem = at_anemometers(mw, layout)
+    if wind.felt_wind != "tributary":  # the field at the sections (anemometer_span needs "smooth" here)
+        sections = structure.positions
+        turb = simulate_turbulence(sections, V_ref, n / wind.anemometer_rate, wind.anemometer_rate, wind.turbulence, rng)[:n]
         turb = turb * scale
         if wind.felt_wind == "smooth":
-            return WindField(anemometer=point_turbulence(mw, wind, rng), deck=turb, positions=anemo)
-        return WindField(anemometer=turb, deck=turb, positions=anemo)
+            return WindField(anemometer=point_turbulence(mw_anem, wind, rng), deck=turb, positions=sections)
+        return WindField(anemometer=turb, deck=turb, positions=sections)
+    anemo = layout.positions
+    n_a = anemo.size
     trib = tributary_points(structure, wind)  # (S, P)
     positions = np.concatenate([anemo, trib.ravel()])
     # Single indexing: with double indexing each of the n points' sources is resolved only every
     # n / T Hz, coarser than the Davenport coherence of points hundreds of metres apart varies.
     single = dataclasses.replace(wind.turbulence, double_indexing=False)
     field_ = simulate_turbulence(positions, V_ref, n / wind.anemometer_rate, wind.anemometer_rate, single, rng)[:n]
-    deck = field_[:, S:].reshape(n, S, wind.points_per_section, 3).mean(axis=2)
-    return WindField(anemometer=field_[:, :S] * scale, deck=deck * scale, positions=positions)
+    deck = field_[:, n_a:].reshape(n, S, wind.points_per_section, 3).mean(axis=2)
+    return WindField(anemometer=field_[:, :n_a] * (mw_anem.V / V_ref)[:, :, None], deck=deck * scale,
+                     positions=positions)
 
 
 def point_turbulence(mw: MeanWind, wind: WindConfig, rng: np.random.Generator) -> np.ndarray:

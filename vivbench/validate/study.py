@@ -57,6 +57,7 @@ from vivbench.io.netcdf import atomic_path
 from vivbench.regimes.model import model_window_regimes
 from vivbench.synth.family import SPLITS, draw_bridge
 from vivbench.synth.campaign import generate_campaign
+from vivbench.synth.config import WindConfig
 from vivbench.validate.journal import check_record
 from vivbench.validate.journal import format_value
 from vivbench.validate.journal import counting_progress, run_journalled, task_directory
@@ -131,6 +132,10 @@ class StudyConfig:
     max_duration : s; cap on each event's duration (None: the draw's)
     identify : the identification's configuration
     tau : regime threshold (docs/concepts.md (regimes))
+    anemometer_span : fractions of the span length, or None; when given, every draw's campaign
+        has anemometers there instead of one per section (``WindConfig.anemometer_span``, e.g.
+        ``(0.5,)``: one at mid-span), the wind at each section taken from them by ``wind_rule``
+    wind_rule : "nearest" or "interpolation" (``WindConfig.wind_rule``)
     """
 
     split: str
@@ -140,8 +145,14 @@ class StudyConfig:
     max_duration: float | None = None
     identify: IdentifyConfig = field(default_factory=IdentifyConfig)
     tau: float = DEFAULT_TAU
+    anemometer_span: tuple[float, ...] | None = None
+    wind_rule: str = "nearest"
 
     def __post_init__(self) -> None:
+        if self.anemometer_span is not None or self.wind_rule != "nearest":
+            # the generator's own checks (a felt wind that allows fewer anemometers is the family's)
+            layout = WindConfig(anemometer_span=self.anemometer_span, wind_rule=self.wind_rule)
+            object.__setattr__(self, "anemometer_span", layout.anemometer_span)
         if self.split not in SPLITS:
             raise InputError(f"split must be one of {', '.join(SPLITS)}; got {self.split!r}")
         object.__setattr__(self, "draws", check_draws(self.draws))
@@ -162,10 +173,13 @@ class StudyConfig:
         return self.max_events is not None or self.max_duration is not None
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data (the draws included)."""
-        return {"split": self.split, "draws": list(self.draws), "methods": list(self.methods),
+        """Plain data (the draws included); the anemometer layout only when it is not one per section."""
+        data = {"split": self.split, "draws": list(self.draws), "methods": list(self.methods),
                 "max_events": self.max_events, "max_duration_s": self.max_duration,
                 "identify": json.loads(self.identify.to_json()), "tau": self.tau}
+        if self.anemometer_span is not None:
+            data.update(anemometer_span=list(self.anemometer_span), wind_rule=self.wind_rule)
+        return data
 
     def fingerprint(self) -> str:
         """SHA-256 of everything but the draws: the draws of one study directory may grow from run to run."""
@@ -186,12 +200,24 @@ class StudyTask:
     identify: IdentifyConfig
     tau: float = DEFAULT_TAU
     work_root: str | None = None
+    anemometer_span: tuple[float, ...] | None = None
+    wind_rule: str = "nearest"
+
+    def campaign(self, draw):
+        """The draw's (capped) campaign, with this task's anemometers when it places them."""
+        campaign = draw.campaign_config(max_events=self.max_events, max_duration=self.max_duration)
+        if self.anemometer_span is None:
+            return campaign
+        gen = campaign.generator
+        wind = dataclasses.replace(gen.wind, anemometer_span=self.anemometer_span, wind_rule=self.wind_rule)
+        return dataclasses.replace(campaign, generator=dataclasses.replace(gen, wind=wind))
 
 
 def study_tasks(config: StudyConfig) -> list[StudyTask]:
     """One task per draw, in draw order. Cheap: nothing runs."""
     return [StudyTask(split=config.split, draw=d, methods=config.methods, max_events=config.max_events,
-                      max_duration=config.max_duration, identify=config.identify, tau=config.tau)
+                      max_duration=config.max_duration, identify=config.identify, tau=config.tau,
+                      anemometer_span=config.anemometer_span, wind_rule=config.wind_rule)
             for d in config.draws]
 
 
@@ -315,7 +341,7 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
     """
     start = time.perf_counter()
     draw = draw_bridge(task.split, task.draw)
-    campaign = draw.campaign_config(max_events=task.max_events, max_duration=task.max_duration)
+    campaign = task.campaign(draw)
     root = task_directory(task.work_root, f"d{task.draw:05d}-")
     try:
         made = generate_campaign(campaign, root / "campaign", workers=1)

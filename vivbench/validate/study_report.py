@@ -260,6 +260,9 @@ def study_markdown(summary: dict[str, Any]) -> str:
               f"- Draws requested: {_ranges(cfg['draws'])}; scored: {_ranges(summary['draws_scored'])}; "
               f"failed in this run: {_ranges(summary['draws_failed'])}.",
               f"- Methods: {', '.join(cfg['methods'])}.",
+              *([f"- Anemometers at {', '.join(f'{x:g}' for x in cfg['anemometer_span'])} of the span length, "
+                 f"the wind at each section taken from them by the {cfg['wind_rule']} rule (`--anemometers`); the "
+                 "deck feels its own section's wind."] if cfg.get("anemometer_span") is not None else []),
               *([_GREYBOX_NOTE] if "greybox" in cfg["methods"] else []),
               "- Errors are relative: the energy-weighted one is sqrt(sum of squared errors / sum of squared true "
               "dA/dt) over every sample of a campaign, on the truth's own (A, U).",
