@@ -40,6 +40,7 @@ from vivbench.analysis.selection import (
     held_out_loss,
     one_se_set,
     perturbed_wind,
+    shared_groups,
     varying_selection,
     wind_error_scale,
     without_yaw,
@@ -55,6 +56,6 @@ __all__ = [
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
     "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
     "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "ModelSelection", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss",
-    "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw",
+    "one_se_set", "perturbed_wind", "shared_groups", "varying_selection", "wind_error_scale", "without_yaw",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

@@ -72,7 +72,8 @@ from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
 __all__ = ["Candidate", "ModelSelection", "CRITERIA", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "VARYING_OPTIONS", "VARYING_PRIORS", "event_folds",
-           "held_out_loss", "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
+           "held_out_loss", "one_se_set", "perturbed_wind", "shared_groups", "varying_selection", "wind_error_scale",
+           "without_yaw"]
 
 #: Fewest events for a held-out choice among several candidates (every training set keeps two events).
 MIN_EVENTS = 3
@@ -267,23 +268,64 @@ def _fit(model, records):
     return model if fitted is None else fitted
 
 
-def _candidate_task(task: dict) -> dict:
-    """Fit one candidate without each fold's events in turn and score it on them (a picklable top-level task).
+def _variant(model, **overrides) -> dict:
+    """What distinguishes ``model`` within its group of :func:`shared_groups`: its ``final_params``' values,
+    with ``overrides`` where it has them (e.g. n_bootstrap)."""
+    own = model.get_params() if callable(getattr(model, "get_params", None)) else {}
+    return {**{k: own[k] for k in getattr(model, "final_params", ()) if k in own},
+            **{k: v for k, v in overrides.items() if k in own}}
 
-    One task per candidate, not per fold: the records travel to a worker once.
+
+def shared_groups(models: Sequence) -> list[list[int]]:
+    """Indices of ``models`` grouped so that each group can be fitted at once.
+
+    Models of one class with ``fit_variants`` whose parameters are equal outside its
+    ``final_params`` share one group (:meth:`vivbench.models.VaryingCoefficientSINDy.fit_variants`
+    fits them together); every other model is a group of its own. Groups are in the order of
+    their first member.
     """
-    records, fold, criterion = task["records"], task["fold"], task["criterion"]
-    loss = np.zeros(len(records))
+    keys, groups = {}, []
+    for i, m in enumerate(models):
+        final = getattr(m, "final_params", None)
+        if callable(getattr(m, "fit_variants", None)) and final is not None and callable(getattr(m, "get_params", None)):
+            key = (type(m), repr(sorted((k, v) for k, v in m.get_params().items() if k not in final)))
+        else:
+            key = ("alone", i)
+        if key not in keys:
+            keys[key] = len(groups)
+            groups.append([])
+        groups[keys[key]].append(i)
+    return groups
+
+
+def _fit_variants(model, variants: Sequence[dict], records) -> list:
+    """Fitted copies of ``model``, one per variant (parameters to set): at once with its ``fit_variants``
+    (variants of its ``final_params``, :func:`shared_groups`), else one fit each."""
+    own = getattr(model, "fit_variants", None)
+    if callable(own) and getattr(model, "final_params", None) is not None:
+        return list(own(list(records), list(variants)))
+    return [_fit(_unfitted(model, **v), records) for v in variants]
+
+
+def _candidate_task(task: dict) -> dict:
+    """Fit a group of candidates (:func:`shared_groups`) without each fold's events in turn and score them
+    on those events (a picklable top-level task).
+
+    One task per group, not per fold: the records travel to a worker once.
+    """
+    records, fold, criterion, variants = task["records"], task["fold"], task["criterion"], task["variants"]
+    loss = np.zeros((len(variants), len(records)))
     for f in range(int(fold.max()) + 1):
-        fitted = _fit(_unfitted(task["model"], n_bootstrap=0), [r for r, g in zip(records, fold) if g != f])
-        for i in np.flatnonzero(fold == f):
-            loss[i] = held_out_loss(fitted, records[i], criterion)
+        fitted = _fit_variants(task["model"], variants, [r for r, g in zip(records, fold) if g != f])
+        for v, model in enumerate(fitted):
+            for i in np.flatnonzero(fold == f):
+                loss[v, i] = held_out_loss(model, records[i], criterion)
     return {"loss": loss}
 
 
-def _fit_task(task: dict):
-    """Fit a fresh copy of a model (with ``params`` where it has them) to records (a picklable top-level task)."""
-    return _fit(_unfitted(task["model"], **task["params"]), task["records"])
+def _fit_task(task: dict) -> list:
+    """Fit a group of variants of a model to records (:func:`_fit_variants`; a picklable top-level task)."""
+    return _fit_variants(task["model"], task["variants"], task["records"])
 
 
 class ModelSelection:
@@ -347,6 +389,11 @@ class ModelSelection:
     change_ : dict, the chosen model's change scan: ``tested``, ``detected``, ``p_value``, ``event``
         (the first event after the located change, "" when none)
     stationary_ : bool, whether the change scan lets the verdict flag windows (True when not tested)
+    change_scan_ : dict or None, the change scan itself (None when not run): ``events`` (the event ids
+        scanned, in order), ``seed``, ``inputs`` (:func:`vivbench.models.model_change_inputs` of the
+        chosen model on the records' wind as at fit) and ``scan``
+        (:func:`vivbench.analysis.changes.statistics_change_scan` of them), which ``vivbench pool``
+        writes instead of scanning again
     event_ids_ : list of str
     """
 
@@ -417,15 +464,19 @@ class ModelSelection:
         elif C > 1 or null is not None:
             fold = event_folds(E, self.n_folds, self.seed)
             models = [c.model for c in self.candidates] + ([] if null is None else [null])
-            tasks = [{"model": m, "records": records, "fold": fold, "criterion": self.criterion} for m in models]
+            groups = shared_groups(models)
+            tasks = [{"model": models[g[0]], "variants": [_variant(models[i], n_bootstrap=0) for i in g],
+                      "records": records, "fold": fold, "criterion": self.criterion} for g in groups]
             for out in run_tasks(_candidate_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
-                name = self.candidates[out.index].name if out.index < C else "the quasi-steady null model"
                 if out.error is not None:
+                    name = ", ".join(self.candidates[i].name if i < C else "the quasi-steady null model"
+                                     for i in groups[out.index])
                     raise InputError(f"{name!r} failed on a held-out fold: {out.error}")
-                if out.index < C:
-                    self.losses_[out.index] = out.value["loss"]
-                else:
-                    self.null_loss_ = out.value["loss"]
+                for i, loss in zip(groups[out.index], out.value["loss"]):
+                    if i < C:
+                        self.losses_[i] = loss
+                    else:
+                        self.null_loss_ = loss
             self.in_set_, self.excess_, self.se_ = one_se_set(self.losses_)
             if null is not None:
                 with_null = one_se_set(np.vstack([self.losses_, self.null_loss_[None]]))
@@ -450,17 +501,23 @@ class ModelSelection:
         perturbed = [[perturbed_wind(r, s, self.perturbation_timescale_s, rng)
                       for r, s in zip(records, self.wind_error_)] for _ in range(int(self.n_perturbations))]
         others = [i for i in members if i != chosen]
-        # The final fits, in parallel: the choice itself, the set's other members and the perturbed refits.
-        tasks = ([{"model": self.candidates[chosen].model, "params": {}, "records": records}]
-                 + [{"model": self.candidates[i].model, "params": {"n_bootstrap": 0}, "records": records}
-                    for i in others]
-                 + [{"model": self.candidates[chosen].model, "params": {"n_bootstrap": 0}, "records": p}
+        # The final fits, in parallel: the choice itself, the set's other members and the perturbed refits;
+        # the choice and the members that differ from it only in final parameters are fitted together.
+        finals = [chosen] + others
+        groups = shared_groups([self.candidates[i].model for i in finals])
+        tasks = ([{"model": self.candidates[finals[g[0]]].model,
+                   "variants": [_variant(self.candidates[finals[j]].model, **({} if j == 0 else {"n_bootstrap": 0}))
+                                for j in g], "records": records} for g in groups]
+                 + [{"model": self.candidates[chosen].model,
+                     "variants": [_variant(self.candidates[chosen].model, n_bootstrap=0)], "records": p}
                     for p in perturbed])
-        fitted = [None] * len(tasks)
+        slots = groups + [[len(finals) + k] for k in range(len(perturbed))]  # the fits' places in ``fitted``
+        fitted = [None] * (len(finals) + len(perturbed))
         for out in run_tasks(_fit_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
             if out.error is not None:
                 raise InputError(f"the final fit {out.index} of the selection failed: {out.error}")
-            fitted[out.index] = out.value
+            for j, model in zip(slots[out.index], out.value):
+                fitted[j] = model
         self.model_ = fitted[0]
         self.set_models_ = fitted[1:1 + len(others)]
         self.perturbed_models_ = fitted[1 + len(others):]
@@ -469,10 +526,12 @@ class ModelSelection:
         return self
 
     def _change_scan(self, records: list[Record]) -> dict:
-        """The chosen model's change scan on the campaign's events (module docstring)."""
+        """The chosen model's change scan on the campaign's events (module docstring); keeps its inputs and
+        whole result in ``change_scan_`` (None when not scanned)."""
         from vivbench.analysis.changes import statistics_change_scan
 
         out = {"tested": False, "detected": False, "p_value": float("nan"), "event": ""}
+        self.change_scan_ = None
         if not self.change_scan:
             return out
         # on the wind as the model saw it at fit, as vivbench pool's own scan of the model
@@ -480,6 +539,7 @@ class ModelSelection:
         if inputs is None:
             return out
         scan = statistics_change_scan(inputs["statistics"], seed=int(self.seed))
+        self.change_scan_ = {"events": list(self.event_ids_), "seed": int(self.seed), "inputs": inputs, "scan": scan}
         out["tested"] = bool(np.isfinite(scan["p_value"]))
         out["detected"] = bool(scan["detected"])
         out["p_value"] = float(scan["p_value"])

@@ -84,16 +84,16 @@ from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation, nmse
 from vivbench.models.varying_design import design_rows
 from vivbench.models.varying_verdicts import varying_description, varying_summary, varying_window_verdicts
-from vivbench.models.varying_fit import (ORDER_SUBSETS, PENALTY_CHOICES, check_parameters, choose_smoothing,
-                                         event_statistics, fitted_arrays)
-from vivbench.models.wind_weights import resolve_wind_weights, weighted_section_mean
+from vivbench.models.varying_fit import (FINAL_PARAMS, ORDER_SUBSETS, PENALTY_CHOICES, event_statistics, fit_final,
+                                         fit_shared)
+from vivbench.models.wind_weights import weighted_section_mean
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regression.penalised import penalised_rss
 
 # The spline basis, the penalised solve and the order subsets are re-exported from their modules.
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "uniform_knots", "DEGREE",
            "penalised_rss", "ORDER_SUBSETS", "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES",
-           "YAW_INSIDE_DEG"]
+           "YAW_INSIDE_DEG", "FINAL_PARAMS"]
 
 #: Default candidates of the measured wind's Gaussian smoothing, s (0: none), chosen per campaign by
 #: the cross-validated error over events: roughly doubling steps, from the exact wind of an in-library
@@ -285,6 +285,8 @@ class VaryingCoefficientSINDy(ModelBase):
     """
 
     _fitted_attribute = "coef_"
+    #: Parameters that :meth:`fit_variants` may vary between models fitted together.
+    final_params = FINAL_PARAMS
 
     def __init__(self, *, n_basis: Sequence[int] = (6, 8, 11, 15, 20),
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
@@ -403,27 +405,39 @@ class VaryingCoefficientSINDy(ModelBase):
         -------
         self
         """
-        check_parameters(self)
-        raw = [as_record(r, k) for k, r in enumerate(records)]
-        if len(raw) < 2:
-            # M, lambda and the wind smoothing are chosen by cross-validation over events
-            raise InputError(f"the varying-coefficient model needs at least 2 events (its basis and penalty are "
-                             f"chosen by cross-validation over events); got {len(raw)}")
-        for rec in raw:
-            if rec.n_sections != raw[0].n_sections:
-                raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {raw[0].n_sections}")
-        self.penalty_choice_ = self.penalty_choice
-        weights = self.wind_weights if self.wind_input == "mean" else "equal"
-        self.wind_weights_choice_ = weights if isinstance(weights, str) else "given"
-        # The weights come from the amplitudes, which the wind's smoothing does not touch.
-        self.wind_weights_ = resolve_wind_weights(weights, np.concatenate([r.A for r in raw]))
-        grid = [float(self.wind_smoothing_s)] if self.wind_smoothing_grid is None else [
-            float(x) for x in self.wind_smoothing_grid]
-        (self.wind_smoothing_cv_, self.wind_smoothing_s_, samples, sections,
-         self.wind_error_share_) = choose_smoothing(self, raw, grid)
-        for name, value in fitted_arrays(self, samples, sections).items():
-            setattr(self, name, value)
+        fit_final(self, fit_shared(self, records))
         return self
+
+    def fit_variants(self, records: Sequence[Record | tuple], variants: Sequence[dict]) -> list:
+        """Fitted copies of this model, one per variant of its :data:`FINAL_PARAMS`, sharing what they share.
+
+        Equal to ``clone.set_params(**variant).fit(records)`` for each variant, but the
+        wind smoothing, basis and penalty choice (the costly steps, which those
+        parameters do not touch) run once (:func:`vivbench.models.varying_fit.fit_shared`).
+
+        Parameters
+        ----------
+        records : sequence of Record, as :meth:`fit`
+        variants : sequence of dict
+            Parameters to set on each copy, names from :data:`FINAL_PARAMS` only
+            (e.g. ``{"penalty_choice": "least", "n_bootstrap": 0}``).
+
+        Returns
+        -------
+        list of VaryingCoefficientSINDy, fitted, in the order of ``variants`` (this model stays unfitted)
+        """
+        for params in variants:
+            other = sorted(set(params) - set(FINAL_PARAMS))
+            if other:
+                raise InputError(f"fit_variants may change only {', '.join(FINAL_PARAMS)}; got {', '.join(other)}")
+        base = type(self)(**self.get_params())
+        shared = fit_shared(base, records)
+        out = []
+        for params in variants:
+            model = type(self)(**self.get_params()).set_params(**params)
+            fit_final(model, shared)
+            out.append(model)
+        return out
 
     def event_statistics(self, records: Sequence[Record]) -> list[dict]:
         """Per-event sufficient statistics of every equation's penalised regression, at the fitted basis and scales.
