@@ -60,8 +60,14 @@ class StopRule:
 
     def check(self, x: np.ndarray) -> np.ndarray:
         """Stop codes of states x (..., d): shape (...), ``NOT_STOPPED``, ``NON_FINITE``, ``ABOVE`` or ``BELOW``."""
-        finite = np.all(np.isfinite(x), axis=-1)
         y = self.scale * x
+        if y.size:
+            # Every step asks: when the extremes are finite and inside the bounds, nothing stops (a NaN
+            # anywhere makes them NaN, an infinite component makes them infinite: the full test below).
+            lo, hi = float(y.min()), float(y.max())
+            if math.isfinite(lo) and math.isfinite(hi) and lo >= self.lower and hi <= self.upper:
+                return np.zeros(y.shape[:-1], dtype=np.int64)
+        finite = np.all(np.isfinite(x), axis=-1)
         code = np.where(~finite, NON_FINITE, NOT_STOPPED)
         if self.upper < math.inf:
             code = np.where((code == NOT_STOPPED) & np.any(y > self.upper, axis=-1), ABOVE, code)
