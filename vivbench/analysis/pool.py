@@ -26,7 +26,7 @@ from vivbench.analysis.wind_inputs import with_yaw
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import (model_change_inputs, model_for_records, model_summary,
-                                      transforms_wind)
+                                      recorded_change_scan, transforms_wind)
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
            "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing"]
@@ -391,13 +391,13 @@ def _model_change_scan(model, records: list[Record], event_ids: list[str]) -> tu
     :func:`vivbench.analysis.changes.statistics_change_scan` at the model's seed), (None, None) without them.
 
     ``records`` are those the model was just fitted on, their wind as at fit. A model that scanned itself
-    on them (a :class:`vivbench.analysis.ModelSelection`'s ``change_scan_``: the same events, inputs and
-    seed) gives its own recorded scan instead of a second one.
+    on them (:func:`vivbench.models.recorded_change_scan`, e.g. a :class:`vivbench.analysis.ModelSelection`'s:
+    the same events, inputs and seed) gives its own recorded scan instead of a second one.
     """
     from vivbench.analysis.changes import statistics_change_scan
 
     seed = int(getattr(model, "seed", 0))
-    recorded = getattr(model, "change_scan_", None)
+    recorded = recorded_change_scan(model)
     if recorded is not None and recorded["events"] == list(event_ids) and recorded["seed"] == seed:
         return recorded["inputs"], recorded["scan"]
     inputs = model_change_inputs(model, records)

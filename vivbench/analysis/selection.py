@@ -547,6 +547,11 @@ class ModelSelection:
             out["event"] = str(self.event_ids_[int(scan["change_index"])])
         return out
 
+    def recorded_change_scan(self) -> dict | None:
+        """The chosen model's change scan run at fit, ``change_scan_`` (:func:`vivbench.models.recorded_change_scan`)."""
+        self._check_fitted()
+        return self.change_scan_
+
     # -- the protocol, through the chosen model ------------------------------------------------------
 
     def _check_fitted(self) -> None:
