@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.helpers import assert_close, bell_records
-from vivbench.analysis.selection import (Candidate, ModelSelection, event_folds, held_out_loss, one_se_set,
-                                         perturbed_wind, varying_selection, wind_error_scale, without_yaw)
+from vivbench.analysis.held_out import event_folds, held_out_loss, one_se_set, shared_groups
+from vivbench.analysis.selection import (Candidate, ModelSelection, perturbed_wind, varying_selection, wind_error_scale,
+                                         without_yaw)
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.simulate import Simulation
@@ -307,7 +308,6 @@ def test_a_change_located_by_the_chosen_models_scan_withholds_every_flag(step):
 
 
 def test_candidates_that_differ_only_in_final_parameters_share_a_group():
-    from vivbench.analysis.selection import shared_groups
     from vivbench.models import QuasiSteadyAmplitude
 
     sel = varying_selection(options={"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")})

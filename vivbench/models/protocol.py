@@ -59,7 +59,7 @@ __all__ = [
     "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations",
     "ModelBase", "NotFittedError", "as_record", "fit_records", "coef_order_contributions", "format_equations",
     "section_names", "simulate_windows", "model_summary", "model_size", "model_for_records", "model_change_inputs",
-    "recorded_change_scan", "transforms_wind", "model_curves", "model_class_path", "model_description", "chosen_model",
+    "recorded_change_scan", "simulate_many", "transforms_wind", "model_curves", "model_class_path", "model_description", "chosen_model",
     "model_evidence", "IDENTIFIABLE_LONG_NAME",
 ]
 
@@ -460,6 +460,22 @@ def recorded_change_scan(model) -> dict | None:
     """
     own = getattr(model, "recorded_change_scan", None)
     return own() if callable(own) else None
+
+
+def simulate_many(model, runs: Sequence[tuple]) -> list:
+    """Simulations of several spans, ``runs`` a sequence of (record, t0, t1, A0) (A0 None: the record's A at t0).
+
+    ``model.simulate_runs(runs)`` when the model has it (one batched integration, e.g.
+    :meth:`vivbench.models.VaryingCoefficientSINDy.simulate_runs`), else ``model.simulate`` of each run.
+
+    Returns
+    -------
+    list of Simulation, one per run, in order
+    """
+    own = getattr(model, "simulate_runs", None)
+    if callable(own):
+        return list(own(list(runs)))
+    return [model.simulate(r, t0, t1) if A0 is None else model.simulate(r, t0, t1, A0) for r, t0, t1, A0 in runs]
 
 
 def transforms_wind(model) -> bool:

@@ -79,9 +79,9 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.varying_model import read_varying_model, varying_model_dataset, write_varying_model
 from vivbench.library.splines import DEGREE, bspline_basis, bspline_local, difference_penalty, uniform_knots
 from vivbench.models.curve_support import EXTRAPOLATED, curves_dataset
-from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, as_record, section_names
-from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.simulate import Simulation
+from vivbench.models.varying_simulate import simulate_runs
 from vivbench.models.varying_design import design_rows
 from vivbench.models.varying_verdicts import varying_description, varying_summary, varying_window_verdicts
 from vivbench.models.varying_fit import (FINAL_PARAMS, ORDER_SUBSETS, PENALTY_CHOICES, event_statistics, fit_final,
@@ -544,8 +544,9 @@ class VaryingCoefficientSINDy(ModelBase):
                     out[..., k, :] += np.einsum("nmj,...mij->...ni", Bz, np.asarray(coef_yaw)[..., k, cols, :, :])
         return out
 
-    def _record_yaw(self, record: Record) -> np.ndarray | None:
-        """Yaw in degrees for evaluating on a record: its own, or the fitted median without one."""
+    def record_yaw(self, record: Record) -> np.ndarray | None:
+        """Yaw in degrees for evaluating on a record: its own, or the fitted median without one (None
+        without a yaw covariate)."""
         if not self.yaw_degree_:
             return None
         yaw = record.yaw
@@ -557,7 +558,7 @@ class VaryingCoefficientSINDy(ModelBase):
         """Order contributions of bootstrap replicates ``start:stop``, shape (R, n_samples, S, 4), m/s."""
         record = self._check_record(record)
         sl = slice(start, stop)
-        return (self.coefficient_values(record.U, self.coef_bootstrap_[sl], self._record_yaw(record),
+        return (self.coefficient_values(record.U, self.coef_bootstrap_[sl], self.record_yaw(record),
                                         self.coef_yaw_bootstrap_[sl]) * record.A[..., None] ** np.arange(4))
 
     def subset_order_contributions(self, record: Record) -> np.ndarray:
@@ -568,7 +569,7 @@ class VaryingCoefficientSINDy(ModelBase):
         than the best subset's).
         """
         record = self._check_record(record)
-        return (self.coefficient_values(record.U, self.subset_coef_, self._record_yaw(record),
+        return (self.coefficient_values(record.U, self.subset_coef_, self.record_yaw(record),
                                         self.subset_coef_yaw_) * record.A[..., None] ** np.arange(4))
 
     def penalty_order_contributions(self, record: Record) -> np.ndarray | None:
@@ -580,13 +581,13 @@ class VaryingCoefficientSINDy(ModelBase):
         if getattr(self, "penalty_coef_", None) is None:
             return None
         record = self._check_record(record)
-        return (self.coefficient_values(record.U, self.penalty_coef_, self._record_yaw(record),
+        return (self.coefficient_values(record.U, self.penalty_coef_, self.record_yaw(record),
                                         self.penalty_coef_yaw_) * record.A[..., None] ** np.arange(4))
 
     def order_contributions(self, record: Record) -> np.ndarray:
         """r[:, k, i] = a_ki(U_k) A_k^i, shape (n_samples, n_sections, 4), m/s (NaN where A or U is missing)."""
         record = self._check_record(record)
-        return (self.coefficient_values(record.U, yaw=self._record_yaw(record))
+        return (self.coefficient_values(record.U, yaw=self.record_yaw(record))
                 * record.A[..., None] ** np.arange(4))
 
     def order_contributions_bootstrap(self, record: Record) -> np.ndarray:
@@ -639,7 +640,7 @@ class VaryingCoefficientSINDy(ModelBase):
         record = self._check_record(record)
         U = self.wind_inputs(record.U)
         J = self.yaw_degree_
-        z = self.yaw_covariate(self._record_yaw(record), U.shape[0]) if J else None
+        z = self.yaw_covariate(self.record_yaw(record), U.shape[0]) if J else None
         n, S, Lmax = U.shape[0], self.n_sections_, self.coef_.shape[1]
         return design_rows(U, z, self.knots_, self.n_basis_, Lmax, J, self.n_inputs(S))
 
@@ -668,37 +669,14 @@ class VaryingCoefficientSINDy(ModelBase):
         -------
         Simulation
         """
-        record = self._check_record(record)
-        t = record.t
-        i0 = int(np.argmin(np.abs(t - (t[0] if t0 is None else float(t0)))))
-        i1 = int(np.argmin(np.abs(t - (t[-1] if t1 is None else float(t1))))) + 1
-        tt = t[i0:i1]
-        S = self.n_sections_
-        U = record.U[i0:i1]
-        Umid = 0.5 * (U[:-1] + U[1:])
-        yaw = self._record_yaw(record)
-        yaw = None if yaw is None else yaw[i0:i1]
-        ymid = None if yaw is None else 0.5 * (yaw[:-1] + yaw[1:])
-        a = self.coefficient_values(U, yaw=yaw)  # (n, S, 4)
-        am = self.coefficient_values(Umid, yaw=ymid) if tt.size > 1 else np.zeros((0, S, 4))
-        A_meas = record.A[i0:i1]
-        x = np.asarray(record.A[i0] if A0 is None else A0, dtype=float).copy()
-        if x.shape != (S,):
-            raise ValueError(f"A0 must have shape ({S},) (one amplitude per section, m); got {x.shape}")
-        top = bound_factor * np.nanmax(np.abs(record.A)) if np.isfinite(record.A).any() else np.inf
-        coef = (a, am, a)  # the curves at a step's start, midpoint and end (index n + 1)
+        return self.simulate_runs([(record, t0, t1, A0)], bound_factor=bound_factor)[0]
 
-        def f(y, n, stage):
-            c = coef[stage][n + (stage == 2)]
-            return c[:, 0] + y * (c[:, 1] + y * (c[:, 2] + y * c[:, 3]))
-
-        run = rk4(f, x, tt, stop=StopRule(upper=top, lower=-0.05 * top / bound_factor))
-        out = run.x
-        stopped = None if run.stop < 0 else float(tt[run.stop])
-        reason = None if stopped is None else "non-finite or out-of-bounds amplitude"
-        covered = 1.0 if stopped is None else float((stopped - tt[0]) / max(tt[-1] - tt[0], 1e-12))
-        return Simulation(t=tt, A_sim=out, A_meas=A_meas, stopped_at=stopped, reason=reason,
-                          nmse=nmse(out, A_meas), covered=covered, windows=np.zeros(max(tt.size - 1, 0), dtype=int))
+    def simulate_runs(self, runs: Sequence[tuple], bound_factor: float = 10.0) -> list[Simulation]:
+        """:meth:`simulate` of several spans at once, ``runs`` a sequence of (record, t0, t1, A0): one batched
+        RK4 over the runs (:func:`vivbench.models.varying_simulate.simulate_runs`), each result the same as
+        its run's :meth:`simulate`."""
+        self._check_fitted()
+        return simulate_runs(self, [(self._check_record(r), t0, t1, A0) for r, t0, t1, A0 in runs], bound_factor)
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:
         """The fitted curves a_ki(U) of docs/concepts.md (coefficient curves) with block-bootstrap bands.
