@@ -117,3 +117,26 @@ def test_a_former_name_is_refused_with_the_current_one(argv, message, tmp_path, 
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].endswith(message), err
+
+
+def test_pool_writes_the_selections_own_change_scan_instead_of_a_second(small_results, monkeypatch):
+    from vivbench.analysis import CAMPAIGN_DERIVATIVE, changes, pool_results, records_from_results, varying_selection
+    from vivbench.models import model_change_inputs
+
+    scan = changes.statistics_change_scan
+    calls = []
+    monkeypatch.setattr(changes, "statistics_change_scan", lambda *a, **k: calls.append(1) or scan(*a, **k))
+    _camp, _dir, files = small_results
+    sel = varying_selection(options={"yaw_degree": (0,)}, n_perturbations=0, n_basis=(8,), n_bootstrap=4,
+                            block_s=20.0)
+    ds = pool_results(files, sel)
+    assert len(calls) == 1  # the selection's own scan of its chosen model, written by the pool
+    recorded = sel.recorded_change_scan()
+    assert recorded["events"] == [str(e) for e in ds["event"].values] and recorded["seed"] == sel.seed
+    records = records_from_results(files, derivative=CAMPAIGN_DERIVATIVE)
+    fresh = scan(model_change_inputs(sel.model_, [sel.model_.measured_wind(r) for r in records])["statistics"],
+                 seed=sel.seed)
+    for key in ("misfit", "split_gain"):
+        assert np.array_equal(recorded["scan"][key], fresh[key], equal_nan=True)
+    assert np.array_equal(ds["event_misfit"].values, fresh["misfit"], equal_nan=True)
+    assert np.array_equal(ds["event_model_split_gain"].values, fresh["split_gain"], equal_nan=True)

@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.helpers import assert_close, bell_records
-from vivbench.analysis.selection import (Candidate, ModelSelection, event_folds, held_out_loss, one_se_set,
-                                         perturbed_wind, varying_selection, wind_error_scale, without_yaw)
+from vivbench.analysis.held_out import event_folds, held_out_loss, one_se_set, shared_groups
+from vivbench.analysis.selection import (Candidate, ModelSelection, perturbed_wind, varying_selection, wind_error_scale,
+                                         without_yaw)
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.simulate import Simulation
@@ -304,3 +305,36 @@ def test_a_change_located_by_the_chosen_models_scan_withholds_every_flag(step):
     unscanned.verdict = _always_flag
     assert unscanned.fit(recs).identifiable(recs[0], np.array([0.0]), np.array([50.0])).all()
     assert unscanned.evidence()["change"]["tested"] is False
+
+
+def test_candidates_that_differ_only_in_final_parameters_share_a_group():
+    from vivbench.models import QuasiSteadyAmplitude
+
+    sel = varying_selection(options={"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")})
+    models = [c.model for c in sel.candidates] + [QuasiSteadyAmplitude(), _Poly(1), _Poly(1)]
+    assert [c.name for c in sel.candidates] == ["yaw0-cv", "yaw0-least", "yaw1-cv", "yaw1-least"]
+    assert shared_groups(models) == [[0, 1], [2, 3], [4], [5], [6]]
+
+
+def test_grouped_held_out_fits_give_each_candidates_own_losses_and_final_fits():
+    """The selection's losses and fitted models are those of every candidate fitted alone on every fold."""
+    recs = _yaw_records(True)[:5]
+    sel = varying_selection(criterion="output", options={"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")},
+                            n_perturbations=1, n_folds=3, n_basis=(6, 8), n_bootstrap=4, wind_smoothing_s=20.0,
+                            null=False).fit(recs)
+    fold = event_folds(len(recs), 3, 0)
+    for c, losses in zip(sel.candidates, sel.losses_):
+        expected = np.zeros(len(recs))
+        for f in range(3):
+            alone = type(c.model)(**{**c.model.get_params(), "n_bootstrap": 0})
+            alone.fit([r for r, g in zip(recs, fold) if g != f])
+            for i in np.flatnonzero(fold == f):
+                expected[i] = held_out_loss(alone, recs[i], "output")
+        assert np.array_equal(losses, expected), c.name
+    chosen = sel.candidates[sel.chosen_index_].model
+    alone = type(chosen)(**chosen.get_params()).fit(recs)
+    assert sel.model_.to_dataset().identical(alone.to_dataset())
+    others = [sel.candidates[i].model for i in np.flatnonzero(sel.in_set_) if i != sel.chosen_index_]
+    for model, fitted in zip(others, sel.set_models_):
+        assert fitted.to_dataset().identical(type(model)(**{**model.get_params(), "n_bootstrap": 0}).fit(recs)
+                                             .to_dataset())

@@ -252,3 +252,33 @@ def test_eiv_weights():
     p = VaryingCoefficientSINDy(**params, eiv_weights=False).fit(noisy)
     np.testing.assert_array_equal(w.penalty_, p.penalty_)
     assert_not_close(w.coef_, p.coef_, rtol=1e-5, atol=1e-8, reason="a clear difference, not rounding")
+
+
+def test_fit_variants_equal_the_models_fitted_one_by_one():
+    """Models that differ only in final parameters, fitted together, are the models fitted alone (same bytes)."""
+    recs = _records(4, seed=2)
+    base = VaryingCoefficientSINDy(n_basis=(6, 8), n_bootstrap=5, wind_smoothing_s=10.0)
+    variants = [{"penalty_choice": "least", "n_bootstrap": 0}, {}, {"penalty_choice": "loeo", "n_bootstrap": 3}]
+    together = base.fit_variants(recs, variants)
+    assert not hasattr(base, "coef_")  # the model itself stays unfitted
+    for params, model in zip(variants, together):
+        alone = VaryingCoefficientSINDy(**{**base.get_params(), **params}).fit(recs)
+        assert model.get_params() == alone.get_params()
+        assert model.to_dataset().identical(alone.to_dataset())
+        assert np.array_equal(model.coef_bootstrap_, alone.coef_bootstrap_)
+    with pytest.raises(InputError, match="may change only"):
+        base.fit_variants(recs, [{"n_basis": (8,)}])
+
+
+def test_simulate_runs_are_each_runs_simulation(fitted):
+    """Runs integrated together (each its own span, start and bound) give each run's own simulation."""
+    recs = _records(3, seed=4)
+    runs = [(recs[0], None, None, None), (recs[1], 100.0, 400.0, None), (recs[2], 50.0, 900.0, np.array([2.0, 1.0])),
+            (recs[0], 10.0, 10.0, None)]
+    together = fitted.simulate_runs(runs)
+    assert together[2].stopped_at is not None  # started far above the record's amplitudes: stopped
+    for run, sim in zip(runs, together):
+        alone = fitted.simulate(*run)
+        assert np.array_equal(sim.t, alone.t) and np.array_equal(sim.A_sim, alone.A_sim, equal_nan=True)
+        assert sim.stopped_at == alone.stopped_at and sim.covered == alone.covered
+        assert np.array_equal(sim.nmse, alone.nmse, equal_nan=True)

@@ -42,3 +42,13 @@ def test_the_cache_lets_go_of_a_record_no_longer_used():
     del rec
     gc.collect()
     assert len(wind_smoothing._SMOOTHED) == n - 1
+
+
+def test_u_and_yaw_with_different_gaps_are_each_smoothed_over_their_own_valid_samples():
+    rec = _record(2)
+    yaw = rec.yaw.copy()
+    yaw[300:340, 1] = np.nan  # a gap the wind does not have
+    both = smooth_wind(dataclasses.replace(rec, yaw=yaw), 30.0)
+    alone = smooth_wind(dataclasses.replace(rec, U=yaw, yaw=None), 30.0)  # the yaw smoothed as a wind
+    assert_close(both.yaw, alone.U, rtol=0.0, atol=0.0)
+    assert np.isnan(both.yaw[300:340, 1]).all() and np.isfinite(both.U[300:340, 1]).all()

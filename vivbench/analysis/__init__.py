@@ -29,16 +29,24 @@ from vivbench.analysis.pool import (
     load_campaign_model,
     campaign_wind_smoothing,
 )
-from vivbench.analysis.selection import (
+from vivbench.analysis.held_out import (
     CRITERIA,
+    event_folds,
+    fit_group,
+    fit_task,
+    held_out_loss,
+    held_out_losses,
+    held_out_task,
+    one_se_set,
+    shared_groups,
+    variant_params,
+)
+from vivbench.analysis.selection import (
     VARYING_OPTIONS,
     VARYING_PRIORS,
     Candidate,
     ModelSelection,
     STRUCTURAL_OPTIONS,
-    event_folds,
-    held_out_loss,
-    one_se_set,
     perturbed_wind,
     varying_selection,
     wind_error_scale,
@@ -54,7 +62,8 @@ __all__ = [
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
     "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
-    "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "ModelSelection", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss",
-    "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw",
+    "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "ModelSelection", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss", "held_out_losses",
+    "one_se_set", "perturbed_wind", "shared_groups", "variant_params", "fit_group", "held_out_task", "fit_task",
+    "varying_selection", "wind_error_scale", "without_yaw",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

@@ -26,7 +26,7 @@ from vivbench.analysis.wind_inputs import with_yaw
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import (model_change_inputs, model_for_records, model_summary,
-                                      transforms_wind)
+                                      recorded_change_scan, transforms_wind)
 
 __all__ = ["CAMPAIGN_DERIVATIVE", "CURVE_STEP", "curve_wind_grid", "pool_results", "records_from_results",
            "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing"]
@@ -216,7 +216,7 @@ def pool_results(result_files: Sequence, model=None, *,
         ``campaign.regimes.nc``.
     """
     from vivbench.analysis.changes import (FLAG_FDR, change_point_scan, change_relative_flags, event_residual_checks,
-                                           offset_flags, offset_strata, statistics_change_scan)
+                                           offset_flags, offset_strata)
 
     model = PooledSINDy() if model is None else model
     results = []
@@ -319,11 +319,9 @@ def pool_results(result_files: Sequence, model=None, *,
                                "events' of its stratum (Benjamini-Hochberg over the assessed events at FLAG_FDR)"}),
     })
     event_ids = [str(a["event_id"]) for _p, _d, a, _e in results]
-    model_scan = None
-    change_inputs = model_change_inputs(model, records)
+    change_inputs, model_scan = _model_change_scan(model, records, event_ids)
     if change_inputs is not None:
         stats = change_inputs["statistics"]
-        model_scan = statistics_change_scan(stats, seed=int(getattr(model, "seed", 0)))
         # Flags relative to the located change, only when the scan reports one.
         ci = model_scan["change_index"] if model_scan["detected"] else -1
         rel = change_relative_flags(stats, ci, checks["linear_offset_se"], change_inputs["a_ref"],
@@ -387,6 +385,26 @@ def pool_results(result_files: Sequence, model=None, *,
     attrs["offset_not_assessed_events"] = json.dumps([event_ids[i] for i in np.flatnonzero(np.isnan(offsets["p"]))])
     attrs["flag_fdr"] = FLAG_FDR
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def _model_change_scan(model, records: list[Record], event_ids: list[str]) -> tuple[dict | None, dict | None]:
+    """The fitted model's change scan inputs and result (:func:`vivbench.models.model_change_inputs`,
+    :func:`vivbench.analysis.changes.statistics_change_scan` at the model's seed), (None, None) without them.
+
+    ``records`` are those the model was just fitted on, their wind as at fit. A model that scanned itself
+    on them (:func:`vivbench.models.recorded_change_scan`, e.g. a :class:`vivbench.analysis.ModelSelection`'s:
+    the same events, inputs and seed) gives its own recorded scan instead of a second one.
+    """
+    from vivbench.analysis.changes import statistics_change_scan
+
+    seed = int(getattr(model, "seed", 0))
+    recorded = recorded_change_scan(model)
+    if recorded is not None and recorded["events"] == list(event_ids) and recorded["seed"] == seed:
+        return recorded["inputs"], recorded["scan"]
+    inputs = model_change_inputs(model, records)
+    if inputs is None:
+        return None, None
+    return inputs, statistics_change_scan(inputs["statistics"], seed=seed)
 
 
 def campaign_wind_smoothing(pooled) -> float:

@@ -65,22 +65,19 @@ from vivbench.core.errors import InputError
 from vivbench.core.parallel import run_tasks
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
+from vivbench.analysis.held_out import (CRITERIA, event_folds, fit_task, held_out_task, one_se_set,
+                                        shared_groups, variant_params)
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
-from vivbench.preprocess.runs import mask_runs
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind, unmeasured_wind_rms
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
-__all__ = ["Candidate", "ModelSelection", "CRITERIA", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z", "VARYING_OPTIONS",
-           "VARYING_PRIORS", "event_folds", "held_out_loss", "one_se_set", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
+__all__ = ["Candidate", "ModelSelection", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z", "VARYING_OPTIONS",
+           "VARYING_PRIORS", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
 
 #: Fewest events for a held-out choice among several candidates (every training set keeps two events).
 MIN_EVENTS = 3
-
-#: Held-out criteria: simulated envelope (output error) or dA/dt (equation error).
-CRITERIA = ("output", "derivative")
-
 
 @dataclass(frozen=True, kw_only=True)
 class Candidate:
@@ -113,105 +110,6 @@ class Candidate:
             raise InputError(f"candidate {self.name!r}: its model has no fit(records) method")
         if int(self.complexity) != self.complexity or self.complexity < 0:
             raise InputError(f"candidate {self.name!r}: complexity must be an integer >= 0; got {self.complexity!r}")
-
-
-def event_folds(n_events: int, n_folds: int, seed: int = 0) -> np.ndarray:
-    """Fold of every event, shape (n_events,): events dealt in a seeded random order.
-
-    With fewer events than ``n_folds`` every event is its own fold (leave one event out).
-    """
-    if n_events < 2:
-        raise InputError(f"held-out selection needs at least 2 events; got {n_events}")
-    order = np.random.default_rng(seed).permutation(n_events)
-    k = min(int(n_folds), n_events)
-    fold = np.empty(n_events, dtype=int)
-    fold[order] = np.arange(n_events) % k
-    return fold
-
-
-def _decimated(record: Record, step_s: float) -> Record:
-    """Every k-th sample of the record, k = round(step_s / its median step) (the record itself when k <= 1)."""
-    if record.n_samples < 2:
-        return record
-    k = int(round(step_s / float(np.median(np.diff(record.t)))))
-    if k <= 1:
-        return record
-    sl = slice(None, None, k)
-    pick = (lambda x: None if x is None else np.asarray(x)[sl])
-    return Record(event_id=record.event_id, t=record.t[sl], A=record.A[sl], U=record.U[sl], dA=record.dA[sl],
-                  yaw=pick(record.yaw), noise_std=record.noise_std, wind_distance=record.wind_distance)
-
-
-def held_out_loss(model, record: Record, criterion: str = "output", min_samples: int = 20,
-                  step_s: float = 1.0) -> float:
-    """Squared prediction error of a fitted model on one record it was not fitted on (module docstring).
-
-    Parameters
-    ----------
-    model : fitted model of the protocol
-    record : Record, measured (its wind is transformed as the model's was at fit)
-    criterion : "output" (simulated envelope) or "derivative" (dA/dt)
-    min_samples : int, runs shorter than this (on the simulation's grid) are not simulated
-    step_s : float, s
-        Time step of the output error's simulation and sum: the record's wind, once transformed
-        as at fit, is taken every ``step_s`` (the envelope and the smoothed wind vary over tens
-        of seconds, so the integration's step does not limit the loss).
-
-    Returns
-    -------
-    float, m^2 (output) or m^2/s^2 (derivative); 0 when the record has no valid run
-    """
-    rec = measured_input(model, record)
-    ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
-    if criterion == "derivative":
-        f = np.asarray(model.predict(rec), dtype=float)
-        good = ok[:, None] & np.isfinite(rec.dA)
-        # a sample the model does not predict counts as missed by the whole measured dA/dt
-        err = np.where(good, np.where(np.isfinite(f), f - rec.dA, rec.dA), 0.0)
-        return float(np.sum(err**2))
-    rec = _decimated(rec, step_s)
-    ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
-    total = 0.0
-    peak = float(np.nanmax(np.abs(rec.A))) if np.isfinite(rec.A).any() else 0.0
-    for run in mask_runs(ok):
-        if run.stop - run.start < min_samples:
-            continue
-        sim = model.simulate(rec, float(rec.t[run.start]), float(rec.t[run.stop - 1]))
-        d = np.asarray(sim.A_sim, dtype=float) - np.asarray(sim.A_meas, dtype=float)
-        d = np.where(np.isfinite(d), d, peak)
-        total += float(np.sum(d**2))
-    return total
-
-
-def one_se_set(losses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The confidence set of candidates by the one-standard-error rule over events.
-
-    Parameters
-    ----------
-    losses : ndarray, shape (C, E)
-        Held-out loss of every candidate on every event.
-
-    Returns
-    -------
-    in_set : ndarray of bool, shape (C,)
-        Candidates whose summed loss exceeds the best's by at most one standard error of the
-        paired sum of differences over events (the best is always in).
-    excess : ndarray, shape (C,)
-        Summed loss minus the best's (0 for the best).
-    se : ndarray, shape (C,)
-        Standard error of that sum: sqrt(E) times the standard deviation of the per-event
-        differences (0 for the best).
-    """
-    L = np.asarray(losses, dtype=float)
-    if L.ndim != 2 or L.shape[0] < 1:
-        raise ValueError(f"losses must have shape (n_candidates, n_events); got {L.shape}")
-    total = L.sum(axis=1)
-    best = int(np.argmin(total))
-    diff = L - L[best]
-    E = L.shape[1]
-    se = np.sqrt(E) * diff.std(axis=1, ddof=1) if E > 1 else np.zeros(L.shape[0])
-    excess = total - total[best]
-    return excess <= se, excess, se
 
 
 def wind_error_scale(record: Record, timescale_s: float, single_section_share: float = 0.03) -> np.ndarray:
@@ -259,39 +157,6 @@ def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: n
     U = record.U + smooth * np.asarray(scale, dtype=float)[None, :]
     return Record(event_id=record.event_id, t=record.t, A=record.A, U=U, dA=record.dA, yaw=record.yaw,
                   noise_std=record.noise_std, wind_distance=record.wind_distance)
-
-
-def _unfitted(model, **params):
-    """A fresh copy of an unfitted model with ``params`` set where it has them (e.g. n_bootstrap)."""
-    m = copy.deepcopy(model)
-    if callable(getattr(m, "get_params", None)) and callable(getattr(m, "set_params", None)):
-        own = m.get_params()
-        m.set_params(**{k: v for k, v in params.items() if k in own})
-    return m
-
-
-def _fit(model, records):
-    fitted = model.fit(list(records))
-    return model if fitted is None else fitted
-
-
-def _candidate_task(task: dict) -> dict:
-    """Fit one candidate without each fold's events in turn and score it on them (a picklable top-level task).
-
-    One task per candidate, not per fold: the records travel to a worker once.
-    """
-    records, fold, criterion = task["records"], task["fold"], task["criterion"]
-    loss = np.zeros(len(records))
-    for f in range(int(fold.max()) + 1):
-        fitted = _fit(_unfitted(task["model"], n_bootstrap=0), [r for r, g in zip(records, fold) if g != f])
-        for i in np.flatnonzero(fold == f):
-            loss[i] = held_out_loss(fitted, records[i], criterion)
-    return {"loss": loss}
-
-
-def _fit_task(task: dict):
-    """Fit a fresh copy of a model (with ``params`` where it has them) to records (a picklable top-level task)."""
-    return _fit(_unfitted(task["model"], **task["params"]), task["records"])
 
 
 class ModelSelection:
@@ -355,6 +220,11 @@ class ModelSelection:
     change_ : dict, the chosen model's change scan: ``tested``, ``detected``, ``p_value``, ``event``
         (the first event after the located change, "" when none)
     stationary_ : bool, whether the change scan lets the verdict flag windows (True when not tested)
+    change_scan_ : dict or None, the change scan itself (None when not run): ``events`` (the event ids
+        scanned, in order), ``seed``, ``inputs`` (:func:`vivbench.models.model_change_inputs` of the
+        chosen model on the records' wind as at fit) and ``scan``
+        (:func:`vivbench.analysis.changes.statistics_change_scan` of them), which ``vivbench pool``
+        writes instead of scanning again
     event_ids_ : list of str
     """
 
@@ -425,15 +295,19 @@ class ModelSelection:
         elif C > 1 or null is not None:
             fold = event_folds(E, self.n_folds, self.seed)
             models = [c.model for c in self.candidates] + ([] if null is None else [null])
-            tasks = [{"model": m, "records": records, "fold": fold, "criterion": self.criterion} for m in models]
-            for out in run_tasks(_candidate_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
-                name = self.candidates[out.index].name if out.index < C else "the quasi-steady null model"
+            groups = shared_groups(models)
+            tasks = [{"model": models[g[0]], "variants": [variant_params(models[i], n_bootstrap=0) for i in g],
+                      "records": records, "fold": fold, "criterion": self.criterion} for g in groups]
+            for out in run_tasks(held_out_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
                 if out.error is not None:
+                    name = ", ".join(self.candidates[i].name if i < C else "the quasi-steady null model"
+                                     for i in groups[out.index])
                     raise InputError(f"{name!r} failed on a held-out fold: {out.error}")
-                if out.index < C:
-                    self.losses_[out.index] = out.value["loss"]
-                else:
-                    self.null_loss_ = out.value["loss"]
+                for i, loss in zip(groups[out.index], out.value["loss"]):
+                    if i < C:
+                        self.losses_[i] = loss
+                    else:
+                        self.null_loss_ = loss
             self.in_set_, self.excess_, self.se_ = one_se_set(self.losses_)
             if null is not None:
                 with_null = one_se_set(np.vstack([self.losses_, self.null_loss_[None]]))
@@ -458,17 +332,23 @@ class ModelSelection:
         perturbed = [[perturbed_wind(r, s, self.perturbation_timescale_s, rng)
                       for r, s in zip(records, self.wind_error_)] for _ in range(int(self.n_perturbations))]
         others = [i for i in members if i != chosen]
-        # The final fits, in parallel: the choice itself, the set's other members and the perturbed refits.
-        tasks = ([{"model": self.candidates[chosen].model, "params": {}, "records": records}]
-                 + [{"model": self.candidates[i].model, "params": {"n_bootstrap": 0}, "records": records}
-                    for i in others]
-                 + [{"model": self.candidates[chosen].model, "params": {"n_bootstrap": 0}, "records": p}
+        # The final fits, in parallel: the choice itself, the set's other members and the perturbed refits;
+        # the choice and the members that differ from it only in final parameters are fitted together.
+        finals = [chosen] + others
+        groups = shared_groups([self.candidates[i].model for i in finals])
+        tasks = ([{"model": self.candidates[finals[g[0]]].model,
+                   "variants": [variant_params(self.candidates[finals[j]].model, **({} if j == 0 else {"n_bootstrap": 0}))
+                                for j in g], "records": records} for g in groups]
+                 + [{"model": self.candidates[chosen].model,
+                     "variants": [variant_params(self.candidates[chosen].model, n_bootstrap=0)], "records": p}
                     for p in perturbed])
-        fitted = [None] * len(tasks)
-        for out in run_tasks(_fit_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
+        slots = groups + [[len(finals) + k] for k in range(len(perturbed))]  # the fits' places in ``fitted``
+        fitted = [None] * (len(finals) + len(perturbed))
+        for out in run_tasks(fit_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
             if out.error is not None:
                 raise InputError(f"the final fit {out.index} of the selection failed: {out.error}")
-            fitted[out.index] = out.value
+            for j, model in zip(slots[out.index], out.value):
+                fitted[j] = model
         self.model_ = fitted[0]
         self.set_models_ = fitted[1:1 + len(others)]
         self.perturbed_models_ = fitted[1 + len(others):]
@@ -477,10 +357,12 @@ class ModelSelection:
         return self
 
     def _change_scan(self, records: list[Record]) -> dict:
-        """The chosen model's change scan on the campaign's events (module docstring)."""
+        """The chosen model's change scan on the campaign's events (module docstring); keeps its inputs and
+        whole result in ``change_scan_`` (None when not scanned)."""
         from vivbench.analysis.changes import statistics_change_scan
 
         out = {"tested": False, "detected": False, "p_value": float("nan"), "event": ""}
+        self.change_scan_ = None
         if not self.change_scan:
             return out
         # on the wind as the model saw it at fit, as vivbench pool's own scan of the model
@@ -488,12 +370,18 @@ class ModelSelection:
         if inputs is None:
             return out
         scan = statistics_change_scan(inputs["statistics"], seed=int(self.seed))
+        self.change_scan_ = {"events": list(self.event_ids_), "seed": int(self.seed), "inputs": inputs, "scan": scan}
         out["tested"] = bool(np.isfinite(scan["p_value"]))
         out["detected"] = bool(scan["detected"])
         out["p_value"] = float(scan["p_value"])
         if scan["detected"]:
             out["event"] = str(self.event_ids_[int(scan["change_index"])])
         return out
+
+    def recorded_change_scan(self) -> dict | None:
+        """The chosen model's change scan run at fit, ``change_scan_`` (:func:`vivbench.models.recorded_change_scan`)."""
+        self._check_fitted()
+        return self.change_scan_
 
     # -- the protocol, through the chosen model ------------------------------------------------------
 

@@ -88,8 +88,10 @@ def bspline_local_t(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> t
             w = hh[m - 1] / (xb - xa)
             h[m - 1] += w * (xb - x)
             h[m] = w * (x - xa)
-    h[:, ~ok] = np.nan
-    return np.where(ok, ell - degree, 0), h
+    if not ok.all():
+        h[:, ~ok] = np.nan
+        return np.where(ok, ell - degree, 0), h
+    return ell - degree, h
 
 
 def first_index(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> np.ndarray:

@@ -41,32 +41,47 @@ class StopRule:
 
     Parameters
     ----------
-    upper, lower : float
-        Bounds in the units of ``scale`` x state (default: none).
+    upper, lower : float or array_like
+        Bounds in the units of ``scale`` x state (default: none); arrays give each trajectory of a batch
+        its own bounds (broadcast against the state's leading axes).
     scale : float
         Factor from the integrated state to the units of the bounds (e.g. a model that integrates a
         scaled amplitude and bounds the amplitude in m).
     """
 
-    upper: float = math.inf
-    lower: float = -math.inf
+    upper: float | np.ndarray = math.inf
+    lower: float | np.ndarray = -math.inf
     scale: float = 1.0
 
     def __post_init__(self):
-        if math.isnan(self.upper) or math.isnan(self.lower) or not self.lower <= self.upper:
+        upper, lower = np.asarray(self.upper, dtype=float), np.asarray(self.lower, dtype=float)
+        if np.isnan(upper).any() or np.isnan(lower).any() or not np.all(lower <= upper):
             raise ValueError(f"StopRule needs lower <= upper (not NaN); got lower={self.lower}, upper={self.upper}")
         if not (math.isfinite(self.scale) and self.scale > 0):
             raise ValueError(f"StopRule scale must be a finite positive number; got {self.scale!r}")
 
     def check(self, x: np.ndarray) -> np.ndarray:
         """Stop codes of states x (..., d): shape (...), ``NOT_STOPPED``, ``NON_FINITE``, ``ABOVE`` or ``BELOW``."""
-        finite = np.all(np.isfinite(x), axis=-1)
         y = self.scale * x
+        upper, lower = np.asarray(self.upper, dtype=float), np.asarray(self.lower, dtype=float)
+        if y.size:
+            # Every step asks: when the extremes are finite and inside the bounds, nothing stops (a NaN
+            # anywhere makes them NaN, an infinite component makes them infinite: the full test below).
+            if upper.ndim == 0 and lower.ndim == 0:
+                lo, hi = float(y.min()), float(y.max())
+                inside = math.isfinite(lo) and math.isfinite(hi) and lo >= lower and hi <= upper
+            else:
+                lo, hi = y.min(axis=-1), y.max(axis=-1)
+                inside = bool(np.isfinite(lo).all() and np.isfinite(hi).all() and np.all(lo >= lower)
+                              and np.all(hi <= upper))
+            if inside:
+                return np.zeros(y.shape[:-1], dtype=np.int64)
+        finite = np.all(np.isfinite(x), axis=-1)
         code = np.where(~finite, NON_FINITE, NOT_STOPPED)
-        if self.upper < math.inf:
-            code = np.where((code == NOT_STOPPED) & np.any(y > self.upper, axis=-1), ABOVE, code)
-        if self.lower > -math.inf:
-            code = np.where((code == NOT_STOPPED) & np.any(y < self.lower, axis=-1), BELOW, code)
+        if np.any(upper < math.inf):
+            code = np.where((code == NOT_STOPPED) & np.any(y > upper[..., None], axis=-1), ABOVE, code)
+        if np.any(lower > -math.inf):
+            code = np.where((code == NOT_STOPPED) & np.any(y < lower[..., None], axis=-1), BELOW, code)
         return code
 
 
@@ -100,8 +115,9 @@ def rk4(rhs: Callable[[np.ndarray, int, int], np.ndarray], x0, t, *, stop: StopR
         midpoint (1) or end (2).
     x0 : array_like, shape (..., d)
         Initial states (leading axes: a batch of trajectories).
-    t : array_like, shape (n_times,), s
-        The time grid (its steps need not be equal).
+    t : array_like, shape (n_times,) or (n_times,) + x0.shape[:-1], s
+        The time grid (its steps need not be equal), or each trajectory's own (a trajectory whose
+        grid ends early is padded with NaN: its state turns non-finite there and it stops).
     stop : StopRule, optional
         Default: stop at a non-finite state only.
     n_steps : int, optional
@@ -116,14 +132,16 @@ def rk4(rhs: Callable[[np.ndarray, int, int], np.ndarray], x0, t, *, stop: StopR
     if x.ndim == 0:
         raise ValueError("x0 needs a state axis (shape (..., d))")
     t = np.asarray(t, dtype=float)
-    n_steps = t.size - 1 if n_steps is None else min(int(n_steps), t.size - 1)
-    out = np.full((t.size,) + x.shape, np.nan)
+    n_steps = t.shape[0] - 1 if n_steps is None else min(int(n_steps), t.shape[0] - 1)
+    out = np.full((t.shape[0],) + x.shape, np.nan)
     out[0] = x
     batch = x.shape[:-1]
     alive = np.ones(batch, dtype=bool)
     stop_at = np.full(batch, -1, dtype=np.int64)
     reason = np.zeros(batch, dtype=np.int64)
-    dt = np.diff(t)
+    dt = np.diff(t, axis=0)
+    if dt.ndim > 1:  # each trajectory's own steps, against its state's components
+        dt = dt[..., None]
     for n in range(max(n_steps, 0)):  # an ODE step needs the previous one: the loop is over time steps
         h = dt[n]
         k1 = rhs(x, n, 0)

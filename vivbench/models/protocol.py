@@ -59,7 +59,7 @@ __all__ = [
     "Method", "FittedModel", "Predictor", "Simulator", "CampaignLevel", "Persistent", "HasEquations",
     "ModelBase", "NotFittedError", "as_record", "fit_records", "coef_order_contributions", "format_equations",
     "section_names", "simulate_windows", "model_summary", "model_size", "model_for_records", "model_change_inputs",
-    "transforms_wind", "model_curves", "model_class_path", "model_description", "chosen_model",
+    "recorded_change_scan", "simulate_many", "transforms_wind", "model_curves", "model_class_path", "model_description", "chosen_model",
     "model_evidence", "IDENTIFIABLE_LONG_NAME",
 ]
 
@@ -447,6 +447,35 @@ def model_change_inputs(model, records) -> dict | None:
     """
     own = getattr(model, "event_change_inputs", None)
     return own(records) if callable(own) else None
+
+
+def recorded_change_scan(model) -> dict | None:
+    """The change scan a model ran on its own records when it was fitted, or None.
+
+    ``model.recorded_change_scan()`` when the model has it (a
+    :class:`vivbench.analysis.ModelSelection` that scanned its chosen model): a dict with
+    ``events`` (the event ids scanned, in order), ``seed``, ``inputs``
+    (:func:`model_change_inputs` on the records' wind as at fit) and ``scan``
+    (:func:`vivbench.analysis.changes.statistics_change_scan` of them at ``seed``).
+    """
+    own = getattr(model, "recorded_change_scan", None)
+    return own() if callable(own) else None
+
+
+def simulate_many(model, runs: Sequence[tuple]) -> list:
+    """Simulations of several spans, ``runs`` a sequence of (record, t0, t1, A0) (A0 None: the record's A at t0).
+
+    ``model.simulate_runs(runs)`` when the model has it (one batched integration, e.g.
+    :meth:`vivbench.models.VaryingCoefficientSINDy.simulate_runs`), else ``model.simulate`` of each run.
+
+    Returns
+    -------
+    list of Simulation, one per run, in order
+    """
+    own = getattr(model, "simulate_runs", None)
+    if callable(own):
+        return list(own(list(runs)))
+    return [model.simulate(r, t0, t1) if A0 is None else model.simulate(r, t0, t1, A0) for r, t0, t1, A0 in runs]
 
 
 def transforms_wind(model) -> bool:

@@ -79,21 +79,21 @@ from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.varying_model import read_varying_model, varying_model_dataset, write_varying_model
 from vivbench.library.splines import DEGREE, bspline_basis, bspline_local, difference_penalty, uniform_knots
 from vivbench.models.curve_support import EXTRAPOLATED, curves_dataset
-from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, as_record, section_names
-from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.simulate import Simulation
+from vivbench.models.varying_simulate import simulate_runs
 from vivbench.models.varying_design import design_rows
 from vivbench.models.varying_verdicts import varying_description, varying_summary, varying_window_verdicts
-from vivbench.models.varying_fit import (ORDER_SUBSETS, PENALTY_CHOICES, check_parameters, choose_smoothing,
-                                         event_statistics, fitted_arrays)
-from vivbench.models.wind_weights import resolve_wind_weights, weighted_section_mean
+from vivbench.models.varying_fit import (FINAL_PARAMS, ORDER_SUBSETS, PENALTY_CHOICES, event_statistics, fit_final,
+                                         fit_shared)
+from vivbench.models.wind_weights import weighted_section_mean
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regression.penalised import penalised_rss
 
 # The spline basis, the penalised solve and the order subsets are re-exported from their modules.
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "uniform_knots", "DEGREE",
            "penalised_rss", "ORDER_SUBSETS", "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES",
-           "YAW_INSIDE_DEG"]
+           "YAW_INSIDE_DEG", "FINAL_PARAMS"]
 
 #: Default candidates of the measured wind's Gaussian smoothing, s (0: none), chosen per campaign by
 #: the cross-validated error over events: roughly doubling steps, from the exact wind of an in-library
@@ -285,6 +285,8 @@ class VaryingCoefficientSINDy(ModelBase):
     """
 
     _fitted_attribute = "coef_"
+    #: Parameters that :meth:`fit_variants` may vary between models fitted together.
+    final_params = FINAL_PARAMS
 
     def __init__(self, *, n_basis: Sequence[int] = (6, 8, 11, 15, 20),
                  penalties: Sequence[float] = tuple(10.0 ** np.arange(-7.0, 1.5, 1.0)),
@@ -403,27 +405,39 @@ class VaryingCoefficientSINDy(ModelBase):
         -------
         self
         """
-        check_parameters(self)
-        raw = [as_record(r, k) for k, r in enumerate(records)]
-        if len(raw) < 2:
-            # M, lambda and the wind smoothing are chosen by cross-validation over events
-            raise InputError(f"the varying-coefficient model needs at least 2 events (its basis and penalty are "
-                             f"chosen by cross-validation over events); got {len(raw)}")
-        for rec in raw:
-            if rec.n_sections != raw[0].n_sections:
-                raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {raw[0].n_sections}")
-        self.penalty_choice_ = self.penalty_choice
-        weights = self.wind_weights if self.wind_input == "mean" else "equal"
-        self.wind_weights_choice_ = weights if isinstance(weights, str) else "given"
-        # The weights come from the amplitudes, which the wind's smoothing does not touch.
-        self.wind_weights_ = resolve_wind_weights(weights, np.concatenate([r.A for r in raw]))
-        grid = [float(self.wind_smoothing_s)] if self.wind_smoothing_grid is None else [
-            float(x) for x in self.wind_smoothing_grid]
-        (self.wind_smoothing_cv_, self.wind_smoothing_s_, samples, sections,
-         self.wind_error_share_) = choose_smoothing(self, raw, grid)
-        for name, value in fitted_arrays(self, samples, sections).items():
-            setattr(self, name, value)
+        fit_final(self, fit_shared(self, records))
         return self
+
+    def fit_variants(self, records: Sequence[Record | tuple], variants: Sequence[dict]) -> list:
+        """Fitted copies of this model, one per variant of its :data:`FINAL_PARAMS`, sharing what they share.
+
+        Equal to ``clone.set_params(**variant).fit(records)`` for each variant, but the
+        wind smoothing, basis and penalty choice (the costly steps, which those
+        parameters do not touch) run once (:func:`vivbench.models.varying_fit.fit_shared`).
+
+        Parameters
+        ----------
+        records : sequence of Record, as :meth:`fit`
+        variants : sequence of dict
+            Parameters to set on each copy, names from :data:`FINAL_PARAMS` only
+            (e.g. ``{"penalty_choice": "least", "n_bootstrap": 0}``).
+
+        Returns
+        -------
+        list of VaryingCoefficientSINDy, fitted, in the order of ``variants`` (this model stays unfitted)
+        """
+        for params in variants:
+            other = sorted(set(params) - set(FINAL_PARAMS))
+            if other:
+                raise InputError(f"fit_variants may change only {', '.join(FINAL_PARAMS)}; got {', '.join(other)}")
+        base = type(self)(**self.get_params())
+        shared = fit_shared(base, records)
+        out = []
+        for params in variants:
+            model = type(self)(**self.get_params()).set_params(**params)
+            fit_final(model, shared)
+            out.append(model)
+        return out
 
     def event_statistics(self, records: Sequence[Record]) -> list[dict]:
         """Per-event sufficient statistics of every equation's penalised regression, at the fitted basis and scales.
@@ -530,8 +544,9 @@ class VaryingCoefficientSINDy(ModelBase):
                     out[..., k, :] += np.einsum("nmj,...mij->...ni", Bz, np.asarray(coef_yaw)[..., k, cols, :, :])
         return out
 
-    def _record_yaw(self, record: Record) -> np.ndarray | None:
-        """Yaw in degrees for evaluating on a record: its own, or the fitted median without one."""
+    def record_yaw(self, record: Record) -> np.ndarray | None:
+        """Yaw in degrees for evaluating on a record: its own, or the fitted median without one (None
+        without a yaw covariate)."""
         if not self.yaw_degree_:
             return None
         yaw = record.yaw
@@ -543,7 +558,7 @@ class VaryingCoefficientSINDy(ModelBase):
         """Order contributions of bootstrap replicates ``start:stop``, shape (R, n_samples, S, 4), m/s."""
         record = self._check_record(record)
         sl = slice(start, stop)
-        return (self.coefficient_values(record.U, self.coef_bootstrap_[sl], self._record_yaw(record),
+        return (self.coefficient_values(record.U, self.coef_bootstrap_[sl], self.record_yaw(record),
                                         self.coef_yaw_bootstrap_[sl]) * record.A[..., None] ** np.arange(4))
 
     def subset_order_contributions(self, record: Record) -> np.ndarray:
@@ -554,7 +569,7 @@ class VaryingCoefficientSINDy(ModelBase):
         than the best subset's).
         """
         record = self._check_record(record)
-        return (self.coefficient_values(record.U, self.subset_coef_, self._record_yaw(record),
+        return (self.coefficient_values(record.U, self.subset_coef_, self.record_yaw(record),
                                         self.subset_coef_yaw_) * record.A[..., None] ** np.arange(4))
 
     def penalty_order_contributions(self, record: Record) -> np.ndarray | None:
@@ -566,13 +581,13 @@ class VaryingCoefficientSINDy(ModelBase):
         if getattr(self, "penalty_coef_", None) is None:
             return None
         record = self._check_record(record)
-        return (self.coefficient_values(record.U, self.penalty_coef_, self._record_yaw(record),
+        return (self.coefficient_values(record.U, self.penalty_coef_, self.record_yaw(record),
                                         self.penalty_coef_yaw_) * record.A[..., None] ** np.arange(4))
 
     def order_contributions(self, record: Record) -> np.ndarray:
         """r[:, k, i] = a_ki(U_k) A_k^i, shape (n_samples, n_sections, 4), m/s (NaN where A or U is missing)."""
         record = self._check_record(record)
-        return (self.coefficient_values(record.U, yaw=self._record_yaw(record))
+        return (self.coefficient_values(record.U, yaw=self.record_yaw(record))
                 * record.A[..., None] ** np.arange(4))
 
     def order_contributions_bootstrap(self, record: Record) -> np.ndarray:
@@ -625,7 +640,7 @@ class VaryingCoefficientSINDy(ModelBase):
         record = self._check_record(record)
         U = self.wind_inputs(record.U)
         J = self.yaw_degree_
-        z = self.yaw_covariate(self._record_yaw(record), U.shape[0]) if J else None
+        z = self.yaw_covariate(self.record_yaw(record), U.shape[0]) if J else None
         n, S, Lmax = U.shape[0], self.n_sections_, self.coef_.shape[1]
         return design_rows(U, z, self.knots_, self.n_basis_, Lmax, J, self.n_inputs(S))
 
@@ -654,37 +669,14 @@ class VaryingCoefficientSINDy(ModelBase):
         -------
         Simulation
         """
-        record = self._check_record(record)
-        t = record.t
-        i0 = int(np.argmin(np.abs(t - (t[0] if t0 is None else float(t0)))))
-        i1 = int(np.argmin(np.abs(t - (t[-1] if t1 is None else float(t1))))) + 1
-        tt = t[i0:i1]
-        S = self.n_sections_
-        U = record.U[i0:i1]
-        Umid = 0.5 * (U[:-1] + U[1:])
-        yaw = self._record_yaw(record)
-        yaw = None if yaw is None else yaw[i0:i1]
-        ymid = None if yaw is None else 0.5 * (yaw[:-1] + yaw[1:])
-        a = self.coefficient_values(U, yaw=yaw)  # (n, S, 4)
-        am = self.coefficient_values(Umid, yaw=ymid) if tt.size > 1 else np.zeros((0, S, 4))
-        A_meas = record.A[i0:i1]
-        x = np.asarray(record.A[i0] if A0 is None else A0, dtype=float).copy()
-        if x.shape != (S,):
-            raise ValueError(f"A0 must have shape ({S},) (one amplitude per section, m); got {x.shape}")
-        top = bound_factor * np.nanmax(np.abs(record.A)) if np.isfinite(record.A).any() else np.inf
-        coef = (a, am, a)  # the curves at a step's start, midpoint and end (index n + 1)
+        return self.simulate_runs([(record, t0, t1, A0)], bound_factor=bound_factor)[0]
 
-        def f(y, n, stage):
-            c = coef[stage][n + (stage == 2)]
-            return c[:, 0] + y * (c[:, 1] + y * (c[:, 2] + y * c[:, 3]))
-
-        run = rk4(f, x, tt, stop=StopRule(upper=top, lower=-0.05 * top / bound_factor))
-        out = run.x
-        stopped = None if run.stop < 0 else float(tt[run.stop])
-        reason = None if stopped is None else "non-finite or out-of-bounds amplitude"
-        covered = 1.0 if stopped is None else float((stopped - tt[0]) / max(tt[-1] - tt[0], 1e-12))
-        return Simulation(t=tt, A_sim=out, A_meas=A_meas, stopped_at=stopped, reason=reason,
-                          nmse=nmse(out, A_meas), covered=covered, windows=np.zeros(max(tt.size - 1, 0), dtype=int))
+    def simulate_runs(self, runs: Sequence[tuple], bound_factor: float = 10.0) -> list[Simulation]:
+        """:meth:`simulate` of several spans at once, ``runs`` a sequence of (record, t0, t1, A0): one batched
+        RK4 over the runs (:func:`vivbench.models.varying_simulate.simulate_runs`), each result the same as
+        its run's :meth:`simulate`."""
+        self._check_fitted()
+        return simulate_runs(self, [(self._check_record(r), t0, t1, A0) for r, t0, t1, A0 in runs], bound_factor)
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:
         """The fitted curves a_ki(U) of docs/concepts.md (coefficient curves) with block-bootstrap bands.

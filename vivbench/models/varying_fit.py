@@ -14,12 +14,16 @@ The steps, each on per-block sufficient statistics (:mod:`vivbench.models.varyin
 
 :func:`choose_smoothing` runs 1-3 for every candidate wind smoothing and keeps the
 one of least cross-validated error; :func:`fitted_arrays` gathers the sections'
-fits into the model's fitted attributes. The model (``model``) is passed for its
+fits into the model's fitted attributes. Steps 1-3 do not depend on the
+parameters of :data:`FINAL_PARAMS`: :func:`fit_shared` runs them once
+(:class:`SharedFit`) and :func:`fit_final` step 4 for one model, so models that
+differ only in those parameters share the costly part (the model's ``fit_variants``). The model (``model``) is passed for its
 parameters and its wind inputs (``wind_inputs``, ``yaw_covariate``, ``n_inputs``).
 """
 
 from __future__ import annotations
 
+import copy
 import warnings
 from dataclasses import dataclass, replace
 
@@ -27,15 +31,17 @@ import numpy as np
 
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
+from vivbench.models.protocol import as_record
 from vivbench.library.splines import DEGREE, difference_penalty, uniform_knots
 from vivbench.models.varying_design import block_stats, input_contributions
-from vivbench.models.wind_weights import WIND_WEIGHT_MODES, check_wind_weights, weighted_mean_standard_error
+from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights,
+                                          weighted_mean_standard_error)
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.model_set import MODEL_SET_TESTS, confidence_set
 from vivbench.regression.penalised import held_out_errors, penalised_solve, penalty_scale, quadratic_error
 
-__all__ = ["ORDER_SUBSETS", "PENALTY_CHOICES", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
+__all__ = ["ORDER_SUBSETS", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
            "SectionFit", "equation_inputs", "valid_samples", "campaign_samples", "wind_standard_error", "cv_error", "select_orders", "select_basis",
            "eiv_weight", "choose_smoothing", "fit_section", "fitted_arrays", "event_statistics"]
 
@@ -47,6 +53,12 @@ evidence by :func:`vivbench.analysis.varying_selection` (``vivbench pool``)."""
 #: Order subsets of the confidence set of models (all with the linear order 1), rows (0, 1, 2, 3) kept.
 ORDER_SUBSETS = np.array([[o0, True, o2, o3] for o0 in (True, False) for o2 in (True, False)
                           for o3 in (True, False)])
+
+
+#: Parameters of the model that act only in the last step (:func:`fit_section`, or not in the fit at all):
+#: fits that differ only in them share steps 1-3 (:func:`fit_shared`).
+FINAL_PARAMS = ("penalty_choice", "n_bootstrap", "select_orders", "model_set_level", "model_set_test", "agreement",
+                "tau")
 
 
 @dataclass(frozen=True)
@@ -411,6 +423,66 @@ def choose_smoothing(model, records: list[Record], grid: list[float]):
                                            fixed=(first.best.n_basis, first.best.penalty)), cv_error=first.cv_error)
             del first
     return cv, sigma, samples, secs, share
+
+
+@dataclass(frozen=True)
+class SharedFit:
+    """Steps 1-3 of a fit (module docstring), shared by every model that differs only in :data:`FINAL_PARAMS`:
+    the wind weights (``wind_weights_choice`` "equal", "modal" or "given"; ``wind_weights`` (S,)), the yaw
+    degree, the candidate smoothings' cross-validated errors (``wind_smoothing_cv``) and the chosen one
+    (``wind_smoothing_s``, s), its samples (their generator positioned for the bootstrap), the sections'
+    choices and the wind error's shares of the residual variance (S,)."""
+
+    wind_weights_choice: str
+    wind_weights: np.ndarray
+    yaw_degree: int
+    wind_smoothing_cv: np.ndarray
+    wind_smoothing_s: float
+    samples: CampaignSamples
+    sections: list
+    wind_error_share: np.ndarray
+
+
+def fit_shared(model, records) -> SharedFit:
+    """Steps 1-3 of fitting ``model`` to ``records`` (a sequence of Record, or legacy tuples).
+
+    Sets ``wind_weights_`` and ``yaw_degree_`` on ``model`` (the steps read them). Raises InputError for
+    bad parameters or fewer than 2 events, ValueError for records of unequal sections.
+    """
+    check_parameters(model)
+    raw = [as_record(r, k) for k, r in enumerate(records)]
+    if len(raw) < 2:
+        # M, lambda and the wind smoothing are chosen by cross-validation over events
+        raise InputError(f"the varying-coefficient model needs at least 2 events (its basis and penalty are "
+                         f"chosen by cross-validation over events); got {len(raw)}")
+    for rec in raw:
+        if rec.n_sections != raw[0].n_sections:
+            raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {raw[0].n_sections}")
+    weights = model.wind_weights if model.wind_input == "mean" else "equal"
+    # The weights come from the amplitudes, which the wind's smoothing does not touch.
+    model.wind_weights_ = resolve_wind_weights(weights, np.concatenate([r.A for r in raw]))
+    grid = [float(model.wind_smoothing_s)] if model.wind_smoothing_grid is None else [
+        float(x) for x in model.wind_smoothing_grid]
+    cv, sigma, samples, sections, share = choose_smoothing(model, raw, grid)
+    return SharedFit(wind_weights_choice=weights if isinstance(weights, str) else "given",
+                     wind_weights=model.wind_weights_, yaw_degree=int(model.yaw_degree_), wind_smoothing_cv=cv,
+                     wind_smoothing_s=sigma, samples=samples, sections=sections, wind_error_share=share)
+
+
+def fit_final(model, shared: SharedFit) -> None:
+    """Step 4 for ``model`` from ``shared`` (:func:`fit_shared` of a model equal to it outside
+    :data:`FINAL_PARAMS`): sets every fitted attribute, the same as a fit of ``model`` alone."""
+    check_parameters(model)
+    model.penalty_choice_ = model.penalty_choice
+    model.wind_weights_choice_ = shared.wind_weights_choice
+    model.wind_weights_ = shared.wind_weights
+    model.yaw_degree_ = shared.yaw_degree
+    model.wind_smoothing_cv_, model.wind_smoothing_s_ = shared.wind_smoothing_cv, shared.wind_smoothing_s
+    model.wind_error_share_ = shared.wind_error_share
+    # every model draws its bootstrap from the generator where the shared steps left it
+    samples = replace(shared.samples, rng=copy.deepcopy(shared.samples.rng))
+    for name, value in fitted_arrays(model, samples, shared.sections).items():
+        setattr(model, name, value)
 
 
 def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> SectionFit:

@@ -50,12 +50,16 @@ def smooth_wind(record: Record, sigma_s: float) -> Record:
         return done
     width = sigma_s / float(np.median(np.diff(record.t)))
 
+    weights = {}  # the smoothed valid-sample mask, by the mask's bytes: U and yaw usually share theirs
+
     def smooth(x):
         ok = np.isfinite(x)
         num = gaussian_filter1d(np.where(ok, x, 0.0), width, axis=0, mode="nearest", truncate=3.0)
-        den = gaussian_filter1d(ok.astype(float), width, axis=0, mode="nearest", truncate=3.0)
+        key = (ok.shape, ok.tobytes())
+        if key not in weights:
+            weights[key] = gaussian_filter1d(ok.astype(float), width, axis=0, mode="nearest", truncate=3.0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(ok, num / np.maximum(den, 1e-12), np.nan)
+            return np.where(ok, num / np.maximum(weights[key], 1e-12), np.nan)
 
     out = dataclasses.replace(record, U=smooth(record.U), yaw=None if record.yaw is None else smooth(record.yaw))
     _SMOOTHED.setdefault(record, {})[float(sigma_s)] = out
