@@ -10,8 +10,9 @@ the chain recovers on a given campaign, which takes its own inputs and time. A s
 ``study_<name>.py`` of this folder whose ``main(argv)`` parses ``ARGS`` and returns its
 figures (a dict, or a list of rows). This command runs it and writes the figures, with the command line, the
 machine and the wall time, to ``docs/results/studies/<name>.json`` and the page
-``docs/results/studies/<name>.md`` (under Results on the documentation site). Nothing on a page is typed by hand: run the command
-again to update it.
+``docs/results/studies/<name>.md`` (under Results on the documentation site); a ``findings``
+list of sentences, which a study generates from its figures, opens the page. Nothing on a page
+is typed by hand: run the command again to update it.
 """
 
 from __future__ import annotations
@@ -62,8 +63,13 @@ def study_page(name: str, figures: dict, command: str) -> str:
     """The Markdown page of a study's run."""
     lines = [f"# Study `{name}`", "", first_line(STUDIES[name]), "", written_by(command, figures["_run"]), "",
              f"What the study does and how to read its figures: the docstring of `benchmarks/{STUDIES[name].name}`. "
-             f"Every figure of the run is also in `docs/results/studies/{name}.json`.", "", "## Figures", ""]
-    figures = {k: v for k, v in figures.items() if k != "_run"}
+             f"Every figure of the run is also in `docs/results/studies/{name}.json`.", ""]
+    said = figures.get("findings")
+    shown = isinstance(said, list) and bool(said) and all(isinstance(x, str) for x in said)
+    if shown:  # sentences the study generated from its figures
+        lines += ["## What the figures show", "", *(f"- {x}" for x in said), ""]
+    lines += ["## Figures", ""]
+    figures = {k: v for k, v in figures.items() if k != "_run" and not (k == "findings" and shown)}
     cases = {k: v for k, v in figures.items() if isinstance(v, dict) and is_rows([v])}
     if len(cases) >= 2:  # flat dicts of figures, one per case: one table of the cases
         figures = {**{k: v for k, v in figures.items() if k not in cases},

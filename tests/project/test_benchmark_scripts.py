@@ -12,6 +12,7 @@ import inspect
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.helpers import REPO
@@ -76,3 +77,37 @@ def test_study_page_tables(scripts):
     assert "| case | error | n |\n|---|---|---|\n| a | 0.5 | 3 |\n| b | 0.25 | 4 |" in page
     assert "| event | nmse |\n|---|---|\n| E001 | 0.125 |\n| E002 | nan |" in page
     assert "| total | 7 |" in page and "Written by `cmd`" in page and "CPU time 1 s" in page
+
+
+def test_study_page_opens_with_the_findings(scripts):
+    """A study's ``findings`` sentences open its page under their own heading, not as a figure."""
+    _run_all, run_study = scripts
+    meta = {"python": "3", "machine": "x", "cpus": 2, "date": "d", "wall_s": 1.0, "cpu_s": 1.0,
+            "load_average_1min": 0.5}
+    page = run_study.study_page("pysindy_variants", {"findings": ["binned: error 0.5.", "weak: refused."],
+                                                     "total": 7, "_run": meta}, "cmd")
+    said, figures = page.split("## Figures")
+    assert "## What the figures show\n\n- binned: error 0.5.\n- weak: refused.\n" in said
+    assert "| total | 7 |" in figures and "findings" not in figures
+
+
+def test_pysindy_variants_study_scores_and_gives_refusal_reasons(scripts, tmp_path, monkeypatch):
+    """One capped evaluation draw: every method a row; a weak form that cannot fit says why, the others score."""
+    from vivbench.models import pysindy_variants
+
+    _run_all, run_study = scripts
+    # support 4 H = 400 s: longer than the 300 s event, so the weak form is refused on this draw
+    monkeypatch.setattr(pysindy_variants, "weak", lambda: pysindy_variants.PySINDyWeak(H=100.0))
+    figures = run_study.run_study("pysindy_variants", [
+        "--draws", "30", "--max-events", "1", "--max-duration", "300", "--out", str(tmp_path / "study"),
+        "--methods", "binned,vivbench.models.pysindy_variants:weak"])
+    assert figures["draws_failed"] == "none" and figures["capped"] is True
+    rows = {r["method"]: r for r in figures["per_draw"]}
+    assert set(rows) == {"binned", "weak"}
+    assert "4 H = 400 s" in rows["weak"]["reason"] and np.isnan(rows["weak"]["rhs_error_true_AU_energy"])
+    assert rows["binned"]["reason"] == "" and np.isfinite(rows["binned"]["rhs_error_true_AU_energy"])
+    summary = {r["method"]: r for r in figures["methods"]}
+    assert summary["weak"]["draws_scored"] == 0 and summary["weak"]["draws_refused"] == 1
+    assert summary["binned"]["draws_scored"] == 1 and summary["binned"]["draws_refused"] == 0
+    assert any(s.startswith("weak: refused on every draw") and "400 s" in s for s in figures["findings"])
+    assert figures["findings"][0].startswith("Draws: evaluation draws 30 (1 campaigns, 1 events, capped")
