@@ -12,9 +12,11 @@ that difference is
 with
 
 - S_u(f) = (I_u U)^2 (4 L_u / U) / (1 + 6 f L_u / U)^(5/3), the one-sided Kaimal
+  (:func:`vivbench.core.wind_spectra.kaimal_psd`)
   spectrum of the along-wind turbulence (m^2/s^2 per Hz; its integral is
   (I_u U)^2), I_u the turbulence intensity, L_u its integral length (m);
 - exp(-C_u f d / U), the Davenport coherence of two points d metres apart
+  (:func:`vivbench.core.wind_spectra.davenport_coherence`)
   (C_u its decay constant), so that 2 S_u (1 - coherence) is the spectrum of
   the difference of the two points' winds;
 - H(f) = exp(-2 pi^2 f^2 s^2) / (1 + (f / f_c)^(2 N)), the Gaussian smoothing of
@@ -41,6 +43,7 @@ import numpy as np
 
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
+from vivbench.core.wind_spectra import kaimal_psd
 
 __all__ = ["UNMEASURED_WIND_PRIORS", "unmeasured_wind_error", "unmeasured_wind_rms", "shifted_unmeasured_wind"]
 
@@ -58,9 +61,9 @@ def _variance(U: np.ndarray, d: float, smoothing_s: float, cutoff_hz: float, ord
     """sigma_e^2 (module docstring) at each speed of ``U`` (1-D, > 0), m^2/s^2."""
     f = _F[None, :]
     Uc = U[:, None]
-    L = priors["kaimal_length_m"]
-    S = (priors["intensity"] * Uc) ** 2 * (4.0 * L / Uc) / (1.0 + 6.0 * f * L / Uc) ** (5.0 / 3.0)
+    S = kaimal_psd(f, Uc, priors["intensity"] * Uc, priors["kaimal_length_m"])
     gain = np.exp(-2.0 * math.pi**2 * f**2 * smoothing_s**2) / (1.0 + (f / cutoff_hz) ** (2 * order))
+    # 1 - davenport_coherence(f, d, U, C), as expm1 for its accuracy at low f d / U
     integrand = 2.0 * S * gain**2 * -np.expm1(-priors["coherence_decay"] * f * d / Uc)
     # d f = f d(ln f): the trapezoidal rule on the logarithmic grid
     return np.trapezoid(integrand * f, np.log(_F), axis=1)
