@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from tests.helpers import assert_close, bell_records
 from vivbench.analysis.held_out import event_folds, held_out_loss, one_se_set, shared_groups
-from vivbench.analysis.selection import (Candidate, ModelSelection, perturbed_wind, varying_selection, wind_error_scale,
-                                         without_yaw)
+from vivbench.analysis.selection import (SINGLE_SECTION_SHARE, Candidate, ModelSelection, perturbed_wind,
+                                         varying_selection, wind_error_scale, without_yaw)
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.simulate import Simulation
@@ -145,6 +145,8 @@ def test_held_out_loss_counts_a_stopped_run_as_missed():
     (dict(criterion="aic"), "criterion must be one of"),
     (dict(n_folds=1), "n_folds must be"),
     (dict(n_perturbations=-1), "n_perturbations must be"),
+    (dict(single_section_share=1.5), "single_section_share must be"),
+    (dict(single_section_share=float("nan")), "single_section_share must be"),
 ])
 def test_selection_refuses_bad_settings(bad, match):
     kw = dict(candidates=[Candidate(name="a", model=_Poly(1))])
@@ -168,8 +170,15 @@ def test_wind_error_scale_is_the_spread_between_sections():
     rec = Record(event_id="E", t=t, A=np.full(U.shape, 0.1), U=U, dA=np.zeros(U.shape))
     assert_close(wind_error_scale(rec, 60.0), np.full(3, 0.3))
     one = Record(event_id="E", t=t, A=np.full((t.size, 1), 0.1), U=base[:, None], dA=np.zeros((t.size, 1)))
-    assert_close(wind_error_scale(one, 60.0), [0.03 * base.mean()], rtol=1e-3,
+    assert_close(wind_error_scale(one, 60.0), [SINGLE_SECTION_SHARE * base.mean()], rtol=1e-3,
                  reason="the mean of the wind smoothed at 60 s, whose edges differ from the raw wind's")
+    assert_close(wind_error_scale(one, 60.0, 0.06), 2.0 * wind_error_scale(one, 60.0))
+    # the selection passes its prior on: a doubled share doubles the single section's error estimate
+    recs1 = [Record(event_id=f"E{k}", t=t, A=np.full((t.size, 1), 0.1), U=base[:, None] + k,
+                    dA=np.zeros((t.size, 1))) for k in range(3)]
+    errs = [ModelSelection(candidates=[Candidate(name="a", model=_Poly(1))], n_perturbations=0,
+                           single_section_share=share).fit(recs1).wind_error_ for share in (0.03, 0.06)]
+    assert_close(errs[1], 2.0 * errs[0])
     pert = perturbed_wind(rec, np.full(3, 0.3), 60.0, rng)
     d = pert.U - rec.U
     assert_close(d.std(axis=0), np.full(3, 0.3))

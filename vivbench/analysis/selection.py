@@ -74,7 +74,8 @@ from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind, unmeasu
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
 __all__ = ["Candidate", "ModelSelection", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z", "VARYING_OPTIONS",
-           "VARYING_PRIORS", "perturbed_wind", "varying_selection", "wind_error_scale", "without_yaw"]
+           "VARYING_PRIORS", "SINGLE_SECTION_SHARE", "perturbed_wind", "varying_selection", "wind_error_scale",
+           "without_yaw"]
 
 #: Fewest events for a held-out choice among several candidates (every training set keeps two events).
 MIN_EVENTS = 3
@@ -112,7 +113,13 @@ class Candidate:
             raise InputError(f"candidate {self.name!r}: complexity must be an integer >= 0; got {self.complexity!r}")
 
 
-def wind_error_scale(record: Record, timescale_s: float, single_section_share: float = 0.03) -> np.ndarray:
+#: Error of a single section's measured mean wind, as a share of its mean (a stated prior: one section has no
+#: other to compare with).
+SINGLE_SECTION_SHARE = 0.03
+
+
+def wind_error_scale(record: Record, timescale_s: float,
+                     single_section_share: float = SINGLE_SECTION_SHARE) -> np.ndarray:
     """Estimated rms error of each section's measured mean wind at a time scale, shape (S,), m/s.
 
     With two sections or more: the spread between the sections' winds smoothed at
@@ -201,6 +208,9 @@ class ModelSelection:
         Run the chosen model's change scan once it is fitted to every event, and flag no window when it
         locates a change (module docstring); models without per-event statistics
         (:func:`vivbench.models.model_change_inputs` gives None) are not scanned.
+    single_section_share : float, in [0, 1)
+        The wind error of a campaign with one section, as a share of each event's mean wind
+        (:func:`wind_error_scale`; default :data:`SINGLE_SECTION_SHARE`, a stated prior).
 
     Attributes
     ----------
@@ -231,8 +241,9 @@ class ModelSelection:
     def __init__(self, *, candidates: Sequence[Candidate], n_folds: int = 5, criterion: str = "output",
                  n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, tau: float = DEFAULT_TAU,
                  verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None,
-                 null_model=None, change_scan: bool = False):
+                 null_model=None, change_scan: bool = False, single_section_share: float = SINGLE_SECTION_SHARE):
         self.candidates = tuple(candidates)
+        self.single_section_share = single_section_share
         self.null_model = null_model
         self.change_scan = change_scan
         self.n_folds = n_folds
@@ -259,6 +270,9 @@ class ModelSelection:
             raise InputError(f"criterion must be one of {', '.join(map(repr, CRITERIA))}; got {self.criterion!r}")
         if int(self.n_perturbations) != self.n_perturbations or self.n_perturbations < 0:
             raise InputError(f"n_perturbations must be an integer >= 0; got {self.n_perturbations!r}")
+        share = self.single_section_share
+        if not (isinstance(share, (int, float)) and math.isfinite(share) and 0.0 <= share < 1.0):
+            raise InputError(f"single_section_share must be a number in [0, 1) (a share of the mean wind); got {share!r}")
         if not (np.isfinite(self.perturbation_timescale_s) and self.perturbation_timescale_s > 0):
             raise InputError(f"perturbation_timescale_s must be a positive number of seconds; "
                              f"got {self.perturbation_timescale_s!r}")
@@ -328,7 +342,8 @@ class ModelSelection:
         self.chosen_index_ = chosen
         self.chosen_ = self.names_[chosen]
         rng = np.random.default_rng([int(self.seed), 1])
-        self.wind_error_ = np.stack([wind_error_scale(r, self.perturbation_timescale_s) for r in records])
+        self.wind_error_ = np.stack([wind_error_scale(r, self.perturbation_timescale_s, self.single_section_share)
+                                     for r in records])
         perturbed = [[perturbed_wind(r, s, self.perturbation_timescale_s, rng)
                       for r, s in zip(records, self.wind_error_)] for _ in range(int(self.n_perturbations))]
         others = [i for i in members if i != chosen]
@@ -618,7 +633,8 @@ VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0}
 def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterion: str = "output",
                       n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, seed: int = 0,
                       workers: int = 1, scheduler: str | None = None, null: bool = True,
-                      change_scan: bool = True, **params) -> ModelSelection:
+                      change_scan: bool = True, single_section_share: float = SINGLE_SECTION_SHARE,
+                      **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -628,7 +644,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         the grid is their product and a candidate's complexity is the sum of its values' positions
         in the :data:`STRUCTURAL_OPTIONS`.
         A parameter given in ``params`` is pinned: it leaves the grid.
-    n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler
+    n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler, single_section_share
         Those of :class:`ModelSelection` (``seed`` also the models').
     null : bool
         Test the candidates against the quasi-steady map :class:`vivbench.models.QuasiSteadyAmplitude`
@@ -667,7 +683,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                           workers=workers, scheduler=scheduler,
                           null_model=(QuasiSteadyAmplitude(wind_smoothing_s=fixed.get("wind_smoothing_s", 30.0))
                                       if null else None),
-                          change_scan=change_scan)
+                          change_scan=change_scan, single_section_share=single_section_share)
 
 
 def _option_label(name: str, value) -> str:

@@ -238,7 +238,8 @@ class CampaignMethod:
             return VerdictModel(PooledSINDy(**self.params).fit(records), model_verdicts)
         # The options not given in params are chosen from the records' held-out evidence, as by vivbench pool.
         params = dict(self.params)
-        selection_keys = ("n_folds", "criterion", "n_perturbations", "perturbation_timescale_s", "workers", "options")
+        selection_keys = ("n_folds", "criterion", "n_perturbations", "perturbation_timescale_s", "workers", "options",
+                          "single_section_share")
         sel_params = {k: params.pop(k) for k in selection_keys if k in params}
         selection = varying_selection(**sel_params, **params)
         if any(r.yaw is None for r in records):
