@@ -132,12 +132,13 @@ def register(sub) -> None:
     s.add_argument("--yaw-degree", type=int, default=None, choices=(0, 1, 2),
                    help="with --model varying: powers of sin^2(yaw) in the curves (default: 0 or 1, chosen from "
                         "the campaign's held-out evidence when the results store the yaw, else 0)")
-    s.add_argument("--wind-input", default=None, choices=("mean", "section", "additive"),
+    s.add_argument("--wind-input", default=None, choices=("mean", "section", "additive", "sum"),
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
-                        "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s)")
+                        "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s), or "
+                        "every section's wind with one curve shared by all, weighted by --wind-weights and summed (sum)")
     s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",
-                   help="with --model varying and the mean wind: the sections' weights in it: modal (default, a "
+                   help="with --model varying and the mean wind (or the sum): the sections' weights in it: modal (default, a "
                         "prior: each section's share of the mode's energy, sum of A_k^2, the weights of the averaged "
                         "truth when the sections' tributary lengths are equal), equal (the plain mean), or one "
                         "number per section (e.g. L_k phi_k^2 from the bridge's drawings)")

@@ -44,6 +44,11 @@ for each section's wind and yaw (p = 4 M (J + 1) S, the same penalty on every
 section's curve; only the sum is identifiable, the penalty keeps the split
 smooth). The coefficient curve at wind U is then the model at the uniform wind
 U_j = U, the sum over the sections. ``ADDITIVE_SETTINGS`` are its settings.
+``"sum"`` ties those curves to one shape weighted by the sections' weights,
+a_kij = w_j f_ki (the same deck cross-section at every section, the truth's form
+with modal weights): p = 4 M (J + 1) as with the mean wind, fitted from the
+additive statistics contracted by the weights
+(:func:`vivbench.models.varying_design.tie_stats`).
 
 With the wind's yaw (``yaw_degree`` > 0; by default whenever the records carry
 it) its yaw psi (its angle to the span's normal, which U does not carry) is a
@@ -144,11 +149,14 @@ class VaryingCoefficientSINDy(ModelBase):
         Regime threshold of docs/concepts.md (regimes).
     seed : int
         Seed of the fold assignment and of the bootstrap.
-    wind_input : {"mean", "section", "additive"}
+    wind_input : {"mean", "section", "additive", "sum"}
         The wind of equation k's curves: the mean of U over the sections
         (default), the section's own U_k, or every section's U_j (and yaw),
         a curve of each summed (module docstring; use it with
-        ``ADDITIVE_SETTINGS``, as ``vivbench pool --wind-input additive`` does).
+        ``ADDITIVE_SETTINGS``, as ``vivbench pool --wind-input additive`` does),
+        or every section's U_j with one curve shared by all, weighted by the
+        sections' ``wind_weights`` and summed: a_ki = sum_j w_j f_ki(U_j), the
+        same deck at every section, with as many coefficients as "mean".
     yaw_degree : int, 0..3, or None
         Powers j = 1..J of sin^2(psi), psi the mean wind's yaw, whose spline
         curves are added: a_ki(U, psi) = sum_j sin^2j(psi) f_kij(U) (0: the
@@ -201,7 +209,7 @@ class VaryingCoefficientSINDy(ModelBase):
         Costs a second weighted pass at the chosen basis only;
         :meth:`event_statistics` stays unweighted.
     wind_weights : {"modal", "equal"} or sequence of float
-        The sections' weights in the mean wind (and yaw) of ``wind_input="mean"``
+        The sections' weights in the mean wind (and yaw) of ``wind_input="mean"``, or of the shared curve of ``"sum"``
         (:mod:`vivbench.models.wind_weights`): ``"modal"`` (default) each
         section's share of the mode's energy, sum_t A_k^2 over the campaign,
         which are the averaged truth's weights L_k phi_k^2 of the linear order
@@ -333,8 +341,8 @@ class VaryingCoefficientSINDy(ModelBase):
         return weighted_section_mean(X, w)
 
     def n_inputs(self, n_sections: int) -> int:
-        """Winds that enter each equation: every section's with ``wind_input="additive"``, else one."""
-        return int(n_sections) if self.wind_input == "additive" else 1
+        """Winds that enter each equation: every section's with ``wind_input`` "additive" or "sum", else one."""
+        return int(n_sections) if self.wind_input in ("additive", "sum") else 1
 
     def measured_wind(self, record: Record) -> Record:
         """``record`` with its measured U and yaw smoothed as the model's were at fit (``wind_smoothing_s``).
@@ -742,7 +750,7 @@ class VaryingCoefficientSINDy(ModelBase):
             for i in range(4):
                 if not self.orders_[k, i]:
                     continue
-                wind = (f"U1..U{self.n_sections_}" if self.wind_input == "additive" else f"U{k + 1}")
+                wind = (f"U1..U{self.n_sections_}" if self.wind_input in ("additive", "sum") else f"U{k + 1}")
                 name = f"a{k + 1}{i}({wind})" + ("" if i == 0 else f" A{k + 1}" + ("" if i == 1 else f"^{i}"))
                 terms.append(name)
             line = f"dA{k + 1}/dt = " + (" + ".join(terms) if terms else "0")

@@ -8,6 +8,11 @@ cubic B-splines (:mod:`vivbench.library.splines`), ordered (i, j, s, m). A row
 has only DEGREE + 1 non-zero B-splines per wind input; everything here works
 from that local form, and :func:`block_stats` sums the per-block sufficient
 statistics (X_b^T X_b, X_b^T y_b, y_b^T y_b) without building the dense rows.
+
+With ``wind_input="sum"`` every wind input shares one curve per order and yaw
+power, weighted by its section's weight w_s: the columns are sum_s w_s B_m(U_s)
+(A / a_ref)^i z_s^j, i.e. X T with the tying matrix T of :func:`tie_stats` and
+:func:`untie`, which map the statistics and coefficients between the two layouts.
 """
 
 from __future__ import annotations
@@ -16,7 +21,8 @@ import numpy as np
 
 from vivbench.library.splines import DEGREE, bspline_local, bspline_local_t, first_index
 
-__all__ = ["design_local_t", "local_columns", "spline_design", "input_contributions", "block_stats", "design_rows"]
+__all__ = ["design_local_t", "local_columns", "spline_design", "input_contributions", "block_stats", "design_rows",
+           "tie_stats", "untie"]
 
 
 def design_local_t(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,
@@ -202,3 +208,37 @@ def design_rows(U: np.ndarray, z: np.ndarray | None, knots: np.ndarray, n_basis:
             cols[:, k, :, s_] = idx[:, None, :] + s_ * M + n_coef * np.arange(n_yaw + 1)[:, None]
             vals[:, k, :, s_] = zp[:, :, None] * picked[:, None, :]
     return cols.reshape(n, S, -1), vals.reshape(n, S, -1)
+
+
+def tie_stats(G: np.ndarray, b: np.ndarray, weights: np.ndarray, n_yaw: int, M: int) -> tuple[np.ndarray, np.ndarray]:
+    """Statistics of the tied design X T from those of X (:func:`block_stats` with one wind input per section).
+
+    T maps the tied coefficient of (i, j, m) to w_s times it at (i, j, s, m) for every input s
+    (:func:`untie`): T^T G T and b T, computed without forming T.
+
+    Parameters
+    ----------
+    G : ndarray, shape (..., p, p), p = 4 (n_yaw + 1) S M
+    b : ndarray, shape (..., p)
+    weights : ndarray, shape (S,); the sections' weights w_s
+
+    Returns
+    -------
+    G_t, b_t : ndarray, shapes (..., q, q) and (..., q), q = 4 (n_yaw + 1) M
+    """
+    w = np.asarray(weights, dtype=float)
+    S, IJ = w.size, 4 * (n_yaw + 1)
+    lead = G.shape[:-2]
+    Gr = G.reshape(lead + (IJ, S, M, IJ, S, M))
+    Gt = np.einsum("...asmbtn,s,t->...ambn", Gr, w, w, optimize=True).reshape(lead + (IJ * M, IJ * M))
+    bt = np.einsum("...asm,s->...am", b.reshape(b.shape[:-1] + (IJ, S, M)), w).reshape(b.shape[:-1] + (IJ * M,))
+    return Gt, bt
+
+
+def untie(c: np.ndarray, weights: np.ndarray, n_yaw: int, M: int) -> np.ndarray:
+    """Tied coefficients (..., 4 (n_yaw + 1) M) as those of one wind input per section, T c: shape (..., 4 (n_yaw + 1) S M)."""
+    w = np.asarray(weights, dtype=float)
+    IJ = 4 * (n_yaw + 1)
+    c = np.asarray(c, dtype=float)
+    out = c.reshape(c.shape[:-1] + (IJ, 1, M)) * w[:, None]
+    return out.reshape(c.shape[:-1] + (IJ * w.size * M,))

@@ -33,7 +33,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.protocol import as_record
 from vivbench.library.splines import DEGREE, difference_penalty, uniform_knots
-from vivbench.models.varying_design import block_stats, input_contributions
+from vivbench.models.varying_design import block_stats, input_contributions, tie_stats, untie
 from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights,
                                           weighted_mean_standard_error)
 from vivbench.preprocess.wind_smoothing import smooth_wind
@@ -43,7 +43,13 @@ from vivbench.regression.penalised import held_out_errors, penalised_solve, pena
 
 __all__ = ["ORDER_SUBSETS", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
            "SectionFit", "equation_inputs", "valid_samples", "campaign_samples", "wind_standard_error", "cv_error", "select_orders", "select_basis",
-           "eiv_weight", "choose_smoothing", "fit_section", "fitted_arrays", "event_statistics"]
+           "eiv_weight", "choose_smoothing", "fit_section", "fitted_arrays", "event_statistics", "WIND_INPUTS",
+           "fitted_inputs", "as_inputs"]
+
+#: Values of ``wind_input`` (:class:`vivbench.models.VaryingCoefficientSINDy`): the sections' weighted mean wind, the
+#: section's own, every section's wind with a curve of its own (summed), or every section's wind with one shared
+#: curve, weighted by the sections' weights (summed).
+WIND_INPUTS = ("mean", "section", "additive", "sum")
 
 PENALTY_CHOICES = ("cv", "least", "loeo")
 """Values of ``penalty_choice``: the 5-fold cross-validated error's minimum, the least penalty of the confidence
@@ -178,8 +184,8 @@ def check_parameters(model) -> None:
                              f"of seconds >= 0; got {model.wind_smoothing_grid!r}")
     if model.model_set_test not in MODEL_SET_TESTS:
         raise InputError(f"model_set_test must be 'z' or 'signed_rank'; got {model.model_set_test!r}")
-    if model.wind_input not in ("section", "mean", "additive"):
-        raise InputError(f"wind_input must be 'section', 'mean' or 'additive'; got {model.wind_input!r}")
+    if model.wind_input not in WIND_INPUTS:
+        raise InputError(f"wind_input must be one of {', '.join(map(repr, WIND_INPUTS))}; got {model.wind_input!r}")
     if not isinstance(model.wind_weights, str):
         check_wind_weights(model.wind_weights)
     elif model.wind_weights not in WIND_WEIGHT_MODES:
@@ -190,9 +196,21 @@ def check_parameters(model) -> None:
                          f"got {model.penalty_choice!r}")
 
 
+def fitted_inputs(model, n_sections: int) -> int:
+    """Wind inputs with curves of their own in the fit: those of ``model.n_inputs``, but one shared by every
+    section's wind with ``wind_input="sum"``."""
+    return 1 if model.wind_input == "sum" else model.n_inputs(n_sections)
+
+
+def as_inputs(model, coef: np.ndarray, n_yaw: int, M: int) -> np.ndarray:
+    """Standardised coefficients (..., p) of the fit in the layout of every wind input (``model.n_inputs``):
+    with ``wind_input="sum"`` the shared curve times each section's weight (:func:`untie`), else as they are."""
+    return untie(coef, model.wind_weights_, n_yaw, M) if model.wind_input == "sum" else coef
+
+
 def equation_inputs(wind_input: str, U: np.ndarray, Z: np.ndarray | None, k: int):
-    """Equation ``k``'s wind and yaw covariate: (n,) columns, or (n, S) every section's when additive."""
-    if wind_input == "additive":
+    """Equation ``k``'s wind and yaw covariate: (n,) columns, or (n, S) every section's ("additive", "sum")."""
+    if wind_input in ("additive", "sum"):
         return U, Z
     return U[:, k], None if Z is None else Z[:, k]
 
@@ -301,8 +319,8 @@ def select_basis(model, samples: CampaignSamples, k: int, weight: np.ndarray | N
     pen = np.asarray(model.penalties if fixed is None else [fixed[1]], dtype=float)
     ok = valid_samples(model.wind_input, A, U, dA, Z if J else None, k)
     n = int(ok.sum())
-    n_in = model.n_inputs(samples.n_sections)
-    p_max = 4 * (J + 1) * n_in * int(n_basis.max())
+    n_fit = fitted_inputs(model, samples.n_sections)
+    p_max = 4 * (J + 1) * n_fit * int(n_basis.max())
     if n < p_max + 2:
         raise InputError(f"section {k + 1}: {n} valid samples are too few for {p_max} spline coefficients")
     Uall, Zall = equation_inputs(model.wind_input, U, Z, k)
@@ -329,8 +347,10 @@ def select_basis(model, samples: CampaignSamples, k: int, weight: np.ndarray | N
     for a, M in enumerate(n_basis):
         knots = uniform_knots(lo, hi, int(M))
         G, b, yy, _cnt = block_stats(Uk, Ak, y, blk, nb, knots, aref, zk, J, None if weight is None else weight[ok])
+        if model.wind_input == "sum":  # one curve shared by every section's wind
+            G, b = tie_stats(G, b, model.wind_weights_, J, int(M))
         # Block-diagonal: the same roughness penalty on every order's, yaw power's and wind input's curve.
-        P = np.kron(np.eye(4 * (J + 1) * n_in), difference_penalty(int(M)))
+        P = np.kron(np.eye(4 * (J + 1) * n_fit), difference_penalty(int(M)))
         err = cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool)) / n
         errors[a] = err
         j = int(np.argmin(err))
@@ -358,7 +378,7 @@ def eiv_weight(model, samples: CampaignSamples, k: int, sec: SectionSamples, ste
     idx = np.flatnonzero(ok)
     best = sec.best
     Gs, bs = best.G.sum(axis=0), best.b.sum(axis=0)
-    c = penalised_solve(Gs, bs, best.P, best.penalty * penalty_scale(Gs, best.P))
+    c = as_inputs(model, penalised_solve(Gs, bs, best.P, best.penalty * penalty_scale(Gs, best.P)), J, best.n_basis)
     Uk, Zk = equation_inputs(model.wind_input, U, Z, k)
     zk = None if not J else Zk / sec.yaw_ref
     res = np.empty(idx.size)
@@ -458,7 +478,7 @@ def fit_shared(model, records) -> SharedFit:
     for rec in raw:
         if rec.n_sections != raw[0].n_sections:
             raise ValueError(f"record {rec.event_id!r} has {rec.n_sections} sections, the first {raw[0].n_sections}")
-    weights = model.wind_weights if model.wind_input == "mean" else "equal"
+    weights = model.wind_weights if model.wind_input in ("mean", "sum") else "equal"
     # The weights come from the amplitudes, which the wind's smoothing does not touch.
     model.wind_weights_ = resolve_wind_weights(weights, np.concatenate([r.A for r in raw]))
     grid = [float(model.wind_smoothing_s)] if model.wind_smoothing_grid is None else [
@@ -493,7 +513,7 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
     """
     J, n_ev, rng = samples.yaw_degree, samples.n_events, samples.rng
     pen = np.asarray(model.penalties, dtype=float)
-    n_in = model.n_inputs(samples.n_sections)
+    n_in, n_fit = model.n_inputs(samples.n_sections), fitted_inputs(model, samples.n_sections)
     best = sec.best
     M, lam_rel, G, b, yy, P = best.n_basis, best.penalty, best.G, best.b, best.yy, best.P
     Gs, bs = G.sum(axis=0), b.sum(axis=0)
@@ -516,9 +536,9 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
             lam_rel = float(pen[confidence_set(loss, level, test)].min())
     keep_orders = np.ones(4, dtype=bool)
     if model.select_orders:
-        keep_orders = select_orders(G, b, yy, sec.fold_of_block, samples.n_folds, P, lam_rel, (J + 1) * n_in * M,
+        keep_orders = select_orders(G, b, yy, sec.fold_of_block, samples.n_folds, P, lam_rel, (J + 1) * n_fit * M,
                                     best.error * sec.n)
-    keep = np.repeat(keep_orders, (J + 1) * n_in * M)
+    keep = np.repeat(keep_orders, (J + 1) * n_fit * M)
     lam = lam_rel * penalty_scale(Gs, P)
     c = penalised_solve(Gs, bs, P, lam, keep)
     ys = sec.y_scale
@@ -530,7 +550,8 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
     zscale = sec.yaw_ref ** -np.arange(J + 1.0)  # (J + 1,): coefficients of (sin^2 psi)^j
     L = n_in * M
 
-    def physical(coef):  # (..., p) standardised -> (..., L, 4, J + 1) physical
+    def physical(coef):  # (..., p) standardised -> (..., L, 4, J + 1) physical (every wind input's, untied)
+        coef = as_inputs(model, coef, J, M)
         return np.moveaxis(coef.reshape(coef.shape[:-1] + (4, J + 1, L)), -1, -3) * to_phys[:, None] * zscale
 
     n_boot = int(model.n_bootstrap)
@@ -544,7 +565,7 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
     loeo = np.full((ORDER_SUBSETS.shape[0], n_ev), np.nan)
     subset = np.zeros((ORDER_SUBSETS.shape[0], L, 4, J + 1))
     for a, orders in enumerate(ORDER_SUBSETS):
-        keep_a = np.repeat(orders, (J + 1) * L)
+        keep_a = np.repeat(orders, (J + 1) * n_fit * M)
         loeo[a, has] = held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, [lam], keep_a)[:, 0]
         subset[a] = physical(penalised_solve(Gs, bs, P, lam, keep_a))
     # The confidence set of penalties (same basis and orders): a penalty's bias is shared by every
@@ -615,7 +636,7 @@ def event_statistics(model, records: list[Record]) -> list[dict]:
     Z = np.concatenate([model.yaw_covariate(r, r.n_samples) for r in records]) if J else None
     event = np.concatenate([np.full(r.n_samples, e) for e, r in enumerate(records)])
     E = len(records)
-    n_in = model.n_inputs(model.n_sections_)
+    n_in = fitted_inputs(model, model.n_sections_)
     for k in range(model.n_sections_):
         M = int(model.n_basis_[k])
         knots = model.knots_[k, :M + DEGREE + 1]
@@ -624,6 +645,8 @@ def event_statistics(model, records: list[Record]) -> list[dict]:
         zk = None if not J else Zk[ok] / model.yaw_ref_[k]
         G, b, yy, cnt = block_stats(Uk[ok], A[ok, k], dA[ok, k] / model.y_scale_[k], event[ok], E, knots,
                                     model.a_ref_[k], zk, J)
+        if model.wind_input == "sum":
+            G, b = tie_stats(G, b, model.wind_weights_, J, M)
         out.append({"G": G, "b": b, "yy": yy, "n": cnt,
                     "P": np.kron(np.eye(4 * (J + 1) * n_in), difference_penalty(M)),
                     "penalty": float(model.penalty_[k]), "keep": np.repeat(model.orders_[k], (J + 1) * n_in * M),
