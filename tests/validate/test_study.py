@@ -167,10 +167,10 @@ def test_summary_counts_wins_choices_and_change_alarms():
         base.update({k: str(v) for k, v in kw.items()})
         return base
 
-    rows = [row(0, "a", 0.1, chosen="yaw0-cv", change_p_value=0.5, yaw_effect="gaussian"),
+    rows = [row(0, "a", 0.1, chosen="yaw0-cv", change_p_value=0.5, yaw_effect="gaussian", yaw_course="shared"),
             row(0, "b", 0.2),
             row(1, "a", 0.3, chosen="yaw1-least", change_p_value=0.01, change_detected=1, change_index=1,
-                yaw_effect="gaussian"),
+                yaw_effect="gaussian", yaw_course="per_event"),
             row(1, "b", 0.2),
             row(2, "a", 0.1, chosen="yaw0-cv", change="damping_step", step_event=4, change_p_value=0.02,
                 change_detected=1, change_index=2),     # first changed event E004: index 3, found at 2
@@ -179,8 +179,10 @@ def test_summary_counts_wins_choices_and_change_alarms():
     summary = study_summary({"split": "development", "draws": [0, 1, 2, 3], "methods": ["a", "b"]}, rows)
     assert summary["versus"]["a vs b"] == {"draws": 2, "lower": 1, "share_lower": 0.5}
     a = summary["methods"]["a"]
-    assert a["yaw_present"]["choices"] == {"draws": 2, "yaw_chosen": 1}
-    assert a["yaw_absent"]["choices"] == {"draws": 2, "yaw_chosen": 1}
+    assert a["yaw_present"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 1, "per_event_yaw_chosen": 1,
+                                           "shared_draws": 1, "shared_yaw_chosen": 0}
+    assert a["yaw_absent"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 0, "per_event_yaw_chosen": 0,
+                                          "shared_draws": 0, "shared_yaw_chosen": 0}
     assert a["all"]["changes"] == {"draws_without_change": 2, "false_alarms": 1, "draws_with_step": 2,
                                    "detected": 1, "located_within_one_event": 1}
     assert summary["methods"]["b"]["all"]["changes"]["draws_without_change"] == 0  # never scanned

@@ -96,7 +96,13 @@ def _choices(rows: Sequence[dict]) -> dict[str, Any]:
     """How often a model that chooses from the campaign's evidence took a yaw covariate (``chosen`` "yawN-...")."""
     chosen = [r for r in rows if str(r.get("chosen") or "").startswith("yaw")]
     with_yaw = [r for r in chosen if not str(r["chosen"]).startswith("yaw0")]
-    return {"draws": len(chosen), "yaw_chosen": len(with_yaw)}
+    out = {"draws": len(chosen), "yaw_chosen": len(with_yaw)}
+    # By the yaw's course: varying between events (the yaw can be told from the time within an event) or the
+    # same course in every event (confounded with it; the selection should leave the yaw out and widen the bands).
+    for course in ("per_event", "shared"):
+        out[f"{course}_draws"] = sum(1 for r in chosen if r.get("yaw_course") == course)
+        out[f"{course}_yaw_chosen"] = sum(1 for r in with_yaw if r.get("yaw_course") == course)
+    return out
 
 
 def _recorded(row: dict, key: str) -> bool:
@@ -336,13 +342,18 @@ def study_markdown(summary: dict[str, Any]) -> str:
     for pair, v in summary.get("versus", {}).items():
         lines.append(f"| {pair} | {v['draws']} | {v['lower']} | {_fmt(v['share_lower'])} |")
     lines += ["", "## Covariates chosen from the campaign's evidence", "",
-              "Draws on which a method that chooses its options from held-out events took a yaw covariate.", "",
-              "| method | draws | draws with a choice | yaw chosen |", "|---|---|---|---|"]
+              "Draws on which a method that chooses its options from held-out events took a yaw covariate, in all "
+              "and by the yaw's course: varying between events (per event), or the same course in every event "
+              "(shared), where the yaw is confounded with the time within an event and cannot be told from it.", "",
+              "| method | draws | draws with a choice | yaw chosen | per-event course: draws, yaw chosen "
+              "| shared course: draws, yaw chosen |", "|---|---|---|---|---|---|"]
     for name, blocks in summary["methods"].items():
         for subset, block in blocks.items():
             c = block["choices"]
             if c["draws"]:
-                lines.append(f"| {name} | {_subset(subset, block)} | {c['draws']} | {c['yaw_chosen']} |")
+                lines.append(f"| {name} | {_subset(subset, block)} | {c['draws']} | {c['yaw_chosen']} "
+                             f"| {c.get('per_event_draws', 0)}, {c.get('per_event_yaw_chosen', 0)} "
+                             f"| {c.get('shared_draws', 0)}, {c.get('shared_yaw_chosen', 0)} |")
     lines += ["", "## Changes the wind does not carry", "",
               "The model's change scan (refits before and after every split of the events, permutation p-value "
               "below 0.05): alarms on draws without a change, and damping steps detected and located within one "
