@@ -12,6 +12,7 @@ from vivbench.models.greybox import GreyBoxRefit
 from vivbench.models.greybox_wind import (
     relative_spread,
     simex_extrapolate,
+    unmeasured_wind_draws,
     wind_error_draws,
     wind_second_moment,
 )
@@ -53,6 +54,25 @@ def test_wind_error_draws_are_seeded_from_other_events_and_scale_linearly():
         assert any(is_close(got, x, rtol=1e-5, atol=1e-8, reason="ratios of resampled winds: rounding") for x in donors)
     with pytest.raises(ValueError, match="n_draws"):
         wind_error_draws(U, ev, n_draws=0, seed=0)
+
+
+def test_unmeasured_wind_draws_are_the_error_over_the_distance_where_the_spread_shows_none():
+    from vivbench.preprocess.unmeasured_wind import unmeasured_wind_error
+
+    U = np.full((12, 11, 3), 9.0)  # one anemometer copied to every section: no spread, no spread's error
+    ev = np.repeat(np.arange(3), 4)
+    np.testing.assert_array_equal(wind_error_draws(U, ev, n_draws=2, seed=0), 0.0)
+    assert unmeasured_wind_draws(U, ev, np.zeros((3, 3)), n_draws=2, seed=0) is None
+    dist = np.tile([300.0, 0.0, 300.0], (3, 1))  # the anemometer at section 2
+    d = unmeasured_wind_draws(U, ev, dist, n_draws=400, seed=1)
+    assert d.shape == (400,) + U.shape
+    np.testing.assert_array_equal(d[..., 1], 0.0)
+    sigma = float(unmeasured_wind_error(np.array([9.0]), 300.0)[0])
+    assert sigma > 0
+    # constant over an event (one z per draw, record and section), with the error's rms over the draws
+    assert np.all(d[:, ev == 0][..., 0] == d[:, :1, :1, 0])
+    assert_close(np.std(d[:, 0, 0, 0]), sigma, rtol=0.15, reason="a standard deviation from 400 draws")
+    np.testing.assert_array_equal(d, unmeasured_wind_draws(U, ev, dist, n_draws=400, seed=1))
 
 
 def test_second_moment_is_spread_plus_squared_shift():
@@ -133,6 +153,18 @@ def test_wind_component_is_seeded_zero_without_error_and_grows_with_it(wind_fit,
         GreyBoxRefit(**{**kw, "wind_draws": -1}).fit(records)
     with pytest.raises(InputError, match="wind_draws"):
         GreyBoxRefit(**{**kw, "wind_draws": 0, "band": "sandwich_bias_wind"}).fit(records)
+
+
+def test_winds_taken_from_an_anemometer_elsewhere_widen_the_wind_component(wind_fit):
+    import dataclasses
+
+    model, records, kw = wind_fit
+    S = records[0].n_sections
+    far = [dataclasses.replace(r, wind_distance=np.full(S, 400.0)) for r in records]
+    wider = GreyBoxRefit(**kw).fit(far)
+    assert np.trace(wider.covariances_["wind"]) > np.trace(model.covariances_["wind"])
+    # the fit itself does not read the distance
+    np.testing.assert_array_equal(wider.coef_, model.coef_)
 
 
 def test_wind_component_has_the_size_of_the_known_wind_errors_effect():

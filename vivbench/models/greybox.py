@@ -118,6 +118,7 @@ from vivbench.models.greybox_solve import (
 )
 from vivbench.models.greybox_wind import (
     relative_spread,
+    unmeasured_wind_draws,
     wind_error_draws,
     wind_refits,
     wind_second_moment,
@@ -258,8 +259,10 @@ class GreyBoxRefit(GreyBoxCurves, ModelBase):
         linearisation); a few iterations leave the replicates near the
         optimum and the band too narrow.
     wind_draws : int
-        Refits with the wind perturbed by draws of the anemometers' error
-        (:mod:`vivbench.models.greybox_wind`) after the fit, for the band
+        Refits with the wind perturbed by draws of the anemometers' error (their
+        spread between sections, and for a section whose wind came from an
+        anemometer elsewhere, ``Record.wind_distance``, the error over that
+        distance; :mod:`vivbench.models.greybox_wind`) after the fit, for the band
         component of the wind's errors-in-variables (covariance "wind", band
         "sandwich_bias_wind"); 0: none (then pick another ``band``). Each
         costs about 2 (``wind_iter`` + 1) linearisations.
@@ -551,6 +554,12 @@ class GreyBoxRefit(GreyBoxCurves, ModelBase):
             probe.set_continuity_weight(self.continuity_weight)
             draws = wind_error_draws(grid.U, grid.event, n_draws=int(self.wind_draws), seed=int(self.seed),
                                      scale=float(self.wind_scale))
+            S = grid.U.shape[-1]
+            distances = np.array([np.zeros(S) if r.wind_distance is None else r.wind_distance for r in records])
+            unmeasured = unmeasured_wind_draws(grid.U, grid.event, distances, n_draws=int(self.wind_draws),
+                                               seed=[int(self.seed), 2])
+            if unmeasured is not None:  # winds taken from an anemometer elsewhere on the span
+                draws = draws + float(self.wind_scale) * unmeasured
             wr = wind_refits(probe, g_builder, grid.U, res.theta, res.s, draws, levels=(1.0,),
                              n_iter=int(self.wind_iter), tol=min(self.tol, 1e-6))
             self.wind_coef_ = wr.theta[0]

@@ -37,6 +37,14 @@ does not do: at the fit's continuity weight the defects the perturbed wind
 opens are far from linear, and the step came out 400 times the curves' RMS
 on bridge B.
 
+A section whose wind was taken from an anemometer elsewhere on the span
+(``Record.wind_distance`` > 0; one anemometer copied to every section shows
+no spread at all) adds draws of that error (:func:`unmeasured_wind_draws`):
+per event and section a standard normal multiple of its rms error over the
+distance (:func:`vivbench.preprocess.unmeasured_wind_error`, Kaimal turbulence
+with Davenport coherence, at the identification's low-pass and no further
+smoothing, which overstates it), added to the spread's draws.
+
 Everything is drawn from ``numpy.random.default_rng(seed)`` before any
 refit, and the refits run in order: the same data and seed give the same bytes.
 """
@@ -50,11 +58,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from vivbench.models.greybox_solve import ShootingProblem, solve_gauss_newton
+from vivbench.preprocess.unmeasured_wind import unmeasured_wind_error
 
 __all__ = [
     "WindRefits",
     "relative_spread",
     "simex_extrapolate",
+    "unmeasured_wind_draws",
     "wind_error_draws",
     "wind_refits",
     "wind_second_moment",
@@ -121,6 +131,40 @@ def wind_error_draws(U: np.ndarray, event: np.ndarray, *, n_draws: int, seed: in
             sign = 1.0 if rng.random() < 0.5 else -1.0
             out[b, idx] = sign * scale * rel[src][..., perm] * mean[idx]
     return out
+
+
+def unmeasured_wind_draws(U: np.ndarray, event: np.ndarray, distances: np.ndarray, *, n_draws: int,
+                          seed) -> np.ndarray | None:
+    """Draws of the error of section winds taken from an anemometer elsewhere on the span.
+
+    Parameters
+    ----------
+    U : ndarray, shape (I, m, S), m/s
+        Section winds at the stage points of every interval (``ShootingGrid.U``).
+    event : ndarray of int, shape (I,)
+        Record of every interval.
+    distances : ndarray, shape (n_records, S), m
+        Each record's distance from each section to the anemometer its wind came from (0: measured there).
+    n_draws : int
+    seed : int or sequence of int, of ``numpy.random.default_rng``
+
+    Returns
+    -------
+    ndarray, shape (n_draws, I, m, S), m/s, or None when no distance is > 0
+        z sigma_e(U): per draw, record and section one standard normal z times the section's rms error at
+        each point (:func:`vivbench.preprocess.unmeasured_wind_error`); 0 where measured there.
+    """
+    distances = np.asarray(distances, dtype=float)
+    if not np.any(distances > 0):
+        return None
+    U = np.asarray(U, dtype=float)
+    event = np.asarray(event)
+    err = np.zeros_like(U)
+    for r, k in zip(*np.nonzero(distances > 0)):  # records x sections with a distance: a few hundred at most
+        rows = event == r
+        err[rows, :, k] = np.nan_to_num(unmeasured_wind_error(U[rows, :, k], float(distances[r, k])))
+    z = np.random.default_rng(seed).standard_normal((int(n_draws), distances.shape[0], U.shape[-1]))
+    return z[:, event, None, :] * err[None]
 
 
 @dataclass
