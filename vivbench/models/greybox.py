@@ -554,7 +554,6 @@ class GreyBoxRefit(GreyBoxCurves, ModelBase):
             probe.set_continuity_weight(self.continuity_weight)
             draws = wind_error_draws(grid.U, grid.event, n_draws=int(self.wind_draws), seed=int(self.seed),
                                      scale=float(self.wind_scale))
-            S = grid.U.shape[-1]
             distances = np.array([np.zeros(S) if r.wind_distance is None else r.wind_distance for r in records])
             unmeasured = unmeasured_wind_draws(grid.U, grid.event, distances, n_draws=int(self.wind_draws),
                                                seed=[int(self.seed), 2])
