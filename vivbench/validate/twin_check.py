@@ -130,7 +130,8 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
         inside[m] = None if not all(math.isfinite(x) for x in (lo, hi, a)) else bool(lo <= a <= hi)
     return {"draw": task.draw, "n_events": campaign.n_events, "labels": draw.labels, "actual": actual,
             "expected": {m: expected[m] for m in CHECKED_METRICS}, "twin_values": twin_values,
-            "twin_errors": twin.get("errors", {}), "inside": inside}
+            "twin_errors": twin.get("errors", {}), "inside": inside,
+            "twin_nuisances": [d.get("nuisances") for d in twin["draws"]]}
 
 
 def _summary(config: TwinCheckConfig, done: dict[int, dict], failed) -> dict:
@@ -151,7 +152,9 @@ def twin_check_markdown(summary: dict) -> str:
     lines = ["# Does the twin predict?", "",
              f"{len(summary['draws'])} {c['split']} draws of the generator family treated as field campaigns "
              f"({', '.join(map(str, c['draws']))}), {c['n_twins']} twin draws each, pool bootstrap {c['bootstrap']}"
-             + (f"; capped campaigns ({caps})" if caps else "") + ".", "",
+             + (f"; capped campaigns ({caps})" if caps else "") + ". Each twin draws what a field user cannot "
+             "measure (the errors in the wind, buffeting, a yaw effect) from the generator family's priors; the "
+             "values drawn are in the summary's `twin_nuisances`.", "",
              "| figure | actual within the twin's 90 % range | draws assessed |", "|---|---|---|"]
     for m, s in summary["share_inside"].items():
         share = "n/a" if not math.isfinite(s["share"]) else f"{s['share']:.0%}"
