@@ -5,18 +5,19 @@ their measured mean wind and yaw, turbulence intensity, noise floor, anemometer 
 bridge's structural properties from a small TOML file, draws its aerodynamics from the field run's
 campaign model within its bands (:mod:`vivbench.validate.twin_aero`) and what the records cannot
 tell from stated priors (:mod:`vivbench.validate.twin_nuisance`: the errors in the wind, buffeting,
-a yaw effect). Each of ``n_draws`` draws generates such a campaign, runs the chain with the
-field run's own settings (:mod:`vivbench.validate.twin_chain`) and scores the campaign model against the draw's truth. The spread over draws is the expected
-recovery on this bridge: the median of each figure, its 90 % range for one more campaign (a
-normal-theory prediction interval over the draws, of the logarithm for the errors; honest with few
-draws) and the draws' 5th to 95th percentiles.
+a yaw effect). Each of ``n_draws`` draws generates such a campaign, runs the chain with the field
+run's own settings (:mod:`vivbench.validate.twin_chain`) and scores the campaign model against the
+draw's truth. The spread over draws is the expected recovery on this bridge: the median of each
+figure, its 90 % range for one more campaign (a normal-theory prediction interval over the draws,
+of the logarithm for the errors; honest with few draws) and the draws' 5th to 95th percentiles.
 
 Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics,
 the last the nuisances (both redrawn from their streams, up to :data:`AERO_TRIES` times, while an
-event's averaged truth grows without bound and cannot be generated), the others the events. One task is one draw; finished draws are journalled
-(``OUT/twin.jsonl``), so a run stopped part-way keeps them and the next run resumes; ``OUT/twin.json`` and
-``OUT/twin.md`` are rewritten atomically from the journal alone (no wall times), so the same
-inputs and seed give the same bytes whatever the worker count.
+event's averaged truth grows without bound and cannot be generated), the others the events. One
+task is one draw; finished draws are journalled (``OUT/twin.jsonl``), so a run stopped part-way
+keeps them and the next run resumes; ``OUT/twin.json`` and ``OUT/twin.md`` are rewritten
+atomically from the journal alone (no wall times), so the same inputs and seed give the same bytes
+whatever the worker count.
 """
 
 from __future__ import annotations
