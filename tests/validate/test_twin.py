@@ -19,6 +19,7 @@ from vivbench.io.event import read_event, write_event
 from vivbench.report import twin_section
 from vivbench.synth import AeroConfig, CampaignConfig, generate_campaign, generate_event
 from vivbench.validate.twin import TwinConfig, read_twin, run_twin
+from vivbench.validate.twin_nuisance import NuisancePriors
 from vivbench.validate.twin_mirror import (TwinBridge, measure_campaign, mirror_generator, mirror_specs,
                                            mirror_structure, read_bridge)
 
@@ -101,6 +102,16 @@ def test_twin_is_deterministic_and_resumes(field, one_draw, tmp_path):
             assert stats["predict_low"] <= stats["median"] <= stats["predict_high"]
             assert stats["low"] <= stats["median"] <= stats["high"]
     assert 0.0 <= summary["expected"]["coverage"]["median"] <= 1.0
+    # each draw records the nuisances it drew from the stated priors, and the page shows them
+    priors = NuisancePriors()
+    assert summary["config"]["priors"] == priors.to_dict()
+    assert len({json.dumps(r["nuisances"], sort_keys=True) for r in summary["draws"]}) == 2
+    for row in summary["draws"]:
+        n = row["nuisances"]
+        assert n["felt_wind"] in ("tributary", "smooth")
+        assert priors.buffeting_w[0] <= n["buffeting_w"] <= priors.buffeting_w[1]
+        assert priors.buffeting_u[0] <= n["buffeting_u"] <= priors.buffeting_u[1]
+    assert "| draw | felt wind | point time scale, s |" in (a / "twin.md").read_text()
     section = "\n".join(twin_section(a))
     assert section.startswith("## How far to trust this")
     assert "3 events" in section and "dA/dt error, energy-weighted" in section
@@ -187,6 +198,7 @@ def test_twin_check_compares_actual_figures_with_the_twin_range(tmp_path):
             assert row["inside"][m] == (lo <= a <= hi)
         assert summary["share_inside"][m]["assessed"] == int(row["inside"][m] is not None)
     assert "Does the twin predict?" in page.read_text()
+    assert len(row["twin_nuisances"]) == 2 and all(n["felt_wind"] for n in row["twin_nuisances"])
 
 
 def test_the_greybox_bridge_example_is_a_twin_bridge_file():
