@@ -115,6 +115,7 @@ def test_twin_is_deterministic_and_resumes(field, one_draw, tmp_path):
     section = "\n".join(twin_section(a))
     assert section.startswith("## How far to trust this")
     assert "3 events" in section and "dA/dt error, energy-weighted" in section
+    assert "the deck felt a smooth wind in" in section and "of 2 twins" in section
 
 
 def test_a_journalled_draw_survives_a_failed_run(field, one_draw, tmp_path):
