@@ -205,3 +205,16 @@ def test_twin_check_compares_actual_figures_with_the_twin_range(tmp_path):
 def test_the_greybox_bridge_example_is_a_twin_bridge_file():
     bridge = read_bridge(REPO / "examples" / "greybox_bridge_default.toml")
     assert (bridge.mass, bridge.depth, bridge.frequency, bridge.mode_shape) == (27700.0, 3.5, 0.327, (0.707, 1.0, 0.707))
+
+
+def test_fixed_nuisances_keep_the_generator_defaults(field, tmp_path):
+    root, _, _ = field
+    out = tmp_path / "fixed"
+    code = main(["twin", str(root / "campaign"), str(root / "identify"), "--bridge",
+                 str(REPO / "examples" / "greybox_bridge_default.toml"), "--out", str(out), "--draws", "1",
+                 "--fixed-nuisances", "--workers", "1"])
+    assert code == 0
+    summary = read_twin(out)
+    assert summary["config"]["priors"] is None and summary["draws"][0]["nuisances"] is None
+    page = (out / "twin.md").read_text()
+    assert "Fixed at the generator's defaults" in page and "| draw | felt wind |" not in page
