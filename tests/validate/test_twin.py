@@ -218,3 +218,22 @@ def test_fixed_nuisances_keep_the_generator_defaults(field, tmp_path):
     assert summary["config"]["priors"] is None and summary["draws"][0]["nuisances"] is None
     page = (out / "twin.md").read_text()
     assert "Fixed at the generator's defaults" in page and "| draw | felt wind |" not in page
+
+
+def test_a_recorded_anemometer_layout_is_measured(field, tmp_path):
+    """Events imported with positions (one anemometer at 700 m for three sections) give the mirror their layout."""
+    _, events, results = field
+    copies = []
+    for path in events:
+        tree = read_event(path)
+        tree.attrs.update({"import_span_length_m": 1650.0, "import_wind_rule": "interpolation",
+                           "import_anemometer_position_m_mid": 700.0, "import_position_m_S1": 412.5,
+                           "import_position_m_S2": 825.0, "import_position_m_S3": 1237.5,
+                           "wind_distance_m_S1": 287.5, "wind_distance_m_S2": 125.0, "wind_distance_m_S3": 537.5})
+        copies.append(write_event(tree, tmp_path / path.name))
+    mirror = measure_campaign(copies, results)
+    assert (mirror.anemometer_positions, mirror.span_length, mirror.wind_rule) == ((700.0,), 1650.0, "interpolation")
+    assert mirror.positions == (412.5, 825.0, 1237.5)
+    wind = mirror_generator(mirror, mirror_structure(mirror, BRIDGE), AeroConfig()).wind
+    assert_close(np.array(wind.anemometer_span), np.array([700.0 / 1650.0]))
+    assert wind.wind_rule == "interpolation" and wind.anemometer_offset == 0.0
