@@ -19,6 +19,7 @@ from vivbench.io.event import read_event, write_event
 from vivbench.report import twin_section
 from vivbench.synth import AeroConfig, CampaignConfig, generate_campaign, generate_event
 from vivbench.validate.twin import TwinConfig, read_twin, run_twin
+from vivbench.validate.twin_nuisance import NuisancePriors
 from vivbench.validate.twin_mirror import (TwinBridge, measure_campaign, mirror_generator, mirror_specs,
                                            mirror_structure, read_bridge)
 
@@ -101,9 +102,20 @@ def test_twin_is_deterministic_and_resumes(field, one_draw, tmp_path):
             assert stats["predict_low"] <= stats["median"] <= stats["predict_high"]
             assert stats["low"] <= stats["median"] <= stats["high"]
     assert 0.0 <= summary["expected"]["coverage"]["median"] <= 1.0
+    # each draw records the nuisances it drew from the stated priors, and the page shows them
+    priors = NuisancePriors()
+    assert summary["config"]["priors"] == priors.to_dict()
+    assert len({json.dumps(r["nuisances"], sort_keys=True) for r in summary["draws"]}) == 2
+    for row in summary["draws"]:
+        n = row["nuisances"]
+        assert n["felt_wind"] in ("tributary", "smooth")
+        assert priors.buffeting_w[0] <= n["buffeting_w"] <= priors.buffeting_w[1]
+        assert priors.buffeting_u[0] <= n["buffeting_u"] <= priors.buffeting_u[1]
+    assert "| draw | felt wind | point time scale, s |" in (a / "twin.md").read_text()
     section = "\n".join(twin_section(a))
     assert section.startswith("## How far to trust this")
     assert "3 events" in section and "dA/dt error, energy-weighted" in section
+    assert "the deck felt a smooth wind in" in section and "of 2 twins" in section
 
 
 def test_a_journalled_draw_survives_a_failed_run(field, one_draw, tmp_path):
@@ -187,8 +199,41 @@ def test_twin_check_compares_actual_figures_with_the_twin_range(tmp_path):
             assert row["inside"][m] == (lo <= a <= hi)
         assert summary["share_inside"][m]["assessed"] == int(row["inside"][m] is not None)
     assert "Does the twin predict?" in page.read_text()
+    assert len(row["twin_nuisances"]) == 2 and all(n["felt_wind"] for n in row["twin_nuisances"])
 
 
 def test_the_greybox_bridge_example_is_a_twin_bridge_file():
     bridge = read_bridge(REPO / "examples" / "greybox_bridge_default.toml")
     assert (bridge.mass, bridge.depth, bridge.frequency, bridge.mode_shape) == (27700.0, 3.5, 0.327, (0.707, 1.0, 0.707))
+
+
+def test_fixed_nuisances_keep_the_generator_defaults(field, tmp_path):
+    root, _, _ = field
+    out = tmp_path / "fixed"
+    code = main(["twin", str(root / "campaign"), str(root / "identify"), "--bridge",
+                 str(REPO / "examples" / "greybox_bridge_default.toml"), "--out", str(out), "--draws", "1",
+                 "--fixed-nuisances", "--workers", "1"])
+    assert code == 0
+    summary = read_twin(out)
+    assert summary["config"]["priors"] is None and summary["draws"][0]["nuisances"] is None
+    page = (out / "twin.md").read_text()
+    assert "Fixed at the generator's defaults" in page and "| draw | felt wind |" not in page
+
+
+def test_a_recorded_anemometer_layout_is_measured(field, tmp_path):
+    """Events imported with positions (one anemometer at 700 m for three sections) give the mirror their layout."""
+    _, events, results = field
+    copies = []
+    for path in events:
+        tree = read_event(path)
+        tree.attrs.update({"import_span_length_m": 1650.0, "import_wind_rule": "interpolation",
+                           "import_anemometer_position_m_mid": 700.0, "import_position_m_S1": 412.5,
+                           "import_position_m_S2": 825.0, "import_position_m_S3": 1237.5,
+                           "wind_distance_m_S1": 287.5, "wind_distance_m_S2": 125.0, "wind_distance_m_S3": 537.5})
+        copies.append(write_event(tree, tmp_path / path.name))
+    mirror = measure_campaign(copies, results)
+    assert (mirror.anemometer_positions, mirror.span_length, mirror.wind_rule) == ((700.0,), 1650.0, "interpolation")
+    assert mirror.positions == (412.5, 825.0, 1237.5)
+    wind = mirror_generator(mirror, mirror_structure(mirror, BRIDGE), AeroConfig()).wind
+    assert_close(np.array(wind.anemometer_span), np.array([700.0 / 1650.0]))
+    assert wind.wind_rule == "interpolation" and wind.anemometer_offset == 0.0

@@ -13,7 +13,8 @@ def run(args) -> int:
     from vivbench.validate.twin_mirror import read_bridge
 
     bridge = read_bridge(args.bridge)  # a bad or missing file is reported before anything runs
-    config = TwinConfig(n_draws=args.draws, seed=args.seed, knot_step=args.knot_step, max_events=args.max_events)
+    config = TwinConfig(n_draws=args.draws, seed=args.seed, knot_step=args.knot_step, max_events=args.max_events,
+                        **({"priors": None} if args.fixed_nuisances else {}))
     saved = f"the finished draws are saved in {Path(args.out) / 'twin.jsonl'}"
     result = run_resumable("twin", config.n_draws, "draw", saved,
                            lambda advance: run_twin(args.campaign, args.results, bridge, args.out, config=config,
@@ -65,6 +66,10 @@ def register(sub) -> None:
                    help="spacing of the mirrored mean wind's knots, s (default 120)")
     s.add_argument("--max-events", type=int, default=None,
                    help="mirror only the first events (quick checks; recorded in twin.json)")
+    s.add_argument("--fixed-nuisances", action="store_true",
+                   help="fix what the records cannot tell at the generator's defaults (tributary-averaged felt wind, "
+                        "buffeting, no yaw effect) instead of drawing it per twin from the family's priors; the "
+                        "twin's range then leaves it out")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                    help="local worker processes, one twin draw each (results do not depend on it)")
     s.set_defaults(func=run)

@@ -18,6 +18,16 @@ def _fmt(x) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{x:.3g}"
 
 
+def _nuisance_counts(summary: dict) -> str:
+    """`` (here: the deck felt a smooth wind in 2 of 5 twins, a yaw effect acted in 3)`` from the draws' nuisances."""
+    drawn = [r["nuisances"] for r in summary["draws"] if r.get("nuisances")]
+    if not drawn:
+        return ""
+    smooth = sum(n["felt_wind"] == "smooth" for n in drawn)
+    yaw = sum(n["yaw_shape"] != "absent" for n in drawn)
+    return f" (here: the deck felt a smooth wind in {smooth} of {len(drawn)} twins, a yaw effect acted in {yaw})"
+
+
 def twin_section(directory, command: str | None = None) -> list[str]:
     """Markdown lines: the twin's expected recovery on this campaign and what it mirrored and assumed.
 
@@ -56,10 +66,13 @@ def twin_section(directory, command: str | None = None) -> list[str]:
     elif exp.get("coverage", {}).get("n", 0) and exp["coverage"]["predict_high"] == 0:
         lines += ["Flagged regimes: the twins flag no window; this campaign's regimes are not expected to be "
                   "identifiable.", ""]
+    drawn = ("each twin draws what the records cannot tell (the errors in the wind the deck feels, buffeting, a yaw "
+             "effect along the measured yaws) from the generator family's priors" + _nuisance_counts(summary)
+             if summary["config"].get("priors")
+             else "buffeting and the wind the deck feels are the generator's defaults, without a yaw effect")
     lines += ["What the twin assumes: the bridge file's structural properties, the generator's shapes for the "
-              "aerodynamic functions (no yaw effect) fitted to this campaign's curves, and the generator's defaults "
-              "for buffeting, shedding and anemometer errors. Where the campaign model is far from the bridge's "
-              "truth the twin inherits its error and is optimistic (docs/field_workflow.md).", "",
+              f"aerodynamic functions fitted to this campaign's curves; {drawn}. Where the campaign model is far "
+              "from the bridge's truth the twin inherits its error and is optimistic (docs/field_workflow.md).", "",
               produced_by(command, "(twin.json)"), ""]
     if summary["failed"]:
         lines += [f"Twin draws that failed: {', '.join(map(str, summary['failed']))}.", ""]

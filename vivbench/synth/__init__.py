@@ -45,6 +45,7 @@ from vivbench.synth.family import (
     SPLITS,
     FamilyDraw,
     draw_bridge,
+    draw_yaw_effect,
     family_seed,
     generate_family_campaign,
 )
@@ -62,7 +63,7 @@ __all__ = [
     "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
     "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
     "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
-    "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "family_seed",
+    "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "draw_yaw_effect", "family_seed",
     "generate_family_campaign", "ContinuousLog", "ContinuousLogConfig", "generate_continuous_log",
     "write_continuous_log",
 ]

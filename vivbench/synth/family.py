@@ -82,7 +82,7 @@ from vivbench.synth.curves import AsymmetricBell, Constant, GaussianBell, Lorent
 from vivbench.synth.draw import draw_aero
 from vivbench.synth.turbulence import TurbulenceConfig
 
-__all__ = ["FAMILY_ENTROPY", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "family_seed",
+__all__ = ["FAMILY_ENTROPY", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "draw_yaw_effect", "family_seed",
            "generate_family_campaign", "FAMILY_FILE"]
 
 #: Fixed entropy of the family's seeds (any 128-bit number; changing it makes a new family).
@@ -212,7 +212,18 @@ def _aero_damping_max(bell, structure: StructureConfig) -> float:
     return float(np.max(structure.air_density * _WIND * structure.depth * y / (2.0 * structure.mass)))
 
 
-def _yaw(rng: np.random.Generator) -> tuple[YawFactor | None, str]:
+def draw_yaw_effect(rng: np.random.Generator) -> tuple[YawFactor | None, str]:
+    """A yaw effect on Y1 and C_L from the family's prior (module docstring: absent with probability 2/5,
+    else one of :data:`~vivbench.synth.curves.YAW_SHAPES`, 3/20 each, with its parameter drawn uniformly).
+
+    Parameters
+    ----------
+    rng : the random stream (four or fewer draws are taken from it)
+
+    Returns
+    -------
+    (YawFactor or None, name): None and ``"absent"``, or the factor and its shape's name
+    """
     if rng.random() < 0.4:
         return None, "absent"
     shape = ("cosine", "gaussian", "sin2", "logistic")[int(rng.integers(0, 4))]
@@ -283,7 +294,7 @@ def draw_bridge(split: str, index: int) -> FamilyDraw:
         raise InputError(f"family draw {split} {index}: no bridge with a reachable lock-in in {_MAX_TRIES} tries")
     mix = float(rng.random())
     e_mix = "both" if mix < 0.5 else ("e1_only" if mix < 0.75 else "e2_only")
-    yaw, yaw_kind = _yaw(rng)
+    yaw, yaw_kind = draw_yaw_effect(rng)
     aero_over = {"Y1": Y1, "yaw": yaw, "buffeting_w": float(rng.uniform(0.0, 1.2)),
                  "buffeting_u": float(rng.uniform(0.0, 0.4))}
     if e_mix == "e1_only":

@@ -175,11 +175,20 @@ from vivbench.validate.twin_mirror import (
     CampaignMirror,
     EventMirror,
     TwinBridge,
+    anemometer_fractions,
     measure_campaign,
     mirror_generator,
     mirror_specs,
     mirror_structure,
     read_bridge,
+)
+from vivbench.validate.twin_nuisance import (
+    MIN_MEAN_YAW_FACTOR,
+    YAW_TRIES,
+    NuisancePriors,
+    Nuisances,
+    apply_nuisances,
+    draw_nuisances,
 )
 
 __all__ = [
@@ -189,7 +198,8 @@ __all__ = [
     "TWIN_METRICS", "PoolSettings", "chain_scores", "identify_config_from_json", "pool_method", "pool_settings",
     "run_chain", "CHECKED_METRICS", "TwinCheckConfig", "run_twin_check", "run_twin_check_task", "twin_check_markdown",
     "BRIDGE_KEYS", "CampaignMirror", "EventMirror", "TwinBridge", "measure_campaign", "mirror_generator",
-    "mirror_specs", "mirror_structure", "read_bridge",
+    "mirror_specs", "mirror_structure", "read_bridge", "anemometer_fractions",
+    "MIN_MEAN_YAW_FACTOR", "YAW_TRIES", "NuisancePriors", "Nuisances", "apply_nuisances", "draw_nuisances",
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
     "STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",

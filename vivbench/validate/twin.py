@@ -1,21 +1,23 @@
 """A synthetic twin of a campaign: how far its identification can be trusted (docs/field_workflow.md).
 
 The twin mirrors a campaign (:mod:`vivbench.validate.twin_mirror`: sections, rates, events and
-their measured mean wind and yaw, turbulence intensity, noise floor), takes the bridge's structural
-properties from a small TOML file, and draws its aerodynamics from the field run's campaign model
-within its bands (:mod:`vivbench.validate.twin_aero`). Each of ``n_draws`` draws generates such a
-campaign, runs the chain with the field run's own settings (:mod:`vivbench.validate.twin_chain`)
-and scores the campaign model against the draw's truth. The spread over draws is the expected
-recovery on this bridge: the median of each figure, its 90 % range for one more campaign (a
-normal-theory prediction interval over the draws, of the logarithm for the errors; honest with few
-draws) and the draws' 5th to 95th percentiles.
+their measured mean wind and yaw, turbulence intensity, noise floor, anemometer layout), takes the
+bridge's structural properties from a small TOML file, draws its aerodynamics from the field run's
+campaign model within its bands (:mod:`vivbench.validate.twin_aero`) and what the records cannot
+tell from stated priors (:mod:`vivbench.validate.twin_nuisance`: the errors in the wind, buffeting,
+a yaw effect). Each of ``n_draws`` draws generates such a campaign, runs the chain with the field
+run's own settings (:mod:`vivbench.validate.twin_chain`) and scores the campaign model against the
+draw's truth. The spread over draws is the expected recovery on this bridge: the median of each
+figure, its 90 % range for one more campaign (a normal-theory prediction interval over the draws,
+of the logarithm for the errors; honest with few draws) and the draws' 5th to 95th percentiles.
 
-Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics
-(redrawn from the same stream, up to :data:`AERO_TRIES` times, while an event's averaged truth
-grows without bound and cannot be generated), the others the events. One task is one draw; finished draws are journalled (``OUT/twin.jsonl``),
-so a run stopped part-way keeps them and the next run resumes; ``OUT/twin.json`` and
-``OUT/twin.md`` are rewritten atomically from the journal alone (no wall times), so the same
-inputs and seed give the same bytes whatever the worker count.
+Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics,
+the last the nuisances (both redrawn from their streams, up to :data:`AERO_TRIES` times, while an
+event's averaged truth grows without bound and cannot be generated), the others the events. One
+task is one draw; finished draws are journalled (``OUT/twin.jsonl``), so a run stopped part-way
+keeps them and the next run resumes; ``OUT/twin.json`` and ``OUT/twin.md`` are rewritten
+atomically from the journal alone (no wall times), so the same inputs and seed give the same bytes
+whatever the worker count.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from vivbench.validate.twin_chain import (TWIN_METRICS, PoolSettings, chain_scor
                                           pool_method, pool_settings, run_chain)
 from vivbench.validate.twin_mirror import (CampaignMirror, TwinBridge, measure_campaign, mirror_generator,
                                            mirror_specs, mirror_structure, read_bridge)
+from vivbench.validate.twin_nuisance import NuisancePriors, apply_nuisances, draw_nuisances
 
 __all__ = ["AERO_TRIES", "TwinConfig", "TwinTask", "TwinResult", "twin_inputs", "run_twin", "run_twin_task", "twin_summary",
            "twin_markdown", "read_twin", "TWIN_FILE", "METRIC_NAMES"]
@@ -72,16 +75,20 @@ class TwinConfig:
 
     Attributes
     ----------
-    n_draws : twin campaigns (each a new draw of the aerodynamics, wind turbulence and noise)
+    n_draws : twin campaigns (each a new draw of the aerodynamics, the nuisances, wind turbulence and noise)
     seed : root seed
     knot_step : s; spacing of the wind scripts' knots
     max_events : mirror only the first events (None: all); for quick checks, recorded in the outputs
+    priors : NuisancePriors of what the records cannot tell (the generator family's by default), or None
+        to fix them at the generator's defaults (tributary-averaged felt wind, buffeting_w 0.6,
+        buffeting_u 0, no yaw effect)
     """
 
     n_draws: int = 5
     seed: int = 0
     knot_step: float = 120.0
     max_events: int | None = None
+    priors: NuisancePriors | None = NuisancePriors()
 
     def __post_init__(self) -> None:
         if isinstance(self.n_draws, bool) or not isinstance(self.n_draws, int) or not 1 <= self.n_draws <= 1000:
@@ -92,6 +99,8 @@ class TwinConfig:
             raise InputError(f"knot_step must be 10-1800 s; got {self.knot_step!r}")
         if self.max_events is not None and not (isinstance(self.max_events, int) and self.max_events >= 1):
             raise InputError(f"max_events must be an integer >= 1 or None; got {self.max_events!r}")
+        if self.priors is not None and not isinstance(self.priors, NuisancePriors):
+            raise InputError(f"priors must be a NuisancePriors or None; got {type(self.priors).__name__}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -104,6 +113,7 @@ class TwinTask:
     bridge: TwinBridge
     pool: PoolSettings
     wind_range: tuple[float, float]
+    priors: NuisancePriors | None = None
     work_root: str | None = None
 
 
@@ -141,16 +151,23 @@ AERO_TRIES = 5
 
 
 def _twin_campaign(task: TwinTask, model, structure, children, root: Path):
-    """The twin's aerodynamics and event files: redrawn (from the same stream) while an event cannot be generated."""
-    rng = np.random.default_rng(children[0])
+    """The twin's aerodynamics, nuisances and event files: redrawn (from their streams) while an event cannot be
+    generated."""
+    rng, nuisance_rng = np.random.default_rng(children[0]), np.random.default_rng(children[-1])
+    yaws = np.concatenate([e.yaws for e in task.mirror.events])
+    specs = mirror_specs(task.mirror)
     for attempt in range(1, AERO_TRIES + 1):
         aero, misfit = draw_aero(model, structure, task.wind_range, rng)
         generator = mirror_generator(task.mirror, structure, aero)
+        nuisances = None
+        if task.priors is not None:
+            nuisances = draw_nuisances(task.priors, yaws, nuisance_rng)
+            generator = apply_nuisances(generator, nuisances)
         try:
             files = [write_event(generate_event(spec, generator, seed, campaign_seed=task.seed),
                                  root / "campaign" / f"{spec.event_id}.nc")
-                     for spec, seed in zip(mirror_specs(task.mirror), children[1:])]
-            return aero, misfit, attempt, files
+                     for spec, seed in zip(specs, children[1:len(specs) + 1])]
+            return aero, misfit, nuisances, attempt, files
         except InputError:
             shutil.rmtree(root / "campaign", ignore_errors=True)
             if attempt == AERO_TRIES:
@@ -160,12 +177,12 @@ def _twin_campaign(task: TwinTask, model, structure, children, root: Path):
 def run_twin_task(task: TwinTask) -> dict[str, Any]:
     """Generate one twin campaign, run the chain on it and score it; runs in a worker."""
     root_seed = np.random.SeedSequence(task.seed, spawn_key=(task.draw,))
-    children = root_seed.spawn(len(task.mirror.events) + 1)
+    children = root_seed.spawn(len(task.mirror.events) + 2)
     model = load_campaign_model(task.pool.model_path)
     structure = mirror_structure(task.mirror, task.bridge)
     root = task_directory(task.work_root, f"twin{task.draw:04d}-")
     try:
-        aero, misfit, tries, files = _twin_campaign(task, model, structure, children, root)
+        aero, misfit, nuisances, tries, files = _twin_campaign(task, model, structure, children, root)
         identify = identify_config_from_json(task.mirror.identify_json)
         fitted, records, truths, windows = run_chain(files, root / "identify", identify, pool_method(task.pool),
                                                      wind_smoothing_s=task.pool.wind_smoothing_s)
@@ -177,7 +194,8 @@ def run_twin_task(task: TwinTask) -> dict[str, Any]:
         shutil.rmtree(root, ignore_errors=True)
     return {"draw": task.draw, "scores": scores, "n_events": n_events, "aero_misfit": misfit, "aero_tries": tries,
             "aero": {"Y1": dataclasses.asdict(aero.Y1), "C_L": dataclasses.asdict(aero.C_L),
-                     "e1": dataclasses.asdict(aero.e1), "e2": dataclasses.asdict(aero.e2)}}
+                     "e1": dataclasses.asdict(aero.e1), "e2": dataclasses.asdict(aero.e2)},
+            "nuisances": None if nuisances is None else nuisances.to_dict()}
 
 
 def _spread(values: Sequence[float], bounds: tuple[float, float], log: bool) -> dict[str, float]:
@@ -224,7 +242,9 @@ def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], fa
                    "accel_rate_hz": mirror.accel_rate, "turbulence_intensity": mirror.turbulence_intensity,
                    "section_offset": mirror.section_offset, "noise_density_ug_rthz": mirror.noise_density,
                    "anemometer_offset_m": mirror.anemometer_offset, "frequency_hz": mirror.frequency,
-                   "mode_shape_measured": list(mirror.mode_shape)},
+                   "mode_shape_measured": list(mirror.mode_shape),
+                   "anemometer_positions_m": list(mirror.anemometer_positions), "span_length_m": mirror.span_length,
+                   "wind_rule": mirror.wind_rule},
         "draws": draws, "failed": sorted(int(d) for d in failed),
         "errors": {str(d): failed[d] for d in sorted(failed)}, "expected": expected,
         "range": "low/high: 5th and 95th percentiles of the draws; predict_low/predict_high: 90 % prediction "
@@ -255,12 +275,38 @@ def twin_markdown(summary: dict) -> str:
     for key, s in summary["expected"].items():
         lines.append(f"| {METRIC_NAMES[key]} | {_fmt(s['median'])} | {_fmt(s['predict_low'])} - "
                      f"{_fmt(s['predict_high'])} | {_fmt(s['low'])} - {_fmt(s['high'])} | {s['n']} |")
+    layout = (f"anemometers at {', '.join(f'{x:g}' for x in m['anemometer_positions_m'])} m of "
+              f"{m['span_length_m']:g} m ({m['wind_rule']} rule)" if m.get("anemometer_positions_m")
+              else "one anemometer per section")
+    priors = cfg.get("priors")
+    if priors is None:
+        drawn = ("Fixed at the generator's defaults: the tributary-averaged wind the deck feels, buffeting, no yaw "
+                 "effect.")
+    else:
+        drawn = ("Drawn per twin from stated priors (the generator family's): the wind the deck feels (tributary "
+                 f"average, or smooth with point turbulence at the anemometers with probability "
+                 f"{priors['smooth_share']:g}, its time scale log-uniform {priors['point_timescale_s'][0]:g}-"
+                 f"{priors['point_timescale_s'][1]:g} s), buffeting_w U({priors['buffeting_w'][0]:g}, "
+                 f"{priors['buffeting_w'][1]:g}), buffeting_u U({priors['buffeting_u'][0]:g}, "
+                 f"{priors['buffeting_u'][1]:g}), "
+                 + ("a yaw effect on Y1 and C_L (absent, or one of four shapes) along the measured yaws, Y1 and C_L "
+                    "divided by its mean over them." if priors["yaw_effect"] else "no yaw effect."))
     lines += ["", "Mirrored: sections, rates, events (number, start times, durations), each event's measured mean "
               "wind and yaw (knots every " f"{cfg['knot_step']:g} s), turbulence intensity, sections' wind spread, "
-              "noise floor, the identification's and the campaign model's settings. Assumed: the bridge file's "
-              "structural properties; aerodynamic functions of the generator's shapes fitted to the campaign "
-              "model's curves drawn within their bands, without a yaw effect; the generator's defaults for "
-              "everything else (buffeting, Strouhal number, anemometer errors, one anemometer per section).", ""]
+              f"noise floor, {layout}, the identification's and the campaign model's settings. Assumed: the bridge "
+              "file's structural properties; aerodynamic functions of the generator's shapes fitted to the campaign "
+              "model's curves drawn within their bands; the generator's defaults for the Strouhal number and the "
+              "anemometers' own errors. " + drawn, ""]
+    rows = [r for r in summary["draws"] if r.get("nuisances")]
+    if rows:
+        lines += ["| draw | felt wind | point time scale, s | buffeting_w | buffeting_u | yaw effect | mean yaw factor |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in rows:
+            n_ = r["nuisances"]
+            lines.append(f"| {r['draw']} | {n_['felt_wind']} | {_fmt(n_['point_timescale_s'])} | "
+                         f"{_fmt(n_['buffeting_w'])} | {_fmt(n_['buffeting_u'])} | {n_['yaw_shape']} | "
+                         f"{_fmt(n_['yaw_mean_factor'])} |")
+        lines.append("")
     lines += ["The 90 % range of a campaign is where one more campaign's figure falls with 90 % probability if the "
               "draws' figures (the logarithms of the errors) are normal (mean +- t s sqrt(1 + 1/K)); with few draws "
               "it is wide, as it should be.", ""]
@@ -304,7 +350,7 @@ def run_twin(campaign_dir, results_dir, bridge, out_dir, *, config: TwinConfig =
     speeds = np.concatenate([e.speeds for e in mirror.events])
     wind_range = (float(max(np.min(speeds), 0.5)), float(max(np.max(speeds), np.min(speeds) + 1.0)))
     cfg = {"n_draws": config.n_draws, "seed": config.seed, "knot_step": config.knot_step,
-           "max_events": config.max_events, "bridge": {k: v for k, v in dataclasses.asdict(bridge).items()
+           "max_events": config.max_events, "priors": None if config.priors is None else config.priors.to_dict(), "bridge": {k: v for k, v in dataclasses.asdict(bridge).items()
                                                        if k != "source"},
            "pool": settings.to_dict(), "identify": json.loads(mirror.identify_json), "wind_range": list(wind_range)}
     fingerprint = hashlib.sha256(json.dumps({"cfg": {k: v for k, v in cfg.items() if k != "n_draws"},
@@ -322,7 +368,7 @@ def run_twin(campaign_dir, results_dir, bridge, out_dir, *, config: TwinConfig =
         work = out / ".work"
         shutil.rmtree(work, ignore_errors=True)
         pending = [TwinTask(draw=d, seed=config.seed, mirror=mirror, bridge=bridge, pool=settings,
-                            wind_range=wind_range, work_root=str(work))
+                            wind_range=wind_range, priors=config.priors, work_root=str(work))
                    for d in range(config.n_draws) if d not in done]
         if progress is not None:
             progress(len(resumed), config.n_draws)

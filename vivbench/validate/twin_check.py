@@ -26,6 +26,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from vivbench.analysis.identify import IdentifyConfig, identify_files
 from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE, pool_results
 from vivbench.analysis.selection import varying_selection
@@ -130,16 +132,34 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
         inside[m] = None if not all(math.isfinite(x) for x in (lo, hi, a)) else bool(lo <= a <= hi)
     return {"draw": task.draw, "n_events": campaign.n_events, "labels": draw.labels, "actual": actual,
             "expected": {m: expected[m] for m in CHECKED_METRICS}, "twin_values": twin_values,
-            "twin_errors": twin.get("errors", {}), "inside": inside}
+            "twin_errors": twin.get("errors", {}), "inside": inside,
+            "twin_nuisances": [d.get("nuisances") for d in twin["draws"]]}
+
+
+#: Figures that are shares: their range's width is high - low; the errors' is the factor high / low.
+_SHARES = ("flagged_right_share", "coverage")
+
+
+def _median_width(metric: str, ranges: list[dict]) -> float:
+    """Median width of the twin's ranges: high - low for shares, high / low for errors (NaN when low is 0)."""
+    if metric in _SHARES:
+        widths = [e["predict_high"] - e["predict_low"] for e in ranges]
+    else:
+        widths = [e["predict_high"] / e["predict_low"] if e["predict_low"] > 0 else math.nan for e in ranges]
+    return float(np.median(widths)) if widths else math.nan
 
 
 def _summary(config: TwinCheckConfig, done: dict[int, dict], failed) -> dict:
     rows = [done[d] for d in config.draws if d in done]
     shares = {}
     for m in CHECKED_METRICS:
-        flags = [r["inside"][m] for r in rows if r["inside"][m] is not None]
-        shares[m] = {"inside": int(sum(flags)), "assessed": len(flags),
-                     "share": (sum(flags) / len(flags)) if flags else math.nan}
+        assessed = [r for r in rows if r["inside"][m] is not None]
+        flags = [r["inside"][m] for r in assessed]
+        above = sum(1 for r in assessed if not r["inside"][m] and r["actual"][m] > r["expected"][m]["predict_high"])
+        shares[m] = {"inside": int(sum(flags)), "assessed": len(flags), "above": above,
+                     "below": len(flags) - int(sum(flags)) - above,
+                     "share": (sum(flags) / len(flags)) if flags else math.nan,
+                     "median_width": _median_width(m, [r["expected"][m] for r in assessed])}
     return {"config": asdict(config), "draws": rows, "failed": sorted(failed), "share_inside": shares,
             "aim": "the actual figure within the twin's 90 % range on at least 80 % of the draws"}
 
@@ -148,14 +168,21 @@ def twin_check_markdown(summary: dict) -> str:
     """``twin_check.md``: per figure, the share of draws whose actual value the twin's range holds."""
     c = summary["config"]
     caps = ", ".join(f"{k} {c[k]}" for k in ("max_events", "max_duration") if c[k] is not None)
+    drawn = (" Each twin draws what a field user cannot measure (the errors in the wind, buffeting, a yaw effect) "
+             "from the generator family's priors; the values drawn are in the summary's `twin_nuisances`."
+             if any(n for r in summary["draws"] for n in r.get("twin_nuisances", [])) else "")
     lines = ["# Does the twin predict?", "",
              f"{len(summary['draws'])} {c['split']} draws of the generator family treated as field campaigns "
              f"({', '.join(map(str, c['draws']))}), {c['n_twins']} twin draws each, pool bootstrap {c['bootstrap']}"
-             + (f"; capped campaigns ({caps})" if caps else "") + ".", "",
-             "| figure | actual within the twin's 90 % range | draws assessed |", "|---|---|---|"]
+             + (f"; capped campaigns ({caps})" if caps else "") + "." + drawn, "",
+             "| figure | actual within the twin's 90 % range | above the range | below it "
+             "| median width of the range |", "|---|---|---|---|---|"]
     for m, s in summary["share_inside"].items():
         share = "n/a" if not math.isfinite(s["share"]) else f"{s['share']:.0%}"
-        lines.append(f"| {METRIC_NAMES[m]} | {s['inside']} of {s['assessed']} ({share}) | {s['assessed']} |")
+        width = s.get("median_width", math.nan)
+        width = "n/a" if not math.isfinite(width) else (f"{width:.2f}" if m in _SHARES else f"factor {width:.3g}")
+        lines.append(f"| {METRIC_NAMES[m]} | {s['inside']} of {s['assessed']} ({share}) | {s.get('above', 'n/a')} | "
+                     f"{s.get('below', 'n/a')} | {width} |")
     lines += ["", "| draw | figure | actual | twin's 90 % range | inside |", "|---|---|---|---|---|"]
     for r in summary["draws"]:
         for m in CHECKED_METRICS:
@@ -168,7 +195,8 @@ def twin_check_markdown(summary: dict) -> str:
         lines += ["", "Twin draws that failed (their figures are left out of the range): " + "; ".join(failed_twins) + "."]
     lines += ["", "The twin's 90 % range is the normal-theory prediction interval of one more campaign over the twin "
               "draws (of the logarithm for the errors); with few twin draws it is wide, so the share inside says "
-              "little about a twin with many draws."]
+              "little about a twin with many draws. Its width is high - low for the shares and the factor high / low "
+              "for the errors (n/a where the range reaches 0)."]
     if summary["failed"]:
         lines += ["", f"Failed draws (retried by the next run): {', '.join(map(str, summary['failed']))}."]
     return "\n".join(lines) + "\n"

@@ -12,7 +12,13 @@ identification results:
   (:class:`vivbench.synth.WindScript` with ``yaws``), and the side the wind comes from;
 - the turbulence intensity of the anemometers (10-minute blocks less a quadratic trend) and the relative
   spread of the sections' mean winds;
-- the accelerometers' noise floor, from the spectrum above the mode.
+- the accelerometers' noise floor, from the spectrum above the mode;
+- the anemometers' layout when the import recorded it (``import_anemometer_position_m_<name>``,
+  ``import_position_m_<section>``, ``import_span_length_m``, ``import_wind_rule``): the twin's
+  anemometers are placed among its sections as the campaign's are among its own (positions mapped
+  piecewise linearly from the campaign's sections to the twin's) and each section's wind is taken
+  from them by the same rule; otherwise one anemometer per section, at the mean recorded distance
+  from it (``wind_distance_m_<section>``, 0 when none is recorded).
 
 The bridge's structural properties come from a small TOML file (:func:`read_bridge`), the same
 keys as ``vivbench greybox --bridge``; what it leaves out (frequency, mode shape) is measured.
@@ -43,7 +49,7 @@ from vivbench.synth.turbulence import TurbulenceConfig
 from vivbench.synth.wind import WindScript
 
 __all__ = ["BRIDGE_KEYS", "TwinBridge", "EventMirror", "CampaignMirror", "read_bridge", "measure_campaign",
-           "mirror_structure", "mirror_generator", "mirror_specs"]
+           "mirror_structure", "mirror_generator", "mirror_specs", "anemometer_fractions"]
 
 #: Keys of the bridge file: those of ``vivbench greybox --bridge`` and the span's length.
 BRIDGE_KEYS = ("mass", "depth", "frequency", "damping_ratio", "air_density", "mode_shape", "tributary_lengths",
@@ -160,6 +166,10 @@ class CampaignMirror:
     mode_shape : measured amplitude ratios (energy per section, largest 1)
     identify_json : the identification's settings (``identify_config_json`` of the results)
     events : EventMirror per event, in event-id order
+    anemometer_positions : m; the anemometers' positions along the span when the import recorded them
+        (else empty: one anemometer per section)
+    span_length : m; the span length the import recorded with them (None without)
+    wind_rule : the import's rule for the wind at a section ("nearest" or "interpolation")
     """
 
     sections: tuple[str, ...]
@@ -175,6 +185,9 @@ class CampaignMirror:
     mode_shape: tuple[float, ...]
     identify_json: str
     events: tuple[EventMirror, ...] = field(default_factory=tuple)
+    anemometer_positions: tuple[float, ...] = ()
+    span_length: float | None = None
+    wind_rule: str = "nearest"
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""
@@ -267,7 +280,7 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
         res = read_result(path, ["U", "A"], optional=["yaw"])
         by_id[str(res.attrs["event_id"])] = (Path(path), res)
     events, wind_rates, accel_rates, ti, noise, offsets, energy, freqs, distances = [], [], [], [], [], [], [], [], []
-    sections, azimuth, identify_json, positions = None, None, None, ()
+    sections, azimuth, identify_json, positions, layout = None, None, None, (), {}
     for path in sorted((Path(p) for p in event_files), key=lambda p: p.name):
         tree = read_event(path, truth=False)
         eid = str(tree.attrs["event_id"])
@@ -281,6 +294,7 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
             identify_json = str(res.attrs.get("identify_config_json", "{}"))
             positions = tuple(float(tree.attrs[f"import_position_m_{s}"]) for s in secs
                               if f"import_position_m_{s}" in tree.attrs)
+            layout = _layout(tree.attrs, len(positions) == len(secs))
         elif secs != sections:
             raise InputError(f"{path}: sections {list(secs)} differ from the campaign's {list(sections)}")
         tw, ta = wind["time"].values, accel["time"].values
@@ -322,7 +336,46 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
         noise_density=float(np.median(noise)) if noise else 30.0,
         anemometer_offset=float(np.mean(distances)) if distances else 0.0, positions=positions,
         frequency=float(np.median(freqs)) if freqs else math.nan,
-        mode_shape=tuple(float(x) for x in e / e.max()), identify_json=identify_json, events=tuple(events))
+        mode_shape=tuple(float(x) for x in e / e.max()), identify_json=identify_json, events=tuple(events), **layout)
+
+
+_ANEMOMETER_PREFIX = "import_anemometer_position_m_"
+
+
+def _layout(attrs, all_positions: bool) -> dict[str, Any]:
+    """The anemometers' layout an import recorded (CampaignMirror's fields), or {} when it recorded none."""
+    found = sorted(float(v) for k, v in attrs.items() if str(k).startswith(_ANEMOMETER_PREFIX))
+    span = attrs.get("import_span_length_m")
+    if not (found and all_positions and span is not None and math.isfinite(float(span)) and float(span) > 0):
+        return {}
+    return {"anemometer_positions": tuple(found), "span_length": float(span),
+            "wind_rule": str(attrs.get("import_wind_rule", "nearest"))}
+
+
+def anemometer_fractions(mirror: CampaignMirror, structure: StructureConfig) -> tuple[float, ...] | None:
+    """The twin's anemometers as fractions of its span (``WindConfig.anemometer_span``), or None for one per section.
+
+    The campaign's anemometer positions are mapped piecewise linearly from its sections' positions (and
+    the span's ends) to the twin's sections (k / (n + 1) of its span), so that each anemometer lies
+    among the twin's sections as it lies among the campaign's; when the campaign's sections are not in
+    increasing order along the span, the anemometers keep their fractions of the span instead.
+    """
+    if not mirror.anemometer_positions or mirror.span_length is None:
+        return None
+    span = float(mirror.span_length)
+    x = np.asarray(mirror.positions, dtype=float)
+    p = np.asarray(mirror.anemometer_positions, dtype=float)
+    knots = np.concatenate([[0.0], x, [span]])
+    if x.size == len(mirror.sections) and np.all(np.diff(knots) > 0):
+        target = np.concatenate([[0.0], structure.positions / structure.span_length, [1.0]])
+        frac = np.interp(p, knots, target)
+    else:
+        frac = p / span
+    frac = np.clip(frac, 0.0, 1.0)
+    if np.unique(np.round(frac, 9)).size != frac.size:
+        raise InputError(f"the recorded anemometer positions {list(p)} m do not map to distinct places on the twin's "
+                         "span")
+    return tuple(float(round(f, 9)) for f in frac)
 
 
 def mirror_structure(mirror: CampaignMirror, bridge: TwinBridge) -> StructureConfig:
@@ -348,11 +401,15 @@ def mirror_structure(mirror: CampaignMirror, bridge: TwinBridge) -> StructureCon
 
 
 def mirror_generator(mirror: CampaignMirror, structure: StructureConfig, aero: AeroConfig) -> GeneratorConfig:
-    """The twin's generator: the measured rates, turbulence, section spread and noise floor; the scripted
-    mean wind and yaw carry the measured histories (no random wander added)."""
+    """The twin's generator: the measured rates, turbulence, section spread, noise floor and anemometer layout;
+    the scripted mean wind and yaw carry the measured histories (no random wander added). The nuisances a
+    twin draws (:func:`vivbench.validate.twin_nuisance.apply_nuisances`) are applied to it afterwards."""
+    span = anemometer_fractions(mirror, structure)
+    layout = ({"anemometer_offset": mirror.anemometer_offset} if span is None else
+              {"anemometer_span": span, "wind_rule": mirror.wind_rule})
     wind = WindConfig(span_azimuth_deg=mirror.span_azimuth_deg % 360.0, section_offset=mirror.section_offset,
                       section_wander=0.0, speed_wander=0.0, direction_wander_deg=0.0,
-                      anemometer_rate=mirror.wind_rate, anemometer_offset=mirror.anemometer_offset,
+                      anemometer_rate=mirror.wind_rate, **layout,
                       turbulence=TurbulenceConfig(intensity=float(np.clip(mirror.turbulence_intensity, 0.0, 0.45))))
     sensors = SensorConfig(rate=mirror.accel_rate, noise_density=mirror.noise_density)
     step = min(0.02, 1.0 / (20.0 * structure.frequency))
