@@ -261,3 +261,16 @@ def test_sweep_scales_a_realistic_y1_bell():
     gen = GeneratorConfig(aero=AeroConfig.realistic())
     half = PARAMETERS["y1_peak"].apply(gen, 10.0)
     assert half.aero.Y1 == GaussianBell(peak=10.0, center=7.0, width=1.1, baseline=-2.0)
+
+
+def test_scaled_bell_scales_peak_and_baseline_and_refuses_other_curves():
+    from vivbench.core.errors import InputError
+    from vivbench.synth.curves import Constant, GaussianBell, scaled_bell
+
+    bell = GaussianBell(peak=2.0, center=7.0, width=1.0, baseline=-0.5)
+    twice = scaled_bell(bell, 2.0)
+    Ur = np.linspace(4.0, 10.0, 13)
+    assert_close(twice(Ur), 2.0 * bell(Ur), rtol=1e-12, reason="products in another order")
+    assert (twice.center, twice.width) == (bell.center, bell.width)
+    with pytest.raises(InputError, match="only a bell"):
+        scaled_bell(Constant(value=1.0), 2.0)

@@ -34,6 +34,7 @@ from vivbench.synth.curves import (
     LogisticStep,
     LorentzianBell,
     YawFactor,
+    scaled_bell,
     curve_from_data,
     reduced_velocity,
 )
@@ -61,7 +62,7 @@ __all__ = [
     "bell_polynomial", "campaign_specs", "config_from_dict", "config_to_dict", "davenport_coherence",
     "draw_script", "exact_coefficients", "generate_campaign", "generate_event", "kaimal_psd", "load_config",
     "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
-    "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor",
+    "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor", "scaled_bell",
     "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
     "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "draw_yaw_effect", "family_seed",
     "generate_family_campaign", "ContinuousLog", "ContinuousLogConfig", "generate_continuous_log",

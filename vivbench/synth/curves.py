@@ -27,7 +27,7 @@ normal) that multiplies some of the functions.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -47,6 +47,7 @@ __all__ = [
     "YAW_SHAPES",
     "curve_from_data",
     "reduced_velocity",
+    "scaled_bell",
 ]
 
 
@@ -349,6 +350,14 @@ _YAW_TARGETS = ("Y1", "e1", "e2", "Y2", "C_L")
 
 #: Shapes of :class:`YawFactor`.
 YAW_SHAPES = ("cosine", "gaussian", "sin2", "logistic")
+
+
+def scaled_bell(bell, factor: float):
+    """The lock-in bell (:class:`GaussianBell`, :class:`LorentzianBell` or :class:`AsymmetricBell`) with its peak
+    and baseline multiplied by ``factor``; InputError for a curve that is not a bell."""
+    if not isinstance(bell, (GaussianBell, LorentzianBell, AsymmetricBell)):
+        raise InputError(f"only a bell (peak, baseline) can be scaled; got {type(bell).__name__}")
+    return replace(bell, peak=bell.peak * factor, baseline=bell.baseline * factor)
 
 
 @dataclass(frozen=True, kw_only=True)

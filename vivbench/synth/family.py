@@ -78,7 +78,7 @@ from vivbench.io.netcdf import atomic_path
 from vivbench.synth.campaign import CampaignConfig, CampaignResult, generate_campaign
 from vivbench.synth.config import (ChangesConfig, GeneratorConfig, SensorConfig, StructureConfig, WindConfig,
                                    config_to_dict)
-from vivbench.synth.curves import AsymmetricBell, Constant, GaussianBell, LorentzianBell, YawFactor
+from vivbench.synth.curves import AsymmetricBell, Constant, GaussianBell, LorentzianBell, YawFactor, scaled_bell
 from vivbench.synth.draw import draw_aero
 from vivbench.synth.turbulence import TurbulenceConfig
 
@@ -198,11 +198,6 @@ def _unit_bell(rng: np.random.Generator, center: float):
                           baseline=base), kind
 
 
-def _scaled(bell, factor: float):
-    """The bell with peak and baseline multiplied by ``factor``."""
-    return dataclasses.replace(bell, peak=bell.peak * factor, baseline=bell.baseline * factor)
-
-
 _WIND = np.arange(0.5, 40.0, 0.01)
 
 
@@ -286,7 +281,7 @@ def draw_bridge(split: str, index: int) -> FamilyDraw:
             strength = float(rng.uniform(0.2, 0.8)) * min(1.0, changes.step_damping_factor)
         else:
             strength = 1.0 + _log_uniform(rng, 0.3, 3.0)
-        Y1 = _scaled(unit, strength * zeta_w / _aero_damping_max(unit, structure))
+        Y1 = scaled_bell(unit, strength * zeta_w / _aero_damping_max(unit, structure))
         lock = GeneratorConfig(structure=structure, aero=dataclasses.replace(aero0, Y1=Y1)).lock_in
         if lock is not None and 3.0 <= lock[0] and lock[1] <= 25.0:
             break

@@ -33,7 +33,7 @@ import numpy as np
 
 from vivbench.core.errors import InputError
 from vivbench.synth.config import GeneratorConfig
-from vivbench.synth.curves import YawFactor
+from vivbench.synth.curves import YawFactor, scaled_bell
 from vivbench.synth.family import draw_yaw_effect
 
 __all__ = ["NuisancePriors", "Nuisances", "draw_nuisances", "apply_nuisances", "MIN_MEAN_YAW_FACTOR", "YAW_TRIES"]
@@ -165,13 +165,6 @@ def draw_nuisances(priors: NuisancePriors, yaws, rng: np.random.Generator) -> Nu
                      buffeting_u=b_u, yaw=yaw, yaw_shape=shape, yaw_mean_factor=mean)
 
 
-def _scaled(curve, factor: float):
-    """A bell (peak and baseline) multiplied by ``factor``."""
-    if not all(hasattr(curve, k) for k in ("peak", "baseline")):
-        raise InputError(f"a yaw effect needs Y1 and C_L as bells (peak, baseline); got {type(curve).__name__}")
-    return dataclasses.replace(curve, peak=curve.peak * factor, baseline=curve.baseline * factor)
-
-
 def apply_nuisances(generator: GeneratorConfig, nuisances: Nuisances) -> GeneratorConfig:
     """The twin's generator with the nuisances: felt wind, point turbulence of the generator's (measured)
     turbulence intensity, buffeting, and the yaw effect with Y1 and C_L divided by its mean factor."""
@@ -185,6 +178,6 @@ def apply_nuisances(generator: GeneratorConfig, nuisances: Nuisances) -> Generat
                                  "yaw": nuisances.yaw}
     if nuisances.yaw is not None:
         scale = 1.0 / nuisances.yaw_mean_factor
-        aero_over.update(Y1=_scaled(aero.Y1, scale), C_L=_scaled(aero.C_L, scale))
+        aero_over.update(Y1=scaled_bell(aero.Y1, scale), C_L=scaled_bell(aero.C_L, scale))
     return dataclasses.replace(generator, wind=dataclasses.replace(wind, **over),
                                aero=dataclasses.replace(aero, **aero_over))
