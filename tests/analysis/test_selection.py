@@ -176,9 +176,10 @@ def test_wind_error_scale_is_the_spread_between_sections():
     # the selection passes its prior on: a doubled share doubles the single section's error estimate
     recs1 = [Record(event_id=f"E{k}", t=t, A=np.full((t.size, 1), 0.1), U=base[:, None] + k,
                     dA=np.zeros((t.size, 1))) for k in range(3)]
-    errs = [ModelSelection(candidates=[Candidate(name="a", model=_Poly(1))], n_perturbations=0,
-                           single_section_share=share).fit(recs1).wind_error_ for share in (0.03, 0.06)]
-    assert_close(errs[1], 2.0 * errs[0])
+    fits = [ModelSelection(candidates=[Candidate(name="a", model=_Poly(1))], n_perturbations=0,
+                           single_section_share=share).fit(recs1) for share in (0.03, 0.06)]
+    assert_close(fits[1].wind_error_, 2.0 * fits[0].wind_error_)
+    assert fits[1].evidence()["single_section_share"] == 0.06  # recorded with the evidence, for reruns (the twin)
     pert = perturbed_wind(rec, np.full(3, 0.3), 60.0, rng)
     d = pert.U - rec.U
     assert_close(d.std(axis=0), np.full(3, 0.3))

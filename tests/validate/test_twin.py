@@ -237,3 +237,15 @@ def test_a_recorded_anemometer_layout_is_measured(field, tmp_path):
     wind = mirror_generator(mirror, mirror_structure(mirror, BRIDGE), AeroConfig()).wind
     assert_close(np.array(wind.anemometer_span), np.array([700.0 / 1650.0]))
     assert wind.wind_rule == "interpolation" and wind.anemometer_offset == 0.0
+
+
+def test_the_twin_refits_with_the_field_runs_selection_settings(field):
+    from vivbench.analysis.selection import SINGLE_SECTION_SHARE
+    from vivbench.validate.twin_chain import pool_method, pool_settings
+
+    root, _, _ = field
+    settings = pool_settings(root / "identify")
+    assert settings.selection["n_perturbations"] == 0
+    assert settings.selection["single_section_share"] == SINGLE_SECTION_SHARE
+    method = pool_method(settings)
+    assert (method.n_perturbations, method.single_section_share) == (0, SINGLE_SECTION_SHARE)

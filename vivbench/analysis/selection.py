@@ -552,6 +552,7 @@ class ModelSelection:
             "events": list(self.event_ids_),
             "n_perturbations": int(self.n_perturbations),
             "perturbation_timescale_s": float(self.perturbation_timescale_s),
+            "single_section_share": float(self.single_section_share),
             "wind_error_rms": float(np.sqrt(np.mean(self.wind_error_**2))),
             "note": self.note_,
             "null": (None if self.null_model is None else

@@ -22,7 +22,7 @@ import xarray as xr
 
 from vivbench.analysis.identify import IdentifyConfig, identify_files
 from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE
-from vivbench.analysis.selection import varying_selection
+from vivbench.analysis.selection import SINGLE_SECTION_SHARE, varying_selection
 from vivbench.core.errors import InputError
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.io.campaign_model import regimes_file
@@ -100,6 +100,7 @@ def pool_settings(model_dir) -> PoolSettings:
         selection = {"options": options, "n_folds": int(evidence["n_folds"]), "criterion": evidence["criterion"],
                      "n_perturbations": int(evidence["n_perturbations"]),
                      "perturbation_timescale_s": float(evidence["perturbation_timescale_s"]),
+                     "single_section_share": float(evidence.get("single_section_share", SINGLE_SECTION_SHARE)),
                      "null": evidence.get("null") is not None}
         return PoolSettings(selection=selection, params=params, model_path=str(directory), wind_smoothing_s=0.0)
     model = load_campaign_model(directory)
@@ -120,6 +121,7 @@ def pool_method(settings: PoolSettings, *, workers: int = 1):
         return varying_selection(options={k: tuple(v) for k, v in sel["options"].items()}, n_folds=sel["n_folds"],
                                  criterion=sel["criterion"], n_perturbations=sel["n_perturbations"],
                                  perturbation_timescale_s=sel["perturbation_timescale_s"],
+                                 single_section_share=sel.get("single_section_share", SINGLE_SECTION_SHARE),
                                  seed=int(settings.params.get("seed", 0)), workers=workers, null=sel["null"], **fixed)
     model = load_campaign_model(settings.model_path)
     return type(model)(**model.get_params())
