@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from tests.helpers import assert_close, bell_records
 from vivbench.analysis.held_out import event_folds, held_out_loss, one_se_set, shared_groups
-from vivbench.analysis.selection import (SINGLE_SECTION_SHARE, Candidate, ModelSelection, perturbed_wind,
+from vivbench.analysis.selection import (LIMIT_TIME_CONSTANTS, SINGLE_SECTION_SHARE, Candidate, ModelSelection, perturbed_wind,
                                          varying_selection, wind_error_scale, without_yaw)
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
@@ -147,6 +147,8 @@ def test_held_out_loss_counts_a_stopped_run_as_missed():
     (dict(n_perturbations=-1), "n_perturbations must be"),
     (dict(single_section_share=1.5), "single_section_share must be"),
     (dict(single_section_share=float("nan")), "single_section_share must be"),
+    (dict(min_time_constants=0.0), "min_time_constants must be"),
+    (dict(min_time_constants=float("inf")), "min_time_constants must be"),
 ])
 def test_selection_refuses_bad_settings(bad, match):
     kw = dict(candidates=[Candidate(name="a", model=_Poly(1))])
@@ -348,3 +350,55 @@ def test_grouped_held_out_fits_give_each_candidates_own_losses_and_final_fits():
     for model, fitted in zip(others, sel.set_models_):
         assert fitted.to_dataset().identical(type(model)(**{**model.get_params(), "n_bootstrap": 0}).fit(recs)
                                              .to_dataset())
+
+
+def _limit_after_100_s(model, record, window_start, window_end):
+    """A verdict that flags every window: regime 1 before 100 s, the limit regime 3 from 100 s on."""
+    start = np.atleast_1d(np.asarray(window_start, dtype=float))
+    regime = np.repeat(np.where(start >= 100.0, 3, 1)[:, None], record.n_sections, axis=1)
+    return {"regime": regime, "identifiable": np.ones(regime.shape, dtype=bool)}
+
+
+class _PolyLimit(_Poly):
+    """:class:`_Poly` whose own verdicts are :func:`_limit_after_100_s` (what ``vivbench pool`` writes)."""
+
+    def window_verdicts(self, record, window_start, window_end):
+        return _limit_after_100_s(self, record, window_start, window_end)
+
+
+@pytest.mark.parametrize("slope, short", [(0.02, True), (0.05, False)])
+def test_the_envelope_time_constant_comes_from_the_regime_1_windows_and_short_events_are_listed(slope, short):
+    # dA/dt = 0.05 - slope A: the amplitude relaxes with the time constant 1 / slope; each event lasts 199 s,
+    # under LIMIT_TIME_CONSTANTS (5) time constants of 50 s, over them for 20 s.
+    recs = _linear_records(6, slope=slope)
+    sel = ModelSelection(candidates=[Candidate(name="linear", model=_PolyLimit(2))], n_perturbations=0,
+                         verdict=_limit_after_100_s).fit(recs)
+    assert_close(sel.time_constant_s_, -1.0 / sel.model_.coef_[1], rtol=1e-6,
+                 reason="the slope of a linear model by a relative finite difference of its prediction")
+    assert_close(sel.time_constant_s_, 1.0 / slope, rtol=0.2, reason="the fitted slope, from noisy dA/dt")
+    assert_close(sel.event_duration_s_, np.full(6, 199.0))
+    assert (sel.short_events() == sel.event_ids_) is short and (sel.short_events() == []) is (not short)
+    ev = sel.evidence()
+    assert ev["short_events"] == sel.short_events() and ev["min_time_constants"] is None
+    assert ("may be misread" in sel.evidence_text()) is short
+    start, end = np.array([0.0, 100.0]), np.array([50.0, 150.0])
+    # Without min_time_constants the limit regime is flagged; with it, only in events long enough.
+    assert sel.identifiable(recs[0], start, end).all()
+    sel.min_time_constants = LIMIT_TIME_CONSTANTS
+    flags = sel.identifiable(recs[0], start, end)[:, 0]
+    assert flags.tolist() == [True, not short]
+    assert sel.measured_verdicts(recs[0], start, end)["identifiable"][:, 0].tolist() == [True, not short]
+    assert ("are not flagged" in sel.evidence_text()) is short
+
+
+def test_without_regime_1_windows_the_time_constant_is_unknown_and_no_limit_regime_is_flagged():
+    def limit_everywhere(model, record, window_start, window_end):
+        shape = (np.size(window_start), record.n_sections)
+        return {"regime": np.full(shape, 4), "identifiable": np.ones(shape, dtype=bool)}
+
+    recs = _linear_records(4, slope=0.05)
+    sel = ModelSelection(candidates=[Candidate(name="linear", model=_Poly(2))], n_perturbations=0,
+                         verdict=limit_everywhere, min_time_constants=2.0).fit(recs)
+    assert np.isnan(sel.time_constant_s_) and sel.short_events() == sel.event_ids_
+    assert "not identified" in sel.evidence_text()
+    assert not sel.identifiable(recs[0], np.array([0.0]), np.array([50.0])).any()

@@ -75,6 +75,13 @@ def test_bad_wind_weights_exit_2_in_one_line(tmp_path, capsys, bad):
     assert len(lines) == 1 and "--wind-weights must be" in lines[0], lines
 
 
+@pytest.mark.parametrize("bad", ["-1", "nan", "inf"])
+def test_bad_min_time_constants_exit_2_in_one_line(tmp_path, capsys, bad):
+    assert main(["pool", str(tmp_path), "--min-time-constants", bad]) == EXIT_INPUT
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and "--min-time-constants must be" in lines[0], lines
+
+
 def test_os_error_exits_2_in_one_line(tmp_path, monkeypatch, capsys):
     def denied(*_a, **_k):
         raise PermissionError(13, "Permission denied", str(tmp_path / "r"))

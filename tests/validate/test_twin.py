@@ -240,12 +240,14 @@ def test_a_recorded_anemometer_layout_is_measured(field, tmp_path):
 
 
 def test_the_twin_refits_with_the_field_runs_selection_settings(field):
-    from vivbench.analysis.selection import SINGLE_SECTION_SHARE
+    from vivbench.analysis.selection import LIMIT_TIME_CONSTANTS, SINGLE_SECTION_SHARE
     from vivbench.validate.twin_chain import pool_method, pool_settings
 
     root, _, _ = field
     settings = pool_settings(root / "identify")
     assert settings.selection["n_perturbations"] == 0
     assert settings.selection["single_section_share"] == SINGLE_SECTION_SHARE
+    assert settings.selection["min_time_constants"] == LIMIT_TIME_CONSTANTS
     method = pool_method(settings)
     assert (method.n_perturbations, method.single_section_share) == (0, SINGLE_SECTION_SHARE)
+    assert method.min_time_constants == LIMIT_TIME_CONSTANTS

@@ -48,11 +48,20 @@ every event. A located change means that one function of (A, U) does not hold fo
 the model averages over a structural change (a damping step) or misfits some events differently from
 the others, so its regimes are not those of any one period, and no window is flagged. The alarm, its
 p-value and the first event after the located change are recorded in the evidence.
+
+The **envelope's time constant** of the campaign (``time_constant_s_``) is read from the chosen
+model: -1 / the median slope d(dA/dt)/dA of its dA/dt over the windows it flags as regime 1 (no
+self-excitation: the amplitude relaxes to the wind's forcing at that rate). An event that lasts only
+a few time constants shows an amplitude's growth or decay but not how it ends, and the split of that
+change between the orders of A, which decides the limit regimes 3 and 4, is then not identified by
+the event. The evidence lists the events shorter than :data:`LIMIT_TIME_CONSTANTS` time constants;
+with ``min_time_constants`` set, no window of such an event is flagged with a limit regime.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -73,12 +82,19 @@ from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind, unmeasured_wind_rms
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
-__all__ = ["Candidate", "ModelSelection", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z", "VARYING_OPTIONS",
+__all__ = ["Candidate", "ModelSelection", "LIMIT_TIME_CONSTANTS", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z", "VARYING_OPTIONS",
            "VARYING_PRIORS", "SINGLE_SECTION_SHARE", "perturbed_wind", "varying_selection", "wind_error_scale",
            "without_yaw"]
 
 #: Fewest events for a held-out choice among several candidates (every training set keeps two events).
 MIN_EVENTS = 3
+
+#: Events shorter than this many envelope time constants are listed in the evidence as too short to
+#: show how an amplitude's change ends (module docstring; a stated prior, docs/limitations.md).
+LIMIT_TIME_CONSTANTS = 5.0
+
+#: Windows (s) on which the chosen model's regime-1 slopes give the envelope's time constant.
+_TC_WINDOW_S, _TC_STEP_S = 50.0, 25.0
 
 @dataclass(frozen=True, kw_only=True)
 class Candidate:
@@ -211,6 +227,10 @@ class ModelSelection:
     single_section_share : float, in [0, 1)
         The wind error of a campaign with one section, as a share of each event's mean wind
         (:func:`wind_error_scale`; default :data:`SINGLE_SECTION_SHARE`, a stated prior).
+    min_time_constants : float or None, > 0
+        Flag no window with a limit regime (3 or 4) in an event shorter than this many envelope time
+        constants ``time_constant_s_`` (module docstring), nor any in a campaign whose time constant
+        is not identified; None: no such restriction (the short events are still listed in the evidence).
 
     Attributes
     ----------
@@ -236,13 +256,18 @@ class ModelSelection:
         (:func:`vivbench.analysis.changes.statistics_change_scan` of them), which ``vivbench pool``
         writes instead of scanning again
     event_ids_ : list of str
+    time_constant_s_ : float, s, the envelope's time constant (NaN: the chosen model flags no regime-1
+        window, or gives no dA/dt)
+    event_duration_s_ : ndarray, shape (E,), s, each event's span of valid samples
     """
 
     def __init__(self, *, candidates: Sequence[Candidate], n_folds: int = 5, criterion: str = "output",
                  n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, tau: float = DEFAULT_TAU,
                  verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None,
-                 null_model=None, change_scan: bool = False, single_section_share: float = SINGLE_SECTION_SHARE):
+                 null_model=None, change_scan: bool = False, single_section_share: float = SINGLE_SECTION_SHARE,
+                 min_time_constants: float | None = None):
         self.candidates = tuple(candidates)
+        self.min_time_constants = min_time_constants
         self.single_section_share = single_section_share
         self.null_model = null_model
         self.change_scan = change_scan
@@ -273,6 +298,9 @@ class ModelSelection:
         share = self.single_section_share
         if not (isinstance(share, (int, float)) and math.isfinite(share) and 0.0 <= share < 1.0):
             raise InputError(f"single_section_share must be a number in [0, 1) (a share of the mean wind); got {share!r}")
+        k = self.min_time_constants
+        if k is not None and not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
+            raise InputError(f"min_time_constants must be None or a positive number of time constants; got {k!r}")
         if not (np.isfinite(self.perturbation_timescale_s) and self.perturbation_timescale_s > 0):
             raise InputError(f"perturbation_timescale_s must be a positive number of seconds; "
                              f"got {self.perturbation_timescale_s!r}")
@@ -369,7 +397,48 @@ class ModelSelection:
         self.perturbed_models_ = fitted[1 + len(others):]
         self.change_ = self._change_scan(records)
         self.stationary_ = not self.change_["detected"]
+        self.event_duration_s_ = np.array([_valid_span(r) for r in records])
+        self.time_constant_s_ = self._time_constant(records)
         return self
+
+    def _time_constant(self, records: list[Record]) -> float:
+        """The envelope's time constant (s) from the chosen model's regime-1 windows (module docstring)."""
+        slopes = []
+        for rec in records:
+            start = np.arange(rec.t[0], rec.t[-1] - _TC_WINDOW_S + 1e-9, _TC_STEP_S)
+            if start.size == 0:
+                continue
+            end = start + _TC_WINDOW_S
+            own = self._own_verdict(rec, start, end)
+            keep = (np.asarray(own["regime"]) == 1) & np.asarray(own["identifiable"], dtype=bool)
+            if not keep.any():
+                continue
+            slope = _amplitude_slope(self.model_, measured_input(self.model_, rec))
+            if slope is None:
+                return float("nan")
+            for w, k in zip(*np.nonzero(keep)):
+                inside = (rec.t >= start[w]) & (rec.t <= end[w])
+                slopes.append(np.nanmedian(slope[inside, k]) if np.isfinite(slope[inside, k]).any() else np.nan)
+        slopes = np.asarray(slopes, dtype=float)
+        slopes = slopes[np.isfinite(slopes)]
+        if slopes.size == 0 or np.median(slopes) >= 0:
+            return float("nan")
+        return float(-1.0 / np.median(slopes))
+
+    def short_events(self) -> list[str]:
+        """The events shorter than :data:`LIMIT_TIME_CONSTANTS` envelope time constants (all when the time
+        constant is not identified)."""
+        self._check_fitted()
+        return _short(self.event_ids_, self.event_duration_s_, self.time_constant_s_, LIMIT_TIME_CONSTANTS)
+
+    def _limit_allowed(self, record: Record, regime: np.ndarray) -> np.ndarray:
+        """Windows (W, S) whose regime ``min_time_constants`` does not withhold (module docstring)."""
+        regime = np.asarray(regime)
+        k = self.min_time_constants
+        tc = getattr(self, "time_constant_s_", float("nan"))
+        if k is None or (math.isfinite(tc) and _valid_span(record) >= k * tc):
+            return np.ones(regime.shape, dtype=bool)
+        return regime < 3
 
     def _change_scan(self, records: list[Record]) -> dict:
         """The chosen model's change scan on the campaign's events (module docstring); keeps its inputs and
@@ -459,7 +528,8 @@ class ModelSelection:
         self._check_fitted()
         out = model_verdicts(self.model_, measured_input(self.model_, record), window_start, window_end, tau=self.tau)
         # Every model of the confidence set and every wind-perturbed refit must give the window's regime.
-        out["identifiable"] = out["identifiable"] & self.agreement(record, window_start, window_end, out["regime"])
+        out["identifiable"] = (out["identifiable"] & self.agreement(record, window_start, window_end, out["regime"])
+                               & self._limit_allowed(record, out["regime"]))
         return out
 
     def for_records(self, records: Sequence[Record]) -> "ModelSelection":
@@ -503,7 +573,8 @@ class ModelSelection:
         flag = np.asarray(own["identifiable"], dtype=bool)
         if not (getattr(self, "dynamics_shown_", True) and getattr(self, "stationary_", True)):
             return np.zeros(flag.shape, dtype=bool)
-        return flag & self.agreement(record, window_start, window_end, own["regime"])
+        return (flag & self.agreement(record, window_start, window_end, own["regime"])
+                & self._limit_allowed(record, own["regime"]))
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:
         """The chosen model's curves, their bands widened to hold every other member of the confidence set.
@@ -565,6 +636,10 @@ class ModelSelection:
             "change": dict(getattr(self, "change_", {"tested": False, "detected": False,
                                                      "p_value": float("nan"), "event": ""})),
             "stationary": bool(getattr(self, "stationary_", True)),
+            "time_constant_s": float(getattr(self, "time_constant_s_", float("nan"))),
+            "event_duration_s": [float(d) for d in getattr(self, "event_duration_s_", [])],
+            "short_events": (self.short_events() if hasattr(self, "time_constant_s_") else []),
+            "min_time_constants": (None if self.min_time_constants is None else float(self.min_time_constants)),
         }
 
     def evidence_text(self) -> str:
@@ -596,6 +671,14 @@ class ModelSelection:
                          f"(p = {change['p_value']:.3g}): one model does not hold for the whole campaign; "
                          "no window is flagged" if change["detected"] else
                          f"  the chosen model's change scan locates no change (p = {change['p_value']:.3g})")
+        short = ev["short_events"]
+        if short:
+            tc = ev["time_constant_s"]
+            why = (f"shorter than {LIMIT_TIME_CONSTANTS:g} envelope time constants ({tc:.0f} s)" if math.isfinite(tc)
+                   else "in a campaign whose envelope time constant is not identified")
+            lines.append(f"  {len(short)} of {len(ev['events'])} events are {why}: they show an amplitude's change "
+                         "but not how it ends, and their limit regimes (3, 4) " +
+                         ("are not flagged" if ev["min_time_constants"] is not None else "may be misread"))
         return "\n".join(lines)
 
     def to_dataset(self) -> xr.Dataset:
@@ -635,7 +718,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                       n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, seed: int = 0,
                       workers: int = 1, scheduler: str | None = None, null: bool = True,
                       change_scan: bool = True, single_section_share: float = SINGLE_SECTION_SHARE,
-                      **params) -> ModelSelection:
+                      min_time_constants: float | None = LIMIT_TIME_CONSTANTS, **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -645,8 +728,10 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         the grid is their product and a candidate's complexity is the sum of its values' positions
         in the :data:`STRUCTURAL_OPTIONS`.
         A parameter given in ``params`` is pinned: it leaves the grid.
-    n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler, single_section_share
-        Those of :class:`ModelSelection` (``seed`` also the models').
+    n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler, single_section_share,
+    min_time_constants
+        Those of :class:`ModelSelection` (``seed`` also the models'; ``min_time_constants`` here
+        :data:`LIMIT_TIME_CONSTANTS` by default).
     null : bool
         Test the candidates against the quasi-steady map :class:`vivbench.models.QuasiSteadyAmplitude`
         (with the candidates' wind smoothing) before any window is flagged.
@@ -684,7 +769,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                           workers=workers, scheduler=scheduler,
                           null_model=(QuasiSteadyAmplitude(wind_smoothing_s=fixed.get("wind_smoothing_s", 30.0))
                                       if null else None),
-                          change_scan=change_scan, single_section_share=single_section_share)
+                          change_scan=change_scan, single_section_share=single_section_share,
+                          min_time_constants=min_time_constants)
 
 
 def _option_label(name: str, value) -> str:
@@ -703,3 +789,26 @@ def without_yaw(selection: ModelSelection) -> ModelSelection:
     out = copy.copy(selection)
     out.candidates = tuple(kept)
     return out
+
+
+def _valid_span(record: Record) -> float:
+    """Seconds from the first to the last sample with a finite A at any section."""
+    ok = np.isfinite(record.A).any(axis=1)
+    return float(record.t[ok][-1] - record.t[ok][0]) if ok.sum() > 1 else 0.0
+
+
+def _amplitude_slope(model, record: Record, rel: float = 1e-3) -> np.ndarray | None:
+    """d(dA/dt)/dA (n, S), 1/s, of a model's ``predict`` by a relative step of A; None without ``predict``."""
+    predict = getattr(model, "predict", None)
+    if not callable(predict):
+        return None
+    f0 = np.asarray(predict(record), dtype=float)
+    f1 = np.asarray(predict(dataclasses.replace(record, A=record.A * (1.0 + rel))), dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (f1 - f0) / (record.A * rel)
+
+
+def _short(event_ids, durations, time_constant: float, k: float) -> list[str]:
+    if not math.isfinite(time_constant):
+        return [str(e) for e in event_ids]
+    return [str(e) for e, d in zip(event_ids, durations) if d < k * time_constant]

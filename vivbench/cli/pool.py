@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -34,6 +35,9 @@ def run(args) -> int:
     from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 
     weights = _wind_weights(args.wind_weights)  # a bad option is reported before any file is read
+    k = args.min_time_constants
+    if k is not None and not (math.isfinite(k) and k >= 0):
+        raise InputError(f"--min-time-constants must be a number of time constants >= 0 (0: no restriction); got {k!r}")
     results_dir = Path(args.results)
     files = list_results(results_dir)
     campaign = Path(args.campaign) if args.campaign else None
@@ -53,6 +57,8 @@ def run(args) -> int:
                  if v is not None}
         if args.wind_input == "additive":  # its settings chosen on the tuning campaign, unless overridden
             extra = {**ADDITIVE_SETTINGS, **extra}
+        if args.min_time_constants is not None:
+            extra["min_time_constants"] = args.min_time_constants or None  # 0: no restriction
         model = varying_selection(n_folds=args.folds, criterion=args.criterion, n_perturbations=args.perturbations,
                                   seed=args.seed, workers=args.workers, n_bootstrap=args.bootstrap,
                                   block_s=args.block, agreement=args.agreement, tau=args.tau, **extra)
@@ -161,6 +167,10 @@ def register(sub) -> None:
     s.add_argument("--perturbations", type=int, default=2,
                    help="with --model varying: refits on winds perturbed by their estimated error whose regimes a "
                         "flagged window must match (default 2; 0: none)")
+    s.add_argument("--min-time-constants", type=float, default=None,
+                   help="with --model varying: flag no limit regime (3, 4) in an event shorter than this many "
+                        "envelope time constants, read from the chosen model's regime-1 windows (default "
+                        "LIMIT_TIME_CONSTANTS, 5, a stated prior; 0: no such restriction)")
     s.add_argument("--workers", type=int, default=1, help="local processes for the held-out fits (default 1)")
     s.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates (default 100)")
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")

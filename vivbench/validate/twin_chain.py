@@ -101,6 +101,8 @@ def pool_settings(model_dir) -> PoolSettings:
                      "n_perturbations": int(evidence["n_perturbations"]),
                      "perturbation_timescale_s": float(evidence["perturbation_timescale_s"]),
                      "single_section_share": float(evidence.get("single_section_share", SINGLE_SECTION_SHARE)),
+                     # files written before the key was recorded had no such restriction
+                     "min_time_constants": evidence.get("min_time_constants"),
                      "null": evidence.get("null") is not None}
         return PoolSettings(selection=selection, params=params, model_path=str(directory), wind_smoothing_s=0.0)
     model = load_campaign_model(directory)
@@ -122,6 +124,7 @@ def pool_method(settings: PoolSettings, *, workers: int = 1):
                                  criterion=sel["criterion"], n_perturbations=sel["n_perturbations"],
                                  perturbation_timescale_s=sel["perturbation_timescale_s"],
                                  single_section_share=sel.get("single_section_share", SINGLE_SECTION_SHARE),
+                                 min_time_constants=sel.get("min_time_constants"),
                                  seed=int(settings.params.get("seed", 0)), workers=workers, null=sel["null"], **fixed)
     model = load_campaign_model(settings.model_path)
     return type(model)(**model.get_params())
