@@ -400,5 +400,5 @@ def test_without_regime_1_windows_the_time_constant_is_unknown_and_no_limit_regi
     sel = ModelSelection(candidates=[Candidate(name="linear", model=_Poly(2))], n_perturbations=0,
                          verdict=limit_everywhere, min_time_constants=2.0).fit(recs)
     assert np.isnan(sel.time_constant_s_) and sel.short_events() == sel.event_ids_
-    assert "not identified" in sel.evidence_text()
+    assert "time constant is not identified" in sel.evidence_text()
     assert not sel.identifiable(recs[0], np.array([0.0]), np.array([50.0])).any()

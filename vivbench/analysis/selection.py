@@ -671,14 +671,15 @@ class ModelSelection:
                          f"(p = {change['p_value']:.3g}): one model does not hold for the whole campaign; "
                          "no window is flagged" if change["detected"] else
                          f"  the chosen model's change scan locates no change (p = {change['p_value']:.3g})")
-        short = ev["short_events"]
-        if short:
-            tc = ev["time_constant_s"]
-            why = (f"shorter than {LIMIT_TIME_CONSTANTS:g} envelope time constants ({tc:.0f} s)" if math.isfinite(tc)
-                   else "in a campaign whose envelope time constant is not identified")
-            lines.append(f"  {len(short)} of {len(ev['events'])} events are {why}: they show an amplitude's change "
-                         "but not how it ends, and their limit regimes (3, 4) " +
-                         ("are not flagged" if ev["min_time_constants"] is not None else "may be misread"))
+        short, tc = ev["short_events"], ev["time_constant_s"]
+        verdict = "are not flagged" if ev["min_time_constants"] is not None else "may be misread"
+        if short and ev["dynamics_shown"] and ev["stationary"]:  # otherwise no window is flagged anyway
+            lines.append(f"  {len(short)} of {len(ev['events'])} events are shorter than {LIMIT_TIME_CONSTANTS:g} "
+                         f"envelope time constants ({tc:.0f} s): they show an amplitude's change but not how it "
+                         f"ends, and their limit regimes (3, 4) {verdict}" if math.isfinite(tc) else
+                         "  the envelope's time constant is not identified (the chosen model flags no regime-1 "
+                         f"window), so no event is known to show how an amplitude's change ends: limit regimes "
+                         f"(3, 4) {verdict}")
         return "\n".join(lines)
 
     def to_dataset(self) -> xr.Dataset:
