@@ -37,10 +37,8 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
 import csv  # noqa: E402
 import dataclasses  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 from vivbench.core.record import Record  # noqa: E402
 from vivbench.synth.family import draw_bridge  # noqa: E402
@@ -94,16 +92,13 @@ def kept_draws(split: str, draws) -> tuple[int, ...]:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--split", required=True, choices=("development", "evaluation"))
-    parser.add_argument("--draws", required=True, help="N, N-M or a comma-separated list; those with 3-4 sections run")
+    from _family_args import family_parser
+
+    parser = family_parser(__doc__.splitlines()[0],
+                           draws_help="N, N-M or a comma-separated list; those with 3-4 sections run")
     parser.add_argument("--limit", type=int, default=None, help="at most this many of them, in draw order")
-    parser.add_argument("--out", required=True, type=Path, help="study directory (resumable)")
-    parser.add_argument("--max-events", type=int, default=None)
-    parser.add_argument("--max-duration", type=float, default=None, metavar="MINUTES")
     parser.add_argument("--anemometers", default="0.5", help="fractions of the span length (default 0.5)")
     parser.add_argument("--wind-rule", default="nearest", choices=("nearest", "interpolation"))
-    parser.add_argument("--workers", type=int, default=1)
     args = parser.parse_args(argv)
     draws = kept_draws(args.split, parse_draws(args.draws))[:args.limit]
     if not draws:

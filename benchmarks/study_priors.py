@@ -35,10 +35,8 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
 import csv  # noqa: E402
 import math  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -134,14 +132,9 @@ def findings(summary: list[dict]) -> list[str]:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--split", required=True, choices=("development", "evaluation"))
-    parser.add_argument("--draws", required=True, help="N, N-M or a comma-separated list")
-    parser.add_argument("--out", required=True, type=Path, help="study directory (resumable)")
-    parser.add_argument("--max-events", type=int, default=None)
-    parser.add_argument("--max-duration", type=float, default=None, metavar="MINUTES")
-    parser.add_argument("--workers", type=int, default=1)
-    args = parser.parse_args(argv)
+    from _family_args import family_parser
+
+    args = family_parser(__doc__.splitlines()[0]).parse_args(argv)
     methods = {"varying": "stated", **{_PREFIX + name: name for name in VARIANTS}}
     config = StudyConfig(split=args.split, draws=parse_draws(args.draws), methods=tuple(methods),
                          max_events=args.max_events,

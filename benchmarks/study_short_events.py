@@ -32,7 +32,6 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import sys  # noqa: E402
@@ -135,14 +134,9 @@ def main(argv=None) -> dict:
     from vivbench.core.parallel import run_tasks
     from vivbench.validate.study import parse_draws
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--split", required=True, choices=("development", "evaluation"))
-    parser.add_argument("--draws", required=True, help="N, N-M or a comma-separated list")
-    parser.add_argument("--out", required=True, type=Path, help="study directory (resumable)")
-    parser.add_argument("--max-events", type=int, default=6)
-    parser.add_argument("--max-duration", type=float, default=20.0, metavar="MINUTES")
-    parser.add_argument("--workers", type=int, default=1)
-    args = parser.parse_args(argv)
+    from _family_args import family_parser
+
+    args = family_parser(__doc__.splitlines()[0], max_events=6, max_duration=20.0).parse_args(argv)
     # The tasks' function must be importable by the worker processes: this file as a module of the package
     # ``benchmarks`` (the repository's root on the path).
     root = str(Path(__file__).resolve().parent.parent)
