@@ -54,6 +54,7 @@ from vivbench.analysis.selection import (
     wind_error_scale,
     without_yaw,
 )
+from vivbench.analysis.time_constant import amplitude_slope, envelope_time_constant, short_events, valid_span
 from vivbench.analysis.wind_inputs import with_yaw
 from vivbench.preprocess.yaw import event_yaw  # re-exported: analysis is where campaign scripts look
 from vivbench.preprocess.wind_smoothing import smooth_wind  # re-exported, likewise
@@ -67,5 +68,6 @@ __all__ = [
     "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "LIMIT_TIME_CONSTANTS", "ModelSelection", "SINGLE_SECTION_SHARE", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss", "held_out_losses",
     "one_se_set", "perturbed_wind", "shared_groups", "variant_params", "fit_group", "held_out_task", "fit_task",
     "varying_selection", "wind_error_scale", "without_yaw",
+    "amplitude_slope", "envelope_time_constant", "short_events", "valid_span",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

@@ -61,7 +61,6 @@ with ``min_time_constants`` set, no window of such an event is flagged with a li
 from __future__ import annotations
 
 import copy
-import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -76,6 +75,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
 from vivbench.analysis.held_out import (CRITERIA, event_folds, fit_task, held_out_task, one_se_set,
                                         shared_groups, variant_params)
+from vivbench.analysis.time_constant import envelope_time_constant, short_events, valid_span
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
 from vivbench.preprocess.wind_smoothing import smooth_wind
@@ -92,9 +92,6 @@ MIN_EVENTS = 3
 #: Events shorter than this many envelope time constants are listed in the evidence as too short to
 #: show how an amplitude's change ends (module docstring; a stated prior, docs/limitations.md).
 LIMIT_TIME_CONSTANTS = 5.0
-
-#: Windows (s) on which the chosen model's regime-1 slopes give the envelope's time constant.
-_TC_WINDOW_S, _TC_STEP_S = 50.0, 25.0
 
 @dataclass(frozen=True, kw_only=True)
 class Candidate:
@@ -397,46 +394,23 @@ class ModelSelection:
         self.perturbed_models_ = fitted[1 + len(others):]
         self.change_ = self._change_scan(records)
         self.stationary_ = not self.change_["detected"]
-        self.event_duration_s_ = np.array([_valid_span(r) for r in records])
-        self.time_constant_s_ = self._time_constant(records)
+        self.event_duration_s_ = np.array([valid_span(r) for r in records])
+        self.time_constant_s_ = envelope_time_constant(self.model_, records, self._own_verdict,
+                                                       lambda r: measured_input(self.model_, r))
         return self
-
-    def _time_constant(self, records: list[Record]) -> float:
-        """The envelope's time constant (s) from the chosen model's regime-1 windows (module docstring)."""
-        slopes = []
-        for rec in records:
-            start = np.arange(rec.t[0], rec.t[-1] - _TC_WINDOW_S + 1e-9, _TC_STEP_S)
-            if start.size == 0:
-                continue
-            end = start + _TC_WINDOW_S
-            own = self._own_verdict(rec, start, end)
-            keep = (np.asarray(own["regime"]) == 1) & np.asarray(own["identifiable"], dtype=bool)
-            if not keep.any():
-                continue
-            slope = _amplitude_slope(self.model_, measured_input(self.model_, rec))
-            if slope is None:
-                return float("nan")
-            for w, k in zip(*np.nonzero(keep)):
-                inside = (rec.t >= start[w]) & (rec.t <= end[w])
-                slopes.append(np.nanmedian(slope[inside, k]) if np.isfinite(slope[inside, k]).any() else np.nan)
-        slopes = np.asarray(slopes, dtype=float)
-        slopes = slopes[np.isfinite(slopes)]
-        if slopes.size == 0 or np.median(slopes) >= 0:
-            return float("nan")
-        return float(-1.0 / np.median(slopes))
 
     def short_events(self) -> list[str]:
         """The events shorter than :data:`LIMIT_TIME_CONSTANTS` envelope time constants (all when the time
         constant is not identified)."""
         self._check_fitted()
-        return _short(self.event_ids_, self.event_duration_s_, self.time_constant_s_, LIMIT_TIME_CONSTANTS)
+        return short_events(self.event_ids_, self.event_duration_s_, self.time_constant_s_, LIMIT_TIME_CONSTANTS)
 
     def _limit_allowed(self, record: Record, regime: np.ndarray) -> np.ndarray:
         """Windows (W, S) whose regime ``min_time_constants`` does not withhold (module docstring)."""
         regime = np.asarray(regime)
         k = self.min_time_constants
         tc = getattr(self, "time_constant_s_", float("nan"))
-        if k is None or (math.isfinite(tc) and _valid_span(record) >= k * tc):
+        if k is None or (math.isfinite(tc) and valid_span(record) >= k * tc):
             return np.ones(regime.shape, dtype=bool)
         return regime < 3
 
@@ -791,25 +765,3 @@ def without_yaw(selection: ModelSelection) -> ModelSelection:
     out.candidates = tuple(kept)
     return out
 
-
-def _valid_span(record: Record) -> float:
-    """Seconds from the first to the last sample with a finite A at any section."""
-    ok = np.isfinite(record.A).any(axis=1)
-    return float(record.t[ok][-1] - record.t[ok][0]) if ok.sum() > 1 else 0.0
-
-
-def _amplitude_slope(model, record: Record, rel: float = 1e-3) -> np.ndarray | None:
-    """d(dA/dt)/dA (n, S), 1/s, of a model's ``predict`` by a relative step of A; None without ``predict``."""
-    predict = getattr(model, "predict", None)
-    if not callable(predict):
-        return None
-    f0 = np.asarray(predict(record), dtype=float)
-    f1 = np.asarray(predict(dataclasses.replace(record, A=record.A * (1.0 + rel))), dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return (f1 - f0) / (record.A * rel)
-
-
-def _short(event_ids, durations, time_constant: float, k: float) -> list[str]:
-    if not math.isfinite(time_constant):
-        return [str(e) for e in event_ids]
-    return [str(e) for e, d in zip(event_ids, durations) if d < k * time_constant]
