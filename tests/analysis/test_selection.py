@@ -391,6 +391,18 @@ def test_the_envelope_time_constant_comes_from_the_regime_1_windows_and_short_ev
     assert ("are not flagged" in sel.evidence_text()) is short
 
 
+def test_the_listed_short_events_are_those_the_restriction_withholds():
+    # Events of 199 s, a time constant of about 20 s: under 5 time constants no event is short, under 12 all are.
+    recs = _linear_records(6, slope=0.05)
+    sel = ModelSelection(candidates=[Candidate(name="linear", model=_PolyLimit(2))], n_perturbations=0,
+                         verdict=_limit_after_100_s, min_time_constants=12.0).fit(recs)
+    assert sel.short_events() == sel.event_ids_ and sel.evidence()["short_events"] == sel.event_ids_
+    assert "shorter than 12 envelope time constants" in sel.evidence_text()
+    assert sel.identifiable(recs[0], np.array([100.0]), np.array([150.0])).tolist() == [[False]]
+    sel.min_time_constants = None  # nothing withheld; the events under the prior are listed: none
+    assert sel.short_events() == [] and sel.identifiable(recs[0], np.array([100.0]), np.array([150.0])).all()
+
+
 def test_without_regime_1_windows_the_time_constant_is_unknown_and_no_limit_regime_is_flagged():
     def limit_everywhere(model, record, window_start, window_end):
         shape = (np.size(window_start), record.n_sections)

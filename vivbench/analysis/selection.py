@@ -54,8 +54,10 @@ model: -1 / the median slope d(dA/dt)/dA of its dA/dt over the windows it flags 
 self-excitation: the amplitude relaxes to the wind's forcing at that rate). An event that lasts only
 a few time constants shows an amplitude's growth or decay but not how it ends, and the split of that
 change between the orders of A, which decides the limit regimes 3 and 4, is then not identified by
-the event. The evidence lists the events shorter than :data:`LIMIT_TIME_CONSTANTS` time constants;
-with ``min_time_constants`` set, no window of such an event is flagged with a limit regime.
+the event. The evidence lists the events shorter than ``min_time_constants`` time constants
+(:data:`LIMIT_TIME_CONSTANTS` in :func:`varying_selection`), and no window of such an event is flagged
+with a limit regime; with ``min_time_constants`` None, the events shorter than
+:data:`LIMIT_TIME_CONSTANTS` are listed and nothing is withheld.
 """
 
 from __future__ import annotations
@@ -82,8 +84,8 @@ from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind, unmeasured_wind_rms
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
-__all__ = ["Candidate", "ModelSelection", "LIMIT_TIME_CONSTANTS", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z", "VARYING_OPTIONS",
-           "VARYING_PRIORS", "SINGLE_SECTION_SHARE", "perturbed_wind", "varying_selection", "wind_error_scale",
+__all__ = ["Candidate", "ModelSelection", "LIMIT_TIME_CONSTANTS", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z",
+           "VARYING_OPTIONS", "VARYING_PRIORS", "SINGLE_SECTION_SHARE", "perturbed_wind", "varying_selection", "wind_error_scale",
            "without_yaw"]
 
 #: Fewest events for a held-out choice among several candidates (every training set keeps two events).
@@ -399,20 +401,25 @@ class ModelSelection:
                                                        lambda r: measured_input(self.model_, r))
         return self
 
-    def short_events(self) -> list[str]:
-        """The events shorter than :data:`LIMIT_TIME_CONSTANTS` envelope time constants (all when the time
-        constant is not identified)."""
-        self._check_fitted()
-        return short_events(self.event_ids_, self.event_duration_s_, self.time_constant_s_, LIMIT_TIME_CONSTANTS)
+    def _short_threshold(self) -> float:
+        """Time constants an event must last: ``min_time_constants``, or the prior when it is None."""
+        return LIMIT_TIME_CONSTANTS if self.min_time_constants is None else float(self.min_time_constants)
 
-    def _limit_allowed(self, record: Record, regime: np.ndarray) -> np.ndarray:
-        """Windows (W, S) whose regime ``min_time_constants`` does not withhold (module docstring)."""
-        regime = np.asarray(regime)
+    def short_events(self) -> list[str]:
+        """The events shorter than ``min_time_constants`` (or, when None, :data:`LIMIT_TIME_CONSTANTS`)
+        envelope time constants; all when the time constant is not identified."""
+        self._check_fitted()
+        return short_events(self.event_ids_, self.event_duration_s_, self.time_constant_s_, self._short_threshold())
+
+    def _narrowed(self, record: Record, window_start, window_end, regime: np.ndarray) -> np.ndarray:
+        """Windows (W, S) whose ``regime`` every check beyond the chosen model's own verdict lets stand: the
+        :meth:`agreement`, and no limit regime (3, 4) in an event shorter than ``min_time_constants``."""
+        ok = self.agreement(record, window_start, window_end, regime)
         k = self.min_time_constants
         tc = getattr(self, "time_constant_s_", float("nan"))
         if k is None or (math.isfinite(tc) and valid_span(record) >= k * tc):
-            return np.ones(regime.shape, dtype=bool)
-        return regime < 3
+            return ok
+        return ok & (np.asarray(regime) < 3)
 
     def _change_scan(self, records: list[Record]) -> dict:
         """The chosen model's change scan on the campaign's events (module docstring); keeps its inputs and
@@ -502,8 +509,7 @@ class ModelSelection:
         self._check_fitted()
         out = model_verdicts(self.model_, measured_input(self.model_, record), window_start, window_end, tau=self.tau)
         # Every model of the confidence set and every wind-perturbed refit must give the window's regime.
-        out["identifiable"] = (out["identifiable"] & self.agreement(record, window_start, window_end, out["regime"])
-                               & self._limit_allowed(record, out["regime"]))
+        out["identifiable"] = out["identifiable"] & self._narrowed(record, window_start, window_end, out["regime"])
         return out
 
     def for_records(self, records: Sequence[Record]) -> "ModelSelection":
@@ -547,8 +553,7 @@ class ModelSelection:
         flag = np.asarray(own["identifiable"], dtype=bool)
         if not (getattr(self, "dynamics_shown_", True) and getattr(self, "stationary_", True)):
             return np.zeros(flag.shape, dtype=bool)
-        return (flag & self.agreement(record, window_start, window_end, own["regime"])
-                & self._limit_allowed(record, own["regime"]))
+        return flag & self._narrowed(record, window_start, window_end, own["regime"])
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:
         """The chosen model's curves, their bands widened to hold every other member of the confidence set.
@@ -648,7 +653,7 @@ class ModelSelection:
         short, tc = ev["short_events"], ev["time_constant_s"]
         verdict = "are not flagged" if ev["min_time_constants"] is not None else "may be misread"
         if short and ev["dynamics_shown"] and ev["stationary"]:  # otherwise no window is flagged anyway
-            lines.append(f"  {len(short)} of {len(ev['events'])} events are shorter than {LIMIT_TIME_CONSTANTS:g} "
+            lines.append(f"  {len(short)} of {len(ev['events'])} events are shorter than {self._short_threshold():g} "
                          f"envelope time constants ({tc:.0f} s): they show an amplitude's change but not how it "
                          f"ends, and their limit regimes (3, 4) {verdict}" if math.isfinite(tc) else
                          "  the envelope's time constant is not identified (the chosen model flags no regime-1 "
@@ -764,4 +769,3 @@ def without_yaw(selection: ModelSelection) -> ModelSelection:
     out = copy.copy(selection)
     out.candidates = tuple(kept)
     return out
-
