@@ -82,6 +82,12 @@ def test_bad_min_time_constants_exit_2_in_one_line(tmp_path, capsys, bad):
     assert len(lines) == 1 and "--min-time-constants must be" in lines[0], lines
 
 
+def test_bad_wind_bins_exit_2_in_one_line(tmp_path, capsys):
+    assert main(["pool", str(tmp_path), "--wind-bins", "-2"]) == EXIT_INPUT
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and "--wind-bins must be" in lines[0], lines
+
+
 def test_os_error_exits_2_in_one_line(tmp_path, monkeypatch, capsys):
     def denied(*_a, **_k):
         raise PermissionError(13, "Permission denied", str(tmp_path / "r"))

@@ -10,6 +10,7 @@ import pytest
 
 from tests.helpers import assert_close
 from vivbench.core.errors import InputError
+from vivbench.core.record import Record
 from vivbench.validate.study import STUDY_COLUMNS, StudyConfig, method_spec, parse_draws, run_study
 from vivbench.validate.study_report import PROMISE_MIN_FLAGS, study_markdown, study_summary
 
@@ -167,10 +168,11 @@ def test_summary_counts_wins_choices_and_change_alarms():
         base.update({k: str(v) for k, v in kw.items()})
         return base
 
-    rows = [row(0, "a", 0.1, chosen="yaw0-cv", change_p_value=0.5, yaw_effect="gaussian", yaw_course="shared"),
+    rows = [row(0, "a", 0.1, chosen="yaw0-cv", change_p_value=0.5, yaw_effect="gaussian", yaw_course="shared",
+                yaw_factor_range=0.5),  # the yaw matters, and is not chosen
             row(0, "b", 0.2),
             row(1, "a", 0.3, chosen="yaw1-least", change_p_value=0.01, change_detected=1, change_index=1,
-                yaw_effect="gaussian", yaw_course="per_event"),
+                yaw_effect="gaussian", yaw_course="per_event", yaw_factor_range=0.19),  # chosen where it barely matters
             row(1, "b", 0.2),
             row(2, "a", 0.1, chosen="yaw0-cv", change="damping_step", step_event=4, change_p_value=0.02,
                 change_detected=1, change_index=2),     # first changed event E004: index 3, found at 2
@@ -180,14 +182,17 @@ def test_summary_counts_wins_choices_and_change_alarms():
     assert summary["versus"]["a vs b"] == {"draws": 2, "lower": 1, "share_lower": 0.5}
     a = summary["methods"]["a"]
     assert a["yaw_present"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 1, "per_event_yaw_chosen": 1,
-                                           "shared_draws": 1, "shared_yaw_chosen": 0}
+                                           "shared_draws": 1, "shared_yaw_chosen": 0, "matters_draws": 1,
+                                           "matters_yaw_chosen": 0}
     assert a["yaw_absent"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 0, "per_event_yaw_chosen": 0,
-                                          "shared_draws": 0, "shared_yaw_chosen": 0}
+                                          "shared_draws": 0, "shared_yaw_chosen": 0, "matters_draws": 0,
+                                          "matters_yaw_chosen": 0}
     assert a["all"]["changes"] == {"draws_without_change": 2, "false_alarms": 1, "draws_with_step": 2,
                                    "detected": 1, "located_within_one_event": 1}
     assert summary["methods"]["b"]["all"]["changes"]["draws_without_change"] == 0  # never scanned
     page = study_markdown(summary)
     assert "| a vs b | 2 | 1 | 0.500 |" in page and "## Changes the wind does not carry" in page
+    assert "| 1, 1 | 1, 0 | 1, 0 |" in page  # per-event, shared, and where the yaw matters
 
 
 def test_summary_splits_the_draws_by_what_their_own_evidence_let_the_verdict_do():
@@ -207,3 +212,29 @@ def test_summary_splits_the_draws_by_what_their_own_evidence_let_the_verdict_do(
     assert withheld["energy_error"]["worst"] == 0.9 and withheld["energy_error"]["worst_draw"] == 2
     page = study_markdown(summary)
     assert "## By the campaign's own evidence" in page and "| a | regimes withheld | 3 | 0.700 |" in page
+
+
+def test_the_yaw_factor_range_is_the_truths_factor_over_the_measured_yaws():
+    from types import SimpleNamespace
+
+    from vivbench.synth import config_to_dict
+    from vivbench.synth.family import draw_bridge
+    from vivbench.validate.greybox import truth_yaw_factor
+    from vivbench.validate.study import yaw_factor_range
+
+    def truth(split, draw):
+        generator = draw_bridge(split, draw).campaign_config().generator
+        return SimpleNamespace(attrs={"config_json": json.dumps({"generator": config_to_dict(generator)})})
+
+    t = np.arange(201.0)
+    yaw = np.linspace(-30.0, 30.0, 201)[:, None]
+    rec = Record(event_id="E1", t=t, A=np.ones((201, 1)), U=np.full((201, 1), 8.0), yaw=yaw)
+    logistic = truth("development", 102)  # Y1 falls off with the yaw
+    lo, hi = np.percentile(yaw, [5.0, 95.0])
+    want = np.ptp(truth_yaw_factor(logistic, np.linspace(lo, hi, 101)))
+    assert want > 0.0
+    assert_close(yaw_factor_range([rec], [logistic]), want)
+    assert yaw_factor_range([rec], [truth("development", 4)]) == 0.0  # no yaw effect on this bridge
+    still = Record(event_id="E1", t=t, A=np.ones((201, 1)), U=np.full((201, 1), 8.0), yaw=np.zeros((201, 1)))
+    assert yaw_factor_range([still], [logistic]) == 0.0  # one yaw: the factor does not vary over the campaign
+    assert math.isnan(yaw_factor_range([rec], [SimpleNamespace(attrs={})]))  # configuration not readable

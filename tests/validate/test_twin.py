@@ -240,6 +240,7 @@ def test_a_recorded_anemometer_layout_is_measured(field, tmp_path):
 
 
 def test_the_twin_refits_with_the_field_runs_selection_settings(field):
+    from vivbench.analysis.held_out import RANK_LEVEL
     from vivbench.analysis.selection import LIMIT_TIME_CONSTANTS, SINGLE_SECTION_SHARE
     from vivbench.validate.twin_chain import pool_method, pool_settings
 
@@ -248,6 +249,7 @@ def test_the_twin_refits_with_the_field_runs_selection_settings(field):
     assert settings.selection["n_perturbations"] == 0
     assert settings.selection["single_section_share"] == SINGLE_SECTION_SHARE
     assert settings.selection["min_time_constants"] == LIMIT_TIME_CONSTANTS
+    assert settings.selection["rank_level"] == RANK_LEVEL
     method = pool_method(settings)
     assert (method.n_perturbations, method.single_section_share) == (0, SINGLE_SECTION_SHARE)
-    assert method.min_time_constants == LIMIT_TIME_CONSTANTS
+    assert method.min_time_constants == LIMIT_TIME_CONSTANTS and method.rank_level == RANK_LEVEL

@@ -31,6 +31,8 @@ from vivbench.analysis.pool import (
 )
 from vivbench.analysis.held_out import (
     CRITERIA,
+    RANK_LEVEL,
+    confidence_set,
     event_folds,
     fit_group,
     fit_task,
@@ -38,6 +40,7 @@ from vivbench.analysis.held_out import (
     held_out_losses,
     held_out_task,
     one_se_set,
+    rank_p_values,
     shared_groups,
     variant_params,
 )
@@ -56,6 +59,7 @@ from vivbench.analysis.selection import (
 )
 from vivbench.analysis.time_constant import amplitude_slope, envelope_time_constant, short_events, valid_span
 from vivbench.analysis.wind_inputs import with_yaw
+from vivbench.analysis.wind_local import WIND_BINS, dynamics_by_wind, window_wind, wind_bin_edges, wind_bins_of
 from vivbench.preprocess.yaw import event_yaw  # re-exported: analysis is where campaign scripts look
 from vivbench.preprocess.wind_smoothing import smooth_wind  # re-exported, likewise
 
@@ -66,8 +70,9 @@ __all__ = [
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
     "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
     "CRITERIA", "VARYING_OPTIONS", "VARYING_PRIORS", "Candidate", "LIMIT_TIME_CONSTANTS", "ModelSelection", "SINGLE_SECTION_SHARE", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss", "held_out_losses",
-    "one_se_set", "perturbed_wind", "shared_groups", "variant_params", "fit_group", "held_out_task", "fit_task",
+    "RANK_LEVEL", "confidence_set", "one_se_set", "rank_p_values", "perturbed_wind", "shared_groups", "variant_params", "fit_group", "held_out_task", "fit_task",
     "varying_selection", "wind_error_scale", "without_yaw",
     "amplitude_slope", "envelope_time_constant", "short_events", "valid_span",
+    "WIND_BINS", "dynamics_by_wind", "window_wind", "wind_bin_edges", "wind_bins_of",
     "GreyBoxOutcome", "campaign_warm_start", "greybox_results", "results_frequency",
 ]

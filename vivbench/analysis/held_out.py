@@ -3,7 +3,8 @@
 The pieces of :class:`vivbench.analysis.ModelSelection` that fit and score candidates
 (the selection's module docstring says what they compute and why):
 :func:`event_folds` deals the events to folds, :func:`held_out_losses` scores a fitted
-model on events it was not fitted on (their simulations batched), :func:`one_se_set` gives the confidence set,
+model on events it was not fitted on (their simulations batched), :func:`confidence_set` gives the confidence set
+(:func:`one_se_set` and :func:`rank_p_values` its two tests),
 and :func:`held_out_task` and :func:`fit_task` are the picklable tasks that fit the
 candidates, several at once where they share their costly part (:func:`shared_groups`:
 models that differ only in parameters of their ``final_params``, fitted by their
@@ -24,8 +25,10 @@ from vivbench.core.record import Record
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import simulate_many
 from vivbench.preprocess.runs import mask_runs
+from vivbench.analysis.wind_local import wind_bins_of
 
-__all__ = ["CRITERIA", "event_folds", "held_out_loss", "held_out_losses", "one_se_set", "shared_groups", "variant_params", "fit_group",
+__all__ = ["CRITERIA", "RANK_LEVEL", "confidence_set", "event_folds", "held_out_loss", "held_out_losses", "one_se_set",
+           "rank_p_values", "shared_groups", "variant_params", "fit_group",
            "held_out_task", "fit_task"]
 
 #: Held-out criteria: simulated envelope (output error) or dA/dt (equation error).
@@ -71,7 +74,7 @@ def held_out_loss(model, record: Record, criterion: str = "output", min_samples:
 
 
 def held_out_losses(model, records: Sequence[Record], criterion: str = "output", min_samples: int = 20,
-                    step_s: float = 1.0) -> np.ndarray:
+                    step_s: float = 1.0, wind_edges: np.ndarray | None = None) -> np.ndarray:
     """Squared prediction error of a fitted model on each record it was not fitted on (:mod:`vivbench.analysis.selection`).
 
     The output error's runs of every record are simulated together (:func:`vivbench.models.simulate_many`).
@@ -86,12 +89,27 @@ def held_out_losses(model, records: Sequence[Record], criterion: str = "output",
         Time step of the output error's simulation and sum: the record's wind, once transformed
         as at fit, is taken every ``step_s`` (the envelope and the smoothed wind vary over tens
         of seconds, so the integration's step does not limit the loss).
+    wind_edges : ndarray, shape (B + 1,), m/s, optional
+        Increasing edges of wind bins: each sample's squared error (per section) is then summed into
+        the bin of that section's wind as the model sees it (below the first edge: the first bin; above
+        the last: the last).
 
     Returns
     -------
-    ndarray, shape (n_records,), m^2 (output) or m^2/s^2 (derivative); 0 for a record with no valid run
+    ndarray, shape (n_records,), or (n_records, B) with ``wind_edges``; m^2 (output) or m^2/s^2
+    (derivative); 0 for a record with no valid run
     """
-    losses = np.zeros(len(records))
+    edges = None if wind_edges is None else np.asarray(wind_edges, dtype=float)
+    B = 1 if edges is None else edges.size - 1
+    losses = np.zeros((len(records), B))
+
+    def add(e: int, err2: np.ndarray, U: np.ndarray) -> None:
+        if edges is None:
+            losses[e, 0] += float(np.sum(err2))
+        else:  # a sample without wind has no error counted (derivative) or is not simulated (output)
+            b = np.maximum(wind_bins_of(U, edges), 0)
+            losses[e] += np.bincount(b.ravel(), weights=err2.ravel(), minlength=B)
+
     runs, owners = [], []
     for e, record in enumerate(records):
         rec = measured_input(model, record)
@@ -101,7 +119,7 @@ def held_out_losses(model, records: Sequence[Record], criterion: str = "output",
             good = ok[:, None] & np.isfinite(rec.dA)
             # a sample the model does not predict counts as missed by the whole measured dA/dt
             err = np.where(good, np.where(np.isfinite(f), f - rec.dA, rec.dA), 0.0)
-            losses[e] = float(np.sum(err**2))
+            add(e, err**2, rec.U)
             continue
         rec = _decimated(rec, step_s)
         ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
@@ -109,12 +127,13 @@ def held_out_losses(model, records: Sequence[Record], criterion: str = "output",
         for run in mask_runs(ok):
             if run.stop - run.start >= min_samples:
                 runs.append((rec, float(rec.t[run.start]), float(rec.t[run.stop - 1]), None))
-                owners.append((e, peak))
-    for (e, peak), sim in zip(owners, simulate_many(model, runs)):
+                owners.append((e, peak, rec))
+    for (e, peak, rec), sim in zip(owners, simulate_many(model, runs)):
         d = np.asarray(sim.A_sim, dtype=float) - np.asarray(sim.A_meas, dtype=float)
         d = np.where(np.isfinite(d), d, peak)
-        losses[e] += float(np.sum(d**2))
-    return losses
+        U = None if edges is None else rec.U[np.clip(np.searchsorted(rec.t, sim.t), 0, rec.n_samples - 1)]
+        add(e, d**2, U)
+    return losses[:, 0] if edges is None else losses
 
 
 def one_se_set(losses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -146,6 +165,70 @@ def one_se_set(losses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     se = np.sqrt(E) * diff.std(axis=1, ddof=1) if E > 1 else np.zeros(L.shape[0])
     excess = total - total[best]
     return excess <= se, excess, se
+
+
+#: One-sided level of the signed-rank test of :func:`confidence_set`.
+RANK_LEVEL = 0.05
+
+
+def rank_p_values(losses: np.ndarray) -> np.ndarray:
+    """One-sided Wilcoxon signed-rank p-values of every candidate's per-event loss above the best's.
+
+    Parameters
+    ----------
+    losses : ndarray, shape (C, E)
+        Held-out loss of every candidate on every event.
+
+    Returns
+    -------
+    ndarray, shape (C,)
+        p-value of the hypothesis that the candidate's per-event excess over the best candidate
+        (the lowest summed loss) is not centred above zero, by :func:`scipy.stats.wilcoxon`
+        (``alternative="greater"``; zero differences dropped); 1 for the best, for a candidate
+        whose every difference is zero, and with fewer than two events.
+    """
+    from scipy.stats import wilcoxon
+
+    L = np.asarray(losses, dtype=float)
+    if L.ndim != 2 or L.shape[0] < 1:
+        raise ValueError(f"losses must have shape (n_candidates, n_events); got {L.shape}")
+    diff = L - L[int(np.argmin(L.sum(axis=1)))]
+    p = np.ones(L.shape[0])
+    if L.shape[1] < 2:
+        return p
+    for i in np.flatnonzero(np.any(diff != 0.0, axis=1)):
+        p[i] = float(wilcoxon(diff[i], alternative="greater").pvalue)
+    return p
+
+
+def confidence_set(losses: np.ndarray, *, rank_level: float = RANK_LEVEL
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The confidence set of candidates: not significantly worse than the best by either of two tests.
+
+    A candidate leaves the set when its summed held-out loss exceeds the best's by more than one
+    standard error (:func:`one_se_set`), or when its per-event losses lie above the best's more
+    consistently than chance allows (:func:`rank_p_values` below ``rank_level``). The second test
+    matters where a few events dominate the sums: their spread inflates the standard error, while a
+    candidate that loses on nearly every event is still worse.
+
+    Parameters
+    ----------
+    losses : ndarray, shape (C, E)
+        Held-out loss of every candidate on every event.
+    rank_level : float, in (0, 1)
+        Level of the one-sided signed-rank test.
+
+    Returns
+    -------
+    in_set : ndarray of bool, shape (C,)
+    excess, se : ndarray, shape (C,), as :func:`one_se_set`
+    p_rank : ndarray, shape (C,), as :func:`rank_p_values`
+    """
+    if not 0.0 < rank_level < 1.0:
+        raise ValueError(f"rank_level must be in (0, 1); got {rank_level!r}")
+    in_se, excess, se = one_se_set(losses)
+    p = rank_p_values(losses)
+    return in_se & (p >= rank_level), excess, se, p
 
 
 def _unfitted(model, **params):
@@ -205,16 +288,23 @@ def held_out_task(task: dict) -> dict:
     """Fit a group of candidates (:func:`shared_groups`) without each fold's events in turn and score them
     on those events (a picklable top-level task).
 
-    One task per group, not per fold: the records travel to a worker once.
+    One task per group, not per fold: the records travel to a worker once. With ``wind_edges`` in the
+    task, the losses are also returned by wind bin (``binned``, shape (variants, events, bins)).
     """
     records, fold, criterion, variants = task["records"], task["fold"], task["criterion"], task["variants"]
+    edges = task.get("wind_edges")
     loss = np.zeros((len(variants), len(records)))
+    binned = None if edges is None else np.zeros((len(variants), len(records), len(edges) - 1))
     for f in range(int(fold.max()) + 1):
         fitted = fit_group(task["model"], variants, [r for r, g in zip(records, fold) if g != f])
         held = np.flatnonzero(fold == f)
         for v, model in enumerate(fitted):
-            loss[v, held] = held_out_losses(model, [records[i] for i in held], criterion)
-    return {"loss": loss}
+            out = held_out_losses(model, [records[i] for i in held], criterion, wind_edges=edges)
+            if edges is None:
+                loss[v, held] = out
+            else:
+                binned[v, held], loss[v, held] = out, out.sum(axis=1)
+    return {"loss": loss, "binned": binned}
 
 
 def fit_task(task: dict) -> list:

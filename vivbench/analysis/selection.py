@@ -17,13 +17,21 @@ data alone, the same way on a synthetic campaign as on a field one:
    ``criterion="derivative"`` the loss is the squared error of the predicted
    dA/dt against the measured one (the fallback for models that cannot
    simulate).
-3. The **confidence set** holds the candidates whose summed held-out loss is
-   not significantly above the best's: the paired difference to the best over
-   events is at most one standard error of its sum (a one-standard-error rule
-   over events).
+3. The **confidence set** holds the candidates whose held-out losses are not
+   significantly above the best's by either of two paired tests over events:
+   the summed difference to the best is at most one standard error of its sum
+   (a one-standard-error rule), and a one-sided Wilcoxon signed-rank test of the
+   per-event differences does not reject at :data:`RANK_LEVEL`
+   (:func:`vivbench.analysis.confidence_set`). The second test keeps a few
+   events with large losses from hiding a candidate that is worse on nearly
+   every event.
 4. The model reported is the **simplest** of the set (the lowest complexity,
    ties to the lower loss), so that a covariate or a rougher fit enters only
-   where the campaign's own data demand it.
+   where the campaign's own data demand it. The candidates are scored by
+   complexity in a forward search: those of the two lowest complexities
+   first, those of the next one only while the choice is of the highest
+   complexity scored so far (a yaw polynomial of degree 2 is tried only where
+   degree 1 was needed). Candidates never scored are recorded as such.
 
 The verdict of the selected model (:meth:`ModelSelection.identifiable`) flags a
 window only when its own verdict does, when every model of the confidence set
@@ -75,13 +83,15 @@ from vivbench.core.errors import InputError
 from vivbench.core.parallel import run_tasks
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.analysis.held_out import (CRITERIA, event_folds, fit_task, held_out_task, one_se_set,
+from vivbench.analysis.held_out import (CRITERIA, RANK_LEVEL, confidence_set, event_folds, fit_task, held_out_task, one_se_set,
                                         shared_groups, variant_params)
 from vivbench.analysis.time_constant import envelope_time_constant, short_events, valid_span
+from vivbench.analysis.selection_text import evidence_text
+from vivbench.analysis.wind_error import SINGLE_SECTION_SHARE, perturbed_wind, wind_error_scale
+from vivbench.analysis.wind_local import WIND_BINS, dynamics_by_wind, window_wind, wind_bin_edges, wind_bins_of
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
-from vivbench.preprocess.wind_smoothing import smooth_wind
-from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind, unmeasured_wind_rms
+from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
 __all__ = ["Candidate", "ModelSelection", "LIMIT_TIME_CONSTANTS", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z",
@@ -126,59 +136,6 @@ class Candidate:
             raise InputError(f"candidate {self.name!r}: its model has no fit(records) method")
         if int(self.complexity) != self.complexity or self.complexity < 0:
             raise InputError(f"candidate {self.name!r}: complexity must be an integer >= 0; got {self.complexity!r}")
-
-
-#: Error of a single section's measured mean wind, as a share of its mean (a stated prior: one section has no
-#: other to compare with).
-SINGLE_SECTION_SHARE = 0.03
-
-
-def wind_error_scale(record: Record, timescale_s: float,
-                     single_section_share: float = SINGLE_SECTION_SHARE) -> np.ndarray:
-    """Estimated rms error of each section's measured mean wind at a time scale, shape (S,), m/s.
-
-    With two sections or more: the spread between the sections' winds smoothed at
-    ``timescale_s`` (rms over time of each section's deviation from the sections' mean,
-    pooled over sections): independent anemometers' point turbulence and offsets. With one
-    section there is nothing to compare with, and the error is taken as
-    ``single_section_share`` of the event's mean wind (a stated prior). A section whose wind was taken
-    from an anemometer elsewhere (``Record.wind_distance`` > 0; one copied to every section has no spread)
-    adds in quadrature its error over the distance (:func:`vivbench.preprocess.unmeasured_wind_rms`).
-    """
-    rec = smooth_wind(record, float(timescale_s))
-    U = rec.U
-    S = U.shape[1]
-    if S == 1:
-        m = float(np.nanmean(U)) if np.isfinite(U).any() else 0.0
-        return _with_unmeasured(np.array([single_section_share * m]), rec, timescale_s)
-    dev = U - np.nanmean(U, axis=1, keepdims=True)
-    ok = np.isfinite(dev)
-    if not ok.any():
-        return _with_unmeasured(np.zeros(S), rec, timescale_s)
-    # pooled over sections, with the S/(S-1) correction for the mean taken over the same sections
-    s = math.sqrt(float(np.mean(dev[ok] ** 2)) * S / (S - 1))
-    return _with_unmeasured(np.full(S, s), rec, timescale_s)
-
-
-def _with_unmeasured(scale: np.ndarray, rec: Record, timescale_s: float) -> np.ndarray:
-    e = unmeasured_wind_rms(rec, float(timescale_s))  # winds taken away from their sections, in quadrature
-    return scale if e is None else np.hypot(scale, e)
-
-
-def perturbed_wind(record: Record, scale: np.ndarray, timescale_s: float, rng: np.random.Generator) -> Record:
-    """The record with each section's U perturbed by smooth Gaussian noise of rms ``scale`` (S,), m/s.
-
-    The noise is white noise smoothed by a Gaussian of standard deviation ``timescale_s``
-    and rescaled to unit variance; NaN samples stay NaN.
-    """
-    noise = rng.standard_normal(record.U.shape)
-    probe = Record(event_id=record.event_id, t=record.t, A=record.A, U=noise, dA=record.dA)
-    smooth = smooth_wind(probe, float(timescale_s)).U
-    sd = smooth.std(axis=0)
-    smooth = smooth / np.where(sd > 0, sd, 1.0)
-    U = record.U + smooth * np.asarray(scale, dtype=float)[None, :]
-    return Record(event_id=record.event_id, t=record.t, A=record.A, U=U, dA=record.dA, yaw=record.yaw,
-                  noise_std=record.noise_std, wind_distance=record.wind_distance)
 
 
 class ModelSelection:
@@ -226,6 +183,14 @@ class ModelSelection:
     single_section_share : float, in [0, 1)
         The wind error of a campaign with one section, as a share of each event's mean wind
         (:func:`wind_error_scale`; default :data:`SINGLE_SECTION_SHARE`, a stated prior).
+    wind_bins : int or None, >= 1
+        With a null model: also test it in this many bins of the measured wind (equal shares of the
+        samples), and flag a window only where its wind lies in a bin in which the chosen model's held-out
+        error is significantly below the null's (:mod:`vivbench.analysis.wind_local`); None: the
+        campaign-wide test alone.
+    rank_level : float or None, in (0, 1)
+        Level of the confidence set's signed-rank test (:func:`vivbench.analysis.confidence_set`);
+        None: the one-standard-error rule alone.
     min_time_constants : float or None, > 0
         Flag no window with a limit regime (3 or 4) in an event shorter than this many envelope time
         constants ``time_constant_s_`` (module docstring), nor any in a campaign whose time constant
@@ -237,9 +202,11 @@ class ModelSelection:
     chosen_ : str, its name
     names_ : list of str, the candidates' names
     note_ : str, why no held-out choice was made ("" when it was)
-    losses_ : ndarray, shape (C, E), held-out loss of every candidate on every event
-    in_set_ : ndarray of bool, shape (C,), the confidence set
-    excess_, se_ : ndarray, shape (C,), summed loss above the best's and its standard error
+    losses_ : ndarray, shape (C, E), held-out loss of every candidate on every event (NaN where not scored)
+    in_set_ : ndarray of bool, shape (C,), the confidence set (False where not scored)
+    excess_, se_ : ndarray, shape (C,), summed loss above the best's and its standard error (NaN where not scored)
+    p_rank_ : ndarray, shape (C,), the signed-rank test's p-value against the best (NaN where not scored)
+    scored_ : ndarray of bool, shape (C,), the candidates scored on held-out events (the forward search)
     set_models_ : list of fitted models of the set other than the chosen (n_bootstrap 0)
     perturbed_models_ : list of fitted models of the chosen candidate on perturbed winds
     wind_error_ : ndarray, shape (E, S), m/s, the estimated wind error of every event
@@ -264,8 +231,11 @@ class ModelSelection:
                  n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, tau: float = DEFAULT_TAU,
                  verdict=None, seed: int = 0, workers: int = 1, scheduler: str | None = None,
                  null_model=None, change_scan: bool = False, single_section_share: float = SINGLE_SECTION_SHARE,
-                 min_time_constants: float | None = None):
+                 min_time_constants: float | None = None, rank_level: float | None = RANK_LEVEL,
+                 wind_bins: int | None = None):
         self.candidates = tuple(candidates)
+        self.wind_bins = wind_bins
+        self.rank_level = rank_level
         self.min_time_constants = min_time_constants
         self.single_section_share = single_section_share
         self.null_model = null_model
@@ -297,6 +267,12 @@ class ModelSelection:
         share = self.single_section_share
         if not (isinstance(share, (int, float)) and math.isfinite(share) and 0.0 <= share < 1.0):
             raise InputError(f"single_section_share must be a number in [0, 1) (a share of the mean wind); got {share!r}")
+        nb = self.wind_bins
+        if nb is not None and not (isinstance(nb, int) and not isinstance(nb, bool) and nb >= 1):
+            raise InputError(f"wind_bins must be None or an integer >= 1; got {nb!r}")
+        lv = self.rank_level
+        if lv is not None and not (isinstance(lv, (int, float)) and 0.0 < lv < 1.0):
+            raise InputError(f"rank_level must be None or a level in (0, 1); got {lv!r}")
         k = self.min_time_constants
         if k is not None and not (isinstance(k, (int, float)) and math.isfinite(k) and k > 0):
             raise InputError(f"min_time_constants must be None or a positive number of time constants; got {k!r}")
@@ -333,41 +309,26 @@ class ModelSelection:
                           + ("" if null is None else ", and with no held-out evidence of the dynamics "
                              "no window is flagged"))
             self.in_set_, self.excess_, self.se_ = np.ones(C, dtype=bool), np.zeros(C), np.zeros(C)
+            self.p_rank_, self.scored_ = np.ones(C), np.zeros(C, dtype=bool)
         elif C > 1 or null is not None:
-            fold = event_folds(E, self.n_folds, self.seed)
-            models = [c.model for c in self.candidates] + ([] if null is None else [null])
-            groups = shared_groups(models)
-            tasks = [{"model": models[g[0]], "variants": [variant_params(models[i], n_bootstrap=0) for i in g],
-                      "records": records, "fold": fold, "criterion": self.criterion} for g in groups]
-            for out in run_tasks(held_out_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
-                if out.error is not None:
-                    name = ", ".join(self.candidates[i].name if i < C else "the quasi-steady null model"
-                                     for i in groups[out.index])
-                    raise InputError(f"{name!r} failed on a held-out fold: {out.error}")
-                for i, loss in zip(groups[out.index], out.value["loss"]):
-                    if i < C:
-                        self.losses_[i] = loss
-                    else:
-                        self.null_loss_ = loss
-            self.in_set_, self.excess_, self.se_ = one_se_set(self.losses_)
-            if null is not None:
-                with_null = one_se_set(np.vstack([self.losses_, self.null_loss_[None]]))
-                self.null_in_set_ = bool(with_null[0][-1])
-                self.null_excess_, self.null_se_ = float(with_null[1][-1]), float(with_null[2][-1])
+            self._score(records, null)
         else:
             self.in_set_, self.excess_, self.se_ = np.ones(1, dtype=bool), np.zeros(1), np.zeros(1)
+            self.p_rank_, self.scored_ = np.ones(1), np.ones(1, dtype=bool)
         # The dynamics are shown only when the dynamic models predict held-out events significantly better
         # than the null model (the quasi-steady map); with too few events for held-out evidence, they are not.
         if null is None:
             self.dynamics_shown_ = True
         else:
             self.dynamics_shown_ = self.null_in_set_ is False
-        members = np.flatnonzero(self.in_set_)
-        complexity = np.array([c.complexity for c in self.candidates])
-        total = np.nan_to_num(self.losses_.sum(axis=1))
-        chosen = int(min(members, key=lambda i: (complexity[i], total[i], i)))
+        chosen = self._simplest()
         self.chosen_index_ = chosen
         self.chosen_ = self.names_[chosen]
+        binned = getattr(self, "binned_losses_", {})
+        self.dynamics_by_wind_ = None
+        if chosen in binned and C in binned:
+            self.dynamics_by_wind_ = dynamics_by_wind(binned[chosen], binned[C], MIN_EVENTS)
+        members = np.flatnonzero(self.in_set_)
         rng = np.random.default_rng([int(self.seed), 1])
         self.wind_error_ = np.stack([wind_error_scale(r, self.perturbation_timescale_s, self.single_section_share)
                                      for r in records])
@@ -401,6 +362,76 @@ class ModelSelection:
                                                        lambda r: measured_input(self.model_, r))
         return self
 
+    def _scored(self) -> np.ndarray:
+        """Which candidates were scored on held-out events, shape (C,)."""
+        return getattr(self, "scored_", np.ones(len(self.candidates), dtype=bool))
+
+    def _p_rank(self) -> np.ndarray:
+        """The signed-rank p-values of the candidates, shape (C,) (NaN where not computed)."""
+        return getattr(self, "p_rank_", np.full(len(self.candidates), np.nan))
+
+    def _simplest(self) -> int:
+        """Index of the simplest member of the confidence set (lowest complexity, ties to the lower loss)."""
+        complexity = np.array([c.complexity for c in self.candidates])
+        total = np.where(self._scored(), np.nan_to_num(self.losses_.sum(axis=1)), np.inf)
+        return int(min(np.flatnonzero(self.in_set_), key=lambda i: (complexity[i], total[i], i)))
+
+    def _score(self, records: list[Record], null) -> None:
+        """Held-out losses, level by level of complexity, and the confidence set of the scored candidates.
+
+        The candidates of the two lowest complexities (and the null model) are scored first; those of the
+        next complexity only while the choice among the scored ones is of the highest complexity scored
+        (forward selection: a further term is tried only where the previous one was needed).
+        """
+        C, E = len(self.candidates), len(records)
+        fold = event_folds(E, self.n_folds, self.seed)
+        complexity = np.array([c.complexity for c in self.candidates])
+        levels = sorted(set(complexity.tolist()))
+        self.scored_ = np.zeros(C, dtype=bool)
+        self.losses_[:] = np.nan
+        local = null is not None and self.wind_bins is not None
+        self.wind_edges_ = wind_bin_edges(records, self.wind_bins) if local else None
+        binned = {}
+        n_levels = min(2, len(levels))
+        todo = list(np.flatnonzero(complexity <= levels[n_levels - 1])) + ([C] if null is not None else [])
+        while True:
+            models = [self.candidates[i].model if i < C else null for i in todo]
+            groups = shared_groups(models)
+            tasks = [{"model": models[g[0]], "variants": [variant_params(models[i], n_bootstrap=0) for i in g],
+                      "records": records, "fold": fold, "criterion": self.criterion, "wind_edges": self.wind_edges_}
+                     for g in groups]
+            for out in run_tasks(held_out_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
+                if out.error is not None:
+                    name = ", ".join(self.candidates[todo[i]].name if todo[i] < C else "the quasi-steady null model"
+                                     for i in groups[out.index])
+                    raise InputError(f"{name!r} failed on a held-out fold: {out.error}")
+                for j, (i, loss) in enumerate(zip(groups[out.index], out.value["loss"])):
+                    if local:
+                        binned[todo[i]] = out.value["binned"][j]
+                    if todo[i] < C:
+                        self.losses_[todo[i]] = loss
+                        self.scored_[todo[i]] = True
+                    else:
+                        self.null_loss_ = loss
+            idx = np.flatnonzero(self.scored_)
+            if self.rank_level is None:
+                in_set, excess, se = one_se_set(self.losses_[idx])
+                p = np.full(idx.size, np.nan)
+            else:
+                in_set, excess, se, p = confidence_set(self.losses_[idx], rank_level=float(self.rank_level))
+            self.in_set_ = np.zeros(C, dtype=bool)
+            self.excess_, self.se_, self.p_rank_ = np.full(C, np.nan), np.full(C, np.nan), np.full(C, np.nan)
+            self.in_set_[idx], self.excess_[idx], self.se_[idx], self.p_rank_[idx] = in_set, excess, se, p
+            if n_levels == len(levels) or complexity[self._simplest()] < levels[n_levels - 1]:
+                break
+            todo = list(np.flatnonzero(complexity == levels[n_levels]))
+            n_levels += 1
+        self.binned_losses_ = binned  # candidate index (C: the null) -> (E, B) losses by wind bin
+        if null is not None:
+            with_null = one_se_set(np.vstack([self.losses_[idx], self.null_loss_[None]]))
+            self.null_in_set_ = bool(with_null[0][-1])
+            self.null_excess_, self.null_se_ = float(with_null[1][-1]), float(with_null[2][-1])
+
     def _short_threshold(self) -> float:
         """Time constants an event must last: ``min_time_constants``, or the prior when it is None."""
         return LIMIT_TIME_CONSTANTS if self.min_time_constants is None else float(self.min_time_constants)
@@ -413,8 +444,14 @@ class ModelSelection:
 
     def _narrowed(self, record: Record, window_start, window_end, regime: np.ndarray) -> np.ndarray:
         """Windows (W, S) whose ``regime`` every check beyond the chosen model's own verdict lets stand: the
-        :meth:`agreement`, and no limit regime (3, 4) in an event shorter than ``min_time_constants``."""
+        :meth:`agreement`, a wind at which the dynamics were shown (with ``wind_bins``), and no limit regime
+        (3, 4) in an event shorter than ``min_time_constants``."""
         ok = self.agreement(record, window_start, window_end, regime)
+        local = getattr(self, "dynamics_by_wind_", None)
+        if local is not None:
+            U = window_wind(measured_input(self.model_, record).U, record.t, window_start, window_end)
+            b = wind_bins_of(U, self.wind_edges_)
+            ok = ok & (b >= 0) & local[0][np.maximum(b, 0)]
         k = self.min_time_constants
         tc = getattr(self, "time_constant_s_", float("nan"))
         if k is None or (math.isfinite(tc) and valid_span(record) >= k * tc):
@@ -597,7 +634,8 @@ class ModelSelection:
             "candidates": [
                 {"name": c.name, "complexity": int(c.complexity), "options": c.options or {},
                  "held_out_loss": float(self.losses_[i].sum()), "excess": float(self.excess_[i]),
-                 "se": float(self.se_[i]), "in_set": bool(self.in_set_[i])}
+                 "se": float(self.se_[i]), "p_rank": float(self._p_rank()[i]), "scored": bool(self._scored()[i]),
+                 "in_set": bool(self.in_set_[i])}
                 for i, c in enumerate(self.candidates)],
             "events": list(self.event_ids_),
             "n_perturbations": int(self.n_perturbations),
@@ -619,47 +657,23 @@ class ModelSelection:
             "event_duration_s": [float(d) for d in getattr(self, "event_duration_s_", [])],
             "short_events": (self.short_events() if hasattr(self, "time_constant_s_") else []),
             "min_time_constants": (None if self.min_time_constants is None else float(self.min_time_constants)),
+            "rank_level": (None if self.rank_level is None else float(self.rank_level)),
+            "wind_bins": self.wind_bins,
+            "dynamics_by_wind": self._local_evidence(),
         }
 
+    def _local_evidence(self) -> dict | None:
+        local = getattr(self, "dynamics_by_wind_", None)
+        if local is None:
+            return None
+        shown, excess, se, n = local
+        return {"wind_edges": [float(x) for x in self.wind_edges_], "shown": [bool(x) for x in shown],
+                "excess": [float(x) for x in excess], "se": [float(x) for x in se], "n_events": [int(x) for x in n]}
+
     def evidence_text(self) -> str:
-        """One line per candidate: its held-out loss relative to the best, and the set and choice."""
-        ev = self.evidence()
-        best = min(c["held_out_loss"] for c in ev["candidates"])
-        unit = "m^2" if self.criterion == "output" else "m^2/s^2"
-        if self.note_:
-            return self.note_
-        lines = [f"held-out {('output' if self.criterion == 'output' else 'dA/dt')} error over "
-                 f"{len(ev['events'])} events in {ev['n_folds']} folds (sum of squares, {unit}):"]
-        for c in ev["candidates"]:
-            rel = c["held_out_loss"] / best if best > 0 else float("nan")
-            mark = "chosen" if c["name"] == ev["chosen"] else ("in the confidence set" if c["in_set"] else "")
-            lines.append(f"  {c['name']:<22} {c['held_out_loss']:.4g} ({rel:.3f} x best; +{c['excess']:.3g} "
-                         f"+- {c['se']:.3g}) {mark}".rstrip())
-        null = ev["null"]
-        if null is not None:
-            rel = null["held_out_loss"] / best if best > 0 else float("nan")
-            lines.append(f"  {'null: ' + null['name']:<22} {null['held_out_loss']:.4g} ({rel:.3f} x best; "
-                         f"+{null['excess']:.3g} +- {null['se']:.3g})")
-            lines.append("  the dynamic models predict held-out events significantly better than the null model: "
-                         "regimes may be flagged" if ev["dynamics_shown"] else
-                         "  the null model predicts held-out events as well as the dynamic models: the dynamics, "
-                         "and so the regimes, are not identified from this campaign; no window is flagged")
-        change = ev["change"]
-        if change["tested"]:
-            lines.append(f"  the chosen model's change scan locates a change from {change['event']} on "
-                         f"(p = {change['p_value']:.3g}): one model does not hold for the whole campaign; "
-                         "no window is flagged" if change["detected"] else
-                         f"  the chosen model's change scan locates no change (p = {change['p_value']:.3g})")
-        short, tc = ev["short_events"], ev["time_constant_s"]
-        verdict = "are not flagged" if ev["min_time_constants"] is not None else "may be misread"
-        if short and ev["dynamics_shown"] and ev["stationary"]:  # otherwise no window is flagged anyway
-            lines.append(f"  {len(short)} of {len(ev['events'])} events are shorter than {self._short_threshold():g} "
-                         f"envelope time constants ({tc:.0f} s): they show an amplitude's change but not how it "
-                         f"ends, and their limit regimes (3, 4) {verdict}" if math.isfinite(tc) else
-                         "  the envelope's time constant is not identified (the chosen model flags no regime-1 "
-                         f"window), so no event is known to show how an amplitude's change ends: limit regimes "
-                         f"(3, 4) {verdict}")
-        return "\n".join(lines)
+        """One line per candidate: its held-out loss relative to the best, and the set and choice; then the
+        null test (campaign-wide and by wind), the change scan and the short events."""
+        return evidence_text(self.evidence(), note=self.note_, short_threshold=self._short_threshold())
 
     def to_dataset(self) -> xr.Dataset:
         """The chosen model's dataset with the evidence as the attribute ``selection_json``."""
@@ -676,9 +690,10 @@ class ModelSelection:
 
 #: The options of :class:`vivbench.models.VaryingCoefficientSINDy` that :func:`varying_selection`
 #: chooses from the campaign's evidence by default, each listed simplest first: the yaw covariate
-#: (none, or sin^2 of the yaw) and the roughness penalty (the 5-fold cross-validated one, or the least
+#: (none, or a polynomial in sin^2 of the yaw of degree 1 or 2; degree 2 is scored only where degree 1
+#: is chosen over none) and the roughness penalty (the 5-fold cross-validated one, or the least
 #: penalty of the leave-one-event-out confidence set, which gives rougher curves).
-VARYING_OPTIONS = {"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")}
+VARYING_OPTIONS = {"yaw_degree": (0, 1, 2), "penalty_choice": ("cv", "least")}
 
 #: Errors by which winds measured elsewhere on the span are shifted in :meth:`ModelSelection.agreement` (95 %, two-sided).
 UNMEASURED_Z = 1.96
@@ -698,7 +713,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                       n_perturbations: int = 2, perturbation_timescale_s: float = 60.0, seed: int = 0,
                       workers: int = 1, scheduler: str | None = None, null: bool = True,
                       change_scan: bool = True, single_section_share: float = SINGLE_SECTION_SHARE,
-                      min_time_constants: float | None = LIMIT_TIME_CONSTANTS, **params) -> ModelSelection:
+                      min_time_constants: float | None = LIMIT_TIME_CONSTANTS, rank_level: float | None = RANK_LEVEL,
+                      wind_bins: int | None = WIND_BINS, **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -709,9 +725,9 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         in the :data:`STRUCTURAL_OPTIONS`.
         A parameter given in ``params`` is pinned: it leaves the grid.
     n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler, single_section_share,
-    min_time_constants
+    min_time_constants, rank_level, wind_bins
         Those of :class:`ModelSelection` (``seed`` also the models'; ``min_time_constants`` here
-        :data:`LIMIT_TIME_CONSTANTS` by default).
+        :data:`LIMIT_TIME_CONSTANTS` and ``wind_bins`` :data:`vivbench.analysis.WIND_BINS` by default).
     null : bool
         Test the candidates against the quasi-steady map :class:`vivbench.models.QuasiSteadyAmplitude`
         (with the candidates' wind smoothing) before any window is flagged.
@@ -750,7 +766,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                           null_model=(QuasiSteadyAmplitude(wind_smoothing_s=fixed.get("wind_smoothing_s", 30.0))
                                       if null else None),
                           change_scan=change_scan, single_section_share=single_section_share,
-                          min_time_constants=min_time_constants)
+                          min_time_constants=min_time_constants, rank_level=rank_level,
+                          wind_bins=(wind_bins if null else None))
 
 
 def _option_label(name: str, value) -> str:

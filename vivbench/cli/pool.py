@@ -38,6 +38,8 @@ def run(args) -> int:
     k = args.min_time_constants
     if k is not None and not (math.isfinite(k) and k >= 0):
         raise InputError(f"--min-time-constants must be a number of time constants >= 0 (0: no restriction); got {k!r}")
+    if args.wind_bins is not None and args.wind_bins < 0:
+        raise InputError(f"--wind-bins must be an integer >= 0 (0: the campaign-wide test alone); got {args.wind_bins!r}")
     results_dir = Path(args.results)
     files = list_results(results_dir)
     campaign = Path(args.campaign) if args.campaign else None
@@ -59,6 +61,8 @@ def run(args) -> int:
             extra = {**ADDITIVE_SETTINGS, **extra}
         if args.min_time_constants is not None:
             extra["min_time_constants"] = args.min_time_constants or None  # 0: no restriction
+        if args.wind_bins is not None:
+            extra["wind_bins"] = args.wind_bins or None  # 0: the campaign-wide null test alone
         model = varying_selection(n_folds=args.folds, criterion=args.criterion, n_perturbations=args.perturbations,
                                   seed=args.seed, workers=args.workers, n_bootstrap=args.bootstrap,
                                   block_s=args.block, agreement=args.agreement, tau=args.tau, **extra)
@@ -136,8 +140,9 @@ def register(sub) -> None:
                    help="directory of the results' event files, only for results identified before the result "
                         "stored the wind's yaw: their yaw is then measured from the events' anemometers")
     s.add_argument("--yaw-degree", type=int, default=None, choices=(0, 1, 2),
-                   help="with --model varying: powers of sin^2(yaw) in the curves (default: 0 or 1, chosen from "
-                        "the campaign's held-out evidence when the results store the yaw, else 0)")
+                   help="with --model varying: powers of sin^2(yaw) in the curves (default: 0, 1 or 2, chosen from "
+                        "the campaign's held-out evidence when the results store the yaw, 2 tried only where 1 is "
+                        "chosen over 0; else 0)")
     s.add_argument("--wind-input", default=None, choices=("mean", "section", "additive", "sum"),
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
@@ -171,6 +176,10 @@ def register(sub) -> None:
                    help="with --model varying: flag no limit regime (3, 4) in an event shorter than this many "
                         "envelope time constants, read from the chosen model's regime-1 windows (default "
                         "LIMIT_TIME_CONSTANTS, 5, a stated prior; 0: no such restriction)")
+    s.add_argument("--wind-bins", type=int, default=None,
+                   help="with --model varying: bins of the measured wind (equal shares of the samples) in which the "
+                        "chosen model must beat the quasi-steady map on held-out events for a window there to be "
+                        "flagged (default WIND_BINS, 6, a stated prior; 0: the campaign-wide test alone)")
     s.add_argument("--workers", type=int, default=1, help="local processes for the held-out fits (default 1)")
     s.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates (default 100)")
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")

@@ -79,7 +79,7 @@ _FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chos
 _SCORES = tuple(k for k in SCORE_KEYS if k != "fit_time_s")
 #: Columns of ``study.csv``: one row per draw and method.
 STUDY_COLUMNS = ("split", "draw", "method", "campaign_seed", "n_events", "events_failed", *LABEL_COLUMNS,
-                 *_SCORES, *_FLAG_COLUMNS, "error")
+                 "yaw_factor_range", *_SCORES, *_FLAG_COLUMNS, "error")
 _JOURNAL_COLUMNS = ("task_id", "draw", "methods")
 _MAX_DRAW = 2**31
 
@@ -313,6 +313,35 @@ def _choice(fitted) -> dict[str, Any]:
             "stationary": int(bool(ev.get("stationary", True)))}
 
 
+def yaw_factor_range(records, truths) -> float:
+    """How much the yaw matters on a campaign: the range of the truth's factor on Y1 over its measured yaws.
+
+    Parameters
+    ----------
+    records : sequence of Record, with ``yaw`` (degrees) where measured
+    truths : sequence of truth datasets (the generator's configuration in ``config_json``)
+
+    Returns
+    -------
+    float, 1
+        max - min of the factor on a grid between the 5th and 95th percentiles of the measured yaw
+        samples of every event and section; 0 without a yaw effect or without measured yaw, NaN when the
+        truth's configuration cannot be read.
+    """
+    from vivbench.validate.greybox import truth_yaw_factor
+
+    yaws = [np.ravel(r.yaw) for r in records if r.yaw is not None]
+    yaw = np.concatenate(yaws) if yaws else np.empty(0)
+    yaw = yaw[np.isfinite(yaw)]
+    if not len(truths):
+        return math.nan
+    if not yaw.size:
+        return 0.0
+    lo, hi = np.percentile(yaw, [5.0, 95.0])
+    factor = truth_yaw_factor(truths[0], np.linspace(lo, hi, 101))
+    return math.nan if factor is None else float(np.ptp(factor))
+
+
 def _change_scan(fitted, records) -> dict[str, Any]:
     """``vivbench pool``'s change scan of the model (refits before and after each split) on the measured
     records: its permutation p-value, whether it alarms and the first event after the located change
@@ -333,7 +362,8 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
 
     Returns
     -------
-    dict: ``draw``, ``campaign_seed``, ``n_events``, ``events_failed``, ``labels``, ``seconds`` (wall
+    dict: ``draw``, ``campaign_seed``, ``n_events``, ``events_failed``, ``labels``, ``yaw_factor_range``
+    (:func:`yaw_factor_range`), ``seconds`` (wall
     time of the task), ``stage_seconds`` (``generate``, ``identify``) and ``methods`` (method name ->
     its scores with ``fit_time_s``, or NaNs and ``error`` when that method failed).
     Raises when the campaign cannot be generated or no event can be identified (the draw is retried
@@ -370,6 +400,7 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
         shutil.rmtree(root, ignore_errors=True)
     return {"draw": task.draw, "campaign_seed": draw.campaign_seed, "n_events": campaign.n_events,
             "events_failed": len(made.failures) + len(failures), "labels": draw.labels, "methods": methods,
+            "yaw_factor_range": yaw_factor_range(records, truths),
             "seconds": time.perf_counter() - start, "stage_seconds": stages}
 
 
@@ -410,6 +441,7 @@ def _csv_rows(config: StudyConfig, done: dict[int, dict]) -> list[dict[str, Any]
             row = {"split": config.split, "draw": d, "method": name, "campaign_seed": rec["campaign_seed"],
                    "n_events": rec["n_events"], "events_failed": rec["events_failed"]}
             row.update({c: _label_text(labels.get(c)) for c in LABEL_COLUMNS})
+            row["yaw_factor_range"] = rec.get("yaw_factor_range", math.nan)
             row.update({k: scores.get(k, math.nan) for k in (*_SCORES, *_FLAG_COLUMNS)})
             row["error"] = scores.get("error", "")
             rows.append(row)

@@ -23,6 +23,9 @@ __all__ = ["LABEL_COLUMNS", "PROMISE_SHARE", "PROMISE_MIN_FLAGS", "SUMMARY_SCORE
 LABEL_COLUMNS = ("forced_only", "yaw_effect", "yaw_course", "eiv", "bell", "e_mix", "n_sections", "frequency_hz",
                  "depth_m", "damping_ratio", "lock_in_m_s", "point_intensity", "point_timescale_s", "change",
                  "step_event", "step_damping_factor")
+#: A yaw effect "matters" on a campaign when the truth's factor on Y1 ranges by at least this much over the
+#: campaign's measured yaws (5th-95th percentile; :func:`vivbench.validate.study.yaw_factor_range`): a reporting cut.
+YAW_MATTERS = 0.2
 #: The verdict's promise: at least this share of flagged window-equations right ...
 PROMISE_SHARE = 0.95
 #: ... on every draw with at least this many flagged window-equations.
@@ -102,6 +105,10 @@ def _choices(rows: Sequence[dict]) -> dict[str, Any]:
     for course in ("per_event", "shared"):
         out[f"{course}_draws"] = sum(1 for r in chosen if r.get("yaw_course") == course)
         out[f"{course}_yaw_chosen"] = sum(1 for r in with_yaw if r.get("yaw_course") == course)
+    # Where the yaw matters over the campaign's own yaws (the truth's factor on Y1 ranges by YAW_MATTERS or more).
+    matters = [r for r in chosen if _number(r.get("yaw_factor_range")) >= YAW_MATTERS]
+    out["matters_draws"] = len(matters)
+    out["matters_yaw_chosen"] = sum(1 for r in matters if not str(r["chosen"]).startswith("yaw0"))
     return out
 
 
@@ -344,16 +351,19 @@ def study_markdown(summary: dict[str, Any]) -> str:
     lines += ["", "## Covariates chosen from the campaign's evidence", "",
               "Draws on which a method that chooses its options from held-out events took a yaw covariate, in all "
               "and by the yaw's course: varying between events (per event), or the same course in every event "
-              "(shared), where the yaw is confounded with the time within an event and cannot be told from it.", "",
+              "(shared), where the yaw is confounded with the time within an event and cannot be told from it; "
+              f"and on the draws where the yaw matters: the truth's factor on Y1 ranges by {YAW_MATTERS:g} or more "
+              "over the campaign's measured yaws (5th to 95th percentile).", "",
               "| method | draws | draws with a choice | yaw chosen | per-event course: draws, yaw chosen "
-              "| shared course: draws, yaw chosen |", "|---|---|---|---|---|---|"]
+              "| shared course: draws, yaw chosen | yaw matters: draws, yaw chosen |", "|---|---|---|---|---|---|---|"]
     for name, blocks in summary["methods"].items():
         for subset, block in blocks.items():
             c = block["choices"]
             if c["draws"]:
                 lines.append(f"| {name} | {_subset(subset, block)} | {c['draws']} | {c['yaw_chosen']} "
                              f"| {c.get('per_event_draws', 0)}, {c.get('per_event_yaw_chosen', 0)} "
-                             f"| {c.get('shared_draws', 0)}, {c.get('shared_yaw_chosen', 0)} |")
+                             f"| {c.get('shared_draws', 0)}, {c.get('shared_yaw_chosen', 0)} "
+                             f"| {c.get('matters_draws', 0)}, {c.get('matters_yaw_chosen', 0)} |")
     lines += ["", "## Changes the wind does not carry", "",
               "The model's change scan (refits before and after every split of the events, permutation p-value "
               "below 0.05): alarms on draws without a change, and damping steps detected and located within one "

@@ -103,6 +103,10 @@ def pool_settings(model_dir) -> PoolSettings:
                      "single_section_share": float(evidence.get("single_section_share", SINGLE_SECTION_SHARE)),
                      # files written before the key was recorded had no such restriction
                      "min_time_constants": evidence.get("min_time_constants"),
+                     # files written before the rank test was recorded had the one-standard-error rule alone
+                     "rank_level": evidence.get("rank_level"),
+                     # and without the test by wind
+                     "wind_bins": evidence.get("wind_bins"),
                      "null": evidence.get("null") is not None}
         return PoolSettings(selection=selection, params=params, model_path=str(directory), wind_smoothing_s=0.0)
     model = load_campaign_model(directory)
@@ -124,7 +128,8 @@ def pool_method(settings: PoolSettings, *, workers: int = 1):
                                  criterion=sel["criterion"], n_perturbations=sel["n_perturbations"],
                                  perturbation_timescale_s=sel["perturbation_timescale_s"],
                                  single_section_share=sel.get("single_section_share", SINGLE_SECTION_SHARE),
-                                 min_time_constants=sel.get("min_time_constants"),
+                                 min_time_constants=sel.get("min_time_constants"), rank_level=sel.get("rank_level"),
+                                 wind_bins=sel.get("wind_bins"),
                                  seed=int(settings.params.get("seed", 0)), workers=workers, null=sel["null"], **fixed)
     model = load_campaign_model(settings.model_path)
     return type(model)(**model.get_params())
