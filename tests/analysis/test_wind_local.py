@@ -8,9 +8,9 @@ from hypothesis import strategies as st
 
 from tests.analysis.test_selection import _Poly, _always_flag
 from tests.helpers import assert_close
-from vivbench.analysis.held_out import held_out_losses
+from vivbench.analysis.held_out import dynamics_by_wind, held_out_losses
 from vivbench.analysis.selection import Candidate, ModelSelection
-from vivbench.analysis.wind_local import dynamics_by_wind, window_wind, wind_bin_edges, wind_bins_of
+from vivbench.analysis.wind_local import window_wind, wind_bin_edges, wind_bins_of
 from vivbench.core.record import Record
 
 

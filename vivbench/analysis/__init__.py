@@ -33,6 +33,7 @@ from vivbench.analysis.held_out import (
     CRITERIA,
     RANK_LEVEL,
     confidence_set,
+    dynamics_by_wind,
     event_folds,
     fit_group,
     fit_task,
@@ -59,7 +60,7 @@ from vivbench.analysis.selection import (
 )
 from vivbench.analysis.time_constant import amplitude_slope, envelope_time_constant, short_events, valid_span
 from vivbench.analysis.wind_inputs import with_yaw
-from vivbench.analysis.wind_local import WIND_BINS, dynamics_by_wind, window_wind, wind_bin_edges, wind_bins_of
+from vivbench.analysis.wind_local import WIND_BINS, window_wind, wind_bin_edges, wind_bins_of
 from vivbench.preprocess.yaw import event_yaw  # re-exported: analysis is where campaign scripts look
 from vivbench.preprocess.wind_smoothing import smooth_wind  # re-exported, likewise
 

@@ -27,7 +27,7 @@ from vivbench.models.protocol import simulate_many
 from vivbench.preprocess.runs import mask_runs
 from vivbench.analysis.wind_local import wind_bins_of
 
-__all__ = ["CRITERIA", "RANK_LEVEL", "confidence_set", "event_folds", "held_out_loss", "held_out_losses", "one_se_set",
+__all__ = ["CRITERIA", "RANK_LEVEL", "confidence_set", "dynamics_by_wind", "event_folds", "held_out_loss", "held_out_losses", "one_se_set",
            "rank_p_values", "shared_groups", "variant_params", "fit_group",
            "held_out_task", "fit_task"]
 
@@ -229,6 +229,39 @@ def confidence_set(losses: np.ndarray, *, rank_level: float = RANK_LEVEL
     in_se, excess, se = one_se_set(losses)
     p = rank_p_values(losses)
     return in_se & (p >= rank_level), excess, se, p
+
+
+def dynamics_by_wind(model_losses: np.ndarray, null_losses: np.ndarray,
+                     min_events: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per wind bin, whether the model's held-out error is significantly below the null model's.
+
+    Parameters
+    ----------
+    model_losses, null_losses : ndarray, shape (E, B)
+        Held-out loss of the chosen model and of the null model on every event, summed by wind bin.
+    min_events : int
+        Fewest events with samples in a bin for a test there (fewer: not shown).
+
+    Returns
+    -------
+    shown : ndarray of bool, shape (B,)
+        The null lies outside the one-standard-error set of the pair over the bin's events.
+    excess, se : ndarray, shape (B,)
+        The null's summed loss above the model's and its standard error (NaN where not tested).
+    n_events : ndarray of int, shape (B,)
+        Events with samples in the bin.
+    """
+    M, N = np.asarray(model_losses, dtype=float), np.asarray(null_losses, dtype=float)
+    B = M.shape[1]
+    shown, excess, se = np.zeros(B, dtype=bool), np.full(B, np.nan), np.full(B, np.nan)
+    present = (M > 0) | (N > 0)
+    n_events = present.sum(axis=0)
+    for b in np.flatnonzero(n_events >= min_events):
+        ev = present[:, b]
+        in_set, _, s = one_se_set(np.vstack([M[ev, b], N[ev, b]]))
+        excess[b], se[b] = float(N[ev, b].sum() - M[ev, b].sum()), float(s.max())
+        shown[b] = not bool(in_set[1])  # the null is out of the pair's set: the model is the better, significantly
+    return shown, excess, se, n_events
 
 
 def _unfitted(model, **params):

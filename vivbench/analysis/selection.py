@@ -47,7 +47,9 @@ the dynamic candidates do not predict held-out events significantly better than 
 follows the wind with no dynamics (a forced response, an envelope driven by buffeting, errors in
 the wind that drown the amplitude's own changes), any split of the dynamics between the orders of A
 fits, and the regimes are not identified from the campaign. With too few events for held-out
-evidence (fewer than :data:`MIN_EVENTS`) nothing is flagged either.
+evidence (fewer than :data:`MIN_EVENTS`) nothing is flagged either. With ``wind_bins``, the same test
+is also made by wind (:mod:`vivbench.analysis.wind_local`): a window is flagged only where its wind
+lies in a bin in which the chosen model's held-out error is significantly below the null's.
 
 With the **stationarity test** (``change_scan=True``, the default of :func:`varying_selection`), the
 chosen model's own change scan (:func:`vivbench.analysis.changes.statistics_change_scan`: refits before
@@ -83,12 +85,12 @@ from vivbench.core.errors import InputError
 from vivbench.core.parallel import run_tasks
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.analysis.held_out import (CRITERIA, RANK_LEVEL, confidence_set, event_folds, fit_task, held_out_task, one_se_set,
-                                        shared_groups, variant_params)
+from vivbench.analysis.held_out import (CRITERIA, RANK_LEVEL, confidence_set, dynamics_by_wind, event_folds, fit_task,
+                                        held_out_task, one_se_set, shared_groups, variant_params)
 from vivbench.analysis.time_constant import envelope_time_constant, short_events, valid_span
 from vivbench.analysis.selection_text import evidence_text
 from vivbench.analysis.wind_error import SINGLE_SECTION_SHARE, perturbed_wind, wind_error_scale
-from vivbench.analysis.wind_local import WIND_BINS, dynamics_by_wind, window_wind, wind_bin_edges, wind_bins_of
+from vivbench.analysis.wind_local import WIND_BINS, window_wind, wind_bin_edges, wind_bins_of
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind
@@ -301,6 +303,7 @@ class ModelSelection:
         null = self.null_model
         self.null_loss_ = np.full(E, np.nan)
         self.null_in_set_ = None
+        self.binned_losses_, self.wind_edges_ = {}, None
         if (C > 1 or null is not None) and E < MIN_EVENTS:
             # Leaving events out would leave a single event to fit: no evidence, the simplest candidate.
             self.losses_[:] = np.nan

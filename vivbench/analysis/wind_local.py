@@ -7,7 +7,7 @@ it, where the envelope only follows the buffeting and the wind): there the split
 orders of A is the library's fit to a stochastic envelope, not a regime. The held-out output errors are
 therefore also summed by wind bin (:func:`vivbench.analysis.held_out_losses` with ``wind_edges``), and a
 window is flagged only where its wind lies in a bin in which the chosen model's held-out error is
-significantly below the null's (:func:`dynamics_by_wind`).
+significantly below the null's (:func:`vivbench.analysis.held_out.dynamics_by_wind`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 
 from vivbench.core.record import Record
 
-__all__ = ["WIND_BINS", "dynamics_by_wind", "window_wind", "wind_bin_edges", "wind_bins_of"]
+__all__ = ["WIND_BINS", "window_wind", "wind_bin_edges", "wind_bins_of"]
 
 #: Wind bins of the local null test: quantiles of the campaign's measured wind, so that each holds the same
 #: share of its samples (a stated prior, docs/model_selection.md).
@@ -44,41 +44,6 @@ def wind_bins_of(U: np.ndarray, edges: np.ndarray) -> np.ndarray:
     B = len(edges) - 1
     b = np.clip(np.searchsorted(edges, np.nan_to_num(U, nan=edges[0]), side="right") - 1, 0, B - 1)
     return np.where(np.isfinite(U), b, -1)
-
-
-def dynamics_by_wind(model_losses: np.ndarray, null_losses: np.ndarray,
-                     min_events: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per wind bin, whether the model's held-out error is significantly below the null model's.
-
-    Parameters
-    ----------
-    model_losses, null_losses : ndarray, shape (E, B)
-        Held-out loss of the chosen model and of the null model on every event, summed by wind bin.
-    min_events : int
-        Fewest events with samples in a bin for a test there (fewer: not shown).
-
-    Returns
-    -------
-    shown : ndarray of bool, shape (B,)
-        The null lies outside the one-standard-error set of the pair over the bin's events.
-    excess, se : ndarray, shape (B,)
-        The null's summed loss above the model's and its standard error (NaN where not tested).
-    n_events : ndarray of int, shape (B,)
-        Events with samples in the bin.
-    """
-    from vivbench.analysis.held_out import one_se_set
-
-    M, N = np.asarray(model_losses, dtype=float), np.asarray(null_losses, dtype=float)
-    B = M.shape[1]
-    shown, excess, se = np.zeros(B, dtype=bool), np.full(B, np.nan), np.full(B, np.nan)
-    present = (M > 0) | (N > 0)
-    n_events = present.sum(axis=0)
-    for b in np.flatnonzero(n_events >= min_events):
-        ev = present[:, b]
-        in_set, _, s = one_se_set(np.vstack([M[ev, b], N[ev, b]]))
-        excess[b], se[b] = float(N[ev, b].sum() - M[ev, b].sum()), float(s.max())
-        shown[b] = not bool(in_set[1])  # the null is out of the pair's set: the model is the better, significantly
-    return shown, excess, se, n_events
 
 
 def window_wind(U: np.ndarray, t: np.ndarray, window_start, window_end) -> np.ndarray:
