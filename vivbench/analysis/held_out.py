@@ -174,18 +174,11 @@ RANK_LEVEL = 0.05
 def rank_p_values(losses: np.ndarray) -> np.ndarray:
     """One-sided Wilcoxon signed-rank p-values of every candidate's per-event loss above the best's.
 
-    Parameters
-    ----------
-    losses : ndarray, shape (C, E)
-        Held-out loss of every candidate on every event.
-
-    Returns
-    -------
-    ndarray, shape (C,)
-        p-value of the hypothesis that the candidate's per-event excess over the best candidate
-        (the lowest summed loss) is not centred above zero, by :func:`scipy.stats.wilcoxon`
-        (``alternative="greater"``; zero differences dropped); 1 for the best, for a candidate
-        whose every difference is zero, and with fewer than two events.
+    ``losses`` (C, E) are as in :func:`one_se_set`. Returns an ndarray of shape (C,): the
+    p-value of the hypothesis that the candidate's per-event excess over the best candidate
+    (the lowest summed loss) is not centred above zero, by :func:`scipy.stats.wilcoxon`
+    (``alternative="greater"``; zero differences dropped); 1 for the best, for a candidate whose
+    every difference is zero, and with fewer than two events.
     """
     from scipy.stats import wilcoxon
 
