@@ -8,7 +8,11 @@ inputs, the yaw covariate, M = 10 B-splines: p = 240 columns, 1200-sample blocks
 - B-splines: :func:`vivbench.models.varying.bspline_local` against scipy's ``BSpline.design_matrix``
   (dense, as the model built it before), and their largest difference (0 expected: same recursion);
 - block statistics: the grouped local products (``block_stats``) against the dense design per block
-  and X_b^T X_b (what it did before), and the largest relative difference of the Grams.
+  and X_b^T X_b (what it did before), and the largest relative difference of the Grams;
+- the default model's shape (one mean wind, yaw of degree 2, M = 15: p = 180): the moments of
+  :func:`vivbench.models.varying_stats.block_statistics` summed by fold (what the basis choice needs)
+  against ``block_stats`` summed by fold, the closed-form uniform cubic B-splines against the
+  recursion, and their largest relative differences.
 
 Whole ``vivbench pool`` runs (wall, CPU, peak memory) are in the closing note of the branch; this
 benchmark measures the kernels only. It asserts nothing.
@@ -76,6 +80,31 @@ def main(samples: int = 60_000) -> dict:
     out["block_stats"] = {"dense_s": t_old, "grouped_s": t_new,
                           "max_rel_diff": float(np.abs(G_new - G_old).max() / np.abs(G_old).max())}
 
+    # The default model's shape: one wind input (the sections' weighted mean), yaw of degree 2, M = 15.
+    from vivbench.library.splines import bspline_local_t, uniform_cubic_local_t
+    from vivbench.models.varying import uniform_knots
+    from vivbench.models.varying_stats import block_statistics, one_hot
+
+    knots15 = uniform_knots(4.0, 14.0, 15)
+    u, z1 = U[:, 0], z[:, 0]
+    t_old, (f_old, v_old) = best_of(lambda: bspline_local_t(u, knots15))
+    t_new, (f_new, v_new) = best_of(lambda: uniform_cubic_local_t(u, knots15))
+    out["uniform_cubic"] = {"recursion_s": t_old, "closed_form_s": t_new, "same_first": bool((f_old == f_new).all()),
+                            "max_abs_diff": float(np.abs(v_old - v_new).max())}
+    fold = np.arange(nb) % 5
+
+    def grouped_by_fold():
+        G, b, _yy, _n = vd.block_stats(u, A, y, block, nb, knots15, 0.1, z1, 2)
+        return np.stack([G[fold == f].sum(axis=0) for f in range(5)])
+
+    def moments_by_fold():
+        return block_statistics(u, A, y, block, nb, knots15, 0.1, z1, 2).sums(one_hot(fold, 5))[0]
+
+    t_old, G_old = best_of(grouped_by_fold)
+    t_new, G_new = best_of(moments_by_fold)
+    out["block_statistics_one_input"] = {"p": int(G_new.shape[-1]), "grouped_by_fold_s": t_old,
+                                         "moments_by_fold_s": t_new,
+                                         "max_rel_diff": float(np.abs(G_new - G_old).max() / np.abs(G_old).max())}
     return out
 
 

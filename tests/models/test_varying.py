@@ -282,3 +282,21 @@ def test_simulate_runs_are_each_runs_simulation(fitted):
         assert np.array_equal(sim.t, alone.t) and np.array_equal(sim.A_sim, alone.A_sim, equal_nan=True)
         assert sim.stopped_at == alone.stopped_at and sim.covered == alone.covered
         assert np.array_equal(sim.nmse, alone.nmse, equal_nan=True)
+
+
+@pytest.mark.parametrize("choice", ["cv", "least"])
+def test_a_fit_without_model_sets_predicts_the_same_and_gives_no_verdict(choice):
+    """model_sets=False (fits made only to predict) changes no coefficient or prediction; the verdict refuses it."""
+    recs = _records(5, seed=3)
+    base = VaryingCoefficientSINDy(n_basis=(6, 8), n_bootstrap=0, wind_smoothing_s=10.0, penalty_choice=choice)
+    full, bare = base.fit_variants(recs, [{}, {"model_sets": False}])
+    assert np.array_equal(full.coef_, bare.coef_) and np.array_equal(full.penalty_coef_, bare.penalty_coef_)
+    assert np.array_equal(full.penalty_, bare.penalty_)
+    assert np.array_equal(full.predict(recs[0]), bare.predict(recs[0]))
+    assert full.subset_plausible_.any() and not bare.subset_plausible_.any()
+    ws, we = np.array([0.0, 600.0]), np.array([600.0, 1200.0])
+    varying_window_verdicts(full, recs[0], ws, we)
+    with pytest.raises(InputError, match="model_sets=False"):
+        varying_window_verdicts(bare, recs[0], ws, we)
+    with pytest.raises(InputError, match="model_sets must be True or False"):
+        VaryingCoefficientSINDy(model_sets="no").fit(recs)

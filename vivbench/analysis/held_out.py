@@ -311,17 +311,21 @@ def fit_group(model, variants: Sequence[dict], records) -> list:
 
 
 def held_out_task(task: dict) -> dict:
-    """Fit a group of candidates (:func:`shared_groups`) without each fold's events in turn and score them
-    on those events (a picklable top-level task).
+    """Fit a group of candidates (:func:`shared_groups`) without a fold's events and score them on those
+    events (a picklable top-level task).
 
-    One task per group, not per fold: the records travel to a worker once. With ``wind_edges`` in the
-    task, the losses are also returned by wind bin (``binned``, shape (variants, events, bins)).
+    ``task["folds"]`` lists the folds to run in turn (default every fold): one task per (group, fold)
+    keeps every worker busy, one per group sends the records to a worker once. The losses of the events
+    of the folds not run are NaN. With ``wind_edges`` in the task, the losses are also returned by wind
+    bin (``binned``, shape (variants, events, bins)).
     """
     records, fold, criterion, variants = task["records"], task["fold"], task["criterion"], task["variants"]
     edges = task.get("wind_edges")
-    loss = np.zeros((len(variants), len(records)))
-    binned = None if edges is None else np.zeros((len(variants), len(records), len(edges) - 1))
-    for f in range(int(fold.max()) + 1):
+    folds = task.get("folds")
+    folds = range(int(fold.max()) + 1) if folds is None else folds
+    loss = np.full((len(variants), len(records)), np.nan)
+    binned = None if edges is None else np.full((len(variants), len(records), len(edges) - 1), np.nan)
+    for f in folds:
         fitted = fit_group(task["model"], variants, [r for r, g in zip(records, fold) if g != f])
         held = np.flatnonzero(fold == f)
         for v, model in enumerate(fitted):

@@ -400,22 +400,29 @@ class ModelSelection:
         while True:
             models = [self.candidates[i].model if i < C else null for i in todo]
             groups = shared_groups(models)
-            tasks = [{"model": models[g[0]], "variants": [variant_params(models[i], n_bootstrap=0) for i in g],
-                      "records": records, "fold": fold, "criterion": self.criterion, "wind_edges": self.wind_edges_}
-                     for g in groups]
+            # one task per (group, fold), the workers sharing a level's fits evenly; fitted to predict only
+            # (no bootstrap, no confidence sets of the verdict)
+            n_fold = int(fold.max()) + 1
+            tasks = [{"model": models[g[0]], "records": records, "fold": fold, "folds": [f],
+                      "variants": [variant_params(models[i], n_bootstrap=0, model_sets=False) for i in g],
+                      "criterion": self.criterion, "wind_edges": self.wind_edges_}
+                     for g in groups for f in range(n_fold)]
+            self.scored_[[i for i in todo if i < C]] = True
+            binned.update({i: np.zeros((E, len(self.wind_edges_) - 1)) for i in todo} if local else {})
             for out in run_tasks(held_out_task, tasks, workers=int(self.workers), scheduler=self.scheduler):
+                group = groups[out.index // n_fold]
                 if out.error is not None:
                     name = ", ".join(self.candidates[todo[i]].name if todo[i] < C else "the quasi-steady null model"
-                                     for i in groups[out.index])
+                                     for i in group)
                     raise InputError(f"{name!r} failed on a held-out fold: {out.error}")
-                for j, (i, loss) in enumerate(zip(groups[out.index], out.value["loss"])):
+                held = fold == tasks[out.index]["folds"][0]
+                for j, (i, loss) in enumerate(zip(group, out.value["loss"])):
                     if local:
-                        binned[todo[i]] = out.value["binned"][j]
+                        binned[todo[i]][held] = out.value["binned"][j][held]
                     if todo[i] < C:
-                        self.losses_[todo[i]] = loss
-                        self.scored_[todo[i]] = True
+                        self.losses_[todo[i], held] = loss[held]
                     else:
-                        self.null_loss_ = loss
+                        self.null_loss_[held] = loss[held]
             idx = np.flatnonzero(self.scored_)
             if self.rank_level is None:
                 in_set, excess, se = one_se_set(self.losses_[idx])

@@ -66,7 +66,8 @@ YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
 #: model's own wind smoothing (the wind was smoothed, or not, before the fit), its cross-validation, the
 #: effective-variance weights, the signed-rank test, the weighted sections' winds and the least plausible penalty.
 LEGACY_PARAMS = {"yaw_degree": 0, "wind_smoothing_s": 0.0, "wind_smoothing_grid": None, "eiv_weights": False,
-                 "model_set_test": "z", "wind_weights": "equal", "penalty_choice": "cv"}
+                 "model_set_test": "z", "wind_weights": "equal", "penalty_choice": "cv",
+                 "model_sets": True}
 
 
 def _as_variable(name: str, value) -> np.ndarray:

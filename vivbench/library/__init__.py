@@ -11,10 +11,10 @@ from vivbench.library.basis import (
     order_contributions_basis,
 )
 from vivbench.library.splines import (DEGREE, bspline_basis, bspline_local, bspline_local_t, difference_penalty,
-                                      first_index, uniform_knots)
+                                      first_index, uniform_cubic_local_t, uniform_knots)
 
 __all__ = [
     "SCALINGS", "WindowLibrary", "window_library", "library_cond", "condition_number", "basis_orders",
     "order_contributions_basis", "DEGREE", "bspline_basis", "bspline_local", "bspline_local_t", "difference_penalty",
-    "first_index", "uniform_knots",
+    "first_index", "uniform_cubic_local_t", "uniform_knots",
 ]

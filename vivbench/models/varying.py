@@ -228,6 +228,12 @@ class VaryingCoefficientSINDy(ModelBase):
         noise where it has not. ``"loeo"``: the best member of that set.
         :func:`vivbench.analysis.varying_selection` chooses between them from
         the campaign's own held-out evidence.
+    model_sets : bool
+        Compute the confidence sets of order subsets and of penalties
+        (leave-one-event-out) that the window verdict requires (default).
+        False skips them, for fits made only to predict (the held-out fits
+        of :class:`vivbench.analysis.ModelSelection`): such a model gives no
+        verdict.
 
     Attributes
     ----------
@@ -304,7 +310,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None, eiv_weights: bool = True,
                  model_set_test: str = "signed_rank", wind_weights: str | Sequence[float] = "modal",
-                 penalty_choice: str = "cv"):
+                 penalty_choice: str = "cv", model_sets: bool = True):
         self.n_basis = n_basis
         self.penalties = penalties
         self.n_folds = n_folds
@@ -323,6 +329,7 @@ class VaryingCoefficientSINDy(ModelBase):
         self.model_set_test = model_set_test
         self.wind_weights = wind_weights
         self.penalty_choice = penalty_choice
+        self.model_sets = model_sets
 
     def wind_inputs(self, U: np.ndarray) -> np.ndarray:
         """The wind each equation's curves are evaluated at, shape (n, S), m/s."""

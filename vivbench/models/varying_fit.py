@@ -34,6 +34,7 @@ from vivbench.core.record import Record
 from vivbench.models.protocol import as_record
 from vivbench.library.splines import DEGREE, difference_penalty, uniform_knots
 from vivbench.models.varying_design import block_stats, input_contributions, tie_stats, untie
+from vivbench.models.varying_stats import BlockStats, block_statistics
 from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights,
                                           weighted_mean_standard_error)
 from vivbench.preprocess.wind_smoothing import smooth_wind
@@ -44,7 +45,7 @@ from vivbench.regression.penalised import held_out_errors, penalised_solve, pena
 __all__ = ["ORDER_SUBSETS", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
            "SectionFit", "equation_inputs", "valid_samples", "campaign_samples", "wind_standard_error", "cv_error", "select_orders", "select_basis",
            "eiv_weight", "choose_smoothing", "fit_section", "fitted_arrays", "event_statistics", "WIND_INPUTS",
-           "fitted_inputs", "as_inputs"]
+           "fitted_inputs", "as_inputs", "section_statistics"]
 
 #: Values of ``wind_input`` (:class:`vivbench.models.VaryingCoefficientSINDy`): the sections' weighted mean wind, the
 #: section's own, every section's wind with a curve of its own (summed), or every section's wind with one shared
@@ -64,7 +65,7 @@ ORDER_SUBSETS = np.array([[o0, True, o2, o3] for o0 in (True, False) for o2 in (
 #: Parameters of the model that act only in the last step (:func:`fit_section`, or not in the fit at all):
 #: fits that differ only in them share steps 1-3 (:func:`fit_shared`).
 FINAL_PARAMS = ("penalty_choice", "n_bootstrap", "select_orders", "model_set_level", "model_set_test", "agreement",
-                "tau")
+                "tau", "model_sets")
 
 
 @dataclass(frozen=True)
@@ -96,15 +97,13 @@ class CampaignSamples:
 @dataclass(frozen=True)
 class BasisChoice:
     """The cross-validated choice of one section: its error per sample, M, the relative penalty, the knots
-    (m/s) and the block statistics G (blocks, p, p), b (blocks, p), yy (blocks,) with the penalty P (p, p)."""
+    (m/s), the block statistics (:class:`vivbench.models.varying_stats.BlockStats`) and the penalty P (p, p)."""
 
     error: float
     n_basis: int
     penalty: float
     knots: np.ndarray
-    G: np.ndarray
-    b: np.ndarray
-    yy: np.ndarray
+    stats: BlockStats
     P: np.ndarray
 
 
@@ -194,6 +193,8 @@ def check_parameters(model) -> None:
     if model.penalty_choice not in PENALTY_CHOICES:
         raise InputError(f"penalty_choice must be one of {', '.join(map(repr, PENALTY_CHOICES))}; "
                          f"got {model.penalty_choice!r}")
+    if not isinstance(model.model_sets, (bool, np.bool_)):
+        raise InputError(f"model_sets must be True or False; got {model.model_sets!r}")
 
 
 def fitted_inputs(model, n_sections: int) -> int:
@@ -279,16 +280,24 @@ def campaign_samples(model, records: list[Record]) -> CampaignSamples:
         wind_se=wind_standard_error(model.wind_input, model.wind_weights_, U_raw))
 
 
-def cv_error(G, b, yy, fold_of_block, K, P, pen, keep) -> np.ndarray:
+def cv_error(stats: BlockStats, fold_of_block, K, P, pen, keep) -> np.ndarray:
     """Summed held-out squared error over the K folds, for every relative penalty ``pen``, shape (L,)."""
-    Gs, bs = G.sum(axis=0), b.sum(axis=0)
-    Gf = np.stack([G[fold_of_block == f].sum(axis=0) for f in range(K)])
-    bf = np.stack([b[fold_of_block == f].sum(axis=0) for f in range(K)])
-    yf = np.array([yy[fold_of_block == f].sum() for f in range(K)])
+    Gf, bf, yf = stats.by(fold_of_block, K)
+    Gs, bs = Gf.sum(axis=0), bf.sum(axis=0)
     return held_out_errors(Gs, bs, Gf, bf, yf, P, pen * penalty_scale(Gs, P), keep).sum(axis=0)
 
 
-def select_orders(G, b, yy, fold_of_block, K, P, lam_rel, M, err_all) -> np.ndarray:
+def section_statistics(model, U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight=None) -> BlockStats:
+    """One equation's block statistics (:func:`vivbench.models.varying_stats.block_statistics`); with
+    ``wind_input="sum"`` those of the tied design (one curve for every section's wind, :func:`tie_stats`)."""
+    if model.wind_input != "sum":
+        return block_statistics(U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight)
+    G, b, yy, cnt = block_stats(U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight)
+    G, b = tie_stats(G, b, model.wind_weights_, n_yaw, knots.size - DEGREE - 1)
+    return BlockStats(n_blocks=n_blocks, p=G.shape[-1], yy=yy, count=cnt, dense=(G, b))
+
+
+def select_orders(stats, fold_of_block, K, P, lam_rel, M, err_all) -> np.ndarray:
     """Backward elimination of orders by the cross-validated error (order 1 always kept), shape (4,) bool."""
     keep = np.ones(4, dtype=bool)
     current = err_all
@@ -298,7 +307,7 @@ def select_orders(G, b, yy, fold_of_block, K, P, lam_rel, M, err_all) -> np.ndar
             if keep[i]:
                 trial = keep.copy()
                 trial[i] = False
-                trials[i] = float(cv_error(G, b, yy, fold_of_block, K, P, np.array([lam_rel]), np.repeat(trial, M))[0])
+                trials[i] = float(cv_error(stats, fold_of_block, K, P, np.array([lam_rel]), np.repeat(trial, M))[0])
         if not trials:
             return keep
         i = min(trials, key=trials.get)
@@ -346,17 +355,16 @@ def select_basis(model, samples: CampaignSamples, k: int, weight: np.ndarray | N
     errors = np.full((n_basis.size, pen.size), np.nan)
     for a, M in enumerate(n_basis):
         knots = uniform_knots(lo, hi, int(M))
-        G, b, yy, _cnt = block_stats(Uk, Ak, y, blk, nb, knots, aref, zk, J, None if weight is None else weight[ok])
-        if model.wind_input == "sum":  # one curve shared by every section's wind
-            G, b = tie_stats(G, b, model.wind_weights_, J, int(M))
+        stats = section_statistics(model, Uk, Ak, y, blk, nb, knots, aref, zk, J,
+                                   None if weight is None else weight[ok])
         # Block-diagonal: the same roughness penalty on every order's, yaw power's and wind input's curve.
         P = np.kron(np.eye(4 * (J + 1) * n_fit), difference_penalty(int(M)))
-        err = cv_error(G, b, yy, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool)) / n
+        err = cv_error(stats, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool)) / n
         errors[a] = err
         j = int(np.argmin(err))
         if best is None or err[j] < best.error:
-            best = BasisChoice(error=float(err[j]), n_basis=int(M), penalty=float(pen[j]), knots=knots, G=G, b=b,
-                               yy=yy, P=P)
+            best = BasisChoice(error=float(err[j]), n_basis=int(M), penalty=float(pen[j]), knots=knots, stats=stats,
+                               P=P)
     return SectionSamples(n=n, n_blocks=nb, y_scale=ys, a_ref=aref, wind_range=(lo, hi), event_of_block=ev_of_block,
                           fold_of_block=fold_of_block, yaw_fallback=yaw_fallback, yaw_ref=yaw_ref, yaw_min=yaw_min,
                           cv_error=errors, best=best)
@@ -377,7 +385,7 @@ def eiv_weight(model, samples: CampaignSamples, k: int, sec: SectionSamples, ste
     ok = valid_samples(model.wind_input, A, U, dA, Z, k)
     idx = np.flatnonzero(ok)
     best = sec.best
-    Gs, bs = best.G.sum(axis=0), best.b.sum(axis=0)
+    Gs, bs, _ = best.stats.total()
     c = as_inputs(model, penalised_solve(Gs, bs, best.P, best.penalty * penalty_scale(Gs, best.P)), J, best.n_basis)
     Uk, Zk = equation_inputs(model.wind_input, U, Z, k)
     zk = None if not J else Zk / sec.yaw_ref
@@ -515,14 +523,10 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
     pen = np.asarray(model.penalties, dtype=float)
     n_in, n_fit = model.n_inputs(samples.n_sections), fitted_inputs(model, samples.n_sections)
     best = sec.best
-    M, lam_rel, G, b, yy, P = best.n_basis, best.penalty, best.G, best.b, best.yy, best.P
-    Gs, bs = G.sum(axis=0), b.sum(axis=0)
+    M, lam_rel, stats, P = best.n_basis, best.penalty, best.stats, best.P
     # Per-event statistics: leave-one-event-out fits of the penalty choice and of the confidence sets.
-    ev_b = np.zeros((n_ev, G.shape[1], G.shape[1]))
-    np.add.at(ev_b, sec.event_of_block, G)
-    eb = np.zeros((n_ev, G.shape[1]))
-    np.add.at(eb, sec.event_of_block, b)
-    ey = np.bincount(sec.event_of_block, weights=yy, minlength=n_ev)
+    ev_b, eb, ey = stats.by(sec.event_of_block, n_ev)
+    Gs, bs = ev_b.sum(axis=0), eb.sum(axis=0)
     has = np.bincount(sec.event_of_block, minlength=n_ev) > 0
     lams = pen * penalty_scale(Gs, P)
     level, test = model.model_set_level, model.model_set_test
@@ -536,13 +540,13 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
             lam_rel = float(pen[confidence_set(loss, level, test)].min())
     keep_orders = np.ones(4, dtype=bool)
     if model.select_orders:
-        keep_orders = select_orders(G, b, yy, sec.fold_of_block, samples.n_folds, P, lam_rel, (J + 1) * n_fit * M,
+        keep_orders = select_orders(stats, sec.fold_of_block, samples.n_folds, P, lam_rel, (J + 1) * n_fit * M,
                                     best.error * sec.n)
     keep = np.repeat(keep_orders, (J + 1) * n_fit * M)
     lam = lam_rel * penalty_scale(Gs, P)
     c = penalised_solve(Gs, bs, P, lam, keep)
     ys = sec.y_scale
-    rss = float(quadratic_error(c, Gs, bs, yy.sum())) * ys**2
+    rss = float(quadratic_error(c, Gs, bs, ey.sum())) * ys**2
     idx = np.flatnonzero(keep)
     H = np.linalg.solve(Gs[idx[:, None], idx] + lam * P[idx[:, None], idx] + 1e-10 * np.eye(idx.size)
                         * np.trace(Gs[idx[:, None], idx]) / idx.size, Gs[idx[:, None], idx])
@@ -560,24 +564,30 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
         # Block multiplicities; the resampled statistics are weighted sums of the blocks'.
         nb = sec.n_blocks
         mult = block_counts(nb, n_boot, rng).astype(float)
-        boot = physical(penalised_solve(np.einsum("rb,bpq->rpq", mult, G), mult @ b, P, lam, keep))
+        Gb, bb, _ = stats.sums(mult)
+        boot = physical(penalised_solve(Gb, bb, P, lam, keep))
     # The confidence set of order subsets (leave-one-event-out prediction).
+    sets = bool(getattr(model, "model_sets", True))
     loeo = np.full((ORDER_SUBSETS.shape[0], n_ev), np.nan)
     subset = np.zeros((ORDER_SUBSETS.shape[0], L, 4, J + 1))
     for a, orders in enumerate(ORDER_SUBSETS):
         keep_a = np.repeat(orders, (J + 1) * n_fit * M)
-        loeo[a, has] = held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, [lam], keep_a)[:, 0]
+        if sets:
+            loeo[a, has] = held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, [lam], keep_a)[:, 0]
         subset[a] = physical(penalised_solve(Gs, bs, P, lam, keep_a))
     # The confidence set of penalties (same basis and orders): a penalty's bias is shared by every
     # bootstrap replicate, so the verdict also needs the fits at every penalty whose
     # leave-one-event-out error is not significantly above the best one's to agree.
-    loss = (loss_all if loss_all is not None and keep.all()
-            else held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, lams, keep).T)
+    subset_plausible, penalty_plausible = np.zeros(ORDER_SUBSETS.shape[0], dtype=bool), np.zeros(pen.size, dtype=bool)
+    if sets:
+        loss = (loss_all if loss_all is not None and keep.all()
+                else held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, lams, keep).T)
+        subset_plausible = confidence_set(loeo[:, has], level, test)
+        penalty_plausible = confidence_set(loss, level, test)
     return SectionFit(coef=physical(c), bootstrap=boot, subset_coef=subset,
                       penalty_coef=physical(penalised_solve(Gs, bs, P, lams, keep)), penalty=lam_rel,
                       penalty_cv=best.penalty, orders=keep_orders, edf=float(np.trace(H)), rss=rss,
-                      subset_loeo=loeo, subset_plausible=confidence_set(loeo[:, has], level, test),
-                      penalty_plausible=confidence_set(loss, level, test))
+                      subset_loeo=loeo, subset_plausible=subset_plausible, penalty_plausible=penalty_plausible)
 
 
 def fitted_arrays(model, samples: CampaignSamples, secs: list[SectionSamples]) -> dict:
@@ -643,10 +653,10 @@ def event_statistics(model, records: list[Record]) -> list[dict]:
         ok = valid_samples(model.wind_input, A, U, dA, Z if J else None, k)
         Uk, Zk = equation_inputs(model.wind_input, U, Z, k)
         zk = None if not J else Zk[ok] / model.yaw_ref_[k]
-        G, b, yy, cnt = block_stats(Uk[ok], A[ok, k], dA[ok, k] / model.y_scale_[k], event[ok], E, knots,
-                                    model.a_ref_[k], zk, J)
-        if model.wind_input == "sum":
-            G, b = tie_stats(G, b, model.wind_weights_, J, M)
+        stats = section_statistics(model, Uk[ok], A[ok, k], dA[ok, k] / model.y_scale_[k], event[ok], E, knots,
+                                   model.a_ref_[k], zk, J)
+        G, b, yy = stats.sums(np.eye(E))
+        cnt = stats.count
         out.append({"G": G, "b": b, "yy": yy, "n": cnt,
                     "P": np.kron(np.eye(4 * (J + 1) * n_in), difference_penalty(M)),
                     "penalty": float(model.penalty_[k]), "keep": np.repeat(model.orders_[k], (J + 1) * n_in * M),

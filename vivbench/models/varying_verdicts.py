@@ -32,6 +32,7 @@ import json
 
 import numpy as np
 
+from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
 from vivbench.library.splines import DEGREE
@@ -236,6 +237,9 @@ def varying_window_verdicts(model: VaryingCoefficientSINDy, record: Record, wind
     once per record (:func:`window_grams`); they equal the direct evaluation
     of the order contributions at every sample up to rounding.
     """
+    if not getattr(model, "model_sets", True):
+        raise InputError("this varying-coefficient model was fitted with model_sets=False (to predict only): "
+                         "it gives no window verdict; refit it with model_sets=True")
     theta_sets = [model.stacked_coefficients()[None],
                   model.stacked_coefficients(model.coef_bootstrap_, model.coef_yaw_bootstrap_),
                   model.stacked_coefficients(model.subset_coef_, model.subset_coef_yaw_)]

@@ -131,9 +131,18 @@ def held_out_errors(G_total: np.ndarray, b_total: np.ndarray, G: np.ndarray, b: 
     -------
     ndarray, shape (E, L)
     """
-    held = penalised_solve(G_total[None, None] - G[:, None], b_total[None, None] - b[:, None], P,
-                           np.asarray(lam, dtype=float), keep)  # (E, L, p)
-    return quadratic_error(held, G[:, None], b[:, None], np.asarray(yy, dtype=float)[:, None])
+    lam = np.asarray(lam, dtype=float).reshape(-1)
+    G, b, yy = np.asarray(G, dtype=float), np.asarray(b, dtype=float), np.asarray(yy, dtype=float)
+    G_total, b_total = np.asarray(G_total, dtype=float), np.asarray(b_total, dtype=float)
+    if keep is not None:  # the kept columns only: the others' coefficients are zero
+        idx = np.flatnonzero(keep)
+        G_total, b_total, P = G_total[idx[:, None], idx], b_total[idx], np.asarray(P)[idx[:, None], idx]
+        G, b = G[:, idx[:, None], idx], b[:, idx]
+    G_fit, b_fit = G_total[None] - G, b_total[None] - b  # (E, q, q), (E, q): each group's fit without it
+    out = np.empty((G.shape[0], lam.size))
+    for j, lam_j in enumerate(lam):  # the penalties (a few): each a batch of E solves of q x q
+        out[:, j] = quadratic_error(penalised_solve(G_fit, b_fit, P, lam_j), G, b, yy)
+    return out
 
 
 def spd_solve(H: np.ndarray, b: np.ndarray) -> np.ndarray:

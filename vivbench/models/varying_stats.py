@@ -1,0 +1,175 @@
+"""Block statistics of the varying-coefficient design, summed over any weighting of the blocks.
+
+A section's fit needs the sufficient statistics (X^T X, X^T y, y^T y) of its design
+(:mod:`vivbench.models.varying_design`) summed over different sets of its time blocks:
+the cross-validation folds, the events (leave-one-event-out), the bootstrap's block
+multiplicities. :class:`BlockStats` holds them once and gives every such sum,
+``sums(weights)`` with ``weights`` (R, n_blocks).
+
+With one wind input (``wind_input`` "mean" or "section") they are held as moments: an
+entry of a block's X^T X is sum A^(i + i') z^(j + j') B_a(U) B_a'(U) over its samples,
+so the samples of a block in one knot interval (a group) need only the moments
+sum A^p z^q B_a B_a' (p <= 6, q <= 2 J; a, a' over the interval's DEGREE + 1 B-splines)
+and sum A^p z^q y B_a: a few hundred numbers per group instead of the blocks' p x p
+Grams, and one small product over its samples instead of their Q x Q one. A sum over
+blocks is a weighted sum of the groups' moments, spread into the p x p layout once
+per knot interval. Otherwise (several wind inputs) the blocks' Grams are kept as
+:func:`~vivbench.models.varying_design.block_stats` gives them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vivbench.library.splines import DEGREE, first_index, uniform_cubic_local_t
+from vivbench.models.varying_design import block_stats
+
+__all__ = ["BlockStats", "block_statistics", "one_hot"]
+
+#: Powers of the scaled amplitude in the moments of X^T X: orders i + i' of 0..3 each.
+_A_POWERS = 7
+
+#: The pairs a <= a' of an interval's B-splines (B_a B_a' is symmetric), and each (a, a')'s pair.
+_PAIRS = np.array([(a, b) for a in range(DEGREE + 1) for b in range(a, DEGREE + 1)])
+_PAIR_OF = np.zeros((DEGREE + 1, DEGREE + 1), dtype=np.intp)
+_PAIR_OF[_PAIRS[:, 0], _PAIRS[:, 1]] = _PAIR_OF[_PAIRS[:, 1], _PAIRS[:, 0]] = np.arange(len(_PAIRS))
+
+
+def one_hot(labels: np.ndarray, n: int) -> np.ndarray:
+    """Weights (n, len(labels)) that sum the blocks by label (0..n-1): ``sums(one_hot(fold_of_block, K))``."""
+    labels = np.asarray(labels)
+    return (labels[None, :] == np.arange(n)[:, None]).astype(float)
+
+
+def _powers(x: np.ndarray, top: int) -> np.ndarray:
+    """x^0 .. x^top by repeated products, shape (top + 1, n)."""
+    out = np.empty((top + 1, x.size))
+    out[0] = 1.0
+    for q in range(1, top + 1):  # a few powers
+        np.multiply(out[q - 1], x, out=out[q])
+    return out
+
+
+class BlockStats:
+    """Per-block sufficient statistics of one equation's design, summed over weighted blocks on demand.
+
+    Built by :func:`block_statistics`. ``n_blocks`` blocks, ``p`` columns; ``count`` (n_blocks,)
+    the samples per block.
+    """
+
+    def __init__(self, *, n_blocks: int, p: int, yy: np.ndarray, count: np.ndarray, dense=None, moments=None):
+        self.n_blocks, self.p = int(n_blocks), int(p)
+        self.yy, self.count = np.asarray(yy, dtype=float), np.asarray(count)
+        self._dense, self._moments = dense, moments
+
+    def sums(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The statistics of weighted sums of the blocks.
+
+        Parameters
+        ----------
+        weights : ndarray, shape (R, n_blocks)
+
+        Returns
+        -------
+        G : ndarray, shape (R, p, p); b : ndarray, shape (R, p); yy : ndarray, shape (R,)
+        """
+        W = np.asarray(weights, dtype=float).reshape(-1, self.n_blocks)
+        yy = W @ self.yy
+        if self._dense is not None:
+            G, b = self._dense
+            return (W @ G.reshape(self.n_blocks, -1)).reshape(-1, self.p, self.p), W @ b, yy
+        return (*self._spread(W), yy)
+
+    def by(self, labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The statistics summed over the blocks of each label 0..n-1 (e.g. each fold's or event's),
+        shapes as :meth:`sums`."""
+        return self.sums(one_hot(labels, n))
+
+    def total(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """The statistics of every block: G (p, p), b (p,), yy."""
+        G, b, yy = self.sums(np.ones((1, self.n_blocks)))
+        return G[0], b[0], float(yy[0])
+
+    def _spread(self, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted sums of the groups' moments, spread into the (i, j, m) layout, knot interval by interval."""
+        mom, gblock, gint, n_yaw, M = self._moments
+        IJ, nb4, n_q = 4 * (n_yaw + 1), DEGREE + 1, 2 * n_yaw + 1
+        R = W.shape[0]
+        # entry ((i, j, a), (i', j', a')) of a group's Gram is its moment (i + i', j + j', a, a')
+        ii, jj = np.divmod(np.arange(IJ), n_yaw + 1)
+        pq = (ii[:, None] + ii[None, :]) * n_q + jj[:, None] + jj[None, :]  # (IJ, IJ)
+        n_pairs = len(_PAIRS)
+        G = np.zeros((R, IJ, M, IJ, M))
+        b = np.zeros((R, IJ, M))
+        Wg = W[:, gblock]  # (R, groups)
+        for f in range(M - DEGREE):  # the knot intervals, not the samples or groups
+            g = np.flatnonzero(gint == f)
+            if not g.size:
+                continue
+            m = (Wg[:, g] @ mom[g].reshape(g.size, -1)).reshape(R, -1, n_pairs + nb4)
+            G[:, :, f:f + nb4, :, f:f + nb4] += m[:, pq[:, None, :, None], _PAIR_OF[None, :, None, :]]
+            b[:, :, f:f + nb4] += m[:, ii * n_q + jj, n_pairs:]
+        p = IJ * M
+        return G.reshape(R, p, p), b.reshape(R, p)
+
+
+def block_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
+                     knots: np.ndarray, a_ref: float, z: np.ndarray | None = None, n_yaw: int = 0,
+                     weight: np.ndarray | None = None, chunk: int = 16_384) -> BlockStats:
+    """The statistics of :func:`~vivbench.models.varying_design.block_stats` as a :class:`BlockStats`.
+
+    Parameters
+    ----------
+    U : ndarray, shape (n,) or (n, n_in), m/s (finite)
+    A : ndarray, shape (n,), m; y : ndarray, shape (n,) (the standardised target)
+    block : ndarray of int, shape (n,), 0..n_blocks-1
+    knots : ndarray, shape (M + DEGREE + 1,), uniform (:func:`vivbench.library.splines.uniform_knots`)
+    a_ref : float, m; z : ndarray like U or None (the scaled yaw covariate); n_yaw : int
+    weight : ndarray, shape (n,), optional (weighted least squares)
+    chunk : int
+        Samples handled at once (memory).
+    """
+    U2 = np.asarray(U, dtype=float).reshape(np.shape(U)[0], -1)
+    n, n_in = U2.shape
+    M = knots.size - DEGREE - 1
+    if n_in > 1:
+        G, b, yy, cnt = block_stats(U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight, chunk)
+        return BlockStats(n_blocks=n_blocks, p=G.shape[-1], yy=yy, count=cnt, dense=(G, b))
+    u = U2[:, 0]
+    block = np.asarray(block, dtype=np.int64)
+    zz = None if z is None else np.asarray(z, dtype=float).reshape(n)
+    w = None if weight is None else np.asarray(weight, dtype=float)
+    yw2 = y**2 if w is None else y**2 * w
+    yy = np.bincount(block, weights=yw2, minlength=n_blocks)
+    cnt = np.bincount(block, minlength=n_blocks)
+    n_int = M - DEGREE
+    key = block * n_int + first_index(u, knots)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    ends = np.r_[starts[1:], n]
+    n_pq, nb4, n_pairs = _A_POWERS * (2 * n_yaw + 1), DEGREE + 1, len(_PAIRS)
+    # per group: sum A^p z^q B_a B_a' (a <= a'), then sum A^p z^q y B_a
+    mom = np.empty((starts.size, n_pq, n_pairs + nb4))
+    a = np.asarray(A, dtype=float) / a_ref
+    g0 = 0
+    while g0 < starts.size:  # chunks of whole groups
+        g1 = max(int(np.searchsorted(starts, starts[g0] + chunk, side="right")), g0 + 1)
+        sel = order[starts[g0]:ends[g1 - 1]]
+        _first, B = uniform_cubic_local_t(u[sel], knots)  # (4, m)
+        P = _powers(a[sel], _A_POWERS - 1)
+        if n_yaw:
+            P = (P[:, None, :] * _powers(zz[sel], 2 * n_yaw)[None, :, :]).reshape(n_pq, sel.size)
+        F = np.empty((n_pairs + nb4, sel.size))
+        np.multiply(B[_PAIRS[:, 0]], B[_PAIRS[:, 1]], out=F[:n_pairs])
+        np.multiply(B, y[sel], out=F[n_pairs:])
+        if w is not None:
+            F *= w[sel]
+        off = starts[g0]
+        for g in range(g0, g1):  # one small product per group (a few per block), not per sample
+            r = slice(starts[g] - off, ends[g] - off)
+            mom[g] = P[:, r] @ F[:, r].T
+        g0 = g1
+    gblock, gint = np.divmod(ks[starts], n_int)
+    return BlockStats(n_blocks=n_blocks, p=4 * (n_yaw + 1) * M, yy=yy, count=cnt,
+                      moments=(mom, gblock, gint, n_yaw, M))
