@@ -169,7 +169,7 @@ def test_summary_counts_wins_choices_and_change_alarms():
         return base
 
     rows = [row(0, "a", 0.1, chosen="yaw0-cv", change_p_value=0.5, yaw_effect="gaussian", yaw_course="shared",
-                yaw_factor_range=0.5),  # the yaw matters, and is not chosen
+                yaw_factor_range=0.5, confidence_set="yaw0-cv;yaw1-least"),  # the yaw matters, is not chosen, in the set
             row(0, "b", 0.2),
             row(1, "a", 0.3, chosen="yaw1-least", change_p_value=0.01, change_detected=1, change_index=1,
                 yaw_effect="gaussian", yaw_course="per_event", yaw_factor_range=0.19),  # chosen where it barely matters
@@ -183,16 +183,16 @@ def test_summary_counts_wins_choices_and_change_alarms():
     a = summary["methods"]["a"]
     assert a["yaw_present"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 1, "per_event_yaw_chosen": 1,
                                            "shared_draws": 1, "shared_yaw_chosen": 0, "matters_draws": 1,
-                                           "matters_yaw_chosen": 0}
+                                           "matters_yaw_chosen": 0, "matters_yaw_in_set": 1}
     assert a["yaw_absent"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 0, "per_event_yaw_chosen": 0,
                                           "shared_draws": 0, "shared_yaw_chosen": 0, "matters_draws": 0,
-                                          "matters_yaw_chosen": 0}
+                                          "matters_yaw_chosen": 0, "matters_yaw_in_set": 0}
     assert a["all"]["changes"] == {"draws_without_change": 2, "false_alarms": 1, "draws_with_step": 2,
                                    "detected": 1, "located_within_one_event": 1}
     assert summary["methods"]["b"]["all"]["changes"]["draws_without_change"] == 0  # never scanned
     page = study_markdown(summary)
     assert "| a vs b | 2 | 1 | 0.500 |" in page and "## Changes the wind does not carry" in page
-    assert "| 1, 1 | 1, 0 | 1, 0 |" in page  # per-event, shared, and where the yaw matters
+    assert "| 1, 1 | 1, 0 | 1, 0, 1 |" in page  # per-event, shared, and where the yaw matters
 
 
 def test_summary_splits_the_draws_by_what_their_own_evidence_let_the_verdict_do():

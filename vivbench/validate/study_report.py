@@ -109,6 +109,9 @@ def _choices(rows: Sequence[dict]) -> dict[str, Any]:
     matters = [r for r in chosen if _number(r.get("yaw_factor_range")) >= YAW_MATTERS]
     out["matters_draws"] = len(matters)
     out["matters_yaw_chosen"] = sum(1 for r in matters if not str(r["chosen"]).startswith("yaw0"))
+    # ... and where a yaw model is at least in the confidence set (not significantly worse than the best)
+    out["matters_yaw_in_set"] = sum(1 for r in matters if any(
+        m.startswith("yaw") and not m.startswith("yaw0") for m in str(r.get("confidence_set") or "").split(";")))
     return out
 
 
@@ -353,9 +356,11 @@ def study_markdown(summary: dict[str, Any]) -> str:
               "and by the yaw's course: varying between events (per event), or the same course in every event "
               "(shared), where the yaw is confounded with the time within an event and cannot be told from it; "
               f"and on the draws where the yaw matters: the truth's factor on Y1 ranges by {YAW_MATTERS:g} or more "
-              "over the campaign's measured yaws (5th to 95th percentile).", "",
+              "over the campaign's measured yaws (5th to 95th percentile); there also the draws whose confidence "
+              "set holds a yaw model (the evidence does not exclude it).", "",
               "| method | draws | draws with a choice | yaw chosen | per-event course: draws, yaw chosen "
-              "| shared course: draws, yaw chosen | yaw matters: draws, yaw chosen |", "|---|---|---|---|---|---|---|"]
+              "| shared course: draws, yaw chosen | yaw matters: draws, yaw chosen, yaw in the set |",
+              "|---|---|---|---|---|---|---|"]
     for name, blocks in summary["methods"].items():
         for subset, block in blocks.items():
             c = block["choices"]
@@ -363,7 +368,8 @@ def study_markdown(summary: dict[str, Any]) -> str:
                 lines.append(f"| {name} | {_subset(subset, block)} | {c['draws']} | {c['yaw_chosen']} "
                              f"| {c.get('per_event_draws', 0)}, {c.get('per_event_yaw_chosen', 0)} "
                              f"| {c.get('shared_draws', 0)}, {c.get('shared_yaw_chosen', 0)} "
-                             f"| {c.get('matters_draws', 0)}, {c.get('matters_yaw_chosen', 0)} |")
+                             f"| {c.get('matters_draws', 0)}, {c.get('matters_yaw_chosen', 0)}, "
+                             f"{c.get('matters_yaw_in_set', 0)} |")
     lines += ["", "## Changes the wind does not carry", "",
               "The model's change scan (refits before and after every split of the events, permutation p-value "
               "below 0.05): alarms on draws without a change, and damping steps detected and located within one "
