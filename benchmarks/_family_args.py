@@ -18,3 +18,94 @@ def family_parser(description: str, *, draws_help: str = "N, N-M or a comma-sepa
     parser.add_argument("--max-duration", type=float, default=max_duration, metavar="MINUTES")
     parser.add_argument("--workers", type=int, default=1)
     return parser
+
+
+def run_draws(study: str, function: str, args: argparse.Namespace) -> tuple[list[int], list[dict], list[dict]]:
+    """Run ``benchmarks.<study>.<function>(task)`` for every draw of ``args`` (a :func:`family_parser` namespace)
+    on ``args.workers`` local processes.
+
+    Each task is a dict with ``split``, ``draw``, ``out`` (the study directory), ``max_events`` and
+    ``max_duration_s``. Returns the draws, the rows of the draws that ran (sorted by draw) and the failed
+    draws with the first line of their error.
+    """
+    import importlib
+    import sys
+
+    from vivbench.core.parallel import run_tasks
+    from vivbench.validate.study import parse_draws
+
+    # The tasks' function must be importable by the worker processes: a module of the package ``benchmarks``
+    # (the repository's root on the path).
+    root = str(Path(__file__).resolve().parent.parent)
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    task_function = getattr(importlib.import_module(f"benchmarks.{study}"), function)
+    draws = list(parse_draws(args.draws))
+    tasks = [{"split": args.split, "draw": d, "out": str(args.out.resolve()), "max_events": args.max_events,
+              "max_duration_s": args.max_duration * 60.0} for d in draws]
+    rows, failed = [], []
+    for outcome in run_tasks(task_function, tasks, workers=args.workers):
+        if outcome.error is not None:
+            failed.append({"draw": draws[outcome.index], "error": str(outcome.error).splitlines()[0]})
+        else:
+            rows.append(outcome.value)
+    rows.sort(key=lambda r: r["draw"])
+    return draws, rows, failed
+
+
+def draw_dir(task: dict) -> Path:
+    """The draw's directory of the study, ``<out>/dNNN``: its campaign, identification and ``row.json``."""
+    return Path(task["out"]) / f"d{task['draw']:03d}"
+
+
+def stored_row(task: dict) -> dict | None:
+    """The draw's scores from an earlier run of the study (its ``row.json``), or None."""
+    import json
+
+    done = draw_dir(task) / "row.json"
+    return json.loads(done.read_text(encoding="utf-8")) if done.exists() else None
+
+
+def store_row(task: dict, row: dict) -> dict:
+    """Write the draw's scores (``row.json``, atomically) and return them."""
+    import json
+
+    from vivbench.io.netcdf import atomic_path
+
+    root = draw_dir(task)
+    root.mkdir(parents=True, exist_ok=True)
+    with atomic_path(root / "row.json") as tmp:
+        Path(tmp).write_text(json.dumps(row, default=float), encoding="utf-8")
+    return row
+
+
+def capped_draw(task: dict) -> tuple[list, list, list]:
+    """The draw's campaign generated with the task's caps and identified (in :func:`draw_dir`): the records,
+    truths and windows to score a model on (:func:`vivbench.validate.methods.scoring_inputs`)."""
+    from vivbench.analysis.identify import IdentifyConfig, identify_files
+    from vivbench.synth.family import generate_family_campaign
+    from vivbench.validate.methods import scoring_inputs
+
+    root = draw_dir(task)
+    made, _ = generate_family_campaign(task["split"], task["draw"], root / "campaign", max_events=task["max_events"],
+                                       max_duration=task["max_duration_s"])
+    identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
+    results = sorted((root / "identify").glob("*.identify.nc"))
+    ids = {p.name.removesuffix(".identify.nc") for p in results}
+    events = sorted(f for f in (root / "campaign").glob("*.nc") if f.stem in ids)
+    return scoring_inputs(events, results)
+
+
+def verdict_counts(model, records, truth_regimes, windows) -> tuple[int, int, float]:
+    """A fitted selection's flagged window-equations over the records, how many carry the truth's regime
+    (``truth_regimes``: one (W, S) array per record) and the coverage (flagged over those where both have a regime)."""
+    import math
+
+    flagged = right = scored = 0
+    for rec, tru, (s, e) in zip(records, truth_regimes, windows):
+        flag = model.identifiable(rec, s, e)
+        regime = model.window_regimes(rec, s, e)
+        flagged += int(flag.sum())
+        right += int((flag & (regime == tru)).sum())
+        scored += int(((regime > 0) & (tru > 0)).sum())
+    return flagged, right, flagged / scored if scored else math.nan

@@ -32,10 +32,7 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import json  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -51,24 +48,16 @@ def _label(value) -> str:
 
 def score_draw(task: dict) -> dict:
     """One draw: generate (capped), identify, fit the selection once, score the verdict at every value."""
-    from vivbench.analysis.identify import IdentifyConfig, identify_files
     from vivbench.analysis.selection import varying_selection
-    from vivbench.io.netcdf import atomic_path
     from vivbench.regimes.truth import truth_window_regimes
-    from vivbench.synth.family import draw_bridge, generate_family_campaign
-    from vivbench.validate.methods import scoring_inputs
+    from vivbench.synth.family import draw_bridge
 
-    root = Path(task["out"]) / f"d{task['draw']:03d}"
-    done = root / "row.json"
-    if done.exists():
-        return json.loads(done.read_text(encoding="utf-8"))
-    made, _ = generate_family_campaign(task["split"], task["draw"], root / "campaign", max_events=task["max_events"],
-                                       max_duration=task["max_duration_s"])
-    results = identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
-    results = sorted((root / "identify").glob("*.identify.nc"))
-    ids = {p.name.removesuffix(".identify.nc") for p in results}
-    events = sorted(f for f in (root / "campaign").glob("*.nc") if f.stem in ids)
-    records, truths, windows = scoring_inputs(events, results)
+    from benchmarks._family_args import capped_draw, store_row, stored_row, verdict_counts
+
+    done = stored_row(task)
+    if done is not None:
+        return done
+    records, truths, windows = capped_draw(task)
     sel = varying_selection(seed=0, workers=1).fit(records)
     labels = draw_bridge(task["split"], task["draw"]).labels
     row = {"draw": task["draw"], "n_events": len(records), "chosen": sel.chosen_,
@@ -79,20 +68,11 @@ def score_draw(task: dict) -> dict:
     truth_regimes = [truth_window_regimes(t, s, e, tau=sel.tau).astype(int) for t, (s, e) in zip(truths, windows)]
     for value in VALUES:
         sel.min_time_constants = value
-        flagged = right = scored = 0
-        for rec, tru, (s, e) in zip(records, truth_regimes, windows):
-            flag = sel.identifiable(rec, s, e)
-            regime = sel.window_regimes(rec, s, e)
-            flagged += int(flag.sum())
-            right += int((flag & (regime == tru)).sum())
-            scored += int(((regime > 0) & (tru > 0)).sum())
+        flagged, right, coverage = verdict_counts(sel, records, truth_regimes, windows)
         row[f"flags_{_label(value)}"] = flagged
         row[f"right_{_label(value)}"] = right
-        row[f"coverage_{_label(value)}"] = flagged / scored if scored else math.nan
-    root.mkdir(parents=True, exist_ok=True)
-    with atomic_path(done) as tmp:
-        Path(tmp).write_text(json.dumps(row, default=float), encoding="utf-8")
-    return row
+        row[f"coverage_{_label(value)}"] = coverage
+    return store_row(task, row)
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -131,29 +111,10 @@ def findings(summary: list[dict], rows: list[dict]) -> list[str]:
 
 
 def main(argv=None) -> dict:
-    from vivbench.core.parallel import run_tasks
-    from vivbench.validate.study import parse_draws
-
-    from _family_args import family_parser
+    from _family_args import family_parser, run_draws
 
     args = family_parser(__doc__.splitlines()[0], max_events=6, max_duration=20.0).parse_args(argv)
-    # The tasks' function must be importable by the worker processes: this file as a module of the package
-    # ``benchmarks`` (the repository's root on the path).
-    root = str(Path(__file__).resolve().parent.parent)
-    if root not in sys.path:
-        sys.path.insert(0, root)
-    from benchmarks.study_short_events import score_draw as task_function
-
-    draws = list(parse_draws(args.draws))
-    tasks = [{"split": args.split, "draw": d, "out": str(args.out.resolve()), "max_events": args.max_events,
-              "max_duration_s": args.max_duration * 60.0} for d in draws]
-    rows, failed = [], []
-    for outcome in run_tasks(task_function, tasks, workers=args.workers):
-        if outcome.error is not None:
-            failed.append({"draw": draws[outcome.index], "error": str(outcome.error).splitlines()[0]})
-        else:
-            rows.append(outcome.value)
-    rows.sort(key=lambda r: r["draw"])
+    draws, rows, failed = run_draws("study_short_events", "score_draw", args)
     summary = summarise(rows)
     return {"findings": findings(summary, rows), "split": args.split, "draws": draws,
             "max_events": args.max_events, "max_duration_min": args.max_duration,

@@ -40,8 +40,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import json  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -59,24 +57,16 @@ MIN_FLAGS, PROMISE = 20, 0.95
 
 def score_draw(task: dict) -> dict:
     """One draw: generate (capped), identify, fit every variant's selection and score it against the truth."""
-    from vivbench.analysis.identify import IdentifyConfig, identify_files
     from vivbench.analysis.selection import varying_selection
-    from vivbench.io.netcdf import atomic_path
     from vivbench.regimes.truth import truth_window_regimes
-    from vivbench.synth.family import generate_family_campaign
-    from vivbench.validate.methods import SelectedVerdictModel, score_fitted, scoring_inputs
+    from vivbench.validate.methods import SelectedVerdictModel, score_fitted
 
-    root = Path(task["out"]) / f"d{task['draw']:03d}"
-    done = root / "row.json"
-    if done.exists():
-        return json.loads(done.read_text(encoding="utf-8"))
-    made, _ = generate_family_campaign(task["split"], task["draw"], root / "campaign", max_events=task["max_events"],
-                                       max_duration=task["max_duration_s"])
-    identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
-    results = sorted((root / "identify").glob("*.identify.nc"))
-    ids = {p.name.removesuffix(".identify.nc") for p in results}
-    events = sorted(f for f in (root / "campaign").glob("*.nc") if f.stem in ids)
-    records, truths, windows = scoring_inputs(events, results)
+    from benchmarks._family_args import capped_draw, store_row, stored_row, verdict_counts
+
+    done = stored_row(task)
+    if done is not None:
+        return done
+    records, truths, windows = capped_draw(task)
     row = {"draw": task["draw"], "n_events": len(records)}
     truth_regimes = None
     for name, params in VARIANTS.items():
@@ -84,21 +74,12 @@ def score_draw(task: dict) -> dict:
         if truth_regimes is None:
             truth_regimes = [truth_window_regimes(t, s, e, tau=sel.tau).astype(int)
                              for t, (s, e) in zip(truths, windows)]
-        flagged = right = scored = 0
-        for rec, tru, (s, e) in zip(records, truth_regimes, windows):
-            flag = sel.identifiable(rec, s, e)
-            regime = sel.window_regimes(rec, s, e)
-            flagged += int(flag.sum())
-            right += int((flag & (regime == tru)).sum())
-            scored += int(((regime > 0) & (tru > 0)).sum())
+        flagged, right, coverage = verdict_counts(sel, records, truth_regimes, windows)
         scores = score_fitted(SelectedVerdictModel(sel), records, truths, windows=windows, simulate=False)
         row.update({f"chosen_{name}": sel.chosen_, f"flags_{name}": flagged, f"right_{name}": right,
-                    f"coverage_{name}": flagged / scored if scored else math.nan,
+                    f"coverage_{name}": coverage,
                     f"error_{name}": float(scores["rhs_error_true_AU_energy"])})
-    root.mkdir(parents=True, exist_ok=True)
-    with atomic_path(done) as tmp:
-        Path(tmp).write_text(json.dumps(row, default=float), encoding="utf-8")
-    return row
+    return store_row(task, row)
 
 
 def _kept(row: dict, name: str):
@@ -148,29 +129,10 @@ def findings(summary: list[dict]) -> list[str]:
 
 
 def main(argv=None) -> dict:
-    from vivbench.core.parallel import run_tasks
-    from vivbench.validate.study import parse_draws
-
-    from _family_args import family_parser
+    from _family_args import family_parser, run_draws
 
     args = family_parser(__doc__.splitlines()[0], max_events=6, max_duration=20.0).parse_args(argv)
-    # The tasks' function must be importable by the worker processes: this file as a module of the package
-    # ``benchmarks`` (the repository's root on the path).
-    root = str(Path(__file__).resolve().parent.parent)
-    if root not in sys.path:
-        sys.path.insert(0, root)
-    from benchmarks.study_verdict_rules import score_draw as task_function
-
-    draws = list(parse_draws(args.draws))
-    tasks = [{"split": args.split, "draw": d, "out": str(args.out.resolve()), "max_events": args.max_events,
-              "max_duration_s": args.max_duration * 60.0} for d in draws]
-    rows, failed = [], []
-    for outcome in run_tasks(task_function, tasks, workers=args.workers):
-        if outcome.error is not None:
-            failed.append({"draw": draws[outcome.index], "error": str(outcome.error).splitlines()[0]})
-        else:
-            rows.append(outcome.value)
-    rows.sort(key=lambda r: r["draw"])
+    draws, rows, failed = run_draws("study_verdict_rules", "score_draw", args)
     summary = summarise(rows)
     return {"findings": findings(summary), "split": args.split, "draws": draws,
             "max_events": args.max_events, "max_duration_min": args.max_duration,

@@ -8,26 +8,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.helpers import assert_close
+from tests.models.test_varying_design import _design_inputs
 from vivbench.library.splines import bspline_local_t, uniform_cubic_local_t, uniform_knots
 from vivbench.models.varying_design import spline_design
 from vivbench.models.varying_stats import block_statistics, one_hot
 
 
-def _inputs(n=5000, n_in=1, seed=0):
-    rng = np.random.default_rng(seed)
-    knots = uniform_knots(4.0, 12.0, 9)
-    U = np.clip(8.0 + np.cumsum(rng.normal(0.0, 0.08, (n, n_in)), axis=0), 3.0, 13.0)
-    U[rng.random(n) < 0.02, 0] = 12.0  # the right end: the last interval
-    A = rng.uniform(0.0, 0.3, n)
-    z = rng.uniform(0.0, 2.0, (n, n_in))
-    y = rng.normal(size=n)
-    block = np.sort(rng.integers(0, 9, n))
-    return knots, U if n_in > 1 else U[:, 0], A, z if n_in > 1 else z[:, 0], y, block
+def _inputs(n_in):
+    """The inputs of the dense design's test, one column per wind input (one: 1-D)."""
+    knots, U, A, z, y, block = _design_inputs(n=5000, n_in=n_in)
+    return (knots, U, A, z, y, block) if n_in > 1 else (knots, U[:, 0], A, z[:, 0], y, block)
 
 
 @pytest.mark.parametrize("n_in,J,weighted", [(1, 0, False), (1, 1, True), (1, 2, False), (1, 2, True), (3, 1, True)])
 def test_weighted_sums_of_blocks_equal_the_dense_design(n_in, J, weighted):
-    knots, U, A, z, y, block = _inputs(n_in=n_in)
+    knots, U, A, z, y, block = _inputs(n_in)
     w = np.random.default_rng(1).uniform(0.5, 2.0, y.size) if weighted else None
     n_blocks = 10  # block 9 holds no sample: zero statistics
     stats = block_statistics(U, A, y, block, n_blocks, knots, 0.1, z if J else None, J, w, chunk=700)
