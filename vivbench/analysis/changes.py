@@ -71,6 +71,7 @@ from scipy.special import ndtr, ndtri, stdtr
 
 from vivbench.core.record import Record
 from vivbench.regression.penalised import penalised_solve, penalty_scale, quadratic_error, spd_solve
+from vivbench.regression.permutation import permutation_p_value, stratified_permutations
 
 __all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS", "STRATUM_SIZE",
            "UNEXPLAINED_REL_RMS",
@@ -216,7 +217,7 @@ def change_point_scan(delta, se, weight, *, n_permutations: int = 999, seed: int
     rng = np.random.default_rng(seed)
     perm = np.argsort(rng.random((int(n_permutations), idx.size)), axis=1)
     null = _split_statistics(d[perm], w[perm]).max(axis=1)
-    p = float((1 + np.sum(null >= s[best])) / (1 + int(n_permutations)))
+    p = permutation_p_value(null, s[best])
     out.update(change_index=int(idx[best + 1]), p_value=p, detected=bool(p < level))
     return out
 
@@ -422,8 +423,7 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
         sd = np.maximum(sd, 1e-12 * max(float(np.abs(mu).max()), 1e-300))
         observed, null_gain = (gain - mu) / sd, (null_gain - mu) / sd
         best = int(np.argmax(observed))
-    null = null_gain.max(axis=1)
-    p = float((1 + np.sum(null >= observed[best])) / (1 + null.size))
+    p = permutation_p_value(null_gain.max(axis=1), observed[best])
     out.update(change_index=int(use[splits[best]]), p_value=p, detected=bool(p < level))
     return out
 
@@ -485,21 +485,6 @@ def wind_strata(stats: list[dict], size: int = STRATUM_SIZE) -> np.ndarray:
     rank[np.argsort(np.nan_to_num(centre, nan=-1.0), kind="stable")] = np.arange(centre.size)
     n_full = max(int(np.round(centre.size / size)), 1)
     return np.minimum(rank // size, n_full - 1)
-
-
-def stratified_permutations(strata: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """``n`` orderings of the events that move each event only to positions of its own stratum, shape (n, E).
-
-    Row r maps positions to events: ordering r puts event ``out[r, j]`` at
-    position j, and ``strata[out[r, j]] == strata[j]`` for every j.
-    """
-    strata = np.asarray(strata)
-    slots = np.argsort(strata, kind="stable")  # positions grouped by stratum
-    # Events grouped by stratum in the same stratum order, in a random order within each.
-    order = np.argsort(strata[None, :] + rng.random((int(n), strata.size)), axis=1, kind="stable")
-    out = np.empty((int(n), strata.size), dtype=np.int64)
-    out[:, slots] = order
-    return out
 
 
 def _subset_coefficients(G, b, st, train=None) -> np.ndarray:

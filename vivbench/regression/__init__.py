@@ -12,6 +12,7 @@ from vivbench.regression.optimizers import (
     ensemble_path,
 )
 from vivbench.regression.model_set import MODEL_SET_TESTS, confidence_set
+from vivbench.regression.permutation import permutation_p_value, stratified_permutations
 from vivbench.regression.penalised import (DEFAULT_RIDGE, held_out_errors, penalised_rss, penalised_solve,
                                            penalty_scale, quadratic_error, spd_solve)
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, SOLVERS, StlsqSettings
@@ -22,5 +23,5 @@ __all__ = [
     "sr3_path", "ensemble_path", "DEFAULT_THRESHOLDS", "SOLVERS", "StlsqSettings", "StlsqPath", "aicc",
     "stlsq_path", "DEFAULT_RIDGE", "held_out_errors", "penalised_rss", "penalised_solve", "penalty_scale",
     "quadratic_error", "spd_solve", "MODEL_SET_TESTS", "confidence_set", "DRAWS",
-    "block_counts",
+    "block_counts", "permutation_p_value", "stratified_permutations",
 ]
