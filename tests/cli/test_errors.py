@@ -187,3 +187,13 @@ def test_campaign_model_without_its_variables_is_refused():
 
     with pytest.raises(InputError, match=r"not a campaign model .*missing \['coef', 'feature'\]"):
         with_campaign_model(xr.Dataset(), xr.Dataset())
+
+
+def test_wind_bins_is_off_unless_asked_and_takes_the_default_count_without_a_number():
+    from vivbench.cli import _parser
+    from vivbench.cli.pool import DEFAULT_WIND_BINS
+
+    parse = _parser().parse_args
+    assert parse(["pool", "results"]).wind_bins is None  # off: the campaign-wide null test alone
+    assert parse(["pool", "results", "--wind-bins"]).wind_bins is DEFAULT_WIND_BINS  # WIND_BINS bins
+    assert parse(["pool", "results", "--wind-bins", "4"]).wind_bins == 4

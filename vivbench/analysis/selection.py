@@ -724,7 +724,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                       workers: int = 1, scheduler: str | None = None, null: bool = True,
                       change_scan: bool = True, single_section_share: float = SINGLE_SECTION_SHARE,
                       min_time_constants: float | None = LIMIT_TIME_CONSTANTS, rank_level: float | None = RANK_LEVEL,
-                      wind_bins: int | None = WIND_BINS, **params) -> ModelSelection:
+                      wind_bins: int | None = None, **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -737,7 +737,9 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler, single_section_share,
     min_time_constants, rank_level, wind_bins
         Those of :class:`ModelSelection` (``seed`` also the models'; ``min_time_constants`` here
-        :data:`LIMIT_TIME_CONSTANTS` and ``wind_bins`` :data:`vivbench.analysis.WIND_BINS` by default).
+        :data:`LIMIT_TIME_CONSTANTS` by default; ``wind_bins`` None, the campaign-wide null test alone:
+        :data:`vivbench.analysis.WIND_BINS` bins cost right flags and mended no broken promise on development
+        draws, docs/results/studies/verdict_rules).
     null : bool
         Test the candidates against the quasi-steady map :class:`vivbench.models.QuasiSteadyAmplitude`
         (with the candidates' wind smoothing) before any window is flagged.

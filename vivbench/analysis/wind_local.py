@@ -20,8 +20,9 @@ from vivbench.core.record import Record
 
 __all__ = ["WIND_BINS", "window_wind", "wind_bin_edges", "wind_bins_of"]
 
-#: Wind bins of the local null test: quantiles of the campaign's measured wind, so that each holds the same
-#: share of its samples (a stated prior, docs/model_selection.md).
+#: Wind bins of the local null test when it is asked for (``vivbench pool --wind-bins`` without a number):
+#: quantiles of the campaign's measured wind, so that each holds the same share of its samples. The test is
+#: off by default (docs/model_selection.md).
 WIND_BINS = 6
 
 

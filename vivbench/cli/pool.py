@@ -13,6 +13,9 @@ from vivbench.core.errors import InputError
 #: The built-in campaign models of ``--model``: VaryingCoefficientSINDy and PooledSINDy (or a user's model
 #: of the protocol, ``package.module:factory``).
 MODELS = ("varying", "pooled")
+#: ``--wind-bins`` given without a number: :data:`vivbench.analysis.WIND_BINS` bins (not a string, which argparse
+#: would pass through the option's type).
+DEFAULT_WIND_BINS = ("WIND_BINS",)
 #: Former names of ``--model`` values, refused with the current name.
 RENAMED_MODELS = {"sindy": "pooled"}
 
@@ -38,7 +41,7 @@ def run(args) -> int:
     k = args.min_time_constants
     if k is not None and not (math.isfinite(k) and k >= 0):
         raise InputError(f"--min-time-constants must be a number of time constants >= 0 (0: no restriction); got {k!r}")
-    if args.wind_bins is not None and args.wind_bins < 0:
+    if isinstance(args.wind_bins, int) and args.wind_bins < 0:
         raise InputError(f"--wind-bins must be an integer >= 0 (0: the campaign-wide test alone); got {args.wind_bins!r}")
     results_dir = Path(args.results)
     files = list_results(results_dir)
@@ -61,7 +64,11 @@ def run(args) -> int:
             extra = {**ADDITIVE_SETTINGS, **extra}
         if args.min_time_constants is not None:
             extra["min_time_constants"] = args.min_time_constants or None  # 0: no restriction
-        if args.wind_bins is not None:
+        if args.wind_bins is DEFAULT_WIND_BINS:
+            from vivbench.analysis import WIND_BINS
+
+            extra["wind_bins"] = WIND_BINS
+        elif args.wind_bins is not None:
             extra["wind_bins"] = args.wind_bins or None  # 0: the campaign-wide null test alone
         model = varying_selection(n_folds=args.folds, criterion=args.criterion, n_perturbations=args.perturbations,
                                   seed=args.seed, workers=args.workers, n_bootstrap=args.bootstrap,
@@ -176,10 +183,11 @@ def register(sub) -> None:
                    help="with --model varying: flag no limit regime (3, 4) in an event shorter than this many "
                         "envelope time constants, read from the chosen model's regime-1 windows (default "
                         "LIMIT_TIME_CONSTANTS, 5, a stated prior; 0: no such restriction)")
-    s.add_argument("--wind-bins", type=int, default=None,
-                   help="with --model varying: bins of the measured wind (equal shares of the samples) in which the "
-                        "chosen model must beat the quasi-steady map on held-out events for a window there to be "
-                        "flagged (default WIND_BINS, 6, a stated prior; 0: the campaign-wide test alone)")
+    s.add_argument("--wind-bins", type=int, nargs="?", const=DEFAULT_WIND_BINS, default=None, metavar="N",
+                   help="with --model varying: also test the dynamics by wind, in N bins of the measured wind "
+                        "(equal shares of the samples; WIND_BINS, 6, without N): a window is flagged only where "
+                        "the chosen model beats the quasi-steady map on held-out events in its bin (default: off, "
+                        "the campaign-wide test alone; 0: off)")
     s.add_argument("--workers", type=int, default=1, help="local processes for the held-out fits (default 1)")
     s.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates (default 100)")
     s.add_argument("--block", type=float, default=300.0, help="bootstrap block length, s (default 300)")
