@@ -33,7 +33,7 @@ def permutation_p_value(null: np.ndarray, observed: float, rel_tie: float = 1e-9
     A permutation that leaves the split's partition as it is gives the observed statistic itself, summed
     in another order: counted as reaching it whatever the rounding (otherwise the p-value of a few
     events would move by one permutation per tie with the order of the sums). ``rel_tie`` is relative
-    to the larger of |observed| and the null values' largest magnitude.
+    to the larger of abs(observed) and the null values' largest magnitude.
     """
     null = np.asarray(null, dtype=float)
     scale = max(abs(float(observed)), float(np.max(np.abs(null), initial=0.0)), 1e-300)
