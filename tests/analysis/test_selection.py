@@ -12,7 +12,6 @@ from vivbench.analysis.held_out import event_folds, held_out_loss, one_se_set, s
 from vivbench.analysis.selection import (LIMIT_TIME_CONSTANTS, SINGLE_SECTION_SHARE, Candidate, ModelSelection, perturbed_wind,
                                          varying_selection, wind_error_scale, without_yaw)
 from vivbench.core.errors import InputError
-from vivbench.models.varying import WIND_SMOOTHING_GRID
 from vivbench.core.record import Record
 from vivbench.models.simulate import Simulation
 
@@ -205,15 +204,13 @@ def test_the_yaw_enters_only_where_the_campaign_demands_it(in_truth, chosen_yaw)
     assert len(sel.perturbed_models_) == 1
 
 
-@pytest.mark.parametrize("pinned, grid", [({}, WIND_SMOOTHING_GRID), ({"wind_smoothing_s": 15.0}, None),
-                                           ({"options": {"wind_smoothing_s": (15.0, 60.0)}}, None)])
-def test_the_wind_smoothing_is_chosen_in_each_fit_unless_given(pinned, grid):
+@pytest.mark.parametrize("pinned, smoothing", [({}, {30.0}), ({"wind_smoothing_s": 15.0}, {15.0}),
+                                                ({"options": {"wind_smoothing_s": (15.0, 60.0)}}, {15.0, 60.0})])
+def test_the_wind_smoothing_is_the_stated_prior_unless_given_or_among_the_options(pinned, smoothing):
     sel = varying_selection(**pinned)
-    got = {c.model.get_params()["wind_smoothing_grid"] for c in sel.candidates}
-    assert got == {None if grid is None else tuple(grid)}
-    if "wind_smoothing_s" in pinned:
-        assert {c.model.wind_smoothing_s for c in sel.candidates} == {15.0}
-        assert sel.null_model.wind_smoothing_s == 15.0
+    assert {c.model.wind_smoothing_s for c in sel.candidates} == smoothing
+    assert {c.model.get_params()["wind_smoothing_grid"] for c in sel.candidates} == {None}
+    assert sel.null_model.wind_smoothing_s == (15.0 if "wind_smoothing_s" in pinned else 30.0)
 
 
 def test_without_yaw_keeps_the_yaw_free_candidates():

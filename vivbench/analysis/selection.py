@@ -73,7 +73,6 @@ with a limit regime; with ``min_time_constants`` None, the events shorter than
 from __future__ import annotations
 
 import copy
-import itertools
 import json
 import math
 from dataclasses import dataclass
@@ -94,7 +93,6 @@ from vivbench.analysis.wind_error import SINGLE_SECTION_SHARE, perturbed_wind, w
 from vivbench.analysis.wind_local import WIND_BINS, window_wind, wind_bin_edges, wind_bins_of
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
-from vivbench.models.varying import WIND_SMOOTHING_GRID, VaryingCoefficientSINDy
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
@@ -700,10 +698,11 @@ class ModelSelection:
         return write_netcdf_atomic(self.to_dataset(), path)
 
 
-#: The options of :class:`vivbench.models.VaryingCoefficientSINDy` that :func:`varying_selection` chooses from the
-#: campaign's held-out events by default, simplest first: the yaw covariate (none, or a polynomial in sin^2 of the
-#: yaw of degree 1 or 2; degree 2 is scored only where degree 1 is chosen over none) and the roughness penalty (the
-#: 5-fold cross-validated one, or the least penalty of the leave-one-event-out confidence set: rougher curves).
+#: The options of :class:`vivbench.models.VaryingCoefficientSINDy` that :func:`varying_selection`
+#: chooses from the campaign's evidence by default, each listed simplest first: the yaw covariate
+#: (none, or a polynomial in sin^2 of the yaw of degree 1 or 2; degree 2 is scored only where degree 1
+#: is chosen over none) and the roughness penalty (the 5-fold cross-validated one, or the least
+#: penalty of the leave-one-event-out confidence set, which gives rougher curves).
 VARYING_OPTIONS = {"yaw_degree": (0, 1, 2), "penalty_choice": ("cv", "least")}
 
 #: Errors by which winds measured elsewhere on the span are shifted in :meth:`ModelSelection.agreement` (95 %, two-sided).
@@ -714,10 +713,10 @@ UNMEASURED_Z = 1.96
 #: add no complexity: among the confidence set's models of one structure, the lowest held-out loss decides.
 STRUCTURAL_OPTIONS = ("yaw_degree",)
 
-#: Options of the varying model fixed in :func:`varying_selection` unless given. The modal weights (each section's
-#: share of the mode's energy) are a stated prior; the wind's smoothing is chosen in each candidate's fit from the
-#: grid by the cross-validated dA/dt over events (docs/results/studies/priors); a smoothing given replaces the grid.
-VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_grid": WIND_SMOOTHING_GRID}
+#: Options of the varying model that stay fixed in :func:`varying_selection` unless given: stated priors.
+#: The modal section weights are the averaged truth's for a mode seen at the sections (each section's
+#: share of the mode's energy); 30 s is the wind's smoothing time scale.
+VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0}
 
 
 def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterion: str = "output",
@@ -743,7 +742,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         draws, docs/results/studies/verdict_rules).
     null : bool
         Test the candidates against the quasi-steady map :class:`vivbench.models.QuasiSteadyAmplitude`
-        (with the smoothing given, else 30 s) before any window is flagged.
+        (with the candidates' wind smoothing) before any window is flagged.
     change_scan : bool
         Flag no window when the chosen model's change scan locates a change (:class:`ModelSelection`).
     **params
@@ -753,7 +752,10 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     -------
     ModelSelection, unfitted, whose verdict is :func:`vivbench.regimes.varying_window_verdicts`
     """
+    import itertools
+
     from vivbench.models.quasi_steady import QuasiSteadyAmplitude
+    from vivbench.models.varying import VaryingCoefficientSINDy
     from vivbench.regimes import varying_window_verdicts
 
     grid = {k: tuple(v) for k, v in (VARYING_OPTIONS if options is None else options).items() if k not in params}
@@ -761,8 +763,6 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         if not v:
             raise InputError(f"option {k!r} has no candidate value")
     fixed = {**{k: v for k, v in VARYING_PRIORS.items() if k not in grid}, **params, "seed": seed}
-    if ("wind_smoothing_s" in params or "wind_smoothing_s" in grid) and "wind_smoothing_grid" not in params:
-        fixed["wind_smoothing_grid"] = None
     names = list(grid)
     candidates = []
     for idx in itertools.product(*(range(len(grid[k])) for k in names)):

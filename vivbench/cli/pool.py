@@ -93,10 +93,7 @@ def run(args) -> int:
         print(f"vivbench pool: chose {model.chosen_} from the campaign's own evidence; " + model.evidence_text())
         shape = (f"cubic B-splines per curve {', '.join(str(int(k)) for k in ds['n_basis'].values)} "
                  f"({model.wind_weights_choice_} wind weights, {model.penalty_choice_} penalty, "
-                 f"yaw degree {model.yaw_degree_}, wind smoothing {model.fitted_wind_smoothing():g} s"
-                 + ("" if model.wind_smoothing_grid is None else
-                    f" of {', '.join(f'{x:g}' for x in model.wind_smoothing_grid)} s by the cross-validated dA/dt")
-                 + ")")
+                 f"yaw degree {model.yaw_degree_}, wind smoothing {model.fitted_wind_smoothing():g} s)")
     elif args.model == "pooled":
         shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
     else:
@@ -171,9 +168,8 @@ def register(sub) -> None:
                         "minimum)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
-                        "cut-off against the point anemometer's slow turbulence (default with --model varying: chosen "
-                        "per campaign from 15, 30 and 60 s by the cross-validated dA/dt error over events; 0 with "
-                        "--model pooled)")
+                        "cut-off against the point anemometer's slow turbulence (default: 30 s with --model varying, "
+                        "a stated prior; 0 with --model pooled)")
     s.add_argument("--folds", type=int, default=5,
                    help="with --model varying: folds of whole events for the held-out choice of the options not "
                         "given here (yaw degree, penalty choice; default 5, one event per fold with fewer events)")

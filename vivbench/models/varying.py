@@ -100,10 +100,10 @@ __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "differe
            "penalised_rss", "ORDER_SUBSETS", "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES",
            "YAW_INSIDE_DEG", "FINAL_PARAMS"]
 
-#: Candidates of the measured wind's Gaussian smoothing, s, chosen per campaign by the cross-validated
-#: error over events (the default of :func:`vivbench.analysis.varying_selection`): doubling steps around
-#: the time scale of a VIV event's mean wind (docs/results/studies/priors).
-WIND_SMOOTHING_GRID = (15.0, 30.0, 60.0)
+#: Default candidates of the measured wind's Gaussian smoothing, s (0: none), chosen per campaign by
+#: the cross-validated error over events: roughly doubling steps, from the exact wind of an in-library
+#: campaign to a point anemometer's slow turbulence.
+WIND_SMOOTHING_GRID = (0.0, 15.0, 30.0, 60.0)
 
 #: Degrees: curves at yaw 0 count as inside the data when some fitted sample's yaw came this close to
 #: perpendicular (about the direction accuracy of an anemometer).
@@ -178,11 +178,9 @@ class VaryingCoefficientSINDy(ModelBase):
         Candidate smoothings, chosen per campaign (fitted ``wind_smoothing_s_``)
         by the same 5-fold cross-validated error over events as M and lambda,
         summed over the equations (the target and the folds do not depend on
-        the smoothing, so the errors compare); e.g. ``WIND_SMOOTHING_GRID``
-        (the default of :func:`vivbench.analysis.varying_selection`, so of
-        ``vivbench pool``). None (default here): ``wind_smoothing_s`` as given.
-        Each further candidate costs a first fit (before the errors-in-variables
-        refit, made once at the choice).
+        the smoothing, so the errors compare); e.g. ``WIND_SMOOTHING_GRID``.
+        None (default): ``wind_smoothing_s`` as given. The fit costs about one
+        fit per candidate.
     model_set_level : float, [0.5, 1)
         Level of the confidence set of order subsets: the models without some
         of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
