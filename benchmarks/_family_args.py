@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -20,6 +21,14 @@ def family_parser(description: str, *, draws_help: str = "N, N-M or a comma-sepa
     return parser
 
 
+def root_on_path() -> None:
+    """Put the repository's root on ``sys.path``, so that the package ``benchmarks`` (a study's methods or task
+    functions, named ``benchmarks.<study>:...``) imports here and in forked worker processes."""
+    root = str(Path(__file__).resolve().parent.parent)
+    if root not in sys.path:
+        sys.path.insert(0, root)
+
+
 def run_draws(study: str, function: str, args: argparse.Namespace) -> tuple[list[int], list[dict], list[dict]]:
     """Run ``benchmarks.<study>.<function>(task)`` for every draw of ``args`` (a :func:`family_parser` namespace)
     on ``args.workers`` local processes.
@@ -29,16 +38,12 @@ def run_draws(study: str, function: str, args: argparse.Namespace) -> tuple[list
     draws with the first line of their error.
     """
     import importlib
-    import sys
 
     from vivbench.core.parallel import run_tasks
     from vivbench.validate.study import parse_draws
 
-    # The tasks' function must be importable by the worker processes: a module of the package ``benchmarks``
-    # (the repository's root on the path).
-    root = str(Path(__file__).resolve().parent.parent)
-    if root not in sys.path:
-        sys.path.insert(0, root)
+    # The tasks' function must be importable by the worker processes: a module of the package ``benchmarks``.
+    root_on_path()
     task_function = getattr(importlib.import_module(f"benchmarks.{study}"), function)
     draws = list(parse_draws(args.draws))
     tasks = [{"split": args.split, "draw": d, "out": str(args.out.resolve()), "max_events": args.max_events,
