@@ -23,7 +23,8 @@ def family_parser(description: str, *, draws_help: str = "N, N-M or a comma-sepa
 
 def root_on_path() -> None:
     """Put the repository's root on ``sys.path``, so that the package ``benchmarks`` (a study's methods or task
-    functions, named ``benchmarks.<study>:...``) imports here and in forked worker processes."""
+    functions, named ``benchmarks.<study>:...``) imports here and in forked worker processes (``run_study.py``
+    does it for every study)."""
     root = str(Path(__file__).resolve().parent.parent)
     if root not in sys.path:
         sys.path.insert(0, root)

@@ -31,6 +31,10 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from _pages import figures_table, first_line, is_rows, rows_table, run_metadata, written_by  # noqa: E402
+from _family_args import root_on_path  # noqa: E402
+
+# A study's methods may live in its own module (``benchmarks.study_<name>:<method>``), resolved by name.
+root_on_path()
 
 HERE = Path(__file__).resolve().parent
 PAGES = HERE.parent / "docs" / "results" / "studies"  # in the documentation site's Results

@@ -92,9 +92,7 @@ def kept_draws(split: str, draws) -> tuple[int, ...]:
 
 
 def main(argv=None) -> dict:
-    from _family_args import family_parser, root_on_path
-
-    root_on_path()  # UNWIDENED is a method of this module
+    from _family_args import family_parser
 
     parser = family_parser(__doc__.splitlines()[0],
                            draws_help="N, N-M or a comma-separated list; those with 3-4 sections run")

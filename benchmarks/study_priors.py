@@ -143,9 +143,8 @@ def findings(summary: list[dict]) -> list[str]:
 
 
 def main(argv=None) -> dict:
-    from _family_args import family_parser, root_on_path
+    from _family_args import family_parser
 
-    root_on_path()  # the variants are methods of this module, ``benchmarks.study_priors:<name>``
     parser = family_parser(__doc__.splitlines()[0])
     parser.add_argument("--variants", default=",".join(VARIANTS),
                         help=f"comma-separated variants beside the stated priors (default all: {', '.join(VARIANTS)})")
