@@ -19,6 +19,8 @@ right-hand side dA/dt, in two ways:
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import xarray as xr
 
@@ -31,7 +33,7 @@ __all__ = ["recovery_by_event", "model_rhs_true_AU", "model_window_rhs_true_AU",
            "window_relative_errors", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors",
            "regime_scores",
            "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU",
-           "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on"]
+           "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on", "record_with_truth_wind"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -213,6 +215,38 @@ def record_yaw_on(record: Record, t) -> np.ndarray | None:
         if ok.any():
             out[:, k] = np.interp(t, record.t[ok], record.yaw[ok, k])
     return out
+
+
+def record_with_truth_wind(record: Record, truth: xr.Dataset) -> Record:
+    """The record with its measured wind replaced by the wind the truth's dynamics sees.
+
+    An oracle for studies: fitted on such records, a method's errors are those of its model
+    class and of the measured A, free of the errors in the wind (the anemometers' point
+    turbulence, their distance from the deck, the tributary averaging).
+
+    Parameters
+    ----------
+    record : Record
+        A measured record (``U`` in m/s, shape (n, S)).
+    truth : xarray.Dataset
+        Its event's ``/truth`` group: ``time`` (n_t,) s and ``U`` (n_t, S) or (n_t,) m/s.
+
+    Returns
+    -------
+    Record
+        ``U`` is the truth's wind interpolated linearly to ``record.t`` (NaN where the measured
+        wind is NaN: no sample there); ``wind_distance`` is None (the wind is the deck's own);
+        every other field is the record's.
+    """
+    tt = np.asarray(truth["time"].values, dtype=float)
+    Ut = np.asarray(truth["U"].values, dtype=float)
+    Ut = Ut[:, None] if Ut.ndim == 1 else Ut
+    S = record.n_sections
+    if Ut.shape[1] not in (1, S):
+        raise ValueError(f"the truth's wind has {Ut.shape[1]} sections and the record {record.event_id} has {S}")
+    U = np.column_stack([np.interp(record.t, tt, Ut[:, min(k, Ut.shape[1] - 1)]) for k in range(S)])
+    U[~np.isfinite(record.U)] = np.nan
+    return dataclasses.replace(record, U=U, wind_distance=None)
 
 
 def window_relative_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start, end, scale: np.ndarray,

@@ -29,7 +29,10 @@ as its warm start and verdict reference; when ``varying`` is also studied, its f
 used (the methods are fitted in an order that puts ``varying`` first).
 
 ``max_events`` and ``max_duration`` shrink every campaign (for quick checks); a capped
-study's outputs say so on their first lines.
+study's outputs say so on their first lines. ``wind_source="truth"`` fits every method on
+records whose wind is the truth's own (an oracle): run beside the same study on the measured
+wind, it tells how much of a method's error and of its verdict's failures comes from the errors
+in the wind rather than from its model class.
 """
 
 from __future__ import annotations
@@ -64,15 +67,19 @@ from vivbench.validate.journal import counting_progress, run_journalled, task_di
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_spec, fit_method, resolve_method
 from vivbench.validate.methods import score_fitted, scoring_inputs
+from vivbench.validate.recovery import record_with_truth_wind
 from vivbench.validate.study_report import LABEL_COLUMNS, study_markdown, study_summary
 
-__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "StudyConfig", "StudyTask", "StudyResult", "check_draws",
+__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "WIND_SOURCES", "StudyConfig", "StudyTask", "StudyResult",
+           "check_draws",
            "method_spec", "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks"]
 
 #: Short names of the study's methods that are not :func:`resolve_method` names.
 METHOD_ALIASES: dict[str, str] = {}
 #: Study methods built from each draw's structural properties (not :func:`resolve_method` names).
 DRAW_METHODS = ("greybox",)
+#: What a study's methods are fitted on: the measured wind, or the truth's (an oracle).
+WIND_SOURCES = ("measured", "truth")
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
 _FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set", "dynamics_shown", "stationary",
                  "change_p_value", "change_detected", "change_index")
@@ -136,6 +143,10 @@ class StudyConfig:
         has anemometers there instead of one per section (``WindConfig.anemometer_span``, e.g.
         ``(0.5,)``: one at mid-span), the wind at each section taken from them by ``wind_rule``
     wind_rule : "nearest" or "interpolation" (``WindConfig.wind_rule``)
+    wind_source : "measured" (the methods are fitted on the identified records, as a user's are) or
+        "truth" (an oracle: each record's wind replaced by the wind the truth's dynamics sees,
+        :func:`~vivbench.validate.recovery.record_with_truth_wind`; the scores are then those of the
+        method with the errors in the wind removed)
     """
 
     split: str
@@ -147,8 +158,11 @@ class StudyConfig:
     tau: float = DEFAULT_TAU
     anemometer_span: tuple[float, ...] | None = None
     wind_rule: str = "nearest"
+    wind_source: str = "measured"
 
     def __post_init__(self) -> None:
+        if self.wind_source not in WIND_SOURCES:
+            raise InputError(f"wind_source must be one of {', '.join(WIND_SOURCES)}; got {self.wind_source!r}")
         if self.anemometer_span is not None or self.wind_rule != "nearest":
             # the generator's own checks (a felt wind that allows fewer anemometers is the family's)
             layout = WindConfig(anemometer_span=self.anemometer_span, wind_rule=self.wind_rule)
@@ -173,12 +187,15 @@ class StudyConfig:
         return self.max_events is not None or self.max_duration is not None
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data (the draws included); the anemometer layout only when it is not one per section."""
+        """Plain data (the draws included); the anemometer layout only when it is not one per section, the
+        wind source only when it is not the measured wind."""
         data = {"split": self.split, "draws": list(self.draws), "methods": list(self.methods),
                 "max_events": self.max_events, "max_duration_s": self.max_duration,
                 "identify": json.loads(self.identify.to_json()), "tau": self.tau}
         if self.anemometer_span is not None:
             data.update(anemometer_span=list(self.anemometer_span), wind_rule=self.wind_rule)
+        if self.wind_source != "measured":
+            data.update(wind_source=self.wind_source)
         return data
 
     def fingerprint(self) -> str:
@@ -202,6 +219,7 @@ class StudyTask:
     work_root: str | None = None
     anemometer_span: tuple[float, ...] | None = None
     wind_rule: str = "nearest"
+    wind_source: str = "measured"
 
     def campaign(self, draw):
         """The draw's (capped) campaign, with this task's anemometers when it places them."""
@@ -217,7 +235,8 @@ def study_tasks(config: StudyConfig) -> list[StudyTask]:
     """One task per draw, in draw order. Cheap: nothing runs."""
     return [StudyTask(split=config.split, draw=d, methods=config.methods, max_events=config.max_events,
                       max_duration=config.max_duration, identify=config.identify, tau=config.tau,
-                      anemometer_span=config.anemometer_span, wind_rule=config.wind_rule)
+                      anemometer_span=config.anemometer_span, wind_rule=config.wind_rule,
+                      wind_source=config.wind_source)
             for d in config.draws]
 
 
@@ -386,6 +405,8 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
         identified = {p.name.removesuffix(".identify.nc") for p in results}
         events = sorted((f for f in made.files if f.stem in identified), key=lambda p: p.name)
         records, truths, windows = scoring_inputs(events, results)
+        if task.wind_source == "truth":
+            records = [record_with_truth_wind(r, t) for r, t in zip(records, truths)]
         methods, fitted = {}, {}
         for name in _fit_order(task.methods):
             try:

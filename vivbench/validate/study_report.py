@@ -48,6 +48,10 @@ _GREYBOX_NOTE = ("- greybox: the grey-box refit given each draw's structural pro
                  "aerodynamics), warm-started from the varying model, whose regime its flags must also carry. Its "
                  "30 s wind smoothing, penalty grid and verdict settings were chosen on the default campaign, not on "
                  "the family.")
+_TRUTH_WIND_NOTE = ("- **Oracle wind (`--wind-source truth`)**: every method was fitted, and its verdict read, on "
+                    "records whose wind is the truth's own, not the anemometers'. No user has this wind: the "
+                    "figures bound what the methods reach without errors in the wind; compare them with the "
+                    "same draws on the measured wind.")
 
 
 #: Campaigns with fewer events than this are summarised apart on the page (a reporting split, not a setting).
@@ -279,6 +283,7 @@ def study_markdown(summary: dict[str, Any]) -> str:
               *([f"- Anemometers at {', '.join(f'{x:g}' for x in cfg['anemometer_span'])} of the span length, "
                  f"the wind at each section taken from them by the {cfg['wind_rule']} rule (`--anemometers`); the "
                  "deck feels its own section's wind."] if cfg.get("anemometer_span") is not None else []),
+              *([_TRUTH_WIND_NOTE] if cfg.get("wind_source") == "truth" else []),
               *([_GREYBOX_NOTE] if "greybox" in cfg["methods"] else []),
               "- Errors are relative: the energy-weighted one is sqrt(sum of squared errors / sum of squared true "
               "dA/dt) over every sample of a campaign, on the truth's own (A, U).",
