@@ -492,8 +492,8 @@ def _check_config_record(out: Path, config: StudyConfig) -> None:
     data = config.to_dict()
     del data["draws"]
     check_record(out / "study_config.json", config.fingerprint(), data,
-                 "this directory holds a study of another split, methods, caps or identification; use another "
-                 "--out (or delete the directory to start over)")
+                 "this directory holds a study of another split, methods, caps, identification or wind source; use "
+                 "another --out (or delete the directory to start over)")
 
 
 def run_study(config: StudyConfig, out_dir: str | Path, *, workers: int = 1, scheduler: str | None = None,
