@@ -111,3 +111,32 @@ def test_pysindy_variants_study_scores_and_gives_refusal_reasons(scripts, tmp_pa
     assert summary["binned"]["draws_scored"] == 1 and summary["binned"]["draws_refused"] == 0
     assert any(s.startswith("weak: refused on every draw") and "400 s" in s for s in figures["findings"])
     assert figures["findings"][0].startswith("Draws: evaluation draws 30 (1 campaigns, 1 events, capped")
+
+
+def test_truth_wind_study_pairs_the_measured_and_the_truths_wind(scripts, tmp_path):
+    """One capped draw: both winds' rows side by side; a measured study of other caps is refused."""
+    from vivbench.core.errors import InputError
+
+    _run_all, run_study = scripts
+    args = ["--split", "development", "--draws", "18", "--max-events", "2", "--max-duration", "10",
+            "--methods", "pooled"]
+    figures = run_study.run_study("truth_wind", [*args, "--out", str(tmp_path / "own")])
+    (row,) = figures["rows"]
+    assert row["draw"] == 18 and row["method"] == "pooled" and row["eiv"] == "smooth"
+    # this draw's anemometers see 10 % point turbulence that the deck does not feel (29.9 against 1.19 written)
+    assert row["dA_error_truth"] < 0.5 * row["dA_error_measured"]
+    winds = {s["wind"]: s for s in figures["summary"]}
+    assert winds["truth"]["rhs_error_true_AU_energy_median"] == row["dA_error_truth"]
+    assert winds["truth"]["draws_lower_on_truth_wind"] == 1
+    assert figures["findings"][0] == ("1 development draws (capped: at most 2 events, events at most 10 min), each "
+                                      "studied on the measured wind and on the truth's.")
+    # the measured study of another run is read when it differs by nothing but the wind
+    again = run_study.run_study("truth_wind", [*args, "--out", str(tmp_path / "reuse"),
+                                               "--measured", str(tmp_path / "own" / "measured")])
+    assert [(r["dA_error_measured"], r["dA_error_truth"]) for r in again["rows"]] == [
+        (row["dA_error_measured"], row["dA_error_truth"])]
+    with pytest.raises(InputError, match="max_events"):
+        run_study.run_study("truth_wind", ["--split", "development", "--draws", "18", "--max-events", "1",
+                                           "--max-duration", "10", "--methods", "pooled",
+                                           "--out", str(tmp_path / "other"),
+                                           "--measured", str(tmp_path / "own" / "measured")])
