@@ -21,8 +21,12 @@ energy-weighted relative dA/dt error and curve error on the truth's own (A, U) o
 (median, 90th percentile, worst), the draws with at least 20 flagged window-equations and how many
 keep the verdict's promise (at least 95 % of the flags right), and per draw both rows.
 
+The summary also gives, from each study's ``summary.json``, the draws where the yaw matters and
+the yaw covariate was chosen, and the change scan's false alarms and detected damping steps.
+
 ``--max-events`` and ``--max-duration`` (minutes) cap the campaigns (the page then says so). Both
-study directories are resumable: rerunning the command continues them.
+study directories are resumable: rerunning the command continues them, and when both are complete
+it only reads them (the page's wall time is then that of the reading).
 """
 
 from __future__ import annotations
@@ -104,8 +108,25 @@ def _promise(rows) -> tuple[int, int, list[int]]:
     return len(enough), len(enough) - len(broken), broken
 
 
-def summarise(measured: dict, truth: dict, methods, draws) -> tuple[list[dict], list[dict]]:
-    """Per method and wind: the scores' spread and the promise; per draw and method: both winds' rows."""
+def _study_summary(study_dir: Path, methods) -> dict[str, dict]:
+    """Method -> its ``all`` block of the study's ``summary.json`` (choices, changes, withheld draws)."""
+    path = Path(study_dir) / "summary.json"
+    data = json.loads(path.read_text(encoding="utf-8"))
+    return {m: data["methods"][m]["all"] for m in methods}
+
+
+def _choices_and_changes(block: dict) -> dict:
+    ch, ca, wh = block.get("choices", {}), block.get("changes", {}), block.get("withheld", {})
+    return {"yaw_matters_draws": ch.get("matters_draws", 0), "yaw_matters_chosen": ch.get("matters_yaw_chosen", 0),
+            "yaw_chosen": ch.get("yaw_chosen", 0),
+            "draws_without_change": ca.get("draws_without_change", 0), "false_alarms": ca.get("false_alarms", 0),
+            "draws_with_step": ca.get("draws_with_step", 0), "steps_detected": ca.get("detected", 0),
+            "regimes_withheld": wh.get("withheld", 0)}
+
+
+def summarise(measured: dict, truth: dict, methods, draws, blocks: dict | None = None) -> tuple[list[dict], list[dict]]:
+    """Per method and wind: the scores' spread, the promise and (from ``blocks``, wind -> method -> the study
+    summary's ``all`` block) the covariates chosen and the change scan; per draw and method: both winds' rows."""
     summary, rows = [], []
     for m in methods:
         for wind, table in (("measured", measured), ("truth", truth)):
@@ -117,6 +138,8 @@ def summarise(measured: dict, truth: dict, methods, draws) -> tuple[list[dict], 
                 entry.update({f"{key}_median": s["median"], f"{key}_p90": s["p90"], f"{key}_worst": s["worst"]})
             entry.update(promise_draws=n, promise_kept=kept, promise_broken=broken,
                          flagged_median=float(np.median([_num(r["n_flagged"]) for r in mine])))
+            if blocks is not None:
+                entry.update(_choices_and_changes(blocks[wind][m]))
             summary.append(entry)
         pairs = [(_num(measured[(d, m)][SCORES[0]]), _num(truth[(d, m)][SCORES[0]])) for d in draws]
         lower = sum(1 for a, b in pairs if math.isfinite(a) and math.isfinite(b) and b < a)
@@ -131,6 +154,14 @@ def summarise(measured: dict, truth: dict, methods, draws) -> tuple[list[dict], 
                          "right_truth": _num(b["flagged_right_share"]),
                          "error": a["error"] or b["error"]})
     return summary, rows
+
+
+def _scan_text(s: dict) -> str:
+    """The change scan's clause of a finding ("" for a method without a scan on these draws)."""
+    if not s["draws_without_change"] and not s["draws_with_step"]:
+        return ""
+    return (f"; the change scan alarmed on {s['false_alarms']} of {s['draws_without_change']} draws without a "
+            f"change and detected {s['steps_detected']} of {s['draws_with_step']} damping steps")
 
 
 def findings(summary: list[dict], methods, n_draws: int, split: str, caps: str) -> list[str]:
@@ -148,7 +179,10 @@ def findings(summary: list[dict], methods, n_draws: int, split: str, caps: str) 
             broken = (f"broken on draws {', '.join(map(str, s['promise_broken']))}" if s["promise_broken"]
                       else "broken on none")
             out.append(f"{m}, {wind} wind: the promise kept on {s['promise_kept']} of {s['promise_draws']} draws "
-                       f"with at least {PROMISE_MIN_FLAGS} flags ({broken}).")
+                       f"with at least {PROMISE_MIN_FLAGS} flags ({broken})"
+                       + ("." if "yaw_matters_draws" not in s else
+                          f"; the yaw covariate chosen on {s['yaw_matters_chosen']} of the {s['yaw_matters_draws']} "
+                          f"draws where the yaw matters" + _scan_text(s) + "."))
     return out
 
 
@@ -178,7 +212,8 @@ def main(argv=None) -> dict:
         raise InputError(f"draws {sorted(set(failed))} failed; run the command again to retry them")
     measured = _read_rows(measured_dir, methods, draws)
     truth = _read_rows(truth_dir, methods, draws)
-    summary, rows = summarise(measured, truth, methods, draws)
+    blocks = {"measured": _study_summary(measured_dir, methods), "truth": _study_summary(truth_dir, methods)}
+    summary, rows = summarise(measured, truth, methods, draws, blocks)
     caps = "".join(f" (capped: {c})" for c in [", ".join(
         ([f"at most {args.max_events} events"] if args.max_events is not None else [])
         + ([f"events at most {args.max_duration:g} min"] if args.max_duration is not None else []))] if c)
