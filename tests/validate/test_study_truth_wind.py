@@ -7,7 +7,7 @@ import pytest
 import xarray as xr
 
 import vivbench.validate.study as study_module
-from tests.helpers import run_cli
+from tests.helpers import assert_close, run_cli
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.validate.recovery import record_with_truth_wind
@@ -28,15 +28,15 @@ def test_the_truths_wind_replaces_the_measured_one_and_nothing_else():
     truth = xr.Dataset({"U": (("time", "section"), np.column_stack([5.0 + 0.1 * tt, 6.0 - 0.1 * tt]))},
                        coords={"time": tt})
     out = record_with_truth_wind(rec, truth)
-    np.testing.assert_allclose(out.U[:, 0], 5.0 + 0.1 * rec.t)  # linear in time: interpolation is exact
+    assert_close(out.U[:, 0], 5.0 + 0.1 * rec.t)  # linear in time: interpolation is exact
     ok = np.isfinite(rec.U[:, 1])
-    np.testing.assert_allclose(out.U[ok, 1], 6.0 - 0.1 * rec.t[ok])
+    assert_close(out.U[ok, 1], 6.0 - 0.1 * rec.t[ok])
     assert np.isnan(out.U[3, 1])  # no measured sample there: none on the truth's wind either
     assert out.wind_distance is None  # the deck's own wind
     for name in ("t", "A", "dA", "yaw"):
         np.testing.assert_array_equal(getattr(out, name), getattr(rec, name))
     one = xr.Dataset({"U": (("time",), 5.0 + 0.1 * tt)}, coords={"time": tt})  # one wind for every section
-    np.testing.assert_allclose(record_with_truth_wind(rec, one).U[ok, 1], 5.0 + 0.1 * rec.t[ok])
+    assert_close(record_with_truth_wind(rec, one).U[ok, 1], 5.0 + 0.1 * rec.t[ok])
     three = xr.Dataset({"U": (("time", "section"), np.ones((tt.size, 3)))}, coords={"time": tt})
     with pytest.raises(ValueError, match="3 sections and the record E001 has 2"):
         record_with_truth_wind(rec, three)
