@@ -30,12 +30,12 @@ def root_on_path() -> None:
         sys.path.insert(0, root)
 
 
-def run_draws(study: str, function: str, args: argparse.Namespace) -> tuple[list[int], list[dict], list[dict]]:
+def run_draws(study: str, function: str, args: argparse.Namespace, **extra) -> tuple[list[int], list[dict], list[dict]]:
     """Run ``benchmarks.<study>.<function>(task)`` for every draw of ``args`` (a :func:`family_parser` namespace)
     on ``args.workers`` local processes.
 
-    Each task is a dict with ``split``, ``draw``, ``out`` (the study directory), ``max_events`` and
-    ``max_duration_s``. Returns the draws, the rows of the draws that ran (sorted by draw) and the failed
+    Each task is a dict with ``split``, ``draw``, ``out`` (the study directory), ``max_events``,
+    ``max_duration_s`` and the study's own ``extra`` keys. Returns the draws, the rows of the draws that ran (sorted by draw) and the failed
     draws with the first line of their error.
     """
     import importlib
@@ -48,7 +48,7 @@ def run_draws(study: str, function: str, args: argparse.Namespace) -> tuple[list
     task_function = getattr(importlib.import_module(f"benchmarks.{study}"), function)
     draws = list(parse_draws(args.draws))
     tasks = [{"split": args.split, "draw": d, "out": str(args.out.resolve()), "max_events": args.max_events,
-              "max_duration_s": args.max_duration * 60.0} for d in draws]
+              "max_duration_s": args.max_duration * 60.0, **extra} for d in draws]
     rows, failed = [], []
     for outcome in run_tasks(task_function, tasks, workers=args.workers):
         if outcome.error is not None:

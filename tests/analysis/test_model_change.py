@@ -99,3 +99,59 @@ def test_scan_without_yaw_terms_equals_the_scan_of_the_yaw_free_columns():
     assert_close(a["split_gain"], b["split_gain"])
     assert a["p_value"] == b["p_value"]
     assert_not_close(a["split_gain"], c["split_gain"], what="split gain with the yaw columns")  # the yaw columns did count
+
+
+def test_offset_gains_equal_the_penalised_fit_with_a_linear_offset_after_the_split():
+    from vivbench.analysis.change_offset import linear_columns, offset_gain, offset_parts
+
+    rng = np.random.default_rng(5)
+    E, n, M, J1 = 9, 80, 4, 2  # columns ordered (amplitude power i: 4, yaw power j: J1, basis m: M)
+    p = 4 * J1 * M
+    X = rng.standard_normal((E, n, p))
+    y = X[..., :M].sum(axis=2) + rng.standard_normal((E, n))
+    P = np.kron(np.eye(4 * J1), np.diff(np.eye(M), 2, axis=0).T @ np.diff(np.eye(M), 2, axis=0))
+    keep = np.ones(p, dtype=bool)
+    keep[3 * J1 * M:] = False  # the cubic order dropped: the offset's column is still the linear one's sum
+    stats = [{"G": np.einsum("eni,enj->eij", X, X), "b": np.einsum("eni,en->ei", X, y), "yy": (y * y).sum(axis=1),
+              "n": np.full(E, n), "P": P, "penalty": 0.3, "keep": keep, "n_basis": M}]
+    v = linear_columns(stats[0])
+    assert np.flatnonzero(v).tolist() == list(range(J1 * M, J1 * M + M))  # order 1, yaw power 0
+    splits = np.arange(2, E - 1)
+    order = rng.permutation(E)
+    gain = offset_gain(offset_parts(stats), order[None], splits)[0]
+    # the same from the augmented normal equations, solved directly
+    st = stats[0]
+    idx = np.flatnonzero(keep)
+    G, b = st["G"], st["b"]
+    mu = st["penalty"] * np.trace(G.sum(axis=0)) / np.trace(P)
+    Pk = mu * P[np.ix_(idx, idx)]
+
+    def objective(A_idx):  # min over c, delta of ||y - X c - delta x_after||^2 + c' mu P c
+        Xa = np.concatenate([X[..., idx], np.zeros((E, n, 1))], axis=2)
+        Xa[A_idx, :, -1] = X[A_idx][..., v].sum(axis=2)
+        Xf, yf = Xa.reshape(E * n, -1), y.reshape(-1)
+        Hp = Xf.T @ Xf
+        Hp[:-1, :-1] += Pk
+        Hp[np.diag_indices_from(Hp)] += 1e-10 * np.trace(Xf[:, :-1].T @ Xf[:, :-1]) / idx.size
+        c = np.linalg.solve(Hp, Xf.T @ yf)
+        r = yf - Xf @ c
+        return r @ r + c[:-1] @ Pk @ c[:-1], r @ r
+
+    base, base_rss = objective(np.array([], dtype=int))
+    for k, g in zip(splits, gain):
+        assert_close(g, (base - objective(order[k:])[0]) / base_rss, rtol=1e-6,
+                     reason="the scan's ridge of 1e-10 of the mean diagonal enters its objective, not this one's")
+
+
+def test_offset_statistic_locates_a_damping_step_and_stays_quiet_without_one():
+    from vivbench.analysis.changes import model_change_scan
+    from vivbench.models import VaryingCoefficientSINDy
+
+    # from event 6 on, the net linear coefficient is 0.004 1/s lower at every wind: a step of damping
+    recs = change_records(change_at=5, shift=-0.004)
+    model = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,)).fit(recs)
+    scan = model_change_scan(model, recs, n_permutations=99, statistic="offset")
+    assert scan["change_index"] == 5 and scan["detected"]
+    quiet = change_records()
+    model = VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(8,)).fit(quiet)
+    assert not model_change_scan(model, quiet, n_permutations=99, statistic="offset")["detected"]

@@ -71,9 +71,10 @@ from scipy.special import ndtr, ndtri, stdtr
 
 from vivbench.core.record import Record
 from vivbench.regression.penalised import penalised_solve, penalty_scale, quadratic_error, spd_solve
+from vivbench.analysis.change_offset import offset_gain, offset_parts
 from vivbench.regression.permutation import permutation_p_value, stratified_permutations
 
-__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS", "STRATUM_SIZE",
+__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "CHANGE_STATISTICS", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS", "STRATUM_SIZE",
            "UNEXPLAINED_REL_RMS",
            "change_point_scan", "change_relative_flags", "event_residual_checks", "model_change_scan",
            "offset_flags", "offset_strata", "statistics_change_scan", "stratified_permutations", "wind_strata"]
@@ -82,6 +83,8 @@ __all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT
 CHANGE_BLOCK_S = 120.0
 #: Level of the change-point test: a change is reported when its permutation p-value is below it.
 CHANGE_LEVEL = 0.05
+#: Statistics of the model change scan (:func:`model_change_scan`).
+CHANGE_STATISTICS = ("max", "standardised", "offset")
 #: Robust outlier rule of the events' held-out misfit: scaled MADs above the median (log scale).
 MISFIT_MADS = 3.5
 #: ... and at least this many times the median event's held-out mean squared residual.
@@ -321,11 +324,16 @@ def model_change_scan(model, records: Sequence[Record], *, min_events: int = 3, 
         campaign whose wind regimes follow a pattern in time is not).
     stratum_size : int
         Events per stratum (the last stratum takes the remainder).
-    statistic : {"max", "standardised"}
+    statistic : {"max", "standardised", "offset"}
         ``"max"`` (default): the largest split gain over splits.
         ``"standardised"``: the largest over splits of the gain standardised
         by the null orderings' mean and standard deviation at that split
         (every split judged on its own null scale; same orderings and cost).
+        ``"offset"``: the largest over splits of the relative drop of the
+        whole campaign's penalised RSS when the events after the split get
+        their own shift of the linear coefficient (one parameter per
+        equation, the form of a step of structural damping, -2 pi f
+        delta zeta), instead of a refit of every curve on each side.
     yaw_terms : bool
         True (default): the split refits use every column of the model,
         its yaw terms included. False: the split refits (observed and null)
@@ -371,8 +379,8 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
     """
     if null not in ("stratified", "permutation"):
         raise ValueError(f"null must be 'stratified' or 'permutation'; got {null!r}")
-    if statistic not in ("max", "standardised"):
-        raise ValueError(f"statistic must be 'max' or 'standardised'; got {statistic!r}")
+    if statistic not in CHANGE_STATISTICS:
+        raise ValueError(f"statistic must be one of {', '.join(CHANGE_STATISTICS)}; got {statistic!r}")
     if int(stratum_size) < 2:
         raise ValueError(f"stratum_size must be an integer >= 2; got {stratum_size!r}")
     stats = _equal_event_weights(stats)
@@ -401,8 +409,17 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
     splits = np.arange(max(int(min_events), 1), n_use - max(int(min_events), 1) + 1)
     if splits.size == 0:
         return out
-    reduced = _reduced_sums(stats)
-    gain = _split_gain(reduced, np.arange(n_use)[None], splits)[0]
+    if statistic == "offset":
+        reduced = offset_parts(stats)
+
+        def split_gain(order):
+            return offset_gain(reduced, order, splits)
+    else:
+        reduced = _reduced_sums(stats)
+
+        def split_gain(order):
+            return _split_gain(reduced, order, splits)
+    gain = split_gain(np.arange(n_use)[None])[0]
     out["split_gain"][use[splits]] = gain
     best = int(np.argmax(gain))
     rng = np.random.default_rng(seed)
@@ -413,7 +430,7 @@ def statistics_change_scan(stats: list[dict], *, min_events: int = 3, n_permutat
         perms = stratified_permutations(strata, int(n_permutations), rng)
     else:
         perms = np.argsort(rng.random((int(n_permutations), n_use)), axis=1)
-    null_gain = (np.concatenate([_split_gain(reduced, perms[i:i + chunk], splits)
+    null_gain = (np.concatenate([split_gain(perms[i:i + chunk])
                                  for i in range(0, perms.shape[0], chunk)]) if n_permutations
                  else np.zeros((0, splits.size)))
     observed = gain
