@@ -9,8 +9,9 @@ The family puts a step of the structural damping ratio (times 1 -+ U(0.3, 0.6), 
 drawn in 2..n_events on) into a quarter of its draws (:mod:`vivbench.synth.family`). Among
 ``--draws`` this study keeps the draws with such a step and at least ``min_events`` (3) events on
 each side of it in the (capped) campaign, where a scan can see it, and the first
-``--without-change`` draws without any change (all of them by default). Each is generated, identified, and fitted with the default campaign model (``varying``,
-as ``vivbench pool`` fits it); its change scan
+``--without-change`` draws without any change (all of them by default). Each is generated,
+identified, and fitted with the default campaign model (``varying``, as ``vivbench pool``
+fits it); its change scan
 (:func:`vivbench.analysis.changes.statistics_change_scan`, the stratified null, ``--permutations``
 orderings) is run with every statistic of :data:`vivbench.analysis.changes.CHANGE_STATISTICS`:
 
@@ -22,7 +23,7 @@ orderings) is run with every statistic of :data:`vivbench.analysis.changes.CHANG
 
 Per statistic the page gives the draws with a step, how many it detects (p < 0.05) and how many
 of those it locates within one event of the step, and its alarms on the draws without a change
-(the issue's aims: 80 % detected and located, at most 5 % false alarms); per draw the p-values,
+(the aims: 80 % detected and located, at most 5 % false alarms); per draw the p-values,
 the located event and the scans' wall times. ``--max-events`` and ``--max-duration`` (minutes;
 default 30) cap the campaigns. The study directory ``--out`` is resumable.
 """

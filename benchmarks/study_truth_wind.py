@@ -78,7 +78,8 @@ def _read_rows(study_dir: Path, methods, draws) -> dict[tuple[int, str], dict]:
 
 
 def _check_measured(study_dir: Path, config: StudyConfig) -> None:
-    """InputError unless ``study_dir`` is a study on the measured wind of ``config``'s split, caps and identification."""
+    """InputError unless ``study_dir`` is a study on the measured wind of ``config``'s split, caps and
+    identification."""
     path = Path(study_dir) / "study_config.json"
     if not path.exists():
         raise InputError(f"{path}: not a vivbench study directory")
@@ -217,7 +218,8 @@ def main(argv=None) -> dict:
     caps = "".join(f" (capped: {c})" for c in [", ".join(
         ([f"at most {args.max_events} events"] if args.max_events is not None else [])
         + ([f"events at most {args.max_duration:g} min"] if args.max_duration is not None else []))] if c)
-    return {"findings": findings(summary, methods, len(draws), args.split, caps), "split": args.split, "draws": list(draws),
+    return {"findings": findings(summary, methods, len(draws), args.split, caps), "split": args.split,
+            "draws": list(draws),
             "methods": list(methods), "max_events": args.max_events, "max_duration_min": args.max_duration,
             "summary": summary, "rows": rows}
 

@@ -27,23 +27,23 @@ generator:
   giving at least as large a maximum, and the first event after the best split
   is ``change_event``.
 
-:func:`model_change_scan` refits a model that exposes per-event sufficient
-statistics (``VaryingCoefficientSINDy.event_statistics``) separately to the
-events before and after every split (at its fitted basis and relative penalty;
-at least ``min_events`` on each side; each event's equations weighted by the
-inverse of its mean square of dA/dt, floored at ``MISFIT_MS_FLOOR`` of the
-median event's). The statistic is the relative drop of the penalised residual
-sum of squares, summed over the equations; its p-value comes from orderings of
-the events, by default stratified (:func:`wind_strata`: events move only among
-the ``STRATUM_SIZE`` events of most similar wind, so every split keeps the
-observed mix of winds on each side). ``yaw_terms=False`` refits on the yaw-free
-columns only and ``statistic="standardised"`` puts each split on its own null
-scale. It also gives every event its leave-one-event-out misfit (held-out mean
-squared residual over the median event's), flagged as "not predicted" when it
-is a robust outlier (above the median by more than ``MISFIT_MADS`` scaled
-median absolute deviations on a log scale) and at least ``MISFIT_FLOOR`` times
-the median; the ordered scan then runs over the unflagged events only. The
-penalised systems are solved by Cholesky (:func:`vivbench.regression.spd_solve`).
+:func:`model_change_scan` refits a model that exposes per-event sufficient statistics
+(``VaryingCoefficientSINDy.event_statistics``) separately to the events before and after
+every split (at its fitted basis and relative penalty; at least ``min_events`` on each
+side; each event's equations weighted by the inverse of its mean square of dA/dt,
+floored at ``MISFIT_MS_FLOOR`` of the median event's). The statistic is the relative
+drop of the penalised residual sum of squares, summed over the equations; its p-value
+comes from orderings of the events, by default stratified (:func:`wind_strata`: events
+move only among the ``STRATUM_SIZE`` events of most similar wind, so every split keeps
+the observed mix of winds on each side). ``yaw_terms=False`` refits on the yaw-free
+columns only, ``statistic="standardised"`` puts each split on its own null scale and
+``"offset"`` fits one step of the linear coefficient (module ``change_offset``). It also
+gives every event its leave-one-event-out misfit (held-out mean squared residual over
+the median event's), flagged as "not predicted" when it is a robust outlier (above the
+median by more than ``MISFIT_MADS`` scaled median absolute deviations on a log scale)
+and at least ``MISFIT_FLOOR`` times the median; the ordered scan then runs over the
+unflagged events only. The penalised systems are solved by Cholesky
+(:func:`vivbench.regression.spd_solve`).
 
 Per-event "not predicted" flags, each with its false-alarm control:
 
@@ -74,8 +74,8 @@ from vivbench.regression.penalised import penalised_solve, penalty_scale, quadra
 from vivbench.analysis.change_offset import offset_gain, offset_parts
 from vivbench.regression.permutation import permutation_p_value, stratified_permutations
 
-__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "CHANGE_STATISTICS", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS", "STRATUM_SIZE",
-           "UNEXPLAINED_REL_RMS",
+__all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "CHANGE_STATISTICS", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS",
+           "STRATUM_SIZE", "UNEXPLAINED_REL_RMS",
            "change_point_scan", "change_relative_flags", "event_residual_checks", "model_change_scan",
            "offset_flags", "offset_strata", "statistics_change_scan", "stratified_permutations", "wind_strata"]
 
