@@ -25,7 +25,8 @@ Per statistic the page gives the draws with a step, how many it detects (p < 0.0
 of those it locates within one event of the step, and its alarms on the draws without a change
 (the aims: 80 % detected and located, at most 5 % false alarms); per draw the p-values,
 the located event and the scans' wall times. ``--max-events`` and ``--max-duration`` (minutes;
-default 30) cap the campaigns. The study directory ``--out`` is resumable.
+default 30) cap the campaigns. The study directory ``--out`` is resumable: a rerun reads the
+finished draws (the page's wall time is then that of the rest) and its scan times are theirs.
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import math  # noqa: E402
 import time  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 #: Fewest events on each side of a split (the scans' default).
 MIN_EVENTS = 3
@@ -104,8 +107,7 @@ def summarise(rows: list[dict]) -> list[dict]:
         out.append({"statistic": stat, "draws_with_step": len(steps), "detected": len(hit),
                     "located_within_one_event": len(located), "draws_without_change": len(scanned),
                     "false_alarms": len(alarms), "alarm_draws": [r["draw"] for r in alarms],
-                    "scan_s_median": float(sorted(r[f"scan_s_{stat}"] for r in rows)[len(rows) // 2]) if rows
-                    else math.nan})
+                    "scan_s_median": float(np.median([r[f"scan_s_{stat}"] for r in rows])) if rows else math.nan})
     return out
 
 

@@ -45,7 +45,7 @@ import numpy as np  # noqa: E402
 
 from vivbench.core.errors import InputError  # noqa: E402
 from vivbench.validate.study import StudyConfig, parse_draws, run_study  # noqa: E402
-from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE  # noqa: E402
+from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE, study_summary  # noqa: E402
 
 #: Scores compared between the two winds (study.csv columns).
 SCORES = ("rhs_error_true_AU_energy", "curve_error_energy")
@@ -94,65 +94,51 @@ def _check_measured(study_dir: Path, config: StudyConfig) -> None:
         raise InputError(f"{path}: not a study on the measured wind with one anemometer per section")
 
 
-def _spread(values) -> dict:
-    x = np.array([v for v in values if math.isfinite(v)])
-    if not x.size:
-        return {"n": 0, "median": math.nan, "p90": math.nan, "worst": math.nan}
-    return {"n": int(x.size), "median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
-            "worst": float(x.max())}
+def _broken(rows) -> list[int]:
+    """The draws with enough flags whose share of right flags is below the promise."""
+    return [int(r["draw"]) for r in rows
+            if _count(r["n_flagged"]) >= PROMISE_MIN_FLAGS and not _num(r["flagged_right_share"]) >= PROMISE_SHARE]
 
 
-def _promise(rows) -> tuple[int, int, list[int]]:
-    """Draws with enough flags, how many keep the promise, and the draws that break it."""
-    enough = [r for r in rows if _count(r["n_flagged"]) >= PROMISE_MIN_FLAGS]
-    broken = [int(r["draw"]) for r in enough if not _num(r["flagged_right_share"]) >= PROMISE_SHARE]
-    return len(enough), len(enough) - len(broken), broken
+def _entry(block: dict) -> dict:
+    """The figures of one method and wind from its :func:`vivbench.validate.study_summary` block."""
+    out = {}
+    for key in SCORES:
+        d = block["scores"][key]
+        out.update({f"{key}_median": _num(d["median"]), f"{key}_p90": _num(d["p90"]),
+                    f"{key}_worst": _num(d["worst"])})
+    pr, ch, ca = block["promise"], block["choices"], block["changes"]
+    out.update(promise_draws=pr["draws_with_enough_flags"], promise_kept=pr["draws_kept"],
+               yaw_matters_draws=ch["matters_draws"], yaw_matters_chosen=ch["matters_yaw_chosen"],
+               yaw_chosen=ch["yaw_chosen"], draws_without_change=ca["draws_without_change"],
+               false_alarms=ca["false_alarms"], draws_with_step=ca["draws_with_step"], steps_detected=ca["detected"],
+               regimes_withheld=block["withheld"]["withheld"])
+    return out
 
 
-def _study_summary(study_dir: Path, methods) -> dict[str, dict]:
-    """Method -> its ``all`` block of the study's ``summary.json`` (choices, changes, withheld draws)."""
-    path = Path(study_dir) / "summary.json"
-    data = json.loads(path.read_text(encoding="utf-8"))
-    return {m: data["methods"][m]["all"] for m in methods}
-
-
-def _choices_and_changes(block: dict) -> dict:
-    ch, ca, wh = block.get("choices", {}), block.get("changes", {}), block.get("withheld", {})
-    return {"yaw_matters_draws": ch.get("matters_draws", 0), "yaw_matters_chosen": ch.get("matters_yaw_chosen", 0),
-            "yaw_chosen": ch.get("yaw_chosen", 0),
-            "draws_without_change": ca.get("draws_without_change", 0), "false_alarms": ca.get("false_alarms", 0),
-            "draws_with_step": ca.get("draws_with_step", 0), "steps_detected": ca.get("detected", 0),
-            "regimes_withheld": wh.get("withheld", 0)}
-
-
-def summarise(measured: dict, truth: dict, methods, draws, blocks: dict | None = None) -> tuple[list[dict], list[dict]]:
-    """Per method and wind: the scores' spread, the promise and (from ``blocks``, wind -> method -> the study
-    summary's ``all`` block) the covariates chosen and the change scan; per draw and method: both winds' rows."""
+def summarise(config: StudyConfig, measured: dict, truth: dict) -> tuple[list[dict], list[dict]]:
+    """Per method and wind: the study summary (:func:`vivbench.validate.study_summary`) of the rows of ``config``'s
+    draws (scores' spread, promise, covariates chosen, change scan) and the draws that break the promise; per
+    draw and method: both winds' rows. ``measured``, ``truth``: (draw, method) -> ``study.csv`` row."""
+    methods, draws = config.methods, config.draws
+    blocks = {wind: study_summary(config.to_dict(), list(table.values()))["methods"]
+              for wind, table in (("measured", measured), ("truth", truth))}
     summary, rows = [], []
     for m in methods:
         for wind, table in (("measured", measured), ("truth", truth)):
             mine = [table[(d, m)] for d in draws]
-            n, kept, broken = _promise(mine)
-            entry = {"method": m, "wind": wind}
-            for key in SCORES:
-                s = _spread(_num(r[key]) for r in mine)
-                entry.update({f"{key}_median": s["median"], f"{key}_p90": s["p90"], f"{key}_worst": s["worst"]})
-            entry.update(promise_draws=n, promise_kept=kept, promise_broken=broken,
-                         flagged_median=float(np.median([_num(r["n_flagged"]) for r in mine])))
-            if blocks is not None:
-                entry.update(_choices_and_changes(blocks[wind][m]))
-            summary.append(entry)
+            summary.append({"method": m, "wind": wind, **_entry(blocks[wind][m]["all"]),
+                            "promise_broken": _broken(mine),
+                            "flagged_median": float(np.median([_num(r["n_flagged"]) for r in mine]))})
         pairs = [(_num(measured[(d, m)][SCORES[0]]), _num(truth[(d, m)][SCORES[0]])) for d in draws]
-        lower = sum(1 for a, b in pairs if math.isfinite(a) and math.isfinite(b) and b < a)
-        summary[-1]["draws_lower_on_truth_wind"] = lower
+        summary[-1]["draws_lower_on_truth_wind"] = sum(1 for a, b in pairs if b < a)
         for d in draws:
             a, b = measured[(d, m)], truth[(d, m)]
             rows.append({"draw": d, "method": m, "eiv": a["eiv"], "n_sections": _count(a["n_sections"]),
                          "n_events": _count(a["n_events"]), "point_intensity": _num(a["point_intensity"]),
                          "dA_error_measured": _num(a[SCORES[0]]), "dA_error_truth": _num(b[SCORES[0]]),
                          "flags_measured": _count(a["n_flagged"]), "right_measured": _num(a["flagged_right_share"]),
-                         "flags_truth": _count(b["n_flagged"]),
-                         "right_truth": _num(b["flagged_right_share"]),
+                         "flags_truth": _count(b["n_flagged"]), "right_truth": _num(b["flagged_right_share"]),
                          "error": a["error"] or b["error"]})
     return summary, rows
 
@@ -180,10 +166,9 @@ def findings(summary: list[dict], methods, n_draws: int, split: str, caps: str) 
             broken = (f"broken on draws {', '.join(map(str, s['promise_broken']))}" if s["promise_broken"]
                       else "broken on none")
             out.append(f"{m}, {wind} wind: the promise kept on {s['promise_kept']} of {s['promise_draws']} draws "
-                       f"with at least {PROMISE_MIN_FLAGS} flags ({broken})"
-                       + ("." if "yaw_matters_draws" not in s else
-                          f"; the yaw covariate chosen on {s['yaw_matters_chosen']} of the {s['yaw_matters_draws']} "
-                          f"draws where the yaw matters" + _scan_text(s) + "."))
+                       f"with at least {PROMISE_MIN_FLAGS} flags ({broken}); the yaw covariate chosen on "
+                       f"{s['yaw_matters_chosen']} of the {s['yaw_matters_draws']} draws where the yaw matters"
+                       + _scan_text(s) + ".")
     return out
 
 
@@ -213,8 +198,7 @@ def main(argv=None) -> dict:
         raise InputError(f"draws {sorted(set(failed))} failed; run the command again to retry them")
     measured = _read_rows(measured_dir, methods, draws)
     truth = _read_rows(truth_dir, methods, draws)
-    blocks = {"measured": _study_summary(measured_dir, methods), "truth": _study_summary(truth_dir, methods)}
-    summary, rows = summarise(measured, truth, methods, draws, blocks)
+    summary, rows = summarise(StudyConfig(**common), measured, truth)
     caps = "".join(f" (capped: {c})" for c in [", ".join(
         ([f"at most {args.max_events} events"] if args.max_events is not None else [])
         + ([f"events at most {args.max_duration:g} min"] if args.max_duration is not None else []))] if c)

@@ -18,6 +18,9 @@ to one, so x is the sum of the linear order's yaw-free columns of the first wind
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
+
+from vivbench.regression.penalised import penalty_scale
 
 __all__ = ["linear_columns", "offset_gain", "offset_parts"]
 
@@ -44,15 +47,15 @@ def offset_parts(stats: list[dict]) -> list[dict]:
         G, b = st["G"], st["b"]
         Gs, bs = G.sum(axis=0), b.sum(axis=0)
         Gk = Gs[idx[:, None], idx]
-        mu = float(st["penalty"]) * float(np.trace(Gs)) / max(float(np.trace(st["P"])), 1e-300)
-        H = Gk + mu * st["P"][idx[:, None], idx]
+        # the scan's penalised system (as its refits build it): relative penalty times trace(G) / trace(P)
+        H = Gk + float(st["penalty"]) * float(penalty_scale(Gs, st["P"])) * st["P"][idx[:, None], idx]
         H[np.diag_indices_from(H)] += 1e-10 * float(np.trace(Gk)) / max(idx.size, 1)
-        chol = np.linalg.cholesky(H)
-        c0 = np.linalg.solve(H, bs[idx])
+        chol = cho_factor(H, lower=True)
+        c0 = cho_solve(chol, bs[idx])
         full = float(st["yy"].sum() - 2.0 * c0 @ bs[idx] + c0 @ Gk @ c0)
         Gv = G[:, :, v].sum(axis=2)  # (E, p): X_e' x
         r = b[:, v].sum(axis=1) - Gv[:, idx] @ c0  # (E,)
-        w = np.linalg.solve(chol, Gv[:, idx].T).T  # (E, q)
+        w = solve_triangular(chol[0], Gv[:, idx].T, lower=True).T  # (E, q)
         xx = Gv[:, v].sum(axis=1)  # (E,)
         out.append({"r": r, "w": w, "xx": xx, "full": max(full, 1e-300)})
     return out

@@ -69,9 +69,9 @@ import numpy as np
 from scipy.stats import chi2, false_discovery_control
 from scipy.special import ndtr, ndtri, stdtr
 
+from vivbench.analysis.change_offset import offset_gain, offset_parts
 from vivbench.core.record import Record
 from vivbench.regression.penalised import penalised_solve, penalty_scale, quadratic_error, spd_solve
-from vivbench.analysis.change_offset import offset_gain, offset_parts
 from vivbench.regression.permutation import permutation_p_value, stratified_permutations
 
 __all__ = ["CHANGE_BLOCK_S", "CHANGE_LEVEL", "CHANGE_STATISTICS", "FLAG_FDR", "MISFIT_FLOOR", "MISFIT_MADS",
