@@ -197,3 +197,15 @@ def test_wind_bins_is_off_unless_asked_and_takes_the_default_count_without_a_num
     assert parse(["pool", "results"]).wind_bins is None  # off: the campaign-wide null test alone
     assert parse(["pool", "results", "--wind-bins"]).wind_bins is DEFAULT_WIND_BINS  # WIND_BINS bins
     assert parse(["pool", "results", "--wind-bins", "4"]).wind_bins == 4
+
+
+def test_pool_events_needs_its_own_out_and_known_ids(small_results, tmp_path, capsys):
+    """--events refuses to overwrite the whole campaign's model and names an unknown event, in one line each."""
+    _campaign, results, _files = small_results
+    assert main(["pool", str(results), "--events", "E001.."]) == EXIT_INPUT
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and "give --out another directory" in lines[0], lines
+    assert main(["pool", str(results), "--events", "E099", "--out", str(tmp_path / "part")]) == EXIT_INPUT
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and "'E099'" in lines[0] and str(results) in lines[0], lines
+    assert not (tmp_path / "part").exists()

@@ -223,3 +223,17 @@ def test_model_verdicts_default_is_the_rule_without_flags(short_event):
             return np.ones((len(s), rec.n_sections), dtype=bool)
 
     assert model_verdicts(Flagged(), record, start, end)["identifiable"].all()
+
+
+def test_pool_events_fits_and_labels_only_the_chosen_events(small_results, tmp_path, capsys):
+    """``pool --events`` pools the events it names, writes their regimes alone into --out, and says so."""
+    _campaign, results, files = small_results
+    ids = sorted(p.name.removesuffix(".identify.nc") for p in files)
+    out = tmp_path / "part"
+    before = sorted((p.name, p.stat().st_mtime_ns) for p in results.iterdir())
+    assert main(["pool", str(results), "--model", "tests.models.test_protocol_plugin:make", "--events",
+                 f"{ids[-1]}..", "--out", str(out)]) == 0
+    ds = read_campaign_regimes(regimes_file(out))
+    assert set(ds["event_id"].values.astype(str)) == {ids[-1]}
+    assert f"1 events ({ids[-1]}..)" in capsys.readouterr().out
+    assert sorted((p.name, p.stat().st_mtime_ns) for p in results.iterdir()) == before  # the campaign's own untouched

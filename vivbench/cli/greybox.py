@@ -63,13 +63,15 @@ def run(args) -> int:
     from vivbench.cli.common import write_command
     from vivbench.io.greybox import GREYBOX_NAME
     from vivbench.io.netcdf import atomic_path
-    from vivbench.io.result import list_results
+    from vivbench.io.result import list_results, select_results
     from vivbench.models.greybox import GreyBoxRefit
     from vivbench.report.greybox import (greybox_curves_figure, greybox_functions_figure,
                                          greybox_simulation_figure, greybox_yaw_figure)
 
     results_dir = Path(args.results)
     files = list_results(results_dir)
+    if args.events is not None:
+        files = select_results(files, args.events)
     bridge = bridge_from_args(args, files)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -209,6 +211,9 @@ def register(sub) -> None:
     s.add_argument("results", help="directory of <event_id>.identify.nc (and campaign.model.nc of vivbench pool, "
                                    "the warm start)")
     s.add_argument("--out", required=True, help="output directory (greybox.nc, tables, figures)")
+    s.add_argument("--events", default=None, metavar="SPEC",
+                   help="refit only these events: comma-separated ids and ranges in the campaign's order (E003, "
+                        "E007.. from E007 on, ..E006, E002..E005), as vivbench pool --events")
     s.add_argument("--bridge", default=None, metavar="FILE",
                    help="TOML with the bridge's properties ([bridge] mass, depth, frequency, damping_ratio, "
                         "air_density, mode_shape, tributary_lengths)")

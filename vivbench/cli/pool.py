@@ -33,7 +33,7 @@ def run(args) -> int:
     from vivbench.models.campaign import PooledSINDy
     from vivbench.models.varying import ADDITIVE_SETTINGS
     from vivbench.analysis.selection import varying_selection
-    from vivbench.io.result import list_results
+    from vivbench.io.result import list_results, select_results
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 
@@ -45,6 +45,11 @@ def run(args) -> int:
         raise InputError(f"--wind-bins must be an integer >= 0 (0: the campaign-wide test alone); got {args.wind_bins!r}")
     results_dir = Path(args.results)
     files = list_results(results_dir)
+    if args.events is not None:
+        if args.out is None or Path(args.out).resolve() == results_dir.resolve():
+            raise InputError(f"{results_dir}: --events pools part of the campaign; give --out another directory, so "
+                             "that its model and regimes do not replace those of the whole campaign")
+        files = select_results(files, args.events)
     campaign = Path(args.campaign) if args.campaign else None
     smoothing = 0.0
     if args.model not in MODELS:
@@ -98,16 +103,18 @@ def run(args) -> int:
         shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
     else:
         shape = f"model {ds.attrs.get('model', args.model)}"
-    print(f"wrote {out}: {len(files)} events, {ds.sizes['window_all']} windows, {shape}, "
+    chosen = "" if args.events is None else f" ({args.events})"
+    print(f"wrote {out}: {len(files)} events{chosen}, {ds.sizes['window_all']} windows, {shape}, "
           f"regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
     if ds.attrs.get("model_change_detected"):
         print(f"vivbench pool: the campaign model changes with time (refitted before/after each split, permutation "
               f"p = {ds.attrs['model_change_p_value']:.3f}, most likely from {ds.attrs['model_change_event']} on): it "
-              "averages over a change the wind does not carry", file=sys.stderr)
+              "averages over a change the wind does not carry" + _sides(files, ds.attrs["model_change_event"]),
+              file=sys.stderr)
     elif ds.attrs["change_detected"]:
         print(f"vivbench pool: the events' residuals change with time (permutation p = {ds.attrs['change_p_value']:.3f}, "
               f"most likely from {ds.attrs['change_event']} on): the campaign model averages over a change the "
-              "wind does not carry", file=sys.stderr)
+              "wind does not carry" + _sides(files, ds.attrs["change_event"]), file=sys.stderr)
     for key, what in (("change_flagged_events", "after the change whose own offset departs from the events' before it"),
                       ("offset_flagged_events", "whose linear offset departs from the other events' of its stratum"),
                       ("offset_not_assessed_events", "whose offset was not tested (no finite offset, or fewer "
@@ -116,6 +123,16 @@ def run(args) -> int:
             print(f"vivbench pool: events {what}: {', '.join(flagged)}", file=sys.stderr)
     print(f"wrote {model_out}: the fitted campaign model (vivbench.analysis.load_campaign_model)")
     return 0
+
+
+def _sides(files, event_id: str) -> str:
+    """How to pool each side of a change located from ``event_id`` on ("" when it is not among ``files``)."""
+    ids = [Path(f).name.removesuffix(".identify.nc") for f in files]
+    if event_id not in ids or ids.index(event_id) == 0:
+        return ""
+    before = ids[ids.index(event_id) - 1]
+    return (f"; pool each side alone for its own model and regimes (--events ..{before} and --events {event_id}.., "
+            "each with its own --out)")
 
 
 def _wind_weights(text: str | None):
@@ -137,6 +154,10 @@ def register(sub) -> None:
     s = sub.add_parser("pool", help="fit one model to a whole campaign's results and label every window with it")
     s.add_argument("results", help="directory of <event_id>.identify.nc")
     s.add_argument("--out", default=None, help="output directory (default: the results directory)")
+    s.add_argument("--events", default=None, metavar="SPEC",
+                   help="pool only these events: comma-separated ids and ranges in the campaign's order (E003, "
+                        "E007.. from E007 on, ..E006, E002..E005), e.g. each side of a change the scan located; "
+                        "needs --out")
     s.add_argument("--model", type=_model_name, default="varying", metavar="{varying,pooled,MODULE:FACTORY}",
                    help="campaign model: varying (VaryingCoefficientSINDy, penalised spline curves in U with the "
                         "wind's yaw; default: it follows a lock-in bell that no polynomial in U does) or "

@@ -45,7 +45,7 @@ from vivbench.io.netcdf import NETCDF_ENGINE, write_netcdf_atomic
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "FEATURES_PER_SECTION", "VariableSpec", "VARIABLES", "COORDINATES", "ATTRIBUTES",
     "WINDOW_FIT_VARIABLES", "ResultFormatError", "build_result", "write_result", "read_result", "list_results",
-    "result_path", "result_record", "result_noise_std", "result_wind_distance", "markdown_table", "markdown_attributes",
+    "select_results", "result_path", "result_record", "result_noise_std", "result_wind_distance", "markdown_table", "markdown_attributes",
 ]
 
 FORMAT = "vivbench-identify"
@@ -311,6 +311,57 @@ def list_results(results_dir) -> list[Path]:
     if not files:
         raise InputError(f"{d}: no identification results (<event_id>.identify.nc) in this directory")
     return files
+
+
+def select_results(files: Sequence[Path], spec: str) -> list[Path]:
+    """The result files of the events that ``spec`` names, in the order of ``files``.
+
+    Parameters
+    ----------
+    files : sequence of Path
+        ``<event_id>.identify.nc`` files in the campaign's order (:func:`list_results`: by name, the
+        order in which :func:`vivbench.analysis.pool_results` and the change scan take the events).
+    spec : str
+        Comma-separated event ids and ranges over that order: ``E003``, ``E007..`` (from E007 on),
+        ``..E006`` (up to E006), ``E002..E005`` (both ends included).
+
+    Raises
+    ------
+    InputError
+        An id that no file carries, a range whose first event comes after its last, or an empty
+        selection (the message names the id and the first file's directory).
+    """
+    files = [Path(f) for f in files]
+    ids = [f.name.removesuffix(_SUFFIX) for f in files]
+    where = files[0].parent if files else Path(".")
+    index = {e: i for i, e in enumerate(ids)}
+
+    def position(event_id: str, default: int) -> int:
+        if not event_id:
+            return default
+        if event_id not in index:
+            raise InputError(f"{where}: no identification result of event {event_id!r} (--events {spec!r}); "
+                             f"the events are {ids[0]}..{ids[-1]}" if ids else f"{where}: no identification results")
+        return index[event_id]
+
+    keep = np.zeros(len(files), dtype=bool)
+    items = [x.strip() for x in str(spec).split(",")]
+    if not any(items):
+        raise InputError(f"--events must name at least one event id or range (E003, E007.., ..E006, E002..E005); "
+                         f"got {spec!r}")
+    for item in items:
+        if not item:
+            continue
+        if ".." in item:
+            first, _, last = (x.strip() for x in item.partition(".."))
+            a, b = position(first, 0), position(last, len(files) - 1)
+            if a > b:
+                raise InputError(f"{where}: the range {item!r} of --events starts after it ends ({ids[a]} comes after "
+                                 f"{ids[b]} in the campaign's order)")
+            keep[a:b + 1] = True
+        else:
+            keep[position(item, 0)] = True
+    return [f for f, k in zip(files, keep) if k]
 
 
 def read_result(path, variables: Iterable[str] | None = None, *, optional: Iterable[str] = ()) -> xr.Dataset:
