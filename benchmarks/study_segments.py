@@ -20,7 +20,8 @@ of its own side), over all events and over the events after the change (the brid
 and the flagged window-equations and the share of them with the true regime (the model fitted to
 every event flags nothing once its scan locates a change; each side's model has its own verdict).
 ``--max-events`` and ``--max-duration`` (minutes; default 30) cap the campaigns. The study
-directory ``--out`` is resumable: a rerun reads the finished draws.
+directory ``--out`` is resumable: a rerun reads the finished draws (the page's wall time is then that of
+the rest; each row's ``fit_s`` is the fit of the model of every event, in the run that fitted it).
 """
 
 from __future__ import annotations

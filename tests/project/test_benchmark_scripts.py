@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.helpers import REPO
+from tests.helpers import REPO, assert_close
 
 BENCH = REPO / "benchmarks"
 
@@ -140,3 +140,29 @@ def test_truth_wind_study_pairs_the_measured_and_the_truths_wind(scripts, tmp_pa
                                            "--max-duration", "10", "--methods", "pooled",
                                            "--out", str(tmp_path / "other"),
                                            "--measured", str(tmp_path / "own" / "measured")])
+
+
+def test_segments_study_summarises_the_located_draws_and_the_oracle(scripts, monkeypatch):
+    """The segments study's spread and findings: located draws against the model of every event, every draw
+    with a step for the oracle split."""
+    segments = _load(BENCH / "study_segments.py", monkeypatch)
+    nan = float("nan")
+    base = {"step_index": 5, "whole_flagged": 0, "whole_flagged_right_share": nan}
+    rows = [{**base, "draw": 1, "located_index": 5, "whole_error_all": 0.4, "located_error_all": 0.1,
+             "located_error_after": 0.12, "located_whole_error_after": 0.3, "located_flagged": 30,
+             "located_flagged_right_share": 0.9, "true_error_all": 0.1, "true_error_after": 0.12,
+             "true_whole_error_after": 0.3},
+            {**base, "draw": 2, "located_index": -1, "whole_error_all": 0.6, "located_error_all": nan,
+             "located_error_after": nan, "located_whole_error_after": nan, "located_flagged": nan,
+             "located_flagged_right_share": nan, "true_error_all": 0.2, "true_error_after": 0.25,
+             "true_whole_error_after": 0.7}]
+    summary = {(s["model"], s["draws"]): s for s in segments.summarise(rows)}
+    assert summary[("every event", "located")]["n"] == 1 and summary[("every event", "located")]["median"] == 0.4
+    assert summary[("two pieces at the located change", "located")]["after_median"] == 0.12
+    assert summary[("every event", "all with a step")]["worst"] == 0.6
+    oracle = summary[("two pieces at the true step (oracle)", "all with a step")]
+    assert oracle["n"] == 2
+    assert_close(oracle["after_median"], 0.185, what="median of 0.12 and 0.25")
+    text = segments.findings(rows, segments.summarise(rows))
+    assert text[0].startswith("2 draws with a step") and "located a change on 1 (1 within one event" in text[0]
+    assert "lower on 1 of 1" in text[1] and "kept on 0" in text[2]
