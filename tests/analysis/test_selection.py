@@ -273,17 +273,27 @@ def _quasi_steady_records(n_events: int) -> list[Record]:
     return out
 
 
+class _FlaggingPoly(_Poly):
+    """:class:`_Poly` whose own verdict flags every window (what ``vivbench pool`` writes then rests on the selection)."""
+
+    def identifiable(self, record, window_start, window_end):
+        return np.ones((np.size(window_start), record.n_sections), dtype=bool)
+
+
 @pytest.mark.parametrize("slaved", [True, False])
 def test_the_verdict_flags_only_campaigns_whose_dynamics_beat_the_quasi_steady_map(slaved):
     from vivbench.models import QuasiSteadyAmplitude
 
     recs = _quasi_steady_records(8) if slaved else _linear_records(8, slope=0.02)
-    sel = ModelSelection(candidates=[Candidate(name="linear", model=_Poly(2))], n_perturbations=0,
+    sel = ModelSelection(candidates=[Candidate(name="linear", model=_FlaggingPoly(2))], n_perturbations=0,
                          verdict=_always_flag, null_model=QuasiSteadyAmplitude(wind_smoothing_s=0.0)).fit(recs)
-    flags = sel.identifiable(recs[0], np.array([0.0, 100.0]), np.array([50.0, 150.0]))
+    start, end = np.array([0.0, 100.0]), np.array([50.0, 150.0])
+    flags = sel.identifiable(recs[0], start, end)
     ev = sel.evidence()
     assert ev["dynamics_shown"] is (not slaved) and ev["null"]["in_set"] is slaved
     assert bool(flags.all()) is (not slaved) and bool(flags.any()) is (not slaved)
+    # the verdicts vivbench pool writes (measured_verdicts) withhold the same windows
+    np.testing.assert_array_equal(sel.measured_verdicts(recs[0], start, end)["identifiable"], flags)
     assert ("no window is flagged" in sel.evidence_text()) is slaved
 
 

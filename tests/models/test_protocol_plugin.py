@@ -237,3 +237,36 @@ def test_pool_events_fits_and_labels_only_the_chosen_events(small_results, tmp_p
     assert set(ds["event_id"].values.astype(str)) == {ids[-1]}
     assert f"1 events ({ids[-1]}..)" in capsys.readouterr().out
     assert sorted((p.name, p.stat().st_mtime_ns) for p in results.iterdir()) == before  # the campaign's own untouched
+
+
+def test_pool_split_at_change_pools_each_side_of_the_located_change(small_results, tmp_path, capsys, monkeypatch):
+    """``pool --split-at-change`` writes the whole campaign's outputs and, where a change is located, each side's
+    into before_<event> and from_<event>; without a located change it says so and splits nothing."""
+    import vivbench.analysis.pool as pool_module
+
+    _campaign, results, files = small_results
+    ids = sorted(p.name.removesuffix(".identify.nc") for p in files)
+    args = ["pool", str(results), "--model", "tests.models.test_protocol_plugin:make", "--split-at-change"]
+    assert main([*args, "--out", str(tmp_path / "none")]) == 0
+    assert "no change located" in capsys.readouterr().out
+    assert sorted(p.name for p in (tmp_path / "none").iterdir() if p.is_dir()) == []
+    real = pool_module.pool_results
+    calls = []
+
+    def located(files_, model, **kwargs):  # the whole campaign's scan locates a change at the second event
+        ds = real(files_, model, **kwargs)
+        calls.append(len(files_))
+        if len(calls) == 1:
+            ds.attrs.update(change_detected=1, change_event=ids[1], change_p_value=0.01)
+        return ds
+
+    monkeypatch.setattr(pool_module, "pool_results", located)
+    out = tmp_path / "split"
+    assert main([*args, "--out", str(out)]) == 0
+    assert calls == [len(ids), 1, len(ids) - 1]
+    for side, events in ((f"before_{ids[1]}", ids[:1]), (f"from_{ids[1]}", ids[1:])):
+        ds = read_campaign_regimes(regimes_file(out / side))
+        assert sorted(set(ds["event_id"].values.astype(str))) == events
+        assert (out / side / MODEL_NAME).exists()
+    printed = capsys.readouterr()
+    assert f"({ids[0]}..{ids[0]})" in printed.out and f"--events {ids[1]}.." in printed.err

@@ -453,9 +453,11 @@ class ModelSelection:
         return short_events(self.event_ids_, self.event_duration_s_, self.time_constant_s_, self._short_threshold())
 
     def _narrowed(self, record: Record, window_start, window_end, regime: np.ndarray) -> np.ndarray:
-        """Windows (W, S) whose ``regime`` every check beyond the chosen model's own verdict lets stand: the
-        :meth:`agreement`, a wind at which the dynamics were shown (with ``wind_bins``), and no limit regime
-        (3, 4) in an event shorter than ``min_time_constants``."""
+        """Windows (W, S) whose ``regime`` every check beyond the chosen model's own verdict lets stand: none without
+        dynamics shown (the null test) or with a located change; else :meth:`agreement`'s, at a wind where the
+        dynamics were shown (``wind_bins``), no limit regime (3, 4) in an event shorter than ``min_time_constants``."""
+        if not (getattr(self, "dynamics_shown_", True) and getattr(self, "stationary_", True)):
+            return np.zeros(np.shape(regime), dtype=bool)
         ok = self.agreement(record, window_start, window_end, regime)
         local = getattr(self, "dynamics_by_wind_", None)
         if local is not None:
@@ -598,8 +600,6 @@ class ModelSelection:
         self._check_fitted()
         own = self._own_verdict(record, window_start, window_end)
         flag = np.asarray(own["identifiable"], dtype=bool)
-        if not (getattr(self, "dynamics_shown_", True) and getattr(self, "stationary_", True)):
-            return np.zeros(flag.shape, dtype=bool)
         return flag & self._narrowed(record, window_start, window_end, own["regime"])
 
     def curves(self, wind, level: float = 0.95) -> xr.Dataset:

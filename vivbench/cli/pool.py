@@ -30,12 +30,7 @@ def _model_name(text: str) -> str:
 
 
 def run(args) -> int:
-    from vivbench.models.campaign import PooledSINDy
-    from vivbench.models.varying import ADDITIVE_SETTINGS
-    from vivbench.analysis.selection import varying_selection
     from vivbench.io.result import list_results, select_results
-    from vivbench.analysis.pool import pool_results
-    from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 
     weights = _wind_weights(args.wind_weights)  # a bad option is reported before any file is read
     k = args.min_time_constants
@@ -50,6 +45,31 @@ def run(args) -> int:
             raise InputError(f"{results_dir}: --events pools part of the campaign; give --out another directory, so "
                              "that its model and regimes do not replace those of the whole campaign")
         files = select_results(files, args.events)
+    out_dir = Path(args.out) if args.out else results_dir
+    ds = _pool(files, args, weights, out_dir, results_dir, label=args.events)
+    if args.split_at_change:
+        event = (ds.attrs.get("model_change_event", "") if ds.attrs.get("model_change_detected")
+                 else ds.attrs["change_event"] if ds.attrs["change_detected"] else "")
+        ids = [Path(f).name.removesuffix(".identify.nc") for f in files]
+        if event not in ids[1:]:
+            print("vivbench pool: no change located: the campaign is not split")
+            return 0
+        i = ids.index(event)
+        for name, part, label in ((f"before_{event}", files[:i], f"{ids[0]}..{ids[i - 1]}"),
+                                  (f"from_{event}", files[i:], f"{event}..{ids[-1]}")):
+            _pool(part, args, weights, out_dir / name, results_dir, label=label)
+    return 0
+
+
+def _pool(files, args, weights, out_dir: Path, results_dir: Path, *, label: str | None):
+    """Fit the campaign model of ``args`` to ``files`` (``label``: which of the campaign's events they are, None for
+    all), write its regimes and model into ``out_dir`` and report; returns the regimes' dataset."""
+    from vivbench.models.campaign import PooledSINDy
+    from vivbench.models.varying import ADDITIVE_SETTINGS
+    from vivbench.analysis.selection import varying_selection
+    from vivbench.analysis.pool import pool_results
+    from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
+
     campaign = Path(args.campaign) if args.campaign else None
     smoothing = 0.0
     if args.model not in MODELS:
@@ -87,7 +107,6 @@ def run(args) -> int:
         print(f"vivbench pool: {results_dir}: the results store no wind yaw (identified before vivbench stored it): "
               "the varying model was fitted without its yaw covariate; identify again or give --campaign",
               file=sys.stderr)
-    out_dir = Path(args.out) if args.out else results_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     out = write_campaign_regimes(ds, out_dir)
     # The fitted model itself, for forecast, validate and the report (the model protocol's load).
@@ -103,7 +122,7 @@ def run(args) -> int:
         shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
     else:
         shape = f"model {ds.attrs.get('model', args.model)}"
-    chosen = "" if args.events is None else f" ({args.events})"
+    chosen = "" if label is None else f" ({label})"
     print(f"wrote {out}: {len(files)} events{chosen}, {ds.sizes['window_all']} windows, {shape}, "
           f"regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
     if ds.attrs.get("model_change_detected"):
@@ -122,7 +141,7 @@ def run(args) -> int:
         if flagged := json.loads(ds.attrs.get(key, "[]")):
             print(f"vivbench pool: events {what}: {', '.join(flagged)}", file=sys.stderr)
     print(f"wrote {model_out}: the fitted campaign model (vivbench.analysis.load_campaign_model)")
-    return 0
+    return ds
 
 
 def _sides(files, event_id: str) -> str:
@@ -158,6 +177,10 @@ def register(sub) -> None:
                    help="pool only these events: comma-separated ids and ranges in the campaign's order (E003, "
                         "E007.. from E007 on, ..E006, E002..E005), e.g. each side of a change the scan located; "
                         "needs --out")
+    s.add_argument("--split-at-change", action="store_true",
+                   help="where the change scan locates a change, also pool the events before it and those from it "
+                        "on, each into a directory of its own under the output directory (before_<event>, "
+                        "from_<event>): a model and regimes of each period")
     s.add_argument("--model", type=_model_name, default="varying", metavar="{varying,pooled,MODULE:FACTORY}",
                    help="campaign model: varying (VaryingCoefficientSINDy, penalised spline curves in U with the "
                         "wind's yaw; default: it follows a lock-in bell that no polynomial in U does) or "
