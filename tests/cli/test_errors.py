@@ -209,3 +209,10 @@ def test_pool_events_needs_its_own_out_and_known_ids(small_results, tmp_path, ca
     lines = _stderr_lines(capsys)
     assert len(lines) == 1 and "'E099'" in lines[0] and str(results) in lines[0], lines
     assert not (tmp_path / "part").exists()
+
+
+def test_greybox_events_names_an_unknown_event_in_one_line(small_results, tmp_path, capsys):
+    _campaign, results, _files = small_results
+    assert main(["greybox", str(results), "--events", "E099..", "--out", str(tmp_path / "g")]) == EXIT_INPUT
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and lines[0].startswith("vivbench greybox: ") and "'E099'" in lines[0], lines
