@@ -66,7 +66,7 @@ def _pieces(split_at: int, records, truths, windows, truth_regimes, whole) -> di
         flagged += f
         right += r
     return {"error_all": _energy(per_record, records, truths),
-            "error_after": _energy(fitted[1:] * (len(records) - split_at), records[after], truths[after]),
+            "error_after": _energy([fitted[1]] * (len(records) - split_at), records[after], truths[after]),
             "whole_error_after": _energy([whole] * (len(records) - split_at), records[after], truths[after]),
             "flagged": flagged, "flagged_right_share": right / flagged if flagged else math.nan}
 

@@ -44,3 +44,8 @@ def test_bad_selections_are_refused_naming_what_is_wrong(spec, says):
     with pytest.raises(InputError, match=says.replace("(", r"\(")) as err:
         select_results(FILES, spec)
     assert "\n" not in str(err.value)
+
+
+def test_nothing_to_choose_from_is_refused():
+    with pytest.raises(InputError, match="no identification results"):
+        select_results([], "E001..")

@@ -48,8 +48,7 @@ def run(args) -> int:
     out_dir = Path(args.out) if args.out else results_dir
     ds = _pool(files, args, weights, out_dir, results_dir, label=args.events)
     if args.split_at_change:
-        event = (ds.attrs.get("model_change_event", "") if ds.attrs.get("model_change_detected")
-                 else ds.attrs["change_event"] if ds.attrs["change_detected"] else "")
+        event = _located_change(ds)
         ids = [Path(f).name.removesuffix(".identify.nc") for f in files]
         if event not in ids[1:]:
             print("vivbench pool: no change located: the campaign is not split")
@@ -142,6 +141,14 @@ def _pool(files, args, weights, out_dir: Path, results_dir: Path, *, label: str 
             print(f"vivbench pool: events {what}: {', '.join(flagged)}", file=sys.stderr)
     print(f"wrote {model_out}: the fitted campaign model (vivbench.analysis.load_campaign_model)")
     return ds
+
+
+def _located_change(ds) -> str:
+    """The first event after the change that pool's scans located ("" without one): the model's own scan's, else
+    the residuals'."""
+    if ds.attrs.get("model_change_detected"):
+        return str(ds.attrs["model_change_event"])
+    return str(ds.attrs["change_event"]) if ds.attrs["change_detected"] else ""
 
 
 def _sides(files, event_id: str) -> str:

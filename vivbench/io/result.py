@@ -332,8 +332,10 @@ def select_results(files: Sequence[Path], spec: str) -> list[Path]:
         selection (the message names the id and the first file's directory).
     """
     files = [Path(f) for f in files]
+    if not files:
+        raise InputError(f"no identification results to choose the events {spec!r} from")
     ids = [f.name.removesuffix(_SUFFIX) for f in files]
-    where = files[0].parent if files else Path(".")
+    where = files[0].parent
     index = {e: i for i, e in enumerate(ids)}
 
     def position(event_id: str, default: int) -> int:
@@ -341,7 +343,7 @@ def select_results(files: Sequence[Path], spec: str) -> list[Path]:
             return default
         if event_id not in index:
             raise InputError(f"{where}: no identification result of event {event_id!r} (--events {spec!r}); "
-                             f"the events are {ids[0]}..{ids[-1]}" if ids else f"{where}: no identification results")
+                             f"the events are {ids[0]}..{ids[-1]}")
         return index[event_id]
 
     keep = np.zeros(len(files), dtype=bool)
