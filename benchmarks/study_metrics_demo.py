@@ -37,7 +37,6 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from vivbench.analysis import CAMPAIGN_DERIVATIVE  # noqa: E402
 from vivbench.analysis.pool import curve_wind_grid  # noqa: E402
 from vivbench.models import data_wind_range  # noqa: E402
 from vivbench.validate.campaign import event_truth_curves  # noqa: E402
@@ -74,7 +73,7 @@ def main(argv=None) -> dict:
     events = [args.campaign / (p.name.removesuffix(".identify.nc") + ".nc") for p in results]
     if not results:
         raise SystemExit(f"{args.results}: no <event_id>.identify.nc")
-    records, truths, windows = scoring_inputs(events, results, derivative=CAMPAIGN_DERIVATIVE)
+    records, truths, windows = scoring_inputs(events, results)
     U = np.concatenate([tr["U"].values for tr in truths])
     A = np.concatenate([tr["A"].values for tr in truths])
     dA = np.concatenate([np.asarray(tr["r"].values, dtype=float).sum(axis=-1) for tr in truths])

@@ -18,7 +18,7 @@ API (stable; the leaderboard builds on it)::
                  tau=0.2, active_share=0.1, fit_time_s=nan, simulate=True) -> dict
     score_method(method, records, truths, **same keywords) -> dict   # fit_method, then score_fitted
     default_windows(record, window=50.0, step=25.0) -> (start, end)
-    scoring_inputs(event_files, result_files, *, derivative=None) -> (records, truths, windows)
+    scoring_inputs(event_files, result_files, *, derivative=CAMPAIGN_DERIVATIVE) -> (records, truths, windows)
     simulation_nmse(fitted, records) -> (nmse, covered)
 
 ``truths`` are the events' ``/truth`` groups (xarray.Dataset with ``time``,
@@ -89,6 +89,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE, records_from_results
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
@@ -583,14 +584,20 @@ def _curve_scores(fitted, records, truths) -> tuple[float, float, float]:
     return float(err["linear"][k]), float(err["total"][k]), energy
 
 
-def scoring_inputs(event_files: Sequence, result_files: Sequence, *, derivative=None) -> tuple[list, list, list]:
+def scoring_inputs(event_files: Sequence, result_files: Sequence, *,
+                   derivative=CAMPAIGN_DERIVATIVE) -> tuple[list, list, list]:
     """Records, truths and windows of a synthetic campaign's identification, ready for :func:`score_method`.
+
+    The records are those ``vivbench pool`` fits its campaign model on: dA/dt
+    recomputed from each result's A with :data:`vivbench.analysis.CAMPAIGN_DERIVATIVE`,
+    so that a study scores the model a user gets.
 
     Parameters
     ----------
     event_files : the events' files (with ``/truth``), in the results' order
     result_files : their ``<event_id>.identify.nc``
-    derivative : see :func:`vivbench.analysis.records_from_results` (None: the results' own dA)
+    derivative : see :func:`vivbench.analysis.records_from_results`
+        (default :data:`~vivbench.analysis.CAMPAIGN_DERIVATIVE`, as ``vivbench pool``; None: the results' own dA)
 
     Returns
     -------
@@ -598,7 +605,6 @@ def scoring_inputs(event_files: Sequence, result_files: Sequence, *, derivative=
     truths : list of xarray.Dataset (each event's ``/truth``)
     windows : list of (window_start, window_end), the identification's windows (s)
     """
-    from vivbench.analysis.pool import records_from_results
     from vivbench.io.event import read_event
     from vivbench.io.result import read_result
 

@@ -21,7 +21,6 @@ from typing import Any, Sequence
 import xarray as xr
 
 from vivbench.analysis.identify import IdentifyConfig, identify_files
-from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE
 from vivbench.analysis.selection import SINGLE_SECTION_SHARE, varying_selection
 from vivbench.core.errors import InputError
 from vivbench.core.regime import DEFAULT_TAU
@@ -149,7 +148,7 @@ def run_chain(event_files: Sequence, work_dir, identify: IdentifyConfig, method,
     results = sorted(written, key=lambda p: p.name)
     identified = {p.name.removesuffix(".identify.nc") for p in results}
     events = sorted((Path(f) for f in event_files if Path(f).stem in identified), key=lambda p: p.name)
-    records, truths, windows = scoring_inputs(events, results, derivative=CAMPAIGN_DERIVATIVE)
+    records, truths, windows = scoring_inputs(events, results)
     if wind_smoothing_s > 0:
         records = [smooth_wind(r, wind_smoothing_s) for r in records]
     fitted, _ = fit_method(method, records)

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from vivbench.analysis.identify import IdentifyConfig, identify_files
-from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE, pool_results
+from vivbench.analysis.pool import pool_results
 from vivbench.analysis.selection import varying_selection
 from vivbench.core.errors import InputError, error_line
 from vivbench.core.lock import exclusive_directory
@@ -111,7 +111,7 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
         model.save(root / "identify" / MODEL_NAME)
         ids = {p.name.removesuffix(".identify.nc") for p in results}
         events = sorted((f for f in made.files if f.stem in ids), key=lambda p: p.name)
-        records, truths, windows = scoring_inputs(events, results, derivative=CAMPAIGN_DERIVATIVE)
+        records, truths, windows = scoring_inputs(events, results)
         actual = chain_scores(model, records, truths, windows, tau=identify.tau)
         s = draw.config.structure
         bridge = TwinBridge(mass=s.mass, depth=s.depth, damping_ratio=s.damping_ratio, air_density=s.air_density,
