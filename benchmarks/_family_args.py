@@ -96,10 +96,16 @@ def capped_draw(task: dict) -> tuple[list, list, list]:
     made, _ = generate_family_campaign(task["split"], task["draw"], root / "campaign", max_events=task["max_events"],
                                        max_duration=task["max_duration_s"])
     identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
+    return scoring_inputs(*draw_files(task))
+
+
+def draw_files(task: dict) -> tuple[list, list]:
+    """The event files and identification results of a draw :func:`capped_draw` made, in the same order."""
+    root = draw_dir(task)
     results = sorted((root / "identify").glob("*.identify.nc"))
     ids = {p.name.removesuffix(".identify.nc") for p in results}
     events = sorted(f for f in (root / "campaign").glob("*.nc") if f.stem in ids)
-    return scoring_inputs(events, results)
+    return events, results
 
 
 def verdict_counts(model, records, truth_regimes, windows) -> tuple[int, int, float]:
