@@ -73,7 +73,7 @@ def main(argv=None) -> dict:
     from vivbench.models.greybox import GreyBoxRefit
 
     files = list_results(args.results)
-    records = records_from_results(files, wind_smoothing_s=args.wind_smoothing)
+    records = records_from_results(files, derivative=None, wind_smoothing_s=args.wind_smoothing)
     wind = curve_wind_grid(np.concatenate([r.U.ravel() for r in records]))
     warm, source = (None, "none") if args.no_warm_start else campaign_warm_start(Path(args.results), wind)
     grid = None if args.penalty_grid.lower() == "none" else tuple(float(x) for x in args.penalty_grid.split(","))

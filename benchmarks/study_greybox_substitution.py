@@ -65,7 +65,7 @@ def main(argv=None) -> list:
                    help="also refit every case from the truth's curves (fixed penalty 0.3, the default fit too)")
     args = p.parse_args(argv)
     results, camp = Path(args.results), Path(args.campaign)
-    raw = records_from_results(list_results(results))
+    raw = records_from_results(list_results(results), derivative=None)  # the grey-box fits envelopes, not dA/dt
     truths = {str(t.attrs["event_id"]): t["truth"].ds for t in (read_event(f) for f in list_events(camp))}
     tc = tw = None
     U, A, X = [], [], []

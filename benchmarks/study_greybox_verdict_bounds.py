@@ -34,7 +34,7 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     model = GreyBoxRefit.load(f"{args.greybox}/greybox.nc")
     files = list_results(args.results)
-    records = records_from_results(files, wind_smoothing_s=30.0)
+    records = records_from_results(files, derivative=None, wind_smoothing_s=30.0)
     reference = load_campaign_model(campaign_model_file(args.results))
     truths = {str((t := read_event(p)).attrs["event_id"]): t["truth"].ds for p in event_paths([args.campaign])}
     parts = {b: {"regime": [], "flag": [], "truth": [], "reference": []} for b in ("clip", "reflect")}

@@ -303,8 +303,9 @@ def test_records_from_results_feed_the_protocol_and_the_pooled_file_reads(tmp_pa
     fd = records_from_results(paths, derivative=Derivative(method="finite_difference"))
     assert np.isnan(fd[0].dA[(recs[0].t > 390) & (recs[0].t < 410)]).all()
     model = PooledSINDy(n_bootstrap=3, block_s=100.0).fit(recs)
-    pooled = read_campaign_regimes(write_campaign_regimes(pool_results(paths, PooledSINDy(n_bootstrap=3, block_s=100.0), derivative=None),
-                                      tmp_path))
+    # the records pool_results fits are records_from_results' by default (the campaign derivative)
+    pooled = read_campaign_regimes(write_campaign_regimes(pool_results(paths, PooledSINDy(n_bootstrap=3, block_s=100.0)),
+                                                          tmp_path))
     assert np.array_equal(pooled["coef"].values, model.coef_)
     with pytest.raises(ModelFileError, match=r"E0\.identify\.nc: not a campaign regimes"):
         read_campaign_regimes(paths[0])

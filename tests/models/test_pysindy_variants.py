@@ -84,10 +84,11 @@ def test_ensemble_error_is_close_to_that_of_stlsq(small_measured):
     mean = score_method(PySINDyEnsemble(n_models=10), records, truths)
     key = "rhs_error_true_AU_median"
     # The mean of linear fits predicts the mean of their predictions, each bag an STLSQ fit of a resample:
-    # no worse than the full fit beyond resampling scatter (10 %), and better only by the selection
-    # variance the averaging removes, not by the library's bias that both share (at most a factor 2).
+    # no worse than the full fit beyond resampling scatter (15 %: the campaign derivative's dA/dt, nearly
+    # unsmoothed, scatters the bags more than the identification's smoothed one, 10 %), and better only by the
+    # selection variance the averaging removes, not by the library's bias that both share (at most a factor 2).
     ratio = mean[key] / plain[key]
-    assert 0.5 <= ratio <= 1.1, f"ensemble {mean[key]:.3g} against STLSQ {plain[key]:.3g}"
+    assert 0.5 <= ratio <= 1.15, f"ensemble {mean[key]:.3g} against STLSQ {plain[key]:.3g}"
     assert 0.0 <= mean["coverage"] <= 1.0 and plain["coverage"] == 0.0
 
 

@@ -120,7 +120,7 @@ def greybox_results(result_files: Sequence, bridge: BridgeProperties, *, model: 
     if not files:
         raise InputError("no identification results to fit the grey-box model on")
     # Read once: the grey-box fit smooths the measured wind its own way, the reference model as at its fit.
-    raw = records_from_results(files)
+    raw = records_from_results(files, derivative=None)  # the grey-box fits envelopes: no dA/dt is needed
     records = [smooth_wind(r, wind_smoothing_s) for r in raw]
     wind = curve_wind_grid(np.concatenate([r.U.ravel() for r in records]))
     source = "given curves"

@@ -91,7 +91,7 @@ def _result_record(ds, attrs, derivative: Derivative | None) -> Record:
                   wind_distance=result_wind_distance(attrs, ds["A"].shape[1]))
 
 
-def records_from_results(paths: Sequence, *, derivative: Derivative | None = None, campaign=None,
+def records_from_results(paths: Sequence, *, derivative: Derivative | None = CAMPAIGN_DERIVATIVE, campaign=None,
                          wind_smoothing_s: float = 0.0) -> list[Record]:
     """The records of identification results, ready for any model of the protocol (docs/methods.md).
 
@@ -101,9 +101,10 @@ def records_from_results(paths: Sequence, *, derivative: Derivative | None = Non
         Their ``time``, ``A``, ``U``, ``dA``, ``segment`` and (when present)
         ``yaw`` are read: the records carry the mean wind's yaw (``Record.yaw``).
     derivative : Derivative or None
-        None (default) keeps the results' own dA (the identification's
-        smoothed derivative); otherwise dA/dt is recomputed from A on each
-        segment as :func:`pool_results` does (e.g. :data:`CAMPAIGN_DERIVATIVE`).
+        dA/dt recomputed from A on each segment (default
+        :data:`CAMPAIGN_DERIVATIVE`: the records :func:`pool_results` fits);
+        None keeps the results' own dA (the identification's smoothed
+        derivative, which its window regressions want).
     campaign : path or None
         Directory of the events the results were made from (their
         ``source_file``): results without a ``yaw`` variable (written before

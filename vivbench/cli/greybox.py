@@ -169,7 +169,7 @@ def run(args) -> int:
     order = np.argsort(-events["nmse"].fillna(np.inf).values)
     picks = [order[len(order) // 2], order[0], order[-1]] if len(order) >= 3 else list(order)
     from vivbench.analysis.pool import records_from_results
-    recs = records_from_results([files[i] for i in picks], wind_smoothing_s=args.wind_smoothing)
+    recs = records_from_results([files[i] for i in picks], derivative=None, wind_smoothing_s=args.wind_smoothing)
     sims = [(r.event_id, model.simulate(r)) for r in recs]
     greybox_simulation_figure(sims, out_dir / "greybox_simulations.png")
     with atomic_path(out_dir / "summary.json", suffix=".json") as tmp:

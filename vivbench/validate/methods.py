@@ -344,8 +344,10 @@ class WindowMethod:
     """The paper's window SINDy as a method: the identification's estimator and verdicts on each record.
 
     Each record is split into runs of valid samples (A, U, dA finite) at least one window long;
-    on each run the chain's estimator is fitted with :func:`vivbench.regimes.window.label_windows`
-    (the competitor-based identifiability verdict), as :func:`vivbench.analysis.identify_event` does.
+    on each run dA/dt is differentiated again from A with the configuration's derivative (as
+    :func:`vivbench.analysis.identify_event` does, whatever dA/dt the records carry) and the chain's
+    estimator is fitted with :func:`vivbench.regimes.window.label_windows` (the competitor-based
+    identifiability verdict).
 
     Parameters
     ----------
@@ -376,7 +378,8 @@ class WindowMethod:
                 if t.size < 2 or t[-1] - t[0] < cfg.window:
                     continue
                 est = cfg.estimator()
-                v = label_windows(est, t, rec.A[run], rec.U[run], rec.dA[run], tau=cfg.tau, margin=cfg.aicc_margin,
+                dA = cfg.derivative.differentiate(rec.A[run], t)
+                v = label_windows(est, t, rec.A[run], rec.U[run], dA, tau=cfg.tau, margin=cfg.aicc_margin,
                                   fit_tolerance=cfg.fit_tolerance)
                 coefs.append(est.coef_)
                 s_e.append(est.window_start_)
