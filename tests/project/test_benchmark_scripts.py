@@ -166,3 +166,35 @@ def test_segments_study_summarises_the_located_draws_and_the_oracle(scripts, mon
     text = segments.findings(rows, segments.summarise(rows))
     assert text[0].startswith("2 draws with a step") and "located a change on 1 (1 within one event" in text[0]
     assert "lower on 1 of 1" in text[1] and "kept on 0" in text[2]
+
+
+def test_model_derivative_study_compares_the_two_derivatives_draw_by_draw(scripts, monkeypatch):
+    """The model_derivative study's summary: spread per method and derivative, the draws where each is lower,
+    the promise on draws with enough flags and the change scan's alarms split by the true step."""
+    study = _load(BENCH / "study_model_derivative.py", monkeypatch)
+    nan = float("nan")
+
+    def row(draw, step, ident, camp, flags=(0, 0), right=(nan, nan), events=("", "")):
+        out = {"draw": draw, "step_event": step}
+        for deriv, err, f, r, e in zip(study.DERIVATIVES, (ident, camp), flags, right, events):
+            out.update({f"varying_{deriv}_error": err, f"varying_{deriv}_curve_error": err / 2,
+                        f"varying_{deriv}_flags": f, f"varying_{deriv}_right": r,
+                        f"varying_{deriv}_change_p": 0.5, f"varying_{deriv}_change_event": e,
+                        f"binned_{deriv}_error": 2 * err, f"binned_{deriv}_curve_error": nan,
+                        f"binned_{deriv}_flags": 0, f"binned_{deriv}_right": nan})
+        return out
+
+    rows = [row(0, 0, 0.4, 0.3, flags=(30, 25), right=(0.9, 0.96)),
+            row(1, 4, 0.2, 0.25, events=("", "E004")),
+            row(2, 0, 0.5, nan, events=("E002", ""))]
+    summary = {(s["method"], s["derivative"]): s for s in study.summarise(rows)}
+    ident, camp = summary[("varying", "identification")], summary[("varying", "campaign")]
+    assert_close(ident["error_median"], 0.4, what="median of 0.2, 0.4 and 0.5")
+    assert_close(camp["error_median"], 0.275, what="median of 0.25 and 0.3; NaN left out")
+    assert (ident["lower_error_draws"], camp["lower_error_draws"], camp["compared_draws"]) == (1, 1, 2)
+    assert (ident["promise_kept"], camp["promise_kept"], camp["promise_draws"]) == (0, 1, 1)
+    assert (ident["false_alarms"], ident["steps_detected"]) == (1, 0)
+    assert (camp["false_alarms"], camp["steps_detected"], camp["draws_with_step"]) == (0, 1, 1)
+    assert "false_alarms" not in summary[("binned", "campaign")]
+    text = study.findings(study.summarise(rows))
+    assert text[1].startswith("varying on the campaign dA/dt") and "alarms on 0 of 2 draws without a step" in text[1]
