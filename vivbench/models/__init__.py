@@ -61,7 +61,7 @@ from vivbench.models.simulate import (
 from vivbench.models.pysindy_adapter import OTHER_TERMS, PySINDyCampaign, PySINDyCP, PySINDyWindows, term_orders
 from vivbench.models.pysindy_variants import (ENSEMBLE_AGGREGATES, PySINDyEnsemble, PySINDySBR, PySINDyWeak,
                                               sbr_available)
-from vivbench.models.varying import VaryingCoefficientSINDy
+from vivbench.models.varying import ORDER_SET_MARGIN, VaryingCoefficientSINDy
 from vivbench.models.campaign_verdicts import (WindowRecord, campaign_window_verdicts, pooled_window_stats,
                                                window_record, window_stats, window_sums)
 from vivbench.models.varying_verdicts import (gram_order_stats, varying_description, varying_summary,
@@ -84,7 +84,7 @@ __all__ = [
     "RefitResult", "EventRefit", "refit_coefficients", "refit_event", "simulate_coefficients", "order_rms",
     "CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast",
     "forecast_coefficients", "forecast_table", "nmse", "window_in_force", "WindowProblem", "EventWindowSINDy",
-    "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "modal_wind_weights", "weighted_section_mean",
+    "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "ORDER_SET_MARGIN", "modal_wind_weights", "weighted_section_mean",
     "measured_input", "Integration", "StopRule", "rk4",
     "model_summary", "model_size", "model_for_records", "model_change_inputs", "recorded_change_scan", "simulate_many", "transforms_wind", "model_curves",
     "model_class_path", "model_description", "chosen_model", "model_evidence", "IDENTIFIABLE_LONG_NAME", "varying_description", "campaign_window_verdicts", "gram_order_stats", "varying_summary",

@@ -42,7 +42,7 @@ from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.model_set import MODEL_SET_TESTS, confidence_set
 from vivbench.regression.penalised import held_out_errors, penalised_solve, penalty_scale, quadratic_error
 
-__all__ = ["ORDER_SUBSETS", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
+__all__ = ["ORDER_SUBSETS", "ORDER_SET_MARGIN", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
            "SectionFit", "equation_inputs", "valid_samples", "campaign_samples", "wind_standard_error", "cv_error", "select_orders", "select_basis",
            "eiv_weight", "choose_smoothing", "fit_section", "fitted_arrays", "event_statistics", "WIND_INPUTS",
            "fitted_inputs", "as_inputs", "section_statistics"]
@@ -61,10 +61,16 @@ evidence by :func:`vivbench.analysis.varying_selection` (``vivbench pool``)."""
 ORDER_SUBSETS = np.array([[o0, True, o2, o3] for o0 in (True, False) for o2 in (True, False)
                           for o3 in (True, False)])
 
+#: Relative excess of leave-one-event-out error within which an order subset stays in the confidence set
+#: whatever the paired test says (``order_set_margin``): a stated prior, chosen on development draws of the
+#: generator family (docs/results/studies/order_margin).
+ORDER_SET_MARGIN = 0.005
+
 
 #: Parameters of the model that act only in the last step (:func:`fit_section`, or not in the fit at all):
 #: fits that differ only in them share steps 1-3 (:func:`fit_shared`).
-FINAL_PARAMS = ("penalty_choice", "n_bootstrap", "select_orders", "model_set_level", "model_set_test", "agreement",
+FINAL_PARAMS = ("penalty_choice", "n_bootstrap", "select_orders", "model_set_level", "order_set_margin",
+                "model_set_test", "agreement",
                 "tau", "model_sets")
 
 
@@ -170,6 +176,9 @@ def check_parameters(model) -> None:
         raise InputError(f"tau must lie strictly between 0 and 1; got {model.tau!r}")
     if not 0.5 <= model.model_set_level < 1.0:
         raise InputError(f"model_set_level must lie in [0.5, 1); got {model.model_set_level!r}")
+    if not (isinstance(model.order_set_margin, (int, float, np.floating)) and 0.0 <= model.order_set_margin < 1.0):
+        raise InputError(f"order_set_margin must be a number in [0, 1) (a relative excess of held-out error); "
+                         f"got {model.order_set_margin!r}")
     J = model.yaw_degree
     if J is not None and (int(J) != J or not 0 <= int(J) <= 3):
         raise InputError(f"yaw_degree must be None (1 when the records carry the yaw, else 0) or an integer "
@@ -582,7 +591,7 @@ def fit_section(model, samples: CampaignSamples, sec: SectionSamples) -> Section
     if sets:
         loss = (loss_all if loss_all is not None and keep.all()
                 else held_out_errors(Gs, bs, ev_b[has], eb[has], ey[has], P, lams, keep).T)
-        subset_plausible = confidence_set(loeo[:, has], level, test)
+        subset_plausible = confidence_set(loeo[:, has], level, test, margin=float(model.order_set_margin))
         penalty_plausible = confidence_set(loss, level, test)
     return SectionFit(coef=physical(c), bootstrap=boot, subset_coef=subset,
                       penalty_coef=physical(penalised_solve(Gs, bs, P, lams, keep)), penalty=lam_rel,
