@@ -128,6 +128,9 @@ def test_bad_parameters():
         VaryingCoefficientSINDy(wind_input="gust").fit(_records(2))
     with pytest.raises(InputError, match="needs at least 2 events"):  # one event: no cross-validation over events
         VaryingCoefficientSINDy().fit(_records(1))
+    for margin in (-0.1, 1.0, "0.01"):
+        with pytest.raises(InputError, match=r"order_set_margin must be a number in \[0, 1\)"):
+            VaryingCoefficientSINDy(order_set_margin=margin).fit(_records(2))
 
 
 def test_basis_partition_of_unity():
