@@ -121,3 +121,36 @@ def verdict_counts(model, records, truth_regimes, windows) -> tuple[int, int, fl
         right += int((flag & (regime == tru)).sum())
         scored += int(((regime > 0) & (tru > 0)).sum())
     return flagged, right, flagged / scored if scored else math.nan
+
+
+def promise_figures(rows: list[dict], key: str) -> dict:
+    """The verdict's promise over a study's draws for one setting ``key``: each row's ``flags_<key>`` (flagged
+    window-equations), ``right_<key>`` (those with the truth's regime) and ``coverage_<key>``.
+
+    Returns ``draws_with_enough_flags`` (at least :data:`vivbench.validate.PROMISE_MIN_FLAGS`), ``promise_kept``
+    (at least :data:`vivbench.validate.PROMISE_SHARE` of them right), ``worst_share_right``, ``flags``,
+    ``flags_right`` and ``coverage_median`` (NaN without a coverage).
+    """
+    import math
+
+    import numpy as np
+
+    from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE
+
+    tested = [r for r in rows if r[f"flags_{key}"] >= PROMISE_MIN_FLAGS]
+    shares = [r[f"right_{key}"] / r[f"flags_{key}"] for r in tested]
+    cov = np.array([r[f"coverage_{key}"] for r in rows], dtype=float)
+    return {"draws_with_enough_flags": len(tested), "promise_kept": int(sum(s >= PROMISE_SHARE for s in shares)),
+            "worst_share_right": min(shares, default=math.nan), "flags": int(sum(r[f"flags_{key}"] for r in rows)),
+            "flags_right": int(sum(r[f"right_{key}"] for r in rows)),
+            "coverage_median": float(np.nanmedian(cov)) if np.isfinite(cov).any() else math.nan}
+
+
+def family_study(study: str, description: str, argv, summarise, findings, **caps) -> dict:
+    """Run ``benchmarks.<study>.score_draw`` over the draws of ``argv`` (:func:`family_parser` with ``caps``) and
+    return the page's figures: ``findings(summary)`` of ``summarise(rows)``, the options, failed draws and rows."""
+    args = family_parser(description, **caps).parse_args(argv)
+    draws, rows, failed = run_draws(study, "score_draw", args)
+    summary = summarise(rows) if rows else []
+    return {"findings": findings(summary), "split": args.split, "draws": draws, "max_events": args.max_events,
+            "max_duration_min": args.max_duration, "failed_draws": failed, "summary": summary, "rows": rows}

@@ -142,13 +142,10 @@ def findings(summary: list[dict]) -> list[str]:
 
 
 def main(argv=None) -> dict:
-    from _family_args import family_parser, run_draws
+    from _family_args import family_study
 
-    args = family_parser(__doc__.splitlines()[0], max_duration=30.0).parse_args(argv)
-    draws, rows, failed = run_draws("study_model_derivative", "score_draw", args)
-    summary = summarise(rows) if rows else []
-    return {"findings": findings(summary), "split": args.split, "draws": draws, "max_events": args.max_events,
-            "max_duration_min": args.max_duration, "failed_draws": failed, "summary": summary, "rows": rows}
+    return family_study("study_model_derivative", __doc__.splitlines()[0], argv, summarise, findings,
+                        max_duration=30.0)
 
 
 if __name__ == "__main__":

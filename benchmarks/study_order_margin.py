@@ -39,8 +39,8 @@ import numpy as np  # noqa: E402
 
 #: The margins scored.
 VALUES = (0.0, 0.002, 0.005, 0.01, 0.02)
-#: Fewest flags for a draw to test the promise, and the promise itself.
-MIN_FLAGS, PROMISE = 20, 0.95
+#: Fewest flags for a draw to test the promise (as ``vivbench.validate.PROMISE_MIN_FLAGS``).
+MIN_FLAGS = 20
 
 
 def _label(value: float) -> str:
@@ -101,22 +101,13 @@ def score_draw(task: dict) -> dict:
 
 def summarise(rows: list[dict]) -> list[dict]:
     """One row per margin: the promise, the flags and the forced-only draws' self-excited flags over the draws."""
-    out = []
-    for value in VALUES:
-        k = _label(value)
-        tested = [r for r in rows if r[f"flags_{k}"] >= MIN_FLAGS]
-        shares = [r[f"right_{k}"] / r[f"flags_{k}"] for r in tested]
-        cov = np.array([r[f"coverage_{k}"] for r in rows], dtype=float)
-        forced = [r for r in rows if r["forced_only"]]
-        out.append({"order_set_margin": k, "draws": len(rows), "draws_with_enough_flags": len(tested),
-                    "promise_kept": int(sum(s >= PROMISE for s in shares)),
-                    "worst_share_right": min(shares, default=math.nan),
-                    "flags": int(sum(r[f"flags_{k}"] for r in rows)),
-                    "flags_right": int(sum(r[f"right_{k}"] for r in rows)),
-                    "forced_only_draws": len(forced),
-                    "forced_only_self_excited_flags": int(sum(r[f"self_excited_{k}"] for r in forced)),
-                    "coverage_median": float(np.nanmedian(cov)) if np.isfinite(cov).any() else math.nan})
-    return out
+    from benchmarks._family_args import promise_figures
+
+    forced = [r for r in rows if r["forced_only"]]
+    return [{"order_set_margin": _label(value), "draws": len(rows), **promise_figures(rows, _label(value)),
+             "forced_only_draws": len(forced),
+             "forced_only_self_excited_flags": int(sum(r[f"self_excited_{_label(value)}"] for r in forced))}
+            for value in VALUES]
 
 
 def findings(summary: list[dict]) -> list[str]:
@@ -129,13 +120,9 @@ def findings(summary: list[dict]) -> list[str]:
 
 
 def main(argv=None) -> dict:
-    from _family_args import family_parser, run_draws
+    from _family_args import family_study
 
-    args = family_parser(__doc__.splitlines()[0], max_duration=30.0).parse_args(argv)
-    draws, rows, failed = run_draws("study_order_margin", "score_draw", args)
-    summary = summarise(rows) if rows else []
-    return {"findings": findings(summary), "split": args.split, "draws": draws, "max_events": args.max_events,
-            "max_duration_min": args.max_duration, "failed_draws": failed, "summary": summary, "rows": rows}
+    return family_study("study_order_margin", __doc__.splitlines()[0], argv, summarise, findings, max_duration=30.0)
 
 
 if __name__ == "__main__":

@@ -38,8 +38,8 @@ import numpy as np  # noqa: E402
 
 #: The values of ``min_time_constants`` scored (None: no restriction).
 VALUES = (None, 3.0, 5.0, 8.0)
-#: Fewest flags for a draw to test the promise, and the promise itself.
-MIN_FLAGS, PROMISE = 20, 0.95
+#: Fewest flags for a draw to test the promise (as ``vivbench.validate.PROMISE_MIN_FLAGS``).
+MIN_FLAGS = 20
 
 
 def _label(value) -> str:
@@ -77,19 +77,10 @@ def score_draw(task: dict) -> dict:
 
 def summarise(rows: list[dict]) -> list[dict]:
     """One row per value of ``min_time_constants``: the promise and the flags over the draws."""
-    out = []
-    for value in VALUES:
-        k = _label(value)
-        tested = [r for r in rows if r[f"flags_{k}"] >= MIN_FLAGS]
-        shares = [r[f"right_{k}"] / r[f"flags_{k}"] for r in tested]
-        cov = np.array([r[f"coverage_{k}"] for r in rows], dtype=float)
-        out.append({"min_time_constants": k, "draws": len(rows), "draws_with_enough_flags": len(tested),
-                    "promise_kept": int(sum(s >= PROMISE for s in shares)),
-                    "worst_share_right": min(shares, default=math.nan),
-                    "flags": int(sum(r[f"flags_{k}"] for r in rows)),
-                    "flags_right": int(sum(r[f"right_{k}"] for r in rows)),
-                    "coverage_median": float(np.nanmedian(cov)) if np.isfinite(cov).any() else math.nan})
-    return out
+    from benchmarks._family_args import promise_figures
+
+    return [{"min_time_constants": _label(value), "draws": len(rows), **promise_figures(rows, _label(value))}
+            for value in VALUES]
 
 
 def findings(summary: list[dict], rows: list[dict]) -> list[str]:

@@ -198,3 +198,28 @@ def test_model_derivative_study_compares_the_two_derivatives_draw_by_draw(script
     assert "false_alarms" not in summary[("binned", "campaign")]
     text = study.findings(study.summarise(rows))
     assert text[1].startswith("varying on the campaign dA/dt") and "alarms on 0 of 2 draws without a step" in text[1]
+
+
+def test_order_margin_study_counts_the_promise_and_the_forced_only_draws(scripts, monkeypatch):
+    """The order_margin study's summary per margin: promise on draws with enough flags, forced-only self-excited
+    flags, coverage."""
+    study = _load(BENCH / "study_order_margin.py", monkeypatch)
+
+    def row(draw, forced, flags, right, excited):
+        out = {"draw": draw, "forced_only": forced}
+        for value in study.VALUES:
+            k = study._label(value)
+            out.update({f"flags_{k}": flags, f"right_{k}": right, f"self_excited_{k}": excited,
+                        f"coverage_{k}": flags / 1000})
+        return out
+
+    rows = [row(0, False, 100, 99, 10), row(1, True, 300, 100, 200), row(2, False, 10, 0, 0)]
+    rows[1]["flags_0.005"], rows[1]["self_excited_0.005"], rows[1]["coverage_0.005"] = 100, 0, 0.1
+    summary = {s["order_set_margin"]: s for s in study.summarise(rows)}
+    assert (summary["0"]["draws_with_enough_flags"], summary["0"]["promise_kept"]) == (2, 1)
+    assert_close(summary["0"]["worst_share_right"], 1 / 3, what="100 of 300 right")
+    assert summary["0"]["forced_only_self_excited_flags"] == 200 and summary["0.005"]["forced_only_self_excited_flags"] == 0
+    assert (summary["0.005"]["promise_kept"], summary["0.005"]["flags"], summary["0.005"]["flags_right"]) == (2, 210, 199)
+    assert_close(summary["0.005"]["coverage_median"], 0.1, what="median of 0.1, 0.1 and 0.01")
+    text = study.findings(study.summarise(rows))
+    assert text[2].startswith("order_set_margin 0.005: the promise kept on 2 of 2 draws")
