@@ -37,13 +37,13 @@ import math  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE  # noqa: E402
+
 #: The two derivatives compared: name -> ``derivative`` of :func:`vivbench.validate.scoring_inputs`
 #: ("campaign": :data:`vivbench.analysis.CAMPAIGN_DERIVATIVE`, resolved in the worker).
 DERIVATIVES = ("identification", "campaign")
 #: The methods fitted on each.
 METHODS = ("varying", "binned")
-#: Fewest flags for a draw to test the promise, the promise itself, and the change scan's level.
-MIN_FLAGS, PROMISE, LEVEL = 20, 0.95, 0.05
 
 
 def _derivative(name: str):
@@ -109,10 +109,10 @@ def summarise(rows: list[dict]) -> list[dict]:
                      "curve_error_worst": cerr["worst"],
                      "lower_error_draws": int(sum(r[f"{key}_error"] < r[f"{other}_error"] for r in both)),
                      "compared_draws": len(both)}
-            tested = [r for r in rows if r[f"{key}_flags"] >= MIN_FLAGS]
+            tested = [r for r in rows if r[f"{key}_flags"] >= PROMISE_MIN_FLAGS]
             shares = [r[f"{key}_right"] for r in tested]
             entry.update(flags=int(sum(r[f"{key}_flags"] for r in rows)), promise_draws=len(tested),
-                         promise_kept=int(sum(s >= PROMISE for s in shares)),
+                         promise_kept=int(sum(s >= PROMISE_SHARE for s in shares)),
                          worst_share_right=min(shares, default=math.nan))
             if f"{key}_change_p" in rows[0]:
                 calm = [r for r in rows if r["step_event"] == 0]
@@ -133,7 +133,7 @@ def findings(summary: list[dict]) -> list[str]:
                 f"{s['error_median']:.3f}, p90 {s['error_p90']:.3f}, worst {s['error_worst']:.3f}; curves median "
                 f"{s['curve_error_median']:.3f}; the lower error on {s['lower_error_draws']} of {s['compared_draws']} "
                 f"draws; {s['flags']} flags, the promise kept on {s['promise_kept']} of {s['promise_draws']} draws "
-                f"with at least {MIN_FLAGS} (worst {s['worst_share_right']:.3f} right)")
+                f"with at least {PROMISE_MIN_FLAGS} (worst {s['worst_share_right']:.3f} right)")
         if "false_alarms" in s:
             text += (f"; the change scan alarms on {s['false_alarms']} of {s['draws_without_step']} draws without a "
                      f"step and detects {s['steps_detected']} of {s['draws_with_step']} steps")

@@ -37,10 +37,10 @@ import math  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from vivbench.validate.study_report import PROMISE_MIN_FLAGS  # noqa: E402
+
 #: The margins scored.
 VALUES = (0.0, 0.002, 0.005, 0.01, 0.02)
-#: Fewest flags for a draw to test the promise (as ``vivbench.validate.PROMISE_MIN_FLAGS``).
-MIN_FLAGS = 20
 
 
 def _label(value: float) -> str:
@@ -113,9 +113,10 @@ def summarise(rows: list[dict]) -> list[dict]:
 def findings(summary: list[dict]) -> list[str]:
     """Sentences generated from the figures."""
     return [f"order_set_margin {s['order_set_margin']}: the promise kept on {s['promise_kept']} of "
-            f"{s['draws_with_enough_flags']} draws with at least {MIN_FLAGS} flags (worst {s['worst_share_right']:.3f} "
-            f"right); {s['flags']} flags, {s['flags_right']} right; {s['forced_only_self_excited_flags']} self-excited "
-            f"flags on {s['forced_only_draws']} forced-only draws; median coverage {s['coverage_median']:.3f}."
+            f"{s['draws_with_enough_flags']} draws with at least {PROMISE_MIN_FLAGS} flags (worst "
+            f"{s['worst_share_right']:.3f} right); {s['flags']} flags, {s['flags_right']} right; "
+            f"{s['forced_only_self_excited_flags']} self-excited flags on {s['forced_only_draws']} forced-only draws; "
+            f"median coverage {s['coverage_median']:.3f}."
             for s in summary]
 
 

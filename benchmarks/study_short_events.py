@@ -36,10 +36,10 @@ import math  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from vivbench.validate.study_report import PROMISE_MIN_FLAGS  # noqa: E402
+
 #: The values of ``min_time_constants`` scored (None: no restriction).
 VALUES = (None, 3.0, 5.0, 8.0)
-#: Fewest flags for a draw to test the promise (as ``vivbench.validate.PROMISE_MIN_FLAGS``).
-MIN_FLAGS = 20
 
 
 def _label(value) -> str:
@@ -88,7 +88,7 @@ def findings(summary: list[dict], rows: list[dict]) -> list[str]:
     said = []
     for s in summary:
         said.append(f"min_time_constants {s['min_time_constants']}: the promise kept on {s['promise_kept']} of "
-                    f"{s['draws_with_enough_flags']} draws with at least {MIN_FLAGS} flags (worst "
+                    f"{s['draws_with_enough_flags']} draws with at least {PROMISE_MIN_FLAGS} flags (worst "
                     f"{s['worst_share_right']:.3f} right); {s['flags']} flags, {s['flags_right']} right.")
     ratio = np.array([r["time_constant_s"] / r["structural_time_constant_s"] for r in rows], dtype=float)
     known = ratio[np.isfinite(ratio)]

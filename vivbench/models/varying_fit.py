@@ -70,8 +70,7 @@ ORDER_SET_MARGIN = 0.005
 #: Parameters of the model that act only in the last step (:func:`fit_section`, or not in the fit at all):
 #: fits that differ only in them share steps 1-3 (:func:`fit_shared`).
 FINAL_PARAMS = ("penalty_choice", "n_bootstrap", "select_orders", "model_set_level", "order_set_margin",
-                "model_set_test", "agreement",
-                "tau", "model_sets")
+                "model_set_test", "agreement", "tau", "model_sets")
 
 
 @dataclass(frozen=True)
