@@ -223,3 +223,31 @@ def test_order_margin_study_counts_the_promise_and_the_forced_only_draws(scripts
     assert_close(summary["0.005"]["coverage_median"], 0.1, what="median of 0.1, 0.1 and 0.01")
     text = study.findings(study.summarise(rows))
     assert text[2].startswith("order_set_margin 0.005: the promise kept on 2 of 2 draws")
+
+
+def test_wind_smoothing_study_pairs_the_chosen_smoothing_with_the_prior(scripts, monkeypatch):
+    """The wind_smoothing study's summary: spread per variant and kind of wind error, the ratio to the stated prior
+    draw by draw, the promise and the draws where a longer smoothing was chosen."""
+    study = _load(BENCH / "study_wind_smoothing.py", monkeypatch)
+
+    def row(draw, eiv, stated, chosen, label, flags=0, right=0):
+        out = {"draw": draw, "eiv": eiv, "forced_only": False}
+        for name, err, lab in (("stated", stated, "yaw0-cv"), ("chosen", chosen, label)):
+            out.update({f"error_{name}": err, f"curve_error_{name}": err / 2, f"flags_{name}": flags,
+                        f"right_{name}": right, f"coverage_{name}": flags / 1000, f"self_excited_{name}": 0,
+                        f"chosen_{name}": lab, f"fit_s_{name}": 10.0})
+        return out
+
+    rows = [row(0, "smooth", 0.2, 0.1, "yaw0-cv-smooth90", flags=100, right=99),
+            row(1, "smooth", 0.4, 0.6, "yaw0-cv-smooth90"),
+            row(2, "tributary", 0.3, 0.3, "yaw0-cv-smooth30", flags=50, right=40)]
+    summary = {(s["variant"], s["draws_of"]): s for s in study.summarise(rows)}
+    chosen, stated = summary[("chosen", "all")], summary[("stated", "all")]
+    assert_close(chosen["ratio_to_stated_median"], 1.0, what="median of 0.5, 1.5 and 1")
+    assert (chosen["better_by_10pct"], chosen["worse_by_10pct"]) == (1, 1)
+    assert (chosen["longer_smoothing_chosen"], stated["longer_smoothing_chosen"]) == (2, 0)
+    assert (chosen["draws_with_enough_flags"], chosen["promise_kept"]) == (2, 1)
+    assert_close(summary[("chosen", "smooth")]["error_median"], 0.35, what="median of 0.1 and 0.6")
+    assert "ratio_to_stated_median" in summary[("chosen", "tributary")]
+    text = study.findings(study.summarise(rows))
+    assert text[1].startswith("chosen, all draws (3)") and "a longer smoothing chosen on 2" in text[1]
