@@ -18,7 +18,7 @@ from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 from vivbench.io.event import read_event, write_event
 from vivbench.report import twin_section
 from vivbench.synth import AeroConfig, CampaignConfig, generate_campaign, generate_event
-from vivbench.validate.twin import TwinConfig, read_twin, run_twin
+from vivbench.validate.twin import TwinConfig, read_twin, run_twin, twin_promise
 from vivbench.validate.twin_nuisance import NuisancePriors
 from vivbench.validate.twin_mirror import (TwinBridge, measure_campaign, mirror_generator, mirror_specs,
                                            mirror_structure, read_bridge)
@@ -116,6 +116,11 @@ def test_twin_is_deterministic_and_resumes(field, one_draw, tmp_path):
     assert section.startswith("## How far to trust this")
     assert "3 events" in section and "dA/dt error, energy-weighted" in section
     assert "the deck felt a smooth wind in" in section and "of 2 twins" in section
+    expected = twin_promise([r["scores"] for r in summary["draws"]])
+    assert (summary["promise"]["tested"], summary["promise"]["broken"]) == (expected["tested"], expected["broken"])
+    assert_close(summary["promise"]["broken_upper"], expected["broken_upper"], what="NaN when none was tested")
+    page = (a / "twin.md").read_text()
+    assert ("was tested on" in page) if summary["promise"]["tested"] else ("promise was not tested" in page)
 
 
 def test_a_journalled_draw_survives_a_failed_run(field, one_draw, tmp_path):
@@ -253,3 +258,44 @@ def test_the_twin_refits_with_the_field_runs_selection_settings(field):
     method = pool_method(settings)
     assert (method.n_perturbations, method.single_section_share) == (0, SINGLE_SECTION_SHARE)
     assert method.min_time_constants == LIMIT_TIME_CONSTANTS and method.rank_level == RANK_LEVEL
+
+
+def test_twin_promise_counts_the_draws_with_enough_flags_and_bounds_the_chance_of_a_break():
+    """Draws with fewer than 20 flags (or no share) are not tested; the bound is Clopper-Pearson's: the chance p
+    at which k or fewer breaks in n draws have probability 5 %."""
+    from scipy.stats import binom
+
+    ok, bad = {"n_flagged": 40, "flagged_right_share": 1.0}, {"n_flagged": 25, "flagged_right_share": 0.9}
+    few, none = {"n_flagged": 19, "flagged_right_share": 0.1}, {"n_flagged": 0, "flagged_right_share": float("nan")}
+    p = twin_promise([ok] * 5 + [few, none])
+    assert (p["tested"], p["broken"]) == (5, 0)
+    assert_close(p["broken_upper"], 1 - 0.05 ** (1 / 5), what="no break in 5: the rule of three's exact form")
+    p = twin_promise([ok, ok, ok, bad])
+    assert (p["tested"], p["broken"]) == (4, 1)
+    assert_close(binom.cdf(1, 4, p["broken_upper"]), 0.05, what="the bound solves P(X <= 1 | 4, p) = 0.05")
+    assert twin_promise([bad, bad])["broken_upper"] == 1.0
+    assert np.isnan(twin_promise([few, none])["broken_upper"]) and twin_promise([])["tested"] == 0
+
+
+def test_twin_check_lists_the_campaigns_that_test_the_promise_beside_their_twins():
+    from vivbench.validate.twin_check import TwinCheckConfig, _summary, twin_check_markdown
+
+    def row(draw, flags, share, twin):
+        actual = {m: 0.1 for m in CHECKED}
+        actual.update(n_flagged=flags, flagged_right_share=share)
+        expected = {m: {"predict_low": 0.0, "predict_high": 1.0} for m in CHECKED}
+        return {"draw": draw, "actual": actual, "expected": expected, "inside": {m: True for m in CHECKED},
+                "twin_promise": twin, "twin_nuisances": []}
+
+    from vivbench.validate import CHECKED_METRICS as CHECKED
+
+    rows = {0: row(0, 300, 0.40, {"tested": 5, "broken": 0, "broken_upper": 0.45}),
+            1: row(1, 50, 0.99, {"tested": 3, "broken": 1, "broken_upper": 0.86}),
+            2: row(2, 10, 0.10, {"tested": 0, "broken": 0, "broken_upper": float("nan")}),
+            3: row(3, 80, 0.50, None)}  # journalled before the twins' promise was kept
+    config = TwinCheckConfig(split="evaluation", draws=(0, 1, 2, 3), n_twins=5)
+    summary = _summary(config, rows, {})
+    assert [(p["draw"], p["broken"], p["twins_broken"]) for p in summary["promise"]] == [(0, True, 0), (1, False, 1)]
+    page = twin_check_markdown(summary)
+    assert "2 campaigns flagged enough windows to test it, 1 broke it, and the twins of 0 of those" in page
+    assert "| 0 | 300 | 0.400 | yes | 5 | 0 | 45% |" in page

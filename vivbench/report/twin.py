@@ -6,7 +6,7 @@ import math
 from pathlib import Path
 
 from vivbench.report.tables import md_table, produced_by
-from vivbench.validate.twin import METRIC_NAMES, read_twin
+from vivbench.validate.twin import METRIC_NAMES, read_twin, twin_promise
 
 __all__ = ["twin_section"]
 
@@ -46,7 +46,6 @@ def twin_section(directory, command: str | None = None) -> list[str]:
     n = len(summary["draws"])
     rows = [[METRIC_NAMES[k], _fmt(exp[k]["median"]), f"{_fmt(exp[k]['predict_low'])} - {_fmt(exp[k]['predict_high'])}",
              str(exp[k]["n"])] for k in _HEADLINE if k in exp]
-    right = exp.get("flagged_right_share", {})
     lines = [
         "## How far to trust this", "",
         f"A synthetic twin of this campaign (`{directory}`): {n} synthetic campaign{'s' if n != 1 else ''} with "
@@ -59,10 +58,15 @@ def twin_section(directory, command: str | None = None) -> list[str]:
         "prediction over the draws, of the logarithm for the errors).", "",
         md_table(["figure", "expected (median)", "90 % range of a campaign", "draws"], rows), "",
     ]
-    if right.get("n", 0) and math.isfinite(right.get("predict_low", math.nan)):
-        verdict = ("the flags keep the 95 % promise on the twins" if right["predict_low"] >= 0.95 else
-                   "the flags may fall short of the 95 % promise on this bridge: read the flagged regimes with care")
-        lines += [f"Flagged regimes: {verdict}.", ""]
+    promise = twin_promise([d["scores"] for d in summary["draws"]])
+    if promise["tested"]:
+        k, t = promise["broken"], promise["tested"]
+        verdict = (f"the 95 % promise held on all {t} twin{'s' if t != 1 else ''} that flagged enough windows to test "
+                   "it" if k == 0 else f"the 95 % promise broke on {k} of the {t} twins that flagged enough windows to "
+                   "test it: read the flagged regimes with care")
+        lines += [f"Flagged regimes: {verdict}; a campaign like this one breaks it with a chance of at most "
+                  f"{promise['broken_upper']:.0%} (one-sided 95 % bound over the twins: few twins bound it loosely).",
+                  ""]
     elif exp.get("coverage", {}).get("n", 0) and exp["coverage"]["predict_high"] == 0:
         lines += ["Flagged regimes: the twins flag no window; this campaign's regimes are not expected to be "
                   "identifiable.", ""]

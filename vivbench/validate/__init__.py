@@ -152,6 +152,7 @@ from vivbench.validate.twin import (
     run_twin_task,
     twin_inputs,
     twin_markdown,
+    twin_promise,
     twin_summary,
 )
 from vivbench.validate.twin_aero import band_curves, draw_aero, fit_aero, perturbed_curves
@@ -195,7 +196,7 @@ from vivbench.validate.twin_nuisance import (
 __all__ = [
     "BoundaryScore", "boundary_f1",
     "AERO_TRIES", "METRIC_NAMES", "TWIN_FILE", "TwinConfig", "TwinResult", "TwinTask", "read_twin", "run_twin", "run_twin_task",
-    "twin_inputs", "twin_markdown", "twin_summary", "band_curves", "draw_aero", "fit_aero", "perturbed_curves",
+    "twin_inputs", "twin_markdown", "twin_promise", "twin_summary", "band_curves", "draw_aero", "fit_aero", "perturbed_curves",
     "TWIN_METRICS", "PoolSettings", "chain_scores", "identify_config_from_json", "pool_method", "pool_settings",
     "run_chain", "CHECKED_METRICS", "TwinCheckConfig", "run_twin_check", "run_twin_check_task", "twin_check_markdown",
     "BRIDGE_KEYS", "CampaignMirror", "EventMirror", "TwinBridge", "measure_campaign", "mirror_generator",

@@ -10,6 +10,10 @@ run's own settings (:mod:`vivbench.validate.twin_chain`) and scores the campaign
 draw's truth. The spread over draws is the expected recovery on this bridge: the median of each
 figure, its 90 % range for one more campaign (a normal-theory prediction interval over the draws,
 of the logarithm for the errors; honest with few draws) and the draws' 5th to 95th percentiles.
+A share of flags right of 1 in every draw gives a range of 1, which says only that no twin saw a
+failure; so the verdict's promise is also counted over the draws (:func:`twin_promise`): on how
+many draws with enough flags it was tested and broken, and the one-sided 95 % upper bound
+(Clopper-Pearson) of the chance that a campaign like this one breaks it.
 
 Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics,
 the last the nuisances (both redrawn from their streams, up to :data:`AERO_TRIES` times, while an
@@ -43,6 +47,7 @@ from vivbench.models.campaign_files import load_campaign_model
 from vivbench.synth.event import generate_event
 from vivbench.validate.journal import check_record, counting_progress, run_journalled, task_directory
 from vivbench.validate.journal import load as journal_load
+from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE
 from vivbench.validate.twin_aero import draw_aero
 from vivbench.validate.twin_chain import (TWIN_METRICS, PoolSettings, chain_scores, identify_config_from_json,
                                           pool_method, pool_settings, run_chain)
@@ -51,7 +56,7 @@ from vivbench.validate.twin_mirror import (CampaignMirror, TwinBridge, measure_c
 from vivbench.validate.twin_nuisance import NuisancePriors, apply_nuisances, draw_nuisances
 
 __all__ = ["AERO_TRIES", "TwinConfig", "TwinTask", "TwinResult", "twin_inputs", "run_twin", "run_twin_task", "twin_summary",
-           "twin_markdown", "read_twin", "TWIN_FILE", "METRIC_NAMES"]
+           "twin_promise", "twin_markdown", "read_twin", "TWIN_FILE", "METRIC_NAMES"]
 
 #: The summary file of a twin's output directory.
 TWIN_FILE = "twin.json"
@@ -229,6 +234,31 @@ def _spread(values: Sequence[float], bounds: tuple[float, float], log: bool) -> 
 _BOUNDS = {"coverage": (0.0, 1.0), "flagged_right_share": (0.0, 1.0), "n_flagged": (0.0, math.inf)}
 
 
+def twin_promise(scores: Sequence[dict]) -> dict[str, Any]:
+    """The verdict's promise over twin draws: at least :data:`PROMISE_SHARE` of at least :data:`PROMISE_MIN_FLAGS`
+    flagged window-equations right.
+
+    Parameters
+    ----------
+    scores : sequence of dict, each draw's figures (``n_flagged``, ``flagged_right_share``)
+
+    Returns
+    -------
+    dict
+        ``tested`` (draws with enough flags), ``broken`` (those below the share) and ``broken_upper``: the
+        one-sided 95 % Clopper-Pearson upper bound of the chance that a campaign like the twins breaks the
+        promise (``1 - 0.05 ** (1 / tested)`` when none broke it; NaN when none was tested).
+    """
+    from scipy.stats import beta
+
+    shares = [float(s.get("flagged_right_share", math.nan)) for s in scores
+              if float(s.get("n_flagged", 0) or 0) >= PROMISE_MIN_FLAGS]
+    shares = [x for x in shares if math.isfinite(x)]
+    n, k = len(shares), sum(x < PROMISE_SHARE for x in shares)
+    upper = math.nan if n == 0 else (1.0 if k == n else float(beta.ppf(0.95, k + 1, n - k)))
+    return {"tested": n, "broken": int(k), "broken_upper": upper}
+
+
 def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], failed: dict[int, str]) -> dict:
     """The content of ``twin.json``: the inputs, each draw's scores, the failed draws' errors and the expected
     recovery."""
@@ -247,6 +277,7 @@ def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], fa
                    "wind_rule": mirror.wind_rule},
         "draws": draws, "failed": sorted(int(d) for d in failed),
         "errors": {str(d): failed[d] for d in sorted(failed)}, "expected": expected,
+        "promise": twin_promise([r["scores"] for r in draws]),
         "range": "low/high: 5th and 95th percentiles of the draws; predict_low/predict_high: 90 % prediction "
                  "range of one more campaign, mean +- t(0.95, K-1) s sqrt(1 + 1/K) over K draws (of the "
                  "logarithm for the errors)",
@@ -275,6 +306,14 @@ def twin_markdown(summary: dict) -> str:
     for key, s in summary["expected"].items():
         lines.append(f"| {METRIC_NAMES[key]} | {_fmt(s['median'])} | {_fmt(s['predict_low'])} - "
                      f"{_fmt(s['predict_high'])} | {_fmt(s['low'])} - {_fmt(s['high'])} | {s['n']} |")
+    p = summary.get("promise")
+    if p is not None:
+        lines += ["", (f"The verdict's promise (at least {PROMISE_SHARE:.0%} of at least {PROMISE_MIN_FLAGS} flagged "
+                       f"window-equations right) was tested on {p['tested']} twin draw{'s' if p['tested'] != 1 else ''}"
+                       f" and broken on {p['broken']}: a campaign like this one breaks it with a chance of at most "
+                       f"{p['broken_upper']:.0%} (one-sided 95 % bound)." if p["tested"] else
+                       f"No twin draw flagged {PROMISE_MIN_FLAGS} window-equations or more: the verdict's promise "
+                       "was not tested.")]
     layout = (f"anemometers at {', '.join(f'{x:g}' for x in m['anemometer_positions_m'])} m of "
               f"{m['span_length_m']:g} m ({m['wind_rule']} rule)" if m.get("anemometer_positions_m")
               else "one anemometer per section")

@@ -41,6 +41,7 @@ from vivbench.validate.journal import check_record, counting_progress, run_journ
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import scoring_inputs
 from vivbench.validate.study import check_draws
+from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE
 from vivbench.validate.twin import METRIC_NAMES, TwinConfig, read_twin, run_twin
 from vivbench.validate.twin_chain import chain_scores
 from vivbench.validate.twin_mirror import TwinBridge
@@ -132,7 +133,7 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
         inside[m] = None if not all(math.isfinite(x) for x in (lo, hi, a)) else bool(lo <= a <= hi)
     return {"draw": task.draw, "n_events": campaign.n_events, "labels": draw.labels, "actual": actual,
             "expected": {m: expected[m] for m in CHECKED_METRICS}, "twin_values": twin_values,
-            "twin_errors": twin.get("errors", {}), "inside": inside,
+            "twin_errors": twin.get("errors", {}), "inside": inside, "twin_promise": twin.get("promise"),
             "twin_nuisances": [d.get("nuisances") for d in twin["draws"]]}
 
 
@@ -161,7 +162,23 @@ def _summary(config: TwinCheckConfig, done: dict[int, dict], failed) -> dict:
                      "share": (sum(flags) / len(flags)) if flags else math.nan,
                      "median_width": _median_width(m, [r["expected"][m] for r in assessed])}
     return {"config": asdict(config), "draws": rows, "failed": sorted(failed), "share_inside": shares,
+            "promise": _promise_rows(rows),
             "aim": "the actual figure within the twin's 90 % range on at least 80 % of the draws"}
+
+
+def _promise_rows(rows: list[dict]) -> list[dict]:
+    """The campaigns that flagged enough windows to test the verdict's promise, beside their twin's count
+    (:func:`vivbench.validate.twin.twin_promise`; absent from rows journalled before it was kept)."""
+    out = []
+    for r in rows:
+        flags, share = r["actual"].get("n_flagged", 0), r["actual"].get("flagged_right_share", math.nan)
+        if not (flags >= PROMISE_MIN_FLAGS and math.isfinite(share)) or not r.get("twin_promise"):
+            continue
+        t = r["twin_promise"]
+        out.append({"draw": r["draw"], "flags": int(flags), "share_right": float(share),
+                    "broken": bool(share < PROMISE_SHARE), "twins_tested": t["tested"], "twins_broken": t["broken"],
+                    "broken_upper": t["broken_upper"]})
+    return out
 
 
 def twin_check_markdown(summary: dict) -> str:
@@ -189,6 +206,20 @@ def twin_check_markdown(summary: dict) -> str:
             e, a = r["expected"][m], r["actual"][m]
             lines.append(f"| {r['draw']} | {m} | {a:.3g} | {e['predict_low']:.3g} - {e['predict_high']:.3g} | "
                          f"{'n/a' if r['inside'][m] is None else ('yes' if r['inside'][m] else 'no')} |")
+    promise = summary.get("promise") or []
+    if promise:
+        broken = [p for p in promise if p["broken"]]
+        seen = [p for p in broken if p["twins_broken"] > 0]
+        lines += ["", f"The verdict's promise (at least {PROMISE_SHARE:.0%} of at least {PROMISE_MIN_FLAGS} flags right): "
+                  f"{len(promise)} campaigns flagged enough windows to test it, {len(broken)} broke it, and the twins "
+                  f"of {len(seen)} of those saw it broken at least once. The bound is the twin's one-sided 95 % upper "
+                  "bound of the chance that a campaign like this one breaks the promise.", "",
+                  "| draw | flags | share right | broken | twin draws tested | broken in the twins | bound |",
+                  "|---|---|---|---|---|---|---|"]
+        for p in promise:
+            lines.append(f"| {p['draw']} | {p['flags']} | {p['share_right']:.3f} | {'yes' if p['broken'] else 'no'} | "
+                         f"{p['twins_tested']} | {p['twins_broken']} | "
+                         f"{'n/a' if not math.isfinite(p['broken_upper']) else format(p['broken_upper'], '.0%')} |")
     failed_twins = [f"draw {r['draw']}: {len(r.get('twin_errors', {}))} of {c['n_twins']}" for r in summary["draws"]
                     if r.get("twin_errors")]
     if failed_twins:
