@@ -154,3 +154,49 @@ def family_study(study: str, description: str, argv, summarise, findings, **caps
     summary = summarise(rows) if rows else []
     return {"findings": findings(summary), "split": args.split, "draws": draws, "max_events": args.max_events,
             "max_duration_min": args.max_duration, "failed_draws": failed, "summary": summary, "rows": rows}
+
+
+def spread(values) -> dict:
+    """The spread over draws of a figure (NaN and None left out): ``n``, ``median``, ``p90`` (90th percentile)
+    and ``worst`` (the largest)."""
+    import math
+
+    import numpy as np
+
+    x = np.array([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    if not x.size:
+        return {"n": 0, "median": math.nan, "p90": math.nan, "worst": math.nan}
+    return {"n": int(x.size), "median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
+            "worst": float(x.max())}
+
+
+def fit_and_score(method, records, truths, windows) -> dict:
+    """Fit a study method on a draw's records and score it against the truths: ``error`` (energy-weighted
+    relative dA/dt error on the truth's own (A, U)), ``curve_error`` (energy-weighted), ``flags`` (flagged
+    window-equations), ``right`` (those with the truth's regime), ``coverage``, ``fit_s`` (wall time of the
+    fit, s) and ``chosen`` (the selection's chosen candidate, "" for other models)."""
+    import math
+    import time
+
+    from vivbench.models.protocol import model_evidence
+    from vivbench.validate.methods import score_fitted
+
+    t0 = time.perf_counter()
+    fitted = method.fit(records)
+    seconds = time.perf_counter() - t0
+    s = score_fitted(fitted, records, truths, windows=windows, simulate=False, fit_time_s=seconds)
+    flagged = 0 if math.isnan(s["coverage"]) else int(round(s["coverage"] * s["n_scored"]))
+    right = 0 if not flagged else int(round(s["accuracy_identifiable"] * flagged))
+    evidence = model_evidence(fitted) or {}
+    return {"error": s["rhs_error_true_AU_energy"], "curve_error": s["curve_error_energy"], "flags": flagged,
+            "right": right, "coverage": s["coverage"], "fit_s": seconds, "chosen": str(evidence.get("chosen", ""))}
+
+
+def draw_inputs(task: dict) -> tuple[list, list, list]:
+    """The draw's records, truths and windows: read from its directory when it holds an identification (a
+    draw directory copied from another study of the same caps), else :func:`capped_draw`."""
+    from vivbench.validate.methods import scoring_inputs
+
+    if any((draw_dir(task) / "identify").glob("*.identify.nc")):
+        return scoring_inputs(*draw_files(task))
+    return capped_draw(task)

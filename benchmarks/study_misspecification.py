@@ -33,7 +33,7 @@ measured records carry the results' ``yaw``, or for older results the yaw
 measured from the event's anemometers; the truth's record gets the latter on
 its own grid). The "additive U, yaw" rows sum a curve of every section's
 wind and yaw in each equation (``wind_input="additive"``), with
-``ADDITIVE_SETTINGS`` (chosen on the seed-0 campaign) or the model's own CV
+``SEED0_ADDITIVE_SETTINGS`` (chosen on the seed-0 campaign) or the model's own CV
 ("own CV"). ``--wind-smoothing S`` is the varying models' ``wind_smoothing_s``
 (default: the model's, 30 s; ``cv``: chosen per campaign from ``WIND_SMOOTHING_GRID``
 by the model's cross-validation over events): the fit on the measured records smooths their U
@@ -75,7 +75,8 @@ import dataclasses  # noqa: E402
 from vivbench.analysis import CAMPAIGN_DERIVATIVE, event_yaw, records_from_results  # noqa: E402
 from vivbench.core.record import Record  # noqa: E402
 from vivbench.models import PooledSINDy, VaryingCoefficientSINDy  # noqa: E402
-from vivbench.models.varying import ADDITIVE_SETTINGS, WIND_SMOOTHING_GRID  # noqa: E402
+from varying_settings import SEED0_ADDITIVE_SETTINGS  # noqa: E402
+from vivbench.models.varying import WIND_SMOOTHING_GRID  # noqa: E402
 from vivbench.regimes import (campaign_window_verdicts, model_window_regimes, truth_window_regimes,  # noqa: E402
                               varying_window_verdicts)
 
@@ -222,10 +223,10 @@ def run(camp: Path, results: Path, pooled_verdicts: bool = False, select_orders:
         ("VaryingCoefficientSINDy(mean U, yaw)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, yaw_degree=1, **vary), "varying"),
         # Every section's wind and yaw in every equation, summed over the sections like the truth's forces,
-        # with its settings chosen on the seed-0 campaign (ADDITIVE_SETTINGS; the options override them) ...
+        # with its settings chosen on the seed-0 campaign (SEED0_ADDITIVE_SETTINGS; the options override them) ...
         ("VaryingCoefficientSINDy(additive U, yaw)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="additive", yaw_degree=1,
-                                         **{**ADDITIVE_SETTINGS, **vary}), "varying"),
+                                         **{**SEED0_ADDITIVE_SETTINGS, **vary}), "varying"),
         # ... and with the model's own cross-validated basis and penalty.
         ("VaryingCoefficientSINDy(additive U, yaw, own CV)",
          lambda: VaryingCoefficientSINDy(select_orders=select_orders, wind_input="additive", yaw_degree=1, **vary),

@@ -87,21 +87,15 @@ def score_draw(task: dict) -> dict:
     return store_row(task, row)
 
 
-def _spread(values) -> dict:
-    x = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
-    if not x.size:
-        return {"n": 0, "median": math.nan, "p90": math.nan, "worst": math.nan}
-    return {"n": int(x.size), "median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
-            "worst": float(x.max())}
-
-
 def summarise(rows: list[dict]) -> list[dict]:
     """One row per method and derivative: errors over the draws, draws where it is lower, promise, change scan."""
+    from _family_args import spread
+
     out = []
     for name in METHODS:
         for deriv in DERIVATIVES:
             key, other = f"{name}_{deriv}", f"{name}_{[d for d in DERIVATIVES if d != deriv][0]}"
-            err, cerr = _spread(r[f"{key}_error"] for r in rows), _spread(r[f"{key}_curve_error"] for r in rows)
+            err, cerr = spread(r[f"{key}_error"] for r in rows), spread(r[f"{key}_curve_error"] for r in rows)
             both = [r for r in rows if np.isfinite(r[f"{key}_error"]) and np.isfinite(r[f"{other}_error"])]
             entry = {"method": name, "derivative": deriv, "draws": len(rows),
                      "error_median": err["median"], "error_p90": err["p90"], "error_worst": err["worst"],

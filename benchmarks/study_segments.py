@@ -104,27 +104,22 @@ def segment_draw(task: dict) -> dict:
     return store_row(task, row)
 
 
-def _spread(values) -> dict:
-    x = np.array([v for v in values if math.isfinite(v)], dtype=float)
-    if not x.size:
-        return {"n": 0, "median": math.nan, "p90": math.nan, "worst": math.nan}
-    return {"n": int(x.size), "median": float(np.median(x)), "p90": float(np.quantile(x, 0.9)), "worst": float(x.max())}
-
-
 def summarise(rows: list[dict]) -> list[dict]:
     """Errors over the draws whose scan located the change, for the model fitted to every event and the
     two-piece models; and over every draw with a step for the oracle split."""
+    from _family_args import spread
+
     located = [r for r in rows if r["located_index"] > 0]
-    out = [{"model": "every event", "draws": "located", **_spread(r["whole_error_all"] for r in located),
-            "after_median": _spread(r["located_whole_error_after"] for r in located)["median"]},
+    out = [{"model": "every event", "draws": "located", **spread(r["whole_error_all"] for r in located),
+            "after_median": spread(r["located_whole_error_after"] for r in located)["median"]},
            {"model": "two pieces at the located change", "draws": "located",
-            **_spread(r["located_error_all"] for r in located),
-            "after_median": _spread(r["located_error_after"] for r in located)["median"]},
-           {"model": "every event", "draws": "all with a step", **_spread(r["whole_error_all"] for r in rows),
-            "after_median": _spread(r["true_whole_error_after"] for r in rows)["median"]},
+            **spread(r["located_error_all"] for r in located),
+            "after_median": spread(r["located_error_after"] for r in located)["median"]},
+           {"model": "every event", "draws": "all with a step", **spread(r["whole_error_all"] for r in rows),
+            "after_median": spread(r["true_whole_error_after"] for r in rows)["median"]},
            {"model": "two pieces at the true step (oracle)", "draws": "all with a step",
-            **_spread(r["true_error_all"] for r in rows),
-            "after_median": _spread(r["true_error_after"] for r in rows)["median"]}]
+            **spread(r["true_error_all"] for r in rows),
+            "after_median": spread(r["true_error_after"] for r in rows)["median"]}]
     return out
 
 

@@ -5,8 +5,8 @@ Run: ``.venv/bin/python benchmarks/study_wind_input_cv.py RESULTS_DIR``
 
 Fits ``VaryingCoefficientSINDy`` twice on the same records as ``vivbench pool``
 (the campaign derivative of dA/dt): with the mean wind (the default) and with
-every section's wind (``wind_input="additive"`` with ``ADDITIVE_SETTINGS``, as
-``vivbench pool --wind-input additive``), and prints per equation the
+every section's wind (``wind_input="additive"`` with ``SEED0_ADDITIVE_SETTINGS``, the
+settings ``vivbench pool --wind-input additive`` had before it chose them as for the others), and prints per equation the
 leave-one-event-out squared prediction error of each event's measured dA/dt
 (``subset_loeo_event_`` of the model with every order): its median over the
 events and its sum. No truth is read: this is what a user can score. The
@@ -29,7 +29,8 @@ import numpy as np  # noqa: E402
 
 from vivbench.analysis.pool import CAMPAIGN_DERIVATIVE, records_from_results  # noqa: E402
 from vivbench.io.result import list_results  # noqa: E402
-from vivbench.models.varying import ADDITIVE_SETTINGS, VaryingCoefficientSINDy  # noqa: E402
+from varying_settings import SEED0_ADDITIVE_SETTINGS  # noqa: E402
+from vivbench.models.varying import VaryingCoefficientSINDy  # noqa: E402
 
 
 def _fmt(x: np.ndarray) -> str:
@@ -44,7 +45,7 @@ def main(argv=None) -> dict:
     print(f"{len(records)} events of {args.results}; leave-one-event-out squared error of the measured dA/dt, "
           "m^2/s^2, per equation")
     out = {}
-    for name, params in (("mean", {}), ("additive", {"wind_input": "additive", **ADDITIVE_SETTINGS})):
+    for name, params in (("mean", {}), ("additive", {"wind_input": "additive", **SEED0_ADDITIVE_SETTINGS})):
         model = VaryingCoefficientSINDy(n_bootstrap=0, **params).fit(records)
         loss = model.subset_loeo_event_[0]  # (S, E): the subset with every order
         out[name] = {"median": np.nanmedian(loss, axis=1).tolist(), "sum": np.nansum(loss, axis=1).tolist()}

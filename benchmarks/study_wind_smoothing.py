@@ -55,13 +55,10 @@ def _options(grid: tuple[float, ...]) -> dict:
 
 def score_draw(task: dict) -> dict:
     """One draw: generate (capped) and identify once; fit and score both variants on pool's records."""
-    import time
-
-    from vivbench.models.protocol import model_evidence
     from vivbench.synth.family import draw_bridge
-    from vivbench.validate.methods import CampaignMethod, score_fitted, scoring_inputs
+    from vivbench.validate.methods import CampaignMethod
 
-    from benchmarks._family_args import capped_draw, draw_dir, draw_files, store_row, stored_row
+    from benchmarks._family_args import draw_inputs, fit_and_score, store_row, stored_row
 
     done = stored_row(task)
     if done is not None:
@@ -70,46 +67,28 @@ def score_draw(task: dict) -> dict:
     row = {"draw": task["draw"], "eiv": str(labels["eiv"]), "n_sections": int(labels["n_sections"]),
            "forced_only": bool(labels["forced_only"]),
            "point_timescale_s": float(labels["point_timescale_s"] or math.nan)}
-    # a draw directory copied from another study of the same caps is read, not generated again
-    kept = any((draw_dir(task) / "identify").glob("*.identify.nc"))
-    records, truths, windows = scoring_inputs(*draw_files(task)) if kept else capped_draw(task)
+    records, truths, windows = draw_inputs(task)
     row["n_events"] = len(records)
     methods = {"stated": CampaignMethod("varying"),
                "chosen": CampaignMethod("varying", options=_options(tuple(task["grid"])))}
     for name, method in methods.items():
-        t0 = time.perf_counter()
-        fitted = method.fit(records)
-        seconds = time.perf_counter() - t0
-        s = score_fitted(fitted, records, truths, windows=windows, simulate=False, fit_time_s=seconds)
-        flagged = 0 if math.isnan(s["coverage"]) else int(round(s["coverage"] * s["n_scored"]))
-        right = 0 if not flagged else int(round(s["accuracy_identifiable"] * flagged))
-        ev = model_evidence(fitted) or {}
-        row.update({f"error_{name}": s["rhs_error_true_AU_energy"], f"curve_error_{name}": s["curve_error_energy"],
-                    f"flags_{name}": flagged, f"right_{name}": right, f"coverage_{name}": s["coverage"],
-                    # on a forced-only draw the truth has regime 1 only: every wrong flag is self-excited
-                    f"self_excited_{name}": flagged - right if row["forced_only"] else 0,
-                    f"chosen_{name}": str(ev.get("chosen", "")), f"fit_s_{name}": seconds})
+        s = fit_and_score(method, records, truths, windows)
+        # on a forced-only draw the truth has regime 1 only: every wrong flag is self-excited
+        s["self_excited"] = s["flags"] - s["right"] if row["forced_only"] else 0
+        row.update({f"{k}_{name}": v for k, v in s.items()})
     return store_row(task, row)
-
-
-def _spread(values) -> dict:
-    x = np.array([v for v in values if v is not None and np.isfinite(v)], dtype=float)
-    if not x.size:
-        return {"n": 0, "median": math.nan, "p90": math.nan, "worst": math.nan}
-    return {"n": int(x.size), "median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
-            "worst": float(x.max())}
 
 
 def summarise(rows: list[dict]) -> list[dict]:
     """One row per variant and kind of wind error (all draws first): errors, pairing with ``stated``, promise."""
-    from _family_args import promise_figures
+    from _family_args import promise_figures, spread
 
     out = []
     kinds = [("all", rows)] + [(k, [r for r in rows if r["eiv"] == k]) for k in sorted({r["eiv"] for r in rows})]
     for kind, sub in kinds:
         for name in VARIANTS:
-            err = _spread(r[f"error_{name}"] for r in sub)
-            cerr = _spread(r[f"curve_error_{name}"] for r in sub)
+            err = spread(r[f"error_{name}"] for r in sub)
+            cerr = spread(r[f"curve_error_{name}"] for r in sub)
             ratio = [r[f"error_{name}"] / r["error_stated"] for r in sub
                      if np.isfinite(r[f"error_{name}"]) and np.isfinite(r["error_stated"]) and r["error_stated"] > 0]
             entry = {"variant": name, "draws_of": kind, "draws": len(sub), "error_median": err["median"],

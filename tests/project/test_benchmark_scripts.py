@@ -251,3 +251,25 @@ def test_wind_smoothing_study_pairs_the_chosen_smoothing_with_the_prior(scripts,
     assert "ratio_to_stated_median" in summary[("chosen", "tributary")]
     text = study.findings(study.summarise(rows))
     assert text[1].startswith("chosen, all draws (3)") and "a longer smoothing chosen on 2" in text[1]
+
+
+def test_additive_input_study_leaves_out_single_sections_and_counts_the_promise(scripts, monkeypatch):
+    """The additive_input study's summary: draws with one section skipped, spread and promise per variant."""
+    study = _load(BENCH / "study_additive_input.py", monkeypatch)
+
+    def row(draw, errors, flags, right):
+        out = {"draw": draw, "skipped": False}
+        for name, err, f, r in zip(study.VARIANTS, errors, flags, right):
+            out.update({f"error_{name}": err, f"curve_error_{name}": err, f"flags_{name}": f, f"right_{name}": r,
+                        f"coverage_{name}": f / 100, f"fit_s_{name}": 10.0 * (1 + len(name))})
+        return out
+
+    rows = [row(0, (0.1, 0.3, 0.2), (50, 0, 40), (50, 0, 30)), row(1, (0.2, 0.5, float("nan")), (0, 0, 0), (0, 0, 0)),
+            {"draw": 2, "skipped": True}]
+    summary = {s["variant"]: s for s in study.summarise(rows)}
+    assert summary["mean"]["draws"] == 2
+    assert_close(summary["additive_seed0"]["error_median"], 0.4, what="median of 0.3 and 0.5")
+    assert_close(summary["additive"]["error_worst"], 0.2, what="NaN left out")
+    assert (summary["additive"]["draws_with_enough_flags"], summary["additive"]["promise_kept"]) == (1, 0)
+    assert (summary["mean"]["draws_with_enough_flags"], summary["mean"]["promise_kept"]) == (1, 1)
+    assert study.findings(study.summarise(rows))[2].startswith("additive (2 draws with two sections or more)")

@@ -64,7 +64,6 @@ def _pool(files, args, weights, out_dir: Path, results_dir: Path, *, label: str 
     """Fit the campaign model of ``args`` to ``files`` (``label``: which of the campaign's events they are, None for
     all), write its regimes and model into ``out_dir`` and report; returns the regimes' dataset."""
     from vivbench.models.campaign import PooledSINDy
-    from vivbench.models.varying import ADDITIVE_SETTINGS
     from vivbench.analysis.selection import varying_selection
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
@@ -84,8 +83,6 @@ def _pool(files, args, weights, out_dir: Path, results_dir: Path, *, label: str 
                                    ("wind_input", args.wind_input),
                                    ("wind_weights", weights), ("penalty_choice", args.penalty_choice))
                  if v is not None}
-        if args.wind_input == "additive":  # its settings chosen on the tuning campaign, unless overridden
-            extra = {**ADDITIVE_SETTINGS, **extra}
         if args.min_time_constants is not None:
             extra["min_time_constants"] = args.min_time_constants or None  # 0: no restriction
         if args.wind_bins is DEFAULT_WIND_BINS:
@@ -204,7 +201,8 @@ def register(sub) -> None:
     s.add_argument("--wind-input", default=None, choices=("mean", "section", "additive", "sum"),
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
-                        "forces (additive; with its settings ADDITIVE_SETTINGS: 10 unpenalised B-splines, 15 s), or "
+                        "forces (additive; its basis, penalty and smoothing chosen as for the others, a fit several times "
+                        "slower), or "
                         "every section's wind with one curve shared by all, weighted by --wind-weights and summed (sum)")
     s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",
                    help="with --model varying and the mean wind (or the sum): the sections' weights in it: modal (default, a "

@@ -43,7 +43,7 @@ the curves are not linear. ``"additive"`` fits that sum: every column repeated
 for each section's wind and yaw (p = 4 M (J + 1) S, the same penalty on every
 section's curve; only the sum is identifiable, the penalty keeps the split
 smooth). The coefficient curve at wind U is then the model at the uniform wind
-U_j = U, the sum over the sections. ``ADDITIVE_SETTINGS`` are its settings.
+U_j = U, the sum over the sections.
 ``"sum"`` ties those curves to one shape weighted by the sections' weights,
 a_kij = w_j f_ki (the same deck cross-section at every section, the truth's form
 with modal weights): p = 4 M (J + 1) as with the mean wind, fitted from the
@@ -97,7 +97,7 @@ from vivbench.regression.penalised import penalised_rss
 
 # The spline basis, the penalised solve and the order subsets are re-exported from their modules.
 __all__ = ["VaryingCoefficientSINDy", "bspline_basis", "bspline_local", "difference_penalty", "uniform_knots", "DEGREE",
-           "penalised_rss", "ORDER_SUBSETS", "ORDER_SET_MARGIN", "WIND_SMOOTHING_GRID", "ADDITIVE_SETTINGS", "PENALTY_CHOICES",
+           "penalised_rss", "ORDER_SUBSETS", "ORDER_SET_MARGIN", "WIND_SMOOTHING_GRID", "PENALTY_CHOICES",
            "YAW_INSIDE_DEG", "FINAL_PARAMS"]
 
 #: Default candidates of the measured wind's Gaussian smoothing, s (0: none), chosen per campaign by
@@ -110,9 +110,6 @@ WIND_SMOOTHING_GRID = (0.0, 15.0, 30.0, 60.0)
 YAW_INSIDE_DEG = 2.0
 
 
-#: Settings of ``wind_input="additive"``: 10 unpenalised B-splines per curve and 15 s of wind smoothing
-#: (``benchmarks/study_misspecification.py`` measures them).
-ADDITIVE_SETTINGS = {"n_basis": (10,), "penalties": (1e-8,), "wind_smoothing_s": 15.0}
 
 
 
@@ -152,8 +149,8 @@ class VaryingCoefficientSINDy(ModelBase):
     wind_input : {"mean", "section", "additive", "sum"}
         The wind of equation k's curves: the mean of U over the sections
         (default), the section's own U_k, or every section's U_j (and yaw),
-        a curve of each summed (module docstring; use it with
-        ``ADDITIVE_SETTINGS``, as ``vivbench pool --wind-input additive`` does),
+        a curve of each summed (module docstring; S times the coefficients, and
+        a fit several times slower),
         or every section's U_j with one curve shared by all, weighted by the
         sections' ``wind_weights`` and summed: a_ki = sum_j w_j f_ki(U_j), the
         same deck at every section, with as many coefficients as "mean".
