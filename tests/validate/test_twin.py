@@ -298,4 +298,4 @@ def test_twin_check_lists_the_campaigns_that_test_the_promise_beside_their_twins
     assert [(p["draw"], p["broken"], p["twins_broken"]) for p in summary["promise"]] == [(0, True, 0), (1, False, 1)]
     page = twin_check_markdown(summary)
     assert "2 campaigns flagged enough windows to test it, 1 broke it, and the twins of 0 of those" in page
-    assert "| 0 | 300 | 0.400 | yes | 5 | 0 | 45% |" in page
+    assert "| 0 | 300 | 0.400 | yes | 5 | 0 | 45 % |" in page
