@@ -122,7 +122,8 @@ def findings(summary: list[dict]) -> list[str]:
         if s["draws_of"] == "all":
             text += (f"; {s['flags']} flags, the promise kept on {s['promise_kept']} of {s['draws_with_enough_flags']}"
                      f" draws with enough flags (worst {s['worst_share_right']:.3f} right); "
-                     f"{s['forced_only_self_excited_flags']} self-excited flags on forced-only draws; a longer smoothing "
+                     f"{s['forced_only_self_excited_flags']} self-excited flags on forced-only draws; a longer "
+                     "smoothing "
                      f"chosen on {s['longer_smoothing_chosen']}; median fit {s['fit_s_median']:.0f} s")
         said.append(text + ".")
     return said

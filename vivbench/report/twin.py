@@ -65,7 +65,8 @@ def twin_section(directory, command: str | None = None) -> list[str]:
                    "it" if k == 0 else f"the 95 % promise broke on {k} of the {t} twins that flagged enough windows to "
                    "test it: read the flagged regimes with care")
         lines += [f"Flagged regimes: {verdict}; a campaign like this one breaks it with a chance of at most "
-                  f"{promise['broken_upper'] * 100:.0f} % (one-sided 95 % bound over the twins: few twins bound it loosely).",
+                  f"{promise['broken_upper'] * 100:.0f} % (one-sided 95 % bound over the twins: few twins bound it "
+                  "loosely).",
                   ""]
     elif exp.get("coverage", {}).get("n", 0) and exp["coverage"]["predict_high"] == 0:
         lines += ["Flagged regimes: the twins flag no window; this campaign's regimes are not expected to be "

@@ -308,8 +308,8 @@ def twin_markdown(summary: dict) -> str:
                      f"{_fmt(s['predict_high'])} | {_fmt(s['low'])} - {_fmt(s['high'])} | {s['n']} |")
     p = summary.get("promise")
     if p is not None:
-        lines += ["", (f"The verdict's promise (at least {PROMISE_SHARE * 100:.0f} % of at least {PROMISE_MIN_FLAGS} flagged "
-                       f"window-equations right) was tested on {p['tested']} twin draw{'s' if p['tested'] != 1 else ''}"
+        lines += ["", (f"The verdict's promise (at least {PROMISE_SHARE * 100:.0f} % of at least {PROMISE_MIN_FLAGS} "
+                       f"flagged window-equations right) was tested on {p['tested']} twin draw{'s' if p['tested'] != 1 else ''}"
                        f" and broken on {p['broken']}: a campaign like this one breaks it with a chance of at most "
                        f"{p['broken_upper'] * 100:.0f} % (one-sided 95 % bound)." if p["tested"] else
                        f"No twin draw flagged {PROMISE_MIN_FLAGS} window-equations or more: the verdict's promise "

@@ -210,16 +210,17 @@ def twin_check_markdown(summary: dict) -> str:
     if promise:
         broken = [p for p in promise if p["broken"]]
         seen = [p for p in broken if p["twins_broken"] > 0]
-        lines += ["", f"The verdict's promise (at least {PROMISE_SHARE * 100:.0f} % of at least {PROMISE_MIN_FLAGS} flags right): "
+        lines += ["", f"The verdict's promise (at least {PROMISE_SHARE * 100:.0f} % of at least {PROMISE_MIN_FLAGS} "
+                  "flags right): "
                   f"{len(promise)} campaigns flagged enough windows to test it, {len(broken)} broke it, and the twins "
                   f"of {len(seen)} of those saw it broken at least once. The bound is the twin's one-sided 95 % upper "
                   "bound of the chance that a campaign like this one breaks the promise.", "",
                   "| draw | flags | share right | broken | twin draws tested | broken in the twins | bound |",
                   "|---|---|---|---|---|---|---|"]
         for p in promise:
+            bound = "n/a" if not math.isfinite(p["broken_upper"]) else f"{p['broken_upper'] * 100:.0f} %"
             lines.append(f"| {p['draw']} | {p['flags']} | {p['share_right']:.3f} | {'yes' if p['broken'] else 'no'} | "
-                         f"{p['twins_tested']} | {p['twins_broken']} | "
-                         f"{'n/a' if not math.isfinite(p['broken_upper']) else format(p['broken_upper'] * 100, '.0f') + ' %'} |")
+                         f"{p['twins_tested']} | {p['twins_broken']} | {bound} |")
     failed_twins = [f"draw {r['draw']}: {len(r.get('twin_errors', {}))} of {c['n_twins']}" for r in summary["draws"]
                     if r.get("twin_errors")]
     if failed_twins:
