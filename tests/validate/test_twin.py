@@ -299,3 +299,20 @@ def test_twin_check_lists_the_campaigns_that_test_the_promise_beside_their_twins
     page = twin_check_markdown(summary)
     assert "2 campaigns flagged enough windows to test it, 1 broke it, and the twins of 0 of those" in page
     assert "| 0 | 300 | 0.400 | yes | 5 | 0 | 45 % |" in page
+
+
+def test_the_trust_section_bounds_the_chance_of_a_broken_promise(one_draw, tmp_path):
+    """Twins that got every flag right give a range of 1; the report's trust section says how little that is."""
+    twin = tmp_path / "twin"
+    shutil.copytree(one_draw, twin)
+    summary = read_twin(twin)
+    draw = summary["draws"][0]
+    summary["draws"] = [{**draw, "scores": {**draw["scores"], "n_flagged": 40, "flagged_right_share": share}}
+                        for share in (1.0, 1.0, 1.0)]
+    (twin / "twin.json").write_text(json.dumps(summary))
+    section = "\n".join(twin_section(twin))
+    assert "the 95 % promise held on all 3 twins that flagged enough windows to test it" in section
+    assert f"at most {(1 - 0.05 ** (1 / 3)) * 100:.0f} %" in section  # 63 %: three twins vouch for little
+    summary["draws"][0]["scores"]["flagged_right_share"] = 0.5
+    (twin / "twin.json").write_text(json.dumps(summary))
+    assert "the 95 % promise broke on 1 of the 3 twins" in "\n".join(twin_section(twin))
