@@ -29,10 +29,6 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import math  # noqa: E402
-
-import numpy as np  # noqa: E402
-
 #: The variants: the default model, the additive input at its former seed-0 settings and at the chosen ones.
 VARIANTS = ("mean", "additive_seed0", "additive")
 
@@ -69,20 +65,16 @@ def score_draw(task: dict) -> dict:
 
 def summarise(rows: list[dict]) -> list[dict]:
     """One row per variant over the draws with two sections or more: errors, promise, fit time."""
-    from _family_args import promise_figures
+    from _family_args import promise_figures, spread
 
     rows = [r for r in rows if not r.get("skipped")]
     out = []
     for name in VARIANTS:
-        err = np.array([r[f"error_{name}"] for r in rows], dtype=float)
-        cerr = np.array([r[f"curve_error_{name}"] for r in rows], dtype=float)
-        ok, cok = err[np.isfinite(err)], cerr[np.isfinite(cerr)]
-        entry = {"variant": name, "draws": len(rows),
-                 "error_median": float(np.median(ok)) if ok.size else math.nan,
-                 "error_p90": float(np.percentile(ok, 90)) if ok.size else math.nan,
-                 "error_worst": float(ok.max()) if ok.size else math.nan,
-                 "curve_error_median": float(np.median(cok)) if cok.size else math.nan,
-                 "fit_s_median": float(np.median([r[f"fit_s_{name}"] for r in rows])) if rows else math.nan}
+        err = spread(r[f"error_{name}"] for r in rows)
+        curve = spread(r[f"curve_error_{name}"] for r in rows)
+        entry = {"variant": name, "draws": len(rows), "error_median": err["median"], "error_p90": err["p90"],
+                 "error_worst": err["worst"], "curve_error_median": curve["median"],
+                 "fit_s_median": spread(r[f"fit_s_{name}"] for r in rows)["median"]}
         entry.update(promise_figures(rows, name))
         out.append(entry)
     return out

@@ -201,7 +201,7 @@ def register(sub) -> None:
     s.add_argument("--wind-input", default=None, choices=("mean", "section", "additive", "sum"),
                    help="with --model varying: the wind of the curves: the mean over the sections (default), each "
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
-                        "forces (additive; its basis, penalty and smoothing chosen as for the others, a fit several times "
+                        "forces (additive; its basis, penalty and yaw chosen as for the others, a fit several times "
                         "slower), or "
                         "every section's wind with one curve shared by all, weighted by --wind-weights and summed (sum)")
     s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",

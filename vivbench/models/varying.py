@@ -110,9 +110,6 @@ WIND_SMOOTHING_GRID = (0.0, 15.0, 30.0, 60.0)
 YAW_INSIDE_DEG = 2.0
 
 
-
-
-
 class VaryingCoefficientSINDy(ModelBase):
     """Penalised cubic-spline coefficient curves of the powers of A, fitted to a whole campaign.
 
