@@ -86,17 +86,30 @@ def store_row(task: dict, row: dict) -> dict:
 
 
 def capped_draw(task: dict) -> tuple[list, list, list]:
-    """The draw's campaign generated with the task's caps and identified (in :func:`draw_dir`): the records,
-    truths and windows to score a model on (:func:`vivbench.validate.methods.scoring_inputs`)."""
+    """The draw's campaign generated with the task's caps and identified (in :func:`draw_dir`, unless it already
+    holds them): the records, truths and windows to score a model on
+    (:func:`vivbench.validate.methods.scoring_inputs`)."""
     from vivbench.analysis.identify import IdentifyConfig, identify_files
     from vivbench.synth.family import generate_family_campaign
     from vivbench.validate.methods import scoring_inputs
 
     root = draw_dir(task)
-    made, _ = generate_family_campaign(task["split"], task["draw"], root / "campaign", max_events=task["max_events"],
-                                       max_duration=task["max_duration_s"])
-    identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
+    if not _identified(root):
+        made, _ = generate_family_campaign(task["split"], task["draw"], root / "campaign", max_events=task["max_events"],
+                                           max_duration=task["max_duration_s"])
+        identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
     return scoring_inputs(*draw_files(task))
+
+
+def _identified(root: Path) -> bool:
+    """Whether a draw directory holds a campaign (its catalogue) with every event identified: a directory copied
+    from another study of the same caps is read, not generated and identified again."""
+    campaign = root / "campaign"
+    if not (campaign / "catalogue.csv").exists():
+        return False
+    events = {f.stem for f in campaign.glob("*.nc")}
+    done = {f.name.removesuffix(".identify.nc") for f in (root / "identify").glob("*.identify.nc")}
+    return bool(events) and events <= done
 
 
 def draw_files(task: dict) -> tuple[list, list]:
@@ -193,10 +206,6 @@ def fit_and_score(method, records, truths, windows) -> dict:
 
 
 def draw_inputs(task: dict) -> tuple[list, list, list]:
-    """The draw's records, truths and windows: read from its directory when it holds an identification (a
-    draw directory copied from another study of the same caps), else :func:`capped_draw`."""
-    from vivbench.validate.methods import scoring_inputs
-
-    if any((draw_dir(task) / "identify").glob("*.identify.nc")):
-        return scoring_inputs(*draw_files(task))
+    """The draw's records, truths and windows (:func:`capped_draw`, which reads a draw directory copied from another
+    study of the same caps instead of generating and identifying it again)."""
     return capped_draw(task)

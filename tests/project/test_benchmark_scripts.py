@@ -273,3 +273,20 @@ def test_additive_input_study_leaves_out_single_sections_and_counts_the_promise(
     assert (summary["additive"]["draws_with_enough_flags"], summary["additive"]["promise_kept"]) == (1, 0)
     assert (summary["mean"]["draws_with_enough_flags"], summary["mean"]["promise_kept"]) == (1, 1)
     assert study.findings(study.summarise(rows))[2].startswith("additive (2 draws with two sections or more)")
+
+
+def test_family_draw_directory_is_read_only_when_every_event_is_identified(scripts, monkeypatch, tmp_path):
+    """A draw directory copied from another study is read; one whose identification stopped part-way is made again."""
+    family = _load(BENCH / "_family_args.py", monkeypatch)
+    root = tmp_path / "d000"
+    assert not family._identified(root)
+    (root / "campaign").mkdir(parents=True)
+    (root / "identify").mkdir()
+    for name in ("E001.nc", "E002.nc", "catalogue.csv"):
+        (root / "campaign" / name).write_text("", encoding="utf-8")
+    (root / "identify" / "E001.identify.nc").write_text("", encoding="utf-8")
+    assert not family._identified(root)
+    (root / "identify" / "E002.identify.nc").write_text("", encoding="utf-8")
+    assert family._identified(root)
+    (root / "campaign" / "catalogue.csv").unlink()
+    assert not family._identified(root)
