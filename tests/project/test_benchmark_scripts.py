@@ -290,3 +290,38 @@ def test_family_draw_directory_is_read_only_when_every_event_is_identified(scrip
     assert family._identified(root)
     (root / "campaign" / "catalogue.csv").unlink()
     assert not family._identified(root)
+
+
+def test_wind_errors_study_extrapolates_and_keeps_the_error_spectrum(scripts, monkeypatch):
+    """SIMEX's weights reproduce a polynomial at lambda = -1; a surrogate keeps the amplitude spectrum and mean."""
+    study = _load(BENCH / "study_wind_errors.py", monkeypatch)
+    lam = (0.0,) + study.LAMBDAS
+    f = np.array([[2.0 - 3.0 * x + 0.5 * x**2, 1.0 + x] for x in lam])  # two samples, each a polynomial in lambda
+    assert_close(study.extrapolation_weights(lam, 2) @ f, [5.5, 0.0], atol=1e-12, reason="rounding of a zero",
+                 what="quadratic at -1, exact")
+    assert_close(study.extrapolation_weights(lam, 1) @ f[:, 1], 0.0, atol=1e-12, reason="rounding of a zero",
+                 what="line at -1, exact")
+    rng = np.random.default_rng(0)
+    x = np.cumsum(rng.standard_normal((301, 2)), axis=0)
+    y = study.surrogate(x, rng)
+    assert y.shape == x.shape
+    assert_close(np.abs(np.fft.rfft(y, axis=0)), np.abs(np.fft.rfft(x, axis=0)), atol=1e-9,
+                 reason="rounding of the two transforms", what="same amplitude spectrum")
+    assert not np.allclose(y, x)
+
+    def row(draw, eiv, errors, sections=2):
+        out = {"draw": draw, "eiv": eiv, "n_sections": sections, "wind_error_actual": 0.4,
+               "wind_error_estimated": 0.2 if sections == 1 else 0.5}
+        out.update({f"error_{name}": e for name, e in zip(study.VARIANTS, errors)})
+        return out
+
+    rows = [row(0, "smooth", (0.4, 0.1, 0.38, 0.5, 0.4, 0.8), sections=1),
+            row(1, "tributary", (0.2, 0.2, 0.2, 0.19, 0.2, 0.3))]
+    summary = study.summarise(rows)
+    by = {(s["variant"], s["draws_of"]): s for s in summary}
+    assert_close(by[("truth", "all")]["ratio_to_measured_median"], 0.625, what="median of 0.25 and 1")
+    assert (by[("simex_oracle", "all")]["worse_by_10pct"], by[("truth", "smooth")]["better_by_10pct"]) == (2, 1)
+    said = study.findings(summary, rows)
+    assert said[0].startswith("measured, all draws (2)")
+    assert any(s.startswith("The estimated wind error over the actual one, one section (1 draws): median 0.50")
+               for s in said)
