@@ -107,7 +107,7 @@ def surrogate(x: np.ndarray, rng) -> np.ndarray:
     phase = np.exp(2j * np.pi * rng.random(X.shape))
     phase[0] = 1.0
     if x.shape[0] % 2 == 0:
-        phase[-1] = np.sign(phase[-1].real) or 1.0  # the Nyquist term stays real
+        phase[-1] = np.where(phase[-1].real < 0, -1.0, 1.0)  # the Nyquist term stays real
     return np.fft.irfft(X * phase, n=x.shape[0], axis=0)
 
 
