@@ -183,6 +183,23 @@ def spread(values) -> dict:
             "worst": float(x.max())}
 
 
+def by_wind_error(rows: list[dict]) -> list[tuple[str, list[dict]]]:
+    """The rows, all of them first (``"all"``), then by their draws' kind of errors in the wind (``eiv``)."""
+    return [("all", rows)] + [(k, [r for r in rows if r["eiv"] == k]) for k in sorted({r["eiv"] for r in rows})]
+
+
+def paired(rows: list[dict], key: str, base: str) -> dict:
+    """Figure ``key`` over figure ``base`` draw by draw (where both are finite and ``base`` > 0): ``ratio_median``,
+    and the draws where it is lower (``better_by_10pct``) or higher (``worse_by_10pct``) by more than 10 %."""
+    import math
+
+    import numpy as np
+
+    q = [r[key] / r[base] for r in rows if np.isfinite(r[key]) and np.isfinite(r[base]) and r[base] > 0]
+    return {"ratio_median": float(np.median(q)) if q else math.nan, "better_by_10pct": int(sum(x < 1 / 1.1 for x in q)),
+            "worse_by_10pct": int(sum(x > 1.1 for x in q))}
+
+
 def fit_and_score(method, records, truths, windows) -> dict:
     """Fit a study method on a draw's records and score it against the truths: ``error`` (energy-weighted
     relative dA/dt error on the truth's own (A, U)), ``curve_error`` (energy-weighted), ``flags`` (flagged
@@ -203,6 +220,15 @@ def fit_and_score(method, records, truths, windows) -> dict:
     evidence = model_evidence(fitted) or {}
     return {"error": s["rhs_error_true_AU_energy"], "curve_error": s["curve_error_energy"], "flags": flagged,
             "right": right, "coverage": s["coverage"], "fit_s": seconds, "chosen": str(evidence.get("chosen", ""))}
+
+
+def labelled_row(task: dict) -> tuple[dict, dict]:
+    """The draw's family labels and the start of its row: ``draw``, ``eiv`` (the kind of errors in the wind) and
+    ``n_sections``."""
+    from vivbench.synth.family import draw_bridge
+
+    labels = draw_bridge(task["split"], task["draw"]).labels
+    return labels, {"draw": task["draw"], "eiv": str(labels["eiv"]), "n_sections": int(labels["n_sections"])}
 
 
 def draw_inputs(task: dict) -> tuple[list, list, list]:

@@ -45,15 +45,12 @@ def _methods() -> dict:
 
 def score_draw(task: dict) -> dict:
     """One draw with two sections or more: generate (capped) and identify once; fit and score every variant."""
-    from vivbench.synth.family import draw_bridge
-
-    from benchmarks._family_args import draw_inputs, fit_and_score, store_row, stored_row
+    from benchmarks._family_args import draw_inputs, fit_and_score, labelled_row, store_row, stored_row
 
     done = stored_row(task)
     if done is not None:
         return done
-    labels = draw_bridge(task["split"], task["draw"]).labels
-    row = {"draw": task["draw"], "eiv": str(labels["eiv"]), "n_sections": int(labels["n_sections"])}
+    _labels, row = labelled_row(task)
     if row["n_sections"] < 2:
         return store_row(task, {**row, "skipped": True})
     records, truths, windows = draw_inputs(task)

@@ -129,18 +129,16 @@ def score_draw(task: dict) -> dict:
     from vivbench.analysis import VARYING_PRIORS, wind_error_scale
     from vivbench.models import VaryingCoefficientSINDy
     from vivbench.models.protocol import model_evidence
-    from vivbench.synth.family import draw_bridge
     from vivbench.validate import energy_relative_error, record_with_truth_wind
     from vivbench.validate.methods import CampaignMethod
 
-    from benchmarks._family_args import draw_inputs, store_row, stored_row
+    from benchmarks._family_args import draw_inputs, labelled_row, store_row, stored_row
 
     done = stored_row(task)
     if done is not None:
         return done
-    labels = draw_bridge(task["split"], task["draw"]).labels
-    row = {"draw": task["draw"], "eiv": str(labels["eiv"]), "n_sections": int(labels["n_sections"]),
-           "point_intensity": float(labels["point_intensity"] or math.nan)}
+    labels, row = labelled_row(task)
+    row["point_intensity"] = float(labels["point_intensity"] or math.nan)
     records, truths, _windows = draw_inputs(task)
     row["n_events"] = len(records)
     selection = CampaignMethod("varying").fit(records)
@@ -184,20 +182,17 @@ def score_draw(task: dict) -> dict:
 
 def summarise(rows: list[dict]) -> list[dict]:
     """One row per variant and kind of wind error (all draws first): errors and the pairing with ``measured``."""
-    from _family_args import spread
+    from _family_args import by_wind_error, paired, spread
 
     out = []
-    kinds = [("all", rows)] + [(k, [r for r in rows if r["eiv"] == k]) for k in sorted({r["eiv"] for r in rows})]
-    for kind, sub in kinds:
+    for kind, sub in by_wind_error(rows):
         for name in VARIANTS:
             err = spread(r[f"error_{name}"] for r in sub)
-            ratio = [r[f"error_{name}"] / r["error_measured"] for r in sub
-                     if np.isfinite(r[f"error_{name}"]) and np.isfinite(r["error_measured"]) and r["error_measured"] > 0]
+            pair = paired(sub, f"error_{name}", "error_measured")
             out.append({"variant": name, "draws_of": kind, "draws": len(sub), "error_median": err["median"],
                         "error_p90": err["p90"], "error_worst": err["worst"],
-                        "ratio_to_measured_median": float(np.median(ratio)) if ratio else math.nan,
-                        "better_by_10pct": int(sum(q < 1 / 1.1 for q in ratio)),
-                        "worse_by_10pct": int(sum(q > 1.1 for q in ratio))})
+                        "ratio_to_measured_median": pair["ratio_median"], "better_by_10pct": pair["better_by_10pct"],
+                        "worse_by_10pct": pair["worse_by_10pct"]})
     return out
 
 

@@ -55,18 +55,16 @@ def _options(grid: tuple[float, ...]) -> dict:
 
 def score_draw(task: dict) -> dict:
     """One draw: generate (capped) and identify once; fit and score both variants on pool's records."""
-    from vivbench.synth.family import draw_bridge
     from vivbench.validate.methods import CampaignMethod
 
-    from benchmarks._family_args import draw_inputs, fit_and_score, store_row, stored_row
+    from benchmarks._family_args import draw_inputs, fit_and_score, labelled_row, store_row, stored_row
 
     done = stored_row(task)
     if done is not None:
         return done
-    labels = draw_bridge(task["split"], task["draw"]).labels
-    row = {"draw": task["draw"], "eiv": str(labels["eiv"]), "n_sections": int(labels["n_sections"]),
-           "forced_only": bool(labels["forced_only"]),
-           "point_timescale_s": float(labels["point_timescale_s"] or math.nan)}
+    labels, row = labelled_row(task)
+    row.update(forced_only=bool(labels["forced_only"]),
+               point_timescale_s=float(labels["point_timescale_s"] or math.nan))
     records, truths, windows = draw_inputs(task)
     row["n_events"] = len(records)
     methods = {"stated": CampaignMethod("varying"),
@@ -81,22 +79,19 @@ def score_draw(task: dict) -> dict:
 
 def summarise(rows: list[dict]) -> list[dict]:
     """One row per variant and kind of wind error (all draws first): errors, pairing with ``stated``, promise."""
-    from _family_args import promise_figures, spread
+    from _family_args import by_wind_error, paired, promise_figures, spread
 
     out = []
-    kinds = [("all", rows)] + [(k, [r for r in rows if r["eiv"] == k]) for k in sorted({r["eiv"] for r in rows})]
-    for kind, sub in kinds:
+    for kind, sub in by_wind_error(rows):
         for name in VARIANTS:
             err = spread(r[f"error_{name}"] for r in sub)
             cerr = spread(r[f"curve_error_{name}"] for r in sub)
-            ratio = [r[f"error_{name}"] / r["error_stated"] for r in sub
-                     if np.isfinite(r[f"error_{name}"]) and np.isfinite(r["error_stated"]) and r["error_stated"] > 0]
+            pair = paired(sub, f"error_{name}", "error_stated")
             entry = {"variant": name, "draws_of": kind, "draws": len(sub), "error_median": err["median"],
                      "error_p90": err["p90"], "error_worst": err["worst"], "curve_error_median": cerr["median"],
                      "curve_error_p90": cerr["p90"],
-                     "ratio_to_stated_median": float(np.median(ratio)) if ratio else math.nan,
-                     "worse_by_10pct": int(sum(q > 1.1 for q in ratio)),
-                     "better_by_10pct": int(sum(q < 1 / 1.1 for q in ratio)),
+                     "ratio_to_stated_median": pair["ratio_median"], "worse_by_10pct": pair["worse_by_10pct"],
+                     "better_by_10pct": pair["better_by_10pct"],
                      "fit_s_median": float(np.median([r[f"fit_s_{name}"] for r in sub])) if sub else math.nan}
             if kind == "all":
                 entry.update(promise_figures(sub, name))
