@@ -153,7 +153,7 @@ def score_draw(task: dict) -> dict:
     truth_records = [record_with_truth_wind(r, t) for r, t in zip(records, truths)]
     actual = _actual_scales(records, truth_records, smoothing)
     estimated = [wind_error_scale(r, smoothing) for r in records]
-    weights = [np.sqrt(r.n_samples) for r in records]  # rms over samples, pooled over events and sections
+    weights = [r.n_samples for r in records]  # rms over samples, pooled over events and sections
     row["wind_error_actual"] = float(np.sqrt(np.average([np.mean(a**2) for a in actual], weights=weights)))
     row["wind_error_estimated"] = float(np.sqrt(np.average([np.mean(e**2) for e in estimated], weights=weights)))
     raw_errors = [np.nan_to_num(r.U - tr.U) for r, tr in zip(records, truth_records)]  # (n, S) each, m/s
