@@ -326,3 +326,35 @@ def test_wind_errors_study_extrapolates_and_keeps_the_error_spectrum(scripts, mo
     assert said[0].startswith("measured, all draws (2)")
     assert any(s.startswith("The estimated wind error over the actual one, one section (1 draws): median 0.50")
                for s in said)
+
+
+def test_broken_promise_study_changes_one_thing_per_variant(scripts, monkeypatch):
+    """The broken_promise study's variants: another seed, the other felt wind, no buffeting; each row's promise."""
+    import dataclasses
+
+    from vivbench.synth.family import draw_bridge
+
+    study = _load(BENCH / "study_broken_promise.py", monkeypatch)
+    for index in (18, 109):  # a smooth and a tributary felt wind
+        base = draw_bridge("development", index).campaign_config(max_duration=1800.0)
+        g = base.generator
+        assert study.variant_config(base, "campaign") is base
+        second = study.variant_config(base, "second_campaign")
+        assert second.seed == base.seed + 1 and second.generator == g
+        wind = study.variant_config(base, "tributary_wind")
+        assert wind.seed == base.seed and dataclasses.replace(wind.generator, wind=g.wind) == g
+        assert wind.generator.wind.felt_wind != g.wind.felt_wind
+        if g.wind.felt_wind == "tributary":
+            assert wind.generator.wind.point_intensity == study.SMOOTH_POINT["point_intensity"]
+        calm = study.variant_config(base, "no_buffeting")
+        assert (calm.generator.aero.buffeting_w, calm.generator.aero.buffeting_u) == (0.0, 0.0)
+        assert dataclasses.replace(calm.generator, aero=g.aero) == g
+    with pytest.raises(ValueError, match="unknown variant"):
+        study.variant_config(base, "calm")
+    row = {"draw": 18}
+    for name, flags, right in zip(study.VARIANTS, (100, 100, 10, 0), (40, 99, 10, 0)):
+        row.update({f"flags_{name}": flags, f"right_{name}": right, f"error_{name}": 0.2, f"curve_error_{name}": 0.1,
+                    f"chosen_{name}": "yaw0-cv"})
+    summary = study.summarise([row])
+    assert [s["promise"] for s in summary] == ["broken", "kept", "untested", "untested"]
+    assert study.findings(summary)[0].startswith("Draw 18: campaign 40 of 100 right (broken")

@@ -1,0 +1,141 @@
+"""Study: what breaks the verdict's promise on a family draw: the bridge or the campaign, the wind or the buffeting.
+
+Run::
+
+    python benchmarks/run_study.py broken_promise --split development --draws 18 --max-duration 30 --out DIR \
+        [--max-events N] [--workers 2]
+
+On a draw whose campaign breaks the promise (fewer than 95 % of at least 20 flagged window-equations
+carry the truth's regime), the study asks which part of the draw the break belongs to. It fits the
+default campaign model (the held-out selection of varying-coefficient models, as ``vivbench pool``)
+on campaigns that differ from the draw's in one thing each, all with the draw's caps:
+
+- ``campaign``: the draw's own campaign;
+- ``second_campaign``: the same bridge and generator, another campaign seed (new wind scripts,
+  turbulence and noise): a break that comes back belongs to the bridge, not to one campaign;
+- ``tributary_wind``: the same campaign seed, with the deck feeling the tributary average of the
+  turbulent field the anemometers sample (``felt_wind = "tributary"``) instead of a smooth wind while the
+  anemometers record point turbulence it does not feel (a draw already tributary gets the smooth felt
+  wind with the family's mid-range point turbulence, 8.5 % at 20 s);
+- ``no_buffeting``: the same campaign seed without buffeting.
+
+Each variant is scored against its own truth: flags, those right, the energy-weighted relative dA/dt
+error on the truth's own (A, U) and the energy-weighted curve error. The study directory ``--out``
+keeps each draw's campaigns, identifications and scores; rerunning with the same options continues it.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+#: The variants of a draw's campaign.
+VARIANTS = ("campaign", "second_campaign", "tributary_wind", "no_buffeting")
+#: Seed offset of the second campaign of the same bridge.
+SECOND_SEED = 1
+#: Point turbulence given to a tributary draw's ``tributary_wind`` variant (the family prior's mid-range).
+SMOOTH_POINT = {"point_intensity": 0.085, "point_timescale": 20.0}
+
+
+def variant_config(campaign, name: str):
+    """The draw's campaign configuration (a :class:`vivbench.synth.CampaignConfig`) changed as variant ``name``."""
+    import dataclasses
+
+    g = campaign.generator
+    if name == "campaign":
+        return campaign
+    if name == "second_campaign":
+        return dataclasses.replace(campaign, seed=campaign.seed + SECOND_SEED)
+    if name == "tributary_wind":
+        over = ({"felt_wind": "tributary"} if g.wind.felt_wind == "smooth"
+                else {"felt_wind": "smooth", **SMOOTH_POINT})
+        return dataclasses.replace(campaign, generator=dataclasses.replace(g, wind=dataclasses.replace(g.wind, **over)))
+    if name == "no_buffeting":
+        aero = dataclasses.replace(g.aero, buffeting_w=0.0, buffeting_u=0.0)
+        return dataclasses.replace(campaign, generator=dataclasses.replace(g, aero=aero))
+    raise ValueError(f"unknown variant {name!r}; one of {', '.join(VARIANTS)}")
+
+
+def _variant_inputs(task: dict, name: str):
+    """Records, truths and windows of one variant's campaign, generated and identified in ``<draw dir>/<name>``."""
+    from vivbench.analysis.identify import IdentifyConfig, identify_files
+    from vivbench.synth.campaign import generate_campaign
+    from vivbench.synth.family import draw_bridge
+    from vivbench.validate.methods import scoring_inputs
+
+    from benchmarks._family_args import capped_draw, draw_dir
+
+    if name == "campaign":
+        return capped_draw(task)  # the draw directory itself, as the other family studies keep it
+    root = draw_dir(task) / name
+    campaign = draw_bridge(task["split"], task["draw"]).campaign_config(max_events=task["max_events"],
+                                                                        max_duration=task["max_duration_s"])
+    if not (root / "identify" / "done").exists():
+        made = generate_campaign(variant_config(campaign, name), root / "campaign", workers=1)
+        identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
+        (root / "identify" / "done").write_text("", encoding="utf-8")
+    results = sorted((root / "identify").glob("*.identify.nc"))
+    ids = {p.name.removesuffix(".identify.nc") for p in results}
+    events = sorted(f for f in (root / "campaign").glob("*.nc") if f.stem in ids)
+    return scoring_inputs(events, results)
+
+
+def score_draw(task: dict) -> dict:
+    """One draw: every variant's campaign generated, identified, fitted and scored."""
+    from vivbench.validate.methods import CampaignMethod
+
+    from benchmarks._family_args import fit_and_score, labelled_row, store_row, stored_row
+
+    done = stored_row(task)
+    if done is not None:
+        return done
+    labels, row = labelled_row(task)
+    row.update(bell=str(labels["bell"]), e_mix=str(labels["e_mix"]), buffeting_w=float(labels["buffeting_w"]),
+               point_intensity=labels["point_intensity"], point_timescale_s=labels["point_timescale_s"])
+    for name in VARIANTS:
+        records, truths, windows = _variant_inputs(task, name)
+        scores = fit_and_score(CampaignMethod("varying"), records, truths, windows)
+        row.update({f"{k}_{name}": v for k, v in scores.items()}, **{f"n_events_{name}": len(records)})
+    return store_row(task, row)
+
+
+def summarise(rows: list[dict]) -> list[dict]:
+    """One row per draw and variant: flags, those right, their share, whether the promise holds, the errors."""
+    import math
+
+    from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE
+
+    out = []
+    for r in rows:
+        for name in VARIANTS:
+            flags, right = int(r[f"flags_{name}"]), int(r[f"right_{name}"])
+            share = right / flags if flags else math.nan
+            out.append({"draw": r["draw"], "variant": name, "flags": flags, "right": right, "share_right": share,
+                        "promise": ("untested" if flags < PROMISE_MIN_FLAGS else
+                                    "kept" if share >= PROMISE_SHARE else "broken"),
+                        "error": r[f"error_{name}"], "curve_error": r[f"curve_error_{name}"],
+                        "chosen": r[f"chosen_{name}"]})
+    return out
+
+
+def findings(summary: list[dict]) -> list[str]:
+    """Sentences generated from the figures."""
+    lines = []
+    for draw in sorted({s["draw"] for s in summary}):
+        parts = [f"{s['variant']} {s['right']} of {s['flags']} right ({s['promise']}, dA/dt error {s['error']:.3f})"
+                 for s in summary if s["draw"] == draw]
+        lines.append(f"Draw {draw}: " + "; ".join(parts) + ".")
+    return lines
+
+
+def main(argv=None) -> dict:
+    from _family_args import family_study
+
+    return family_study("study_broken_promise", __doc__.splitlines()[0], argv, summarise, findings,
+                        max_duration=30.0)
+
+
+if __name__ == "__main__":
+    main()
