@@ -11,8 +11,9 @@ default campaign model (the held-out selection of varying-coefficient models, as
 on campaigns that differ from the draw's in one thing each, all with the draw's caps:
 
 - ``campaign``: the draw's own campaign;
-- ``second_campaign``: the same bridge and generator, another campaign seed (new wind scripts,
-  turbulence and noise): a break that comes back belongs to the bridge, not to one campaign;
+- ``second_campaign``, ``third_campaign``, ``fourth_campaign``: the same bridge and generator, other
+  campaign seeds (new wind scripts, turbulence and noise): a break that comes back belongs to the
+  bridge, not to one campaign;
 - ``tributary_wind``: the same campaign seed, with the deck feeling the tributary average of the
   turbulent field the anemometers sample (``felt_wind = "tributary"``) instead of a smooth wind while the
   anemometers record point turbulence it does not feel (a draw already tributary gets the smooth felt
@@ -31,10 +32,10 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+#: Seed offsets of the other campaigns of the same bridge.
+OTHER_CAMPAIGNS = {"second_campaign": 1, "third_campaign": 2, "fourth_campaign": 3}
 #: The variants of a draw's campaign.
-VARIANTS = ("campaign", "second_campaign", "tributary_wind", "no_buffeting")
-#: Seed offset of the second campaign of the same bridge.
-SECOND_SEED = 1
+VARIANTS = ("campaign", *OTHER_CAMPAIGNS, "tributary_wind", "no_buffeting")
 #: Point turbulence given to a tributary draw's ``tributary_wind`` variant (the family prior's mid-range).
 SMOOTH_POINT = {"point_intensity": 0.085, "point_timescale": 20.0}
 
@@ -46,8 +47,8 @@ def variant_config(campaign, name: str):
     g = campaign.generator
     if name == "campaign":
         return campaign
-    if name == "second_campaign":
-        return dataclasses.replace(campaign, seed=campaign.seed + SECOND_SEED)
+    if name in OTHER_CAMPAIGNS:
+        return dataclasses.replace(campaign, seed=campaign.seed + OTHER_CAMPAIGNS[name])
     if name == "tributary_wind":
         over = ({"felt_wind": "tributary"} if g.wind.felt_wind == "smooth"
                 else {"felt_wind": "smooth", **SMOOTH_POINT})
@@ -83,18 +84,21 @@ def _variant_inputs(task: dict, name: str):
 
 
 def score_draw(task: dict) -> dict:
-    """One draw: every variant's campaign generated, identified, fitted and scored."""
+    """One draw: every variant's campaign generated, identified, fitted and scored (a stored row gains the
+    variants it lacks)."""
     from vivbench.validate.methods import CampaignMethod
 
     from benchmarks._family_args import fit_and_score, labelled_row, store_row, stored_row
 
-    done = stored_row(task)
-    if done is not None:
-        return done
-    labels, row = labelled_row(task)
-    row.update(bell=str(labels["bell"]), e_mix=str(labels["e_mix"]), buffeting_w=float(labels["buffeting_w"]),
-               point_intensity=labels["point_intensity"], point_timescale_s=labels["point_timescale_s"])
-    for name in VARIANTS:
+    row = stored_row(task)
+    missing = [name for name in VARIANTS if row is None or f"flags_{name}" not in row]
+    if not missing:
+        return row
+    if row is None:
+        labels, row = labelled_row(task)
+        row.update(bell=str(labels["bell"]), e_mix=str(labels["e_mix"]), buffeting_w=float(labels["buffeting_w"]),
+                   point_intensity=labels["point_intensity"], point_timescale_s=labels["point_timescale_s"])
+    for name in missing:
         records, truths, windows = _variant_inputs(task, name)
         scores = fit_and_score(CampaignMethod("varying"), records, truths, windows)
         row.update({f"{k}_{name}": v for k, v in scores.items()}, **{f"n_events_{name}": len(records)})

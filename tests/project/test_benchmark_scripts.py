@@ -339,8 +339,9 @@ def test_broken_promise_study_changes_one_thing_per_variant(scripts, monkeypatch
         base = draw_bridge("development", index).campaign_config(max_duration=1800.0)
         g = base.generator
         assert study.variant_config(base, "campaign") is base
-        second = study.variant_config(base, "second_campaign")
-        assert second.seed == base.seed + 1 and second.generator == g
+        for k, name in enumerate(("second_campaign", "third_campaign", "fourth_campaign"), start=1):
+            other = study.variant_config(base, name)
+            assert other.seed == base.seed + k and other.generator == g
         wind = study.variant_config(base, "tributary_wind")
         assert wind.seed == base.seed and dataclasses.replace(wind.generator, wind=g.wind) == g
         assert wind.generator.wind.felt_wind != g.wind.felt_wind
@@ -352,9 +353,32 @@ def test_broken_promise_study_changes_one_thing_per_variant(scripts, monkeypatch
     with pytest.raises(ValueError, match="unknown variant"):
         study.variant_config(base, "calm")
     row = {"draw": 18}
-    for name, flags, right in zip(study.VARIANTS, (100, 100, 10, 0), (40, 99, 10, 0)):
+    for name, flags, right in zip(study.VARIANTS, (100, 100, 100, 100, 10, 0), (40, 99, 94, 95, 10, 0)):
         row.update({f"flags_{name}": flags, f"right_{name}": right, f"error_{name}": 0.2, f"curve_error_{name}": 0.1,
                     f"chosen_{name}": "yaw0-cv"})
     summary = study.summarise([row])
-    assert [s["promise"] for s in summary] == ["broken", "kept", "untested", "untested"]
+    assert [s["promise"] for s in summary] == ["broken", "kept", "broken", "kept", "untested", "untested"]
     assert study.findings(summary)[0].startswith("Draw 18: campaign 40 of 100 right (broken")
+
+
+def test_broken_promise_study_adds_only_the_variants_a_stored_row_lacks(scripts, monkeypatch, tmp_path):
+    """A draw scored before a variant was added gains that variant and keeps the others' scores."""
+    import json
+
+    import benchmarks._family_args as family
+
+    study = _load(BENCH / "study_broken_promise.py", monkeypatch)
+    fitted = []
+    monkeypatch.setattr(study, "_variant_inputs", lambda task, name: ([name], [], []))
+    monkeypatch.setattr(family, "fit_and_score", lambda method, records, truths, windows: fitted.append(records[0])
+                        or {"flags": 30, "right": 30, "error": 0.1, "curve_error": 0.1, "chosen": "yaw0-cv"})
+    task = {"split": "development", "draw": 18, "out": str(tmp_path), "max_events": None, "max_duration_s": 1800.0}
+    old = {"draw": 18, **{f"{k}_{name}": v for name in ("campaign", "second_campaign", "tributary_wind", "no_buffeting")
+                          for k, v in (("flags", 50), ("right", 20), ("error", 0.3), ("curve_error", 0.2),
+                                       ("chosen", "yaw0-least"))}}
+    family.store_row(task, old)
+    row = study.score_draw(task)
+    assert fitted == ["third_campaign", "fourth_campaign"]
+    assert row["flags_campaign"] == 50 and row["flags_third_campaign"] == 30 and row["n_events_fourth_campaign"] == 1
+    assert json.loads((tmp_path / "d018" / "row.json").read_text()) == row
+    assert study.score_draw(task) == row and len(fitted) == 2  # complete: read, not refitted
