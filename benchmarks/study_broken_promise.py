@@ -131,6 +131,12 @@ def findings(summary: list[dict]) -> list[str]:
         parts = [f"{s['variant']} {s['right']} of {s['flags']} right ({s['promise']}, dA/dt error {s['error']:.3f})"
                  for s in summary if s["draw"] == draw]
         lines.append(f"Draw {draw}: " + "; ".join(parts) + ".")
+    counts = []
+    for name in VARIANTS:
+        tested = [s for s in summary if s["variant"] == name and s["promise"] != "untested"]
+        broken = sum(s["promise"] == "broken" for s in tested)
+        counts.append(f"{name} {broken} of {len(tested)}")
+    lines.append("Broken, of the campaigns with at least 20 flags: " + "; ".join(counts) + ".")
     return lines
 
 

@@ -359,6 +359,9 @@ def test_broken_promise_study_changes_one_thing_per_variant(scripts, monkeypatch
     summary = study.summarise([row])
     assert [s["promise"] for s in summary] == ["broken", "kept", "broken", "kept", "untested", "untested"]
     assert study.findings(summary)[0].startswith("Draw 18: campaign 40 of 100 right (broken")
+    assert study.findings(summary)[1] == ("Broken, of the campaigns with at least 20 flags: campaign 1 of 1; "
+                                          "second_campaign 0 of 1; third_campaign 1 of 1; fourth_campaign 0 of 1; "
+                                          "tributary_wind 0 of 0; no_buffeting 0 of 0.")
 
 
 def test_broken_promise_study_adds_only_the_variants_a_stored_row_lacks(scripts, monkeypatch, tmp_path):
