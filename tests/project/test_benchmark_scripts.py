@@ -342,11 +342,13 @@ def test_broken_promise_study_changes_one_thing_per_variant(scripts, monkeypatch
         for k, name in enumerate(("second_campaign", "third_campaign", "fourth_campaign"), start=1):
             other = study.variant_config(base, name)
             assert other.seed == base.seed + k and other.generator == g
-        wind = study.variant_config(base, "tributary_wind")
-        assert wind.seed == base.seed and dataclasses.replace(wind.generator, wind=g.wind) == g
-        assert wind.generator.wind.felt_wind != g.wind.felt_wind
         if g.wind.felt_wind == "tributary":
-            assert wind.generator.wind.point_intensity == study.SMOOTH_POINT["point_intensity"]
+            with pytest.raises(ValueError, match="already feels the tributary-averaged wind"):
+                study.variant_config(base, "tributary_wind")
+        else:
+            wind = study.variant_config(base, "tributary_wind")
+            assert wind.seed == base.seed and dataclasses.replace(wind.generator, wind=g.wind) == g
+            assert wind.generator.wind.felt_wind == "tributary"
         calm = study.variant_config(base, "no_buffeting")
         assert (calm.generator.aero.buffeting_w, calm.generator.aero.buffeting_u) == (0.0, 0.0)
         assert dataclasses.replace(calm.generator, aero=g.aero) == g
@@ -385,3 +387,7 @@ def test_broken_promise_study_adds_only_the_variants_a_stored_row_lacks(scripts,
     assert row["flags_campaign"] == 50 and row["flags_third_campaign"] == 30 and row["n_events_fourth_campaign"] == 1
     assert json.loads((tmp_path / "d018" / "row.json").read_text()) == row
     assert study.score_draw(task) == row and len(fitted) == 2  # complete: read, not refitted
+    tributary = {**task, "draw": 109}  # the deck already feels the tributary average: the variant does not apply
+    fresh = study.score_draw(tributary)
+    assert "tributary_wind" not in fitted[2:] and fresh["flags_tributary_wind"] == 0
+    assert fresh["eiv"] == "tributary" and np.isnan(fresh["error_tributary_wind"])
