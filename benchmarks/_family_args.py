@@ -112,9 +112,33 @@ def _identified(root: Path) -> bool:
     return bool(events) and events <= done
 
 
+def identified_campaign(root: Path, campaign) -> tuple[list, list, list]:
+    """A campaign (a :class:`vivbench.synth.CampaignConfig`) generated in ``root/campaign`` and identified in
+    ``root/identify`` (unless every event already is): the records, truths and windows to score a model on."""
+    from vivbench.analysis.identify import IdentifyConfig, identify_files
+    from vivbench.synth.campaign import generate_campaign
+    from vivbench.validate.methods import scoring_inputs
+
+    if not _identified(root):
+        made = generate_campaign(campaign, root / "campaign", workers=1)
+        identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
+    return scoring_inputs(*campaign_files(root))
+
+
+def stored_variants(task: dict, variants) -> tuple[dict | None, list[str]]:
+    """The draw's stored row (or None) and the variants whose scores (``flags_<variant>``) it lacks."""
+    row = stored_row(task)
+    return row, [name for name in variants if row is None or f"flags_{name}" not in row]
+
+
 def draw_files(task: dict) -> tuple[list, list]:
     """The event files and identification results of a draw :func:`capped_draw` made, in the same order."""
-    root = draw_dir(task)
+    return campaign_files(draw_dir(task))
+
+
+def campaign_files(root: Path) -> tuple[list, list]:
+    """The event files of ``root/campaign`` and their identification results in ``root/identify``, in the same
+    order."""
     results = sorted((root / "identify").glob("*.identify.nc"))
     ids = {p.name.removesuffix(".identify.nc") for p in results}
     events = sorted(f for f in (root / "campaign").glob("*.nc") if f.stem in ids)

@@ -61,26 +61,15 @@ def variant_config(campaign, name: str):
 
 def _variant_inputs(task: dict, name: str):
     """Records, truths and windows of one variant's campaign, generated and identified in ``<draw dir>/<name>``."""
-    from vivbench.analysis.identify import IdentifyConfig, identify_files
-    from vivbench.synth.campaign import generate_campaign
     from vivbench.synth.family import draw_bridge
-    from vivbench.validate.methods import scoring_inputs
 
-    from benchmarks._family_args import capped_draw, draw_dir
+    from benchmarks._family_args import capped_draw, draw_dir, identified_campaign
 
     if name == "campaign":
         return capped_draw(task)  # the draw directory itself, as the other family studies keep it
-    root = draw_dir(task) / name
     campaign = draw_bridge(task["split"], task["draw"]).campaign_config(max_events=task["max_events"],
                                                                         max_duration=task["max_duration_s"])
-    if not (root / "identify" / "done").exists():
-        made = generate_campaign(variant_config(campaign, name), root / "campaign", workers=1)
-        identify_files(made.files, root / "identify", IdentifyConfig(), workers=1)
-        (root / "identify" / "done").write_text("", encoding="utf-8")
-    results = sorted((root / "identify").glob("*.identify.nc"))
-    ids = {p.name.removesuffix(".identify.nc") for p in results}
-    events = sorted(f for f in (root / "campaign").glob("*.nc") if f.stem in ids)
-    return scoring_inputs(events, results)
+    return identified_campaign(draw_dir(task) / name, variant_config(campaign, name))
 
 
 def score_draw(task: dict) -> dict:
@@ -90,10 +79,9 @@ def score_draw(task: dict) -> dict:
 
     from vivbench.validate.methods import CampaignMethod
 
-    from benchmarks._family_args import fit_and_score, labelled_row, store_row, stored_row
+    from benchmarks._family_args import fit_and_score, labelled_row, store_row, stored_variants
 
-    row = stored_row(task)
-    missing = [name for name in VARIANTS if row is None or f"flags_{name}" not in row]
+    row, missing = stored_variants(task, VARIANTS)
     if not missing:
         return row
     if row is None:

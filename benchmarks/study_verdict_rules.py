@@ -67,12 +67,12 @@ def score_draw(task: dict) -> dict:
     from vivbench.regimes.truth import truth_window_regimes
     from vivbench.validate.methods import SelectedVerdictModel, score_fitted
 
-    from benchmarks._family_args import capped_draw, store_row, stored_row, verdict_counts
+    from benchmarks._family_args import capped_draw, store_row, stored_variants, verdict_counts
 
-    row = stored_row(task) or {}
-    missing = [name for name in VARIANTS if f"flags_{name}" not in row]
+    row, missing = stored_variants(task, VARIANTS)
     if not missing:
         return row
+    row = row or {}
     # the scores of variants no longer studied are dropped
     row = {k: v for k, v in row.items() if not k.startswith(_SCORES) or k.split("_", 1)[1] in VARIANTS}
     records, truths, windows = capped_draw(task)
