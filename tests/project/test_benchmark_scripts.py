@@ -391,3 +391,47 @@ def test_broken_promise_study_adds_only_the_variants_a_stored_row_lacks(scripts,
     fresh = study.score_draw(tributary)
     assert "tributary_wind" not in fitted[2:] and fresh["flags_tributary_wind"] == 0
     assert fresh["eiv"] == "tributary" and np.isnan(fresh["error_tributary_wind"])
+
+
+def test_selection_rule_study_picks_per_rule_and_summarises(scripts, monkeypatch):
+    """The selection_rule study: each rule's pick from the same held-out losses (the default's simplest member of
+    the confidence set, the lowest total, the set on per-event losses scaled by the event's mean) and the summary
+    by whether the yaw matters."""
+    study = _load(BENCH / "study_selection_rule.py", monkeypatch)
+    complexity = np.array([0, 1, 2])
+    # one event dominates the sums: the simple candidate loses it badly and wins the nine others narrowly
+    simple = np.array([100.0] + [1.0] * 9)
+    rich = np.array([1.0] + [1.1] * 9)
+    losses = np.vstack([simple, rich, np.full(10, np.nan)])
+    picks = study.rule_choices(losses, complexity, np.array([True, True, False]))
+    assert picks == {"simplest": 0, "lowest": 1, "normalised": 0}
+    # the rich candidate wins every event by a factor of three: out of every set but its own
+    losses = np.vstack([np.full(10, 3.0), np.ones(10), np.full(10, 2.0)])
+    picks = study.rule_choices(losses, complexity, np.ones(3, dtype=bool))
+    assert picks == {"simplest": 1, "lowest": 1, "normalised": 1}
+    assert study._yaw_free_twin(["yaw0-cv", "yaw1-cv"], "yaw1-cv") == "yaw0-cv"
+    assert study._yaw_free_twin(["yaw0-cv", "yaw1-cv"], "yaw0-cv") is None
+
+    def row(draw, yaw_range, errors, curves, yaw, free):
+        cand = {"yaw0-cv": {"error": errors[0], "curve_error": curves[0]},
+                "yaw1-cv": {"error": min(errors) / 2, "curve_error": 0.05}}
+        out = {"draw": draw, "yaw_factor_range": yaw_range, "candidates": cand, "simplest_is_default": 1}
+        for rule, e, c, y, f in zip(study.RULES, errors, curves, yaw, free):
+            out.update({f"error_{rule}": e, f"curve_error_{rule}": c, f"yaw_{rule}": y,
+                        f"curve_error_yaw_free_{rule}": f})
+        return out
+
+    rows = [row(0, 0.5, (0.4, 0.2, 0.2), (0.3, 0.1, 0.1), (0, 1, 1), (0.3, 0.3, 0.3)),
+            row(1, 0.0, (0.2, 0.3, 0.2), (0.2, 0.25, 0.2), (0, 1, 0), (0.2, 0.2, 0.2))]
+    summary = {(s["rule"], s["draws_of"]): s for s in study.summarise(rows)}
+    assert summary[("lowest", "yaw matters")]["yaw_picked"] == 1
+    assert summary[("simplest", "yaw matters")]["yaw_picked"] == 0
+    low = summary[("lowest", "yaw does not matter")]
+    assert (low["curves_within_10pct_of_yaw_free"], low["curves_compared"]) == (0, 1)
+    assert (summary[("lowest", "all")]["better_by_10pct"], summary[("lowest", "all")]["worse_by_10pct"]) == (1, 1)
+    assert_close(summary[("normalised", "all")]["ratio_to_simplest_median"], 0.75, what="median of 0.5 and 1")
+    oracle = summary[("oracle", "all")]  # the candidate of the lowest error against the truth
+    assert_close(oracle["error_median"], 0.1, what="median of 0.1 and 0.1")
+    assert oracle["yaw_picked"] == 2
+    text = study.findings(study.summarise(rows))
+    assert text[0].startswith("simplest, all (2 draws)") and "the selection's own choice on 2 of 2" in text[0]
