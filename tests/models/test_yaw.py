@@ -12,7 +12,7 @@ from vivbench.core import Record
 from vivbench.core.errors import InputError
 from vivbench.models import VaryingCoefficientSINDy
 from vivbench.preprocess import mean_yaw
-from tests.helpers import assert_close
+from tests.helpers import assert_close, assert_not_close
 
 
 @pytest.mark.parametrize("azimuth", [0.0, 30.0, 75.0])
@@ -89,6 +89,42 @@ def test_yaw_model_save_load_and_records_without_yaw(yaw_model, tmp_path):
         VaryingCoefficientSINDy(n_bootstrap=0, n_basis=(11,), yaw_degree=1).fit(_records(3, with_yaw=False))
     with pytest.raises(InputError, match="yaw_degree"):
         VaryingCoefficientSINDy(yaw_degree=5).fit(_records(3))
+
+
+def test_yaw_beyond_the_fitted_range_is_held_at_its_ends(yaw_model, tmp_path):
+    """A yaw beyond every fitted one gives the curves at the fitted range's end (as a wind beyond it does), not a
+    polynomial extrapolated in sin^2 psi; the range survives save and load."""
+    zmax = yaw_model.yaw_max_
+    assert zmax.shape == (2,) and np.all(zmax <= np.sin(np.radians(25.0)) ** 2 + 1e-12)
+    assert np.all(yaw_model.yaw_min_ < zmax)
+    rec = _records(1, seed=3)[0]
+    edge = np.degrees(np.arcsin(np.sqrt(zmax)))[None, :]
+    far = dataclasses.replace(rec, yaw=np.broadcast_to(edge + 40.0, rec.A.shape).copy())
+    at_edge = dataclasses.replace(rec, yaw=np.broadcast_to(edge, rec.A.shape).copy())
+    assert_close(yaw_model.predict(far), yaw_model.predict(at_edge), what="held at the fitted maximum")
+    inside = dataclasses.replace(rec, yaw=np.broadcast_to(0.5 * edge, rec.A.shape).copy())
+    assert_not_close(yaw_model.predict(inside), yaw_model.predict(at_edge), rtol=1e-3, what="inside: not held",
+                     reason="half the edge's yaw changes the yaw term (-4 sin^2 psi) by far more than 0.1 %")
+    wind = np.linspace(8.0, 12.0, 5)
+    c_far = yaw_model.coefficient_values(np.repeat(wind[:, None], 2, axis=1), yaw=np.full((5, 2), 80.0))
+    c_edge = yaw_model.coefficient_values(np.repeat(wind[:, None], 2, axis=1), yaw=np.repeat(edge, 5, axis=0))
+    assert_close(c_far, c_edge, what="the curves are held too")
+    loaded = VaryingCoefficientSINDy.load(yaw_model.save(tmp_path / "m.nc"))
+    np.testing.assert_array_equal(loaded.yaw_max_, zmax)
+    np.testing.assert_array_equal(loaded.predict(far), yaw_model.predict(far))
+
+
+def test_held_yaw_per_equation_or_shared_and_unknown_ranges():
+    from vivbench.models.varying_design import held_yaw
+
+    z = np.array([[0.0, 0.5], [0.2, np.nan], [0.9, 0.1]])
+    held = held_yaw(z, [0.1, 0.05], [0.3, 0.4], False)
+    np.testing.assert_array_equal(held, [[0.1, 0.4], [0.2, np.nan], [0.3, 0.1]])
+    # every equation takes every section's yaw: the range over every equation holds every column
+    np.testing.assert_array_equal(held_yaw(z, [0.1, 0.05], [0.3, 0.4], True), [[0.05, 0.4], [0.2, np.nan], [0.4, 0.1]])
+    # a file written before the range (NaN) or no range at all: nothing held
+    np.testing.assert_array_equal(held_yaw(z, [np.nan, np.nan], [np.nan, np.nan], False), z)
+    assert held_yaw(z, None, None, False) is z and held_yaw(None, [0.0], [1.0], False) is None
 
 
 def test_yaw_and_smoothing_defaults_follow_the_records():

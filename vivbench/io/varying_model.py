@@ -60,7 +60,7 @@ PENALTY_ARRAYS = {"penalty_coef_": ("penalty_candidate", "equation", "basis", "o
 YAW_ARRAYS = {"coef_yaw_": ("equation", "basis", "order", "yaw_power"),
               "coef_yaw_bootstrap_": ("bootstrap", "equation", "basis", "order", "yaw_power"),
               "yaw_ref_": ("equation",), "yaw_fallback_": ("equation",), "yaw_min_": ("equation",),
-              "subset_coef_yaw_": ("subset", "equation", "basis", "order", "yaw_power")}
+              "yaw_max_": ("equation",), "subset_coef_yaw_": ("subset", "equation", "basis", "order", "yaw_power")}
 
 #: Parameters absent from unversioned files and the value the model then had: before the yaw covariate, the
 #: model's own wind smoothing (the wind was smoothed, or not, before the fit), its cross-validation, the
@@ -192,14 +192,16 @@ def read_varying_model(path, *, n_subsets: int) -> tuple[dict, dict]:
     fit["yaw_degree_"] = J
     if J:
         for name in YAW_ARRAYS:
-            if name.rstrip("_") in ds:  # yaw_min: absent from files written before it (unknown: NaN)
+            if name.rstrip("_") in ds:  # yaw_min, yaw_max: absent from files written before them (unknown: NaN)
                 fit[name] = np.asarray(ds[name.rstrip("_")].values)
-        if "yaw_min" not in ds:
-            fit["yaw_min_"] = np.full(S, np.nan)
+        for name in ("yaw_min_", "yaw_max_"):
+            if name.rstrip("_") not in ds:
+                fit[name] = np.full(S, np.nan)
     else:
         fit["coef_yaw_"] = np.zeros((S, Mmax, 4, 0))
         fit["coef_yaw_bootstrap_"] = np.zeros(fit["coef_bootstrap_"].shape + (0,))
         fit["yaw_ref_"], fit["yaw_fallback_"], fit["yaw_min_"] = np.ones(S), np.zeros(S), np.zeros(S)
+        fit["yaw_max_"] = np.zeros(S)
         fit["subset_coef_yaw_"] = np.zeros((n_subsets, S, Mmax, 4, 0))
     if "subset_coef" in ds:
         for name in SUBSET_ARRAYS:

@@ -53,7 +53,8 @@ additive statistics contracted by the weights
 With the wind's yaw (``yaw_degree`` > 0; by default whenever the records carry
 it) its yaw psi (its angle to the span's normal, which U does not carry) is a
 second covariate: every column above is repeated times sin^2j(psi), j = 1..J,
-with the same penalty (p = 4 M (J + 1)). After the fit the same statistics
+with the same penalty (p = 4 M (J + 1)); beyond the fitted range of sin^2(psi) it is held at
+its ends, as U is. After the fit the same statistics
 give the models of every subset of the orders 0, 2, 3 (order 1 always kept)
 and their leave-one-event-out prediction errors: the confidence set of
 ``model_set_level`` (:func:`vivbench.regression.confidence_set`) used by the
@@ -87,7 +88,7 @@ from vivbench.models.curve_support import EXTRAPOLATED, curves_dataset
 from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation
 from vivbench.models.varying_simulate import simulate_runs
-from vivbench.models.varying_design import design_rows
+from vivbench.models.varying_design import design_rows, held_yaw
 from vivbench.models.varying_verdicts import varying_description, varying_summary, varying_window_verdicts
 from vivbench.models.varying_fit import (FINAL_PARAMS, ORDER_SET_MARGIN, ORDER_SUBSETS, PENALTY_CHOICES, event_statistics,
                                          fit_final, fit_shared)
@@ -284,8 +285,9 @@ class VaryingCoefficientSINDy(ModelBase):
     coef_yaw_ : ndarray, shape (S, M_max, 4, J)
         Spline coefficients of the yaw terms (coefficients of sin^2j(psi)).
     coef_yaw_bootstrap_ : ndarray, shape (n_bootstrap, S, M_max, 4, yaw_degree)
-    yaw_ref_, yaw_fallback_, yaw_min_ : ndarray, shape (S,)
-        RMS, median and minimum of sin^2(psi) over the fitted samples.
+    yaw_ref_, yaw_fallback_, yaw_min_, yaw_max_ : ndarray, shape (S,)
+        RMS, median, minimum and maximum of sin^2(psi) over the fitted samples (outside the last two the
+        covariate is held at them, :func:`~vivbench.models.varying_design.held_yaw`).
     subset_coef_, subset_coef_yaw_ : ndarray, shapes (n_subsets,) + those of ``coef_``, ``coef_yaw_``
         The models of every order subset at the selected basis and penalty.
     subset_loeo_ : ndarray, shape (n_subsets, S), m^2/s^2
@@ -392,6 +394,9 @@ class VaryingCoefficientSINDy(ModelBase):
         if self.wind_input == "mean":
             z = np.repeat(self._section_mean(z)[:, None], z.shape[1], axis=1)
         return z
+
+    def _held_yaw(self, z):
+        return held_yaw(z, getattr(self, "yaw_min_", None), getattr(self, "yaw_max_", None), self.n_inputs(2) > 1)
 
     def to_json(self) -> str:
         """The parameters as a JSON object (sorted keys; sequences as lists)."""
@@ -549,7 +554,7 @@ class VaryingCoefficientSINDy(ModelBase):
         J = self.yaw_degree_
         z = None
         if J and yaw is not None and coef_yaw is not None:
-            z = self.yaw_covariate(np.asarray(yaw, dtype=float), U.shape[0])
+            z = self._held_yaw(self.yaw_covariate(np.asarray(yaw, dtype=float), U.shape[0]))
         out = np.zeros(coef.shape[:-3] + (U.shape[0], self.n_sections_, 4))
         n_in = self.n_inputs(self.n_sections_)
         for k in range(self.n_sections_):  # a few sections
@@ -660,7 +665,7 @@ class VaryingCoefficientSINDy(ModelBase):
         record = self._check_record(record)
         U = self.wind_inputs(record.U)
         J = self.yaw_degree_
-        z = self.yaw_covariate(self.record_yaw(record), U.shape[0]) if J else None
+        z = self._held_yaw(self.yaw_covariate(self.record_yaw(record), U.shape[0])) if J else None
         n, S, Lmax = U.shape[0], self.n_sections_, self.coef_.shape[1]
         return design_rows(U, z, self.knots_, self.n_basis_, Lmax, J, self.n_inputs(S))
 

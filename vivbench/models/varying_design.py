@@ -22,7 +22,35 @@ import numpy as np
 from vivbench.library.splines import DEGREE, bspline_local, bspline_local_t, first_index
 
 __all__ = ["design_local_t", "local_columns", "spline_design", "input_contributions", "block_stats", "design_rows",
-           "tie_stats", "untie"]
+           "held_yaw", "tie_stats", "untie"]
+
+
+def held_yaw(z: np.ndarray | None, yaw_min, yaw_max, shared_inputs: bool) -> np.ndarray | None:
+    """The yaw covariate held at the fitted range's ends outside it, as the curves are in the wind.
+
+    Parameters
+    ----------
+    z : ndarray, shape (n, S), sin^2 psi of each equation's (or, with ``shared_inputs``, each section's) yaw;
+        None passes through
+    yaw_min, yaw_max : array_like, shape (S,) or None
+        The fitted samples' least and largest sin^2 psi per equation (NaN or None: unknown, not held)
+    shared_inputs : bool
+        Every equation takes every section's yaw (``wind_input`` ``"additive"`` or ``"sum"``): the columns of ``z``
+        are sections, and the range over every equation holds them.
+
+    Returns
+    -------
+    ndarray, shape (n, S), or None
+        A polynomial in sin^2 psi says nothing beyond its data; without the hold a held-out event of a larger
+        yaw than the fitted ones extrapolates it, and its simulated envelope can run away.
+    """
+    if z is None or yaw_min is None or yaw_max is None:
+        return z
+    lo, hi = np.asarray(yaw_min, dtype=float), np.asarray(yaw_max, dtype=float)
+    if shared_inputs:
+        lo, hi = np.full(z.shape[1], np.min(lo)), np.full(z.shape[1], np.max(hi))
+    lo, hi = np.where(np.isfinite(lo), lo, -np.inf), np.where(np.isfinite(hi), hi, np.inf)
+    return np.clip(z, lo, hi)  # NaN (no yaw) stays NaN
 
 
 def design_local_t(U: np.ndarray, A: np.ndarray, knots: np.ndarray, a_ref: float, z: np.ndarray | None = None,

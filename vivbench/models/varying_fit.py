@@ -129,6 +129,7 @@ class SectionSamples:
     yaw_fallback: float
     yaw_ref: float
     yaw_min: float
+    yaw_max: float
     cv_error: np.ndarray
     best: BasisChoice
 
@@ -342,11 +343,11 @@ def select_basis(model, samples: CampaignSamples, k: int, weight: np.ndarray | N
         raise InputError(f"section {k + 1}: {n} valid samples are too few for {p_max} spline coefficients")
     Uall, Zall = equation_inputs(model.wind_input, U, Z, k)
     Ak, Uk, yk = A[ok, k], Uall[ok], dA[ok, k]
-    zk, yaw_fallback, yaw_ref, yaw_min = None, 0.0, 1.0, 0.0
+    zk, yaw_fallback, yaw_ref, yaw_min, yaw_max = None, 0.0, 1.0, 0.0, 0.0
     if J:
         # sin^2 psi over its RMS keeps the yaw columns on the scale of the others.
         zraw = Zall[ok]
-        yaw_min = float(np.min(zraw))
+        yaw_min, yaw_max = float(np.min(zraw)), float(np.max(zraw))
         yaw_fallback = float(np.median(zraw))
         yaw_ref = float(np.sqrt(np.mean(zraw**2))) or 1.0
         zk = zraw / yaw_ref
@@ -375,7 +376,7 @@ def select_basis(model, samples: CampaignSamples, k: int, weight: np.ndarray | N
                                P=P)
     return SectionSamples(n=n, n_blocks=nb, y_scale=ys, a_ref=aref, wind_range=(lo, hi), event_of_block=ev_of_block,
                           fold_of_block=fold_of_block, yaw_fallback=yaw_fallback, yaw_ref=yaw_ref, yaw_min=yaw_min,
-                          cv_error=errors, best=best)
+                          yaw_max=yaw_max, cv_error=errors, best=best)
 
 
 def eiv_weight(model, samples: CampaignSamples, k: int, sec: SectionSamples, step: float = 0.05,
@@ -618,7 +619,7 @@ def fitted_arrays(model, samples: CampaignSamples, secs: list[SectionSamples]) -
            # not saved: for studies of the level
            "subset_loeo_event_": np.full((n_sub, S, len(samples.records)), np.nan),
            "penalty_plausible_": np.zeros((pen.size, S), dtype=bool), "yaw_ref_": np.ones(S),
-           "yaw_fallback_": np.zeros(S), "yaw_min_": np.zeros(S)}
+           "yaw_fallback_": np.zeros(S), "yaw_min_": np.zeros(S), "yaw_max_": np.zeros(S)}
     for k, sec in enumerate(secs):
         fit = fit_section(model, samples, sec)
         M, L = sec.best.n_basis, fit.coef.shape[0]
@@ -626,6 +627,7 @@ def fitted_arrays(model, samples: CampaignSamples, secs: list[SectionSamples]) -
                                                                           fit.penalty_coef)
         out["knots_"][k, :M + DEGREE + 1] = sec.best.knots
         out["yaw_fallback_"][k], out["yaw_ref_"][k], out["yaw_min_"][k] = sec.yaw_fallback, sec.yaw_ref, sec.yaw_min
+        out["yaw_max_"][k] = sec.yaw_max
         out["cv_error_"][k] = sec.cv_error
         out["n_basis_"][k], out["penalty_"][k], out["orders_"][k] = M, fit.penalty, fit.orders
         out["penalty_cv_"][k], out["edf_"][k], out["rss_"][k] = fit.penalty_cv, fit.edf, fit.rss
