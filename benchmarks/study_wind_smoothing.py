@@ -47,6 +47,14 @@ import numpy as np  # noqa: E402
 VARIANTS = ("stated", "chosen")
 
 
+def _smoothing_of(candidate: str) -> float | None:
+    """The wind smoothing (s) in a selection candidate's name ("yaw0-cv-smooth90" -> 90.0), None without one."""
+    import re
+
+    found = re.search(r"smooth(\d+(?:\.\d+)?)", candidate)
+    return float(found.group(1)) if found else None
+
+
 def _options(grid: tuple[float, ...]) -> dict:
     from vivbench.analysis.selection import VARYING_OPTIONS
 
@@ -81,6 +89,9 @@ def summarise(rows: list[dict]) -> list[dict]:
     """One row per variant and kind of wind error (all draws first): errors, pairing with ``stated``, promise."""
     from _family_args import by_wind_error, paired, promise_figures, spread
 
+    from vivbench.models import VaryingCoefficientSINDy
+
+    stated_s = VaryingCoefficientSINDy().wind_smoothing_s  # the stated prior's smoothing, s
     out = []
     for kind, sub in by_wind_error(rows):
         for name in VARIANTS:
@@ -98,8 +109,9 @@ def summarise(rows: list[dict]) -> list[dict]:
                 forced = [r for r in sub if r["forced_only"]]
                 entry["forced_only_self_excited_flags"] = int(sum(r[f"self_excited_{name}"] for r in forced))
                 # the candidates' names carry their smoothing ("smooth90") only where it is an option
-                entry["longer_smoothing_chosen"] = int(sum("smooth" in r[f"chosen_{name}"]
-                                                           and "smooth30" not in r[f"chosen_{name}"] for r in sub))
+                chosen = [_smoothing_of(r[f"chosen_{name}"]) for r in sub]
+                entry["longer_smoothing_chosen"] = sum(1 for x in chosen if x is not None and x > stated_s)
+                entry["shorter_smoothing_chosen"] = sum(1 for x in chosen if x is not None and x < stated_s)
             out.append(entry)
     return out
 
@@ -118,8 +130,8 @@ def findings(summary: list[dict]) -> list[str]:
             text += (f"; {s['flags']} flags, the promise kept on {s['promise_kept']} of {s['draws_with_enough_flags']}"
                      f" draws with enough flags (worst {s['worst_share_right']:.3f} right); "
                      f"{s['forced_only_self_excited_flags']} self-excited flags on forced-only draws; a longer "
-                     "smoothing "
-                     f"chosen on {s['longer_smoothing_chosen']}; median fit {s['fit_s_median']:.0f} s")
+                     f"smoothing than the prior's chosen on {s['longer_smoothing_chosen']}, a shorter on "
+                     f"{s['shorter_smoothing_chosen']}; median fit {s['fit_s_median']:.0f} s")
         said.append(text + ".")
     return said
 

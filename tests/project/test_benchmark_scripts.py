@@ -227,7 +227,7 @@ def test_order_margin_study_counts_the_promise_and_the_forced_only_draws(scripts
 
 def test_wind_smoothing_study_pairs_the_chosen_smoothing_with_the_prior(scripts, monkeypatch):
     """The wind_smoothing study's summary: spread per variant and kind of wind error, the ratio to the stated prior
-    draw by draw, the promise and the draws where a longer smoothing was chosen."""
+    draw by draw, the promise and the draws where a smoothing longer or shorter than the prior's was chosen."""
     study = _load(BENCH / "study_wind_smoothing.py", monkeypatch)
 
     def row(draw, eiv, stated, chosen, label, flags=0, right=0):
@@ -240,17 +240,20 @@ def test_wind_smoothing_study_pairs_the_chosen_smoothing_with_the_prior(scripts,
 
     rows = [row(0, "smooth", 0.2, 0.1, "yaw0-cv-smooth90", flags=100, right=99),
             row(1, "smooth", 0.4, 0.6, "yaw0-cv-smooth90"),
-            row(2, "tributary", 0.3, 0.3, "yaw0-cv-smooth30", flags=50, right=40)]
+            row(2, "tributary", 0.3, 0.3, "yaw0-cv-smooth30", flags=50, right=40),
+            row(3, "tributary", 0.3, 0.3, "yaw0-cv-smooth15")]
     summary = {(s["variant"], s["draws_of"]): s for s in study.summarise(rows)}
     chosen, stated = summary[("chosen", "all")], summary[("stated", "all")]
-    assert_close(chosen["ratio_to_stated_median"], 1.0, what="median of 0.5, 1.5 and 1")
+    assert_close(chosen["ratio_to_stated_median"], 1.0, what="median of 0.5, 1.5, 1 and 1")
     assert (chosen["better_by_10pct"], chosen["worse_by_10pct"]) == (1, 1)
     assert (chosen["longer_smoothing_chosen"], stated["longer_smoothing_chosen"]) == (2, 0)
+    assert chosen["shorter_smoothing_chosen"] == 1  # 15 s is no longer than the prior's 30 s
     assert (chosen["draws_with_enough_flags"], chosen["promise_kept"]) == (2, 1)
     assert_close(summary[("chosen", "smooth")]["error_median"], 0.35, what="median of 0.1 and 0.6")
     assert "ratio_to_stated_median" in summary[("chosen", "tributary")]
     text = study.findings(study.summarise(rows))
-    assert text[1].startswith("chosen, all draws (3)") and "a longer smoothing chosen on 2" in text[1]
+    assert text[1].startswith("chosen, all draws (4)")
+    assert "a longer smoothing than the prior's chosen on 2, a shorter on 1" in text[1]
 
 
 def test_additive_input_study_leaves_out_single_sections_and_counts_the_promise(scripts, monkeypatch):
