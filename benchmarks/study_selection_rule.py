@@ -27,8 +27,8 @@ held-out losses (only the candidates the default's forward search scored take pa
   and its standard error (scale-free; one event cannot outweigh the others by its energy).
 
 Beside the rules, ``oracle`` is the scored candidate of the lowest error against the truth: what
-no rule can exceed with these candidates, and no user can pick. Per rule the page gives the error of the candidate it picks (median, 90th percentile, worst over
-the draws), the median paired ratio to the default's, the draws better or worse by more than 10 %,
+no rule can exceed with these candidates, and no user can pick. Per rule the page gives the error
+of the candidate it picks (median, 90th percentile, worst over the draws), the median paired ratio to the default's, the draws better or worse by more than 10 %,
 how often the yaw covariate is picked on the draws where the yaw matters (the truth's factor on Y1
 ranges by :data:`vivbench.validate.study_report.YAW_MATTERS` or more over the campaign's yaws) and
 where it does not, and on the latter the curve error against the yaw-free candidate of the same
@@ -88,10 +88,18 @@ def rule_choices(losses: np.ndarray, complexity: np.ndarray, scored: np.ndarray)
 
 def _yaw_free_twin(names: list[str], name: str) -> str | None:
     """The yaw-free candidate of the same options as ``name`` (``yaw1-cv`` -> ``yaw0-cv``), or None."""
-    if not name.startswith("yaw") or name.startswith("yaw0"):
+    if not name.startswith("yaw") or name.startswith("yaw0") or "-" not in name:
         return None
-    twin = "yaw0" + name[name.index("-"):] if "-" in name else None
+    twin = "yaw0" + name[name.index("-"):]
     return twin if twin in names else None
+
+
+def _pick(rule: str, name: str, cand: dict) -> dict:
+    """The row's fields of ``rule`` picking candidate ``name`` (``cand``: name -> its scores against the truth)."""
+    twin = _yaw_free_twin(list(cand), name)
+    return {f"chosen_{rule}": name, f"error_{rule}": cand[name]["error"],
+            f"curve_error_{rule}": cand[name]["curve_error"], f"yaw_{rule}": int(not name.startswith("yaw0")),
+            f"curve_error_yaw_free_{rule}": cand[(twin or name)]["curve_error"]}
 
 
 def score_draw(task: dict) -> dict:
@@ -123,12 +131,7 @@ def score_draw(task: dict) -> dict:
     row.update(default=str(selection.chosen_), candidates=cand,
                simplest_is_default=int(names[picks["simplest"]] == selection.chosen_))
     for rule, i in picks.items():
-        name = names[i]
-        twin = _yaw_free_twin(names, name)
-        row.update({f"chosen_{rule}": name, f"error_{rule}": cand[name]["error"],
-                    f"curve_error_{rule}": cand[name]["curve_error"],
-                    f"yaw_{rule}": int(not name.startswith("yaw0")),
-                    f"curve_error_yaw_free_{rule}": cand[twin]["curve_error"] if twin else cand[name]["curve_error"]})
+        row.update(_pick(rule, names[i], cand))
     return store_row(task, row)
 
 
@@ -137,10 +140,7 @@ def _with_oracle(row: dict) -> dict:
     rules'."""
     cand = row["candidates"]
     name = min(cand, key=lambda k: (cand[k]["error"] if math.isfinite(cand[k]["error"]) else math.inf, k))
-    twin = _yaw_free_twin(list(cand), name)
-    return {**row, f"chosen_{ORACLE}": name, f"error_{ORACLE}": cand[name]["error"],
-            f"curve_error_{ORACLE}": cand[name]["curve_error"], f"yaw_{ORACLE}": int(not name.startswith("yaw0")),
-            f"curve_error_yaw_free_{ORACLE}": cand[twin]["curve_error"] if twin else cand[name]["curve_error"]}
+    return {**row, **_pick(ORACLE, name, cand)}
 
 
 def summarise(rows: list[dict]) -> list[dict]:

@@ -396,7 +396,8 @@ class VaryingCoefficientSINDy(ModelBase):
         return z
 
     def _held_yaw(self, z):
-        return held_yaw(z, getattr(self, "yaw_min_", None), getattr(self, "yaw_max_", None), self.n_inputs(2) > 1)
+        return held_yaw(z, getattr(self, "yaw_min_", None), getattr(self, "yaw_max_", None),
+                        self.wind_input in ("additive", "sum"))
 
     def to_json(self) -> str:
         """The parameters as a JSON object (sorted keys; sequences as lists)."""

@@ -41,8 +41,8 @@ def held_yaw(z: np.ndarray | None, yaw_min, yaw_max, shared_inputs: bool) -> np.
     Returns
     -------
     ndarray, shape (n, S), or None
-        A polynomial in sin^2 psi says nothing beyond its data; without the hold a held-out event of a larger
-        yaw than the fitted ones extrapolates it, and its simulated envelope can run away.
+        A polynomial in sin^2 psi says nothing beyond its data: without the hold, a held-out event, a forecast
+        or a truth at a larger yaw than the fitted ones would extrapolate it.
     """
     if z is None or yaw_min is None or yaw_max is None:
         return z
