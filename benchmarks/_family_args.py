@@ -228,7 +228,8 @@ def fit_and_score(method, records, truths, windows) -> dict:
     """Fit a study method on a draw's records and score it against the truths: ``error`` (energy-weighted
     relative dA/dt error on the truth's own (A, U)), ``curve_error`` (energy-weighted), ``flags`` (flagged
     window-equations), ``right`` (those with the truth's regime), ``coverage``, ``fit_s`` (wall time of the
-    fit, s) and ``chosen`` (the selection's chosen candidate, "" for other models)."""
+    fit, s), ``chosen`` (the selection's chosen candidate, "" for other models) and ``smoothing`` (the wind
+    smoothing the model was fitted with, s; NaN for models without one)."""
     import math
     import time
 
@@ -242,8 +243,10 @@ def fit_and_score(method, records, truths, windows) -> dict:
     flagged = 0 if math.isnan(s["coverage"]) else int(round(s["coverage"] * s["n_scored"]))
     right = 0 if not flagged else int(round(s["accuracy_identifiable"] * flagged))
     evidence = model_evidence(fitted) or {}
+    smoothing = getattr(getattr(fitted, "model", fitted), "fitted_wind_smoothing", None)
     return {"error": s["rhs_error_true_AU_energy"], "curve_error": s["curve_error_energy"], "flags": flagged,
-            "right": right, "coverage": s["coverage"], "fit_s": seconds, "chosen": str(evidence.get("chosen", ""))}
+            "right": right, "coverage": s["coverage"], "fit_s": seconds, "chosen": str(evidence.get("chosen", "")),
+            "smoothing": float(smoothing()) if callable(smoothing) else math.nan}
 
 
 def labelled_row(task: dict) -> tuple[dict, dict]:

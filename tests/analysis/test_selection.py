@@ -204,12 +204,16 @@ def test_the_yaw_enters_only_where_the_campaign_demands_it(in_truth, chosen_yaw)
     assert len(sel.perturbed_models_) == 1
 
 
-@pytest.mark.parametrize("pinned, smoothing", [({}, {30.0}), ({"wind_smoothing_s": 15.0}, {15.0}),
-                                                ({"options": {"wind_smoothing_s": (15.0, 60.0)}}, {15.0, 60.0})])
-def test_the_wind_smoothing_is_the_stated_prior_unless_given_or_among_the_options(pinned, smoothing):
+@pytest.mark.parametrize("pinned, smoothing, grid", [
+    ({}, {30.0}, (10.0, 30.0, 60.0)), ({"wind_smoothing_s": 15.0}, {15.0}, None),
+    ({"options": {"wind_smoothing_s": (15.0, 60.0)}}, {15.0, 60.0}, None),
+    ({"wind_smoothing_grid": (20.0, 30.0)}, {30.0}, (20.0, 30.0))])
+def test_the_wind_smoothing_is_the_stated_prior_unless_given_or_among_the_options(pinned, smoothing, grid):
+    # The prior's models choose among the grid by their own cross-validation; a smoothing pinned or among the
+    # selection's options leaves them none.
     sel = varying_selection(**pinned)
     assert {c.model.wind_smoothing_s for c in sel.candidates} == smoothing
-    assert {c.model.get_params()["wind_smoothing_grid"] for c in sel.candidates} == {None}
+    assert {c.model.get_params()["wind_smoothing_grid"] for c in sel.candidates} == {grid}
     assert sel.null_model.wind_smoothing_s == (15.0 if "wind_smoothing_s" in pinned else 30.0)
 
 

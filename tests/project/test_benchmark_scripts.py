@@ -230,19 +230,24 @@ def test_wind_smoothing_study_pairs_the_chosen_smoothing_with_the_prior(scripts,
     draw by draw, the promise and the draws where a smoothing longer or shorter than the prior's was chosen."""
     study = _load(BENCH / "study_wind_smoothing.py", monkeypatch)
 
-    def row(draw, eiv, stated, chosen, label, flags=0, right=0):
+    def row(draw, eiv, stated, chosen, label, flags=0, right=0, cv_smoothing=30.0):
         out = {"draw": draw, "eiv": eiv, "forced_only": False}
-        for name, err, lab in (("stated", stated, "yaw0-cv"), ("chosen", chosen, label)):
+        for name, err, lab in (("stated", stated, "yaw0-cv"), ("chosen", chosen, label), ("cv", stated, "yaw0-cv")):
             out.update({f"error_{name}": err, f"curve_error_{name}": err / 2, f"flags_{name}": flags,
                         f"right_{name}": right, f"coverage_{name}": flags / 1000, f"self_excited_{name}": 0,
-                        f"chosen_{name}": lab, f"fit_s_{name}": 10.0})
+                        f"chosen_{name}": lab, f"fit_s_{name}": 10.0, f"smoothing_{name}": 30.0})
+        out["smoothing_cv"] = cv_smoothing  # the cv variant's model records its own smoothing
         return out
 
-    rows = [row(0, "smooth", 0.2, 0.1, "yaw0-cv-smooth90", flags=100, right=99),
-            row(1, "smooth", 0.4, 0.6, "yaw0-cv-smooth90"),
-            row(2, "tributary", 0.3, 0.3, "yaw0-cv-smooth30", flags=50, right=40),
+    rows = [row(0, "smooth", 0.2, 0.1, "yaw0-cv-smooth90", flags=100, right=99, cv_smoothing=60.0),
+            row(1, "smooth", 0.4, 0.6, "yaw0-cv-smooth90", cv_smoothing=10.0),
+            row(2, "tributary", 0.3, 0.3, "yaw0-cv-smooth30", flags=50, right=40, cv_smoothing=10.0),
             row(3, "tributary", 0.3, 0.3, "yaw0-cv-smooth15")]
     summary = {(s["variant"], s["draws_of"]): s for s in study.summarise(rows)}
+    cv = summary[("cv", "all")]
+    assert (cv["longer_smoothing_chosen"], cv["shorter_smoothing_chosen"], cv["shorter_on_tributary"]) == (1, 2, 1)
+    assert "shorter_on_tributary" not in summary[("chosen", "all")]
+    assert [s["variant"] for s in study.summarise(rows, ("stated", "cv"))] == ["stated", "cv"] * 3
     chosen, stated = summary[("chosen", "all")], summary[("stated", "all")]
     assert_close(chosen["ratio_to_stated_median"], 1.0, what="median of 0.5, 1.5, 1 and 1")
     assert (chosen["better_by_10pct"], chosen["worse_by_10pct"]) == (1, 1)
@@ -253,7 +258,8 @@ def test_wind_smoothing_study_pairs_the_chosen_smoothing_with_the_prior(scripts,
     assert "ratio_to_stated_median" in summary[("chosen", "tributary")]
     text = study.findings(study.summarise(rows))
     assert text[1].startswith("chosen, all draws (4)")
-    assert "a longer smoothing than the prior's chosen on 2, a shorter on 1" in text[1]
+    assert "a longer smoothing than the prior's chosen on 2, a shorter on 1;" in text[1]
+    assert "a shorter on 2 (1 of them where the deck feels the tributary turbulence)" in text[2]
 
 
 def test_additive_input_study_leaves_out_single_sections_and_counts_the_promise(scripts, monkeypatch):

@@ -93,6 +93,7 @@ from vivbench.analysis.wind_error import SINGLE_SECTION_SHARE, perturbed_wind, w
 from vivbench.analysis.wind_local import WIND_BINS, window_wind, wind_bin_edges, wind_bins_of
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
+from vivbench.models.varying_fit import smoothing_evidence
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
@@ -638,17 +639,14 @@ class ModelSelection:
         """The held-out evidence of the choice as plain data (JSON-ready)."""
         self._check_fitted()
         return {
-            "criterion": self.criterion,
-            "n_folds": int(min(self.n_folds, len(self.event_ids_))),
-            "chosen": self.chosen_,
+            "criterion": self.criterion, "n_folds": int(min(self.n_folds, len(self.event_ids_))), "chosen": self.chosen_,
             "candidates": [
                 {"name": c.name, "complexity": int(c.complexity), "options": c.options or {},
                  "held_out_loss": float(self.losses_[i].sum()), "excess": float(self.excess_[i]),
                  "se": float(self.se_[i]), "p_rank": float(self._p_rank()[i]), "scored": bool(self._scored()[i]),
                  "in_set": bool(self.in_set_[i])}
                 for i, c in enumerate(self.candidates)],
-            "events": list(self.event_ids_),
-            "n_perturbations": int(self.n_perturbations),
+            "events": list(self.event_ids_), "n_perturbations": int(self.n_perturbations),
             "perturbation_timescale_s": float(self.perturbation_timescale_s),
             "single_section_share": float(self.single_section_share),
             "wind_error_rms": float(np.sqrt(np.mean(self.wind_error_**2))),
@@ -668,8 +666,8 @@ class ModelSelection:
             "short_events": (self.short_events() if hasattr(self, "time_constant_s_") else []),
             "min_time_constants": (None if self.min_time_constants is None else float(self.min_time_constants)),
             "rank_level": (None if self.rank_level is None else float(self.rank_level)),
-            "wind_bins": self.wind_bins,
-            "dynamics_by_wind": self._local_evidence(),
+            "wind_bins": self.wind_bins, "dynamics_by_wind": self._local_evidence(),
+            "wind_smoothing": smoothing_evidence(self.model_),  # the chosen model's, from its own cross-validation
         }
 
     def _local_evidence(self) -> dict | None:
@@ -715,8 +713,9 @@ STRUCTURAL_OPTIONS = ("yaw_degree",)
 
 #: Options of the varying model that stay fixed in :func:`varying_selection` unless given: stated priors.
 #: The modal section weights are the averaged truth's for a mode seen at the sections (each section's
-#: share of the mode's energy); 30 s is the wind's smoothing time scale.
-VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0}
+#: share of the mode's energy); 30 s is the wind's smoothing time scale, which each model replaces by 10 or
+#: 60 s only where its cross-validated dA/dt error demands it (:func:`vivbench.models.varying_fit.smoothing_choice`).
+VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0, "wind_smoothing_grid": (10.0, 30.0, 60.0)}
 
 
 def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterion: str = "output",
@@ -730,9 +729,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     Parameters
     ----------
     options : dict of str to sequence, optional
-        Parameter name -> candidate values, simplest first (default :data:`VARYING_OPTIONS`);
-        the grid is their product and a candidate's complexity is the sum of its values' positions
-        in the :data:`STRUCTURAL_OPTIONS`.
+        Parameter name -> candidate values, simplest first (default :data:`VARYING_OPTIONS`); the grid is their
+        product and a candidate's complexity is the sum of its values' positions in the :data:`STRUCTURAL_OPTIONS`.
         A parameter given in ``params`` is pinned: it leaves the grid.
     n_folds, criterion, n_perturbations, perturbation_timescale_s, seed, workers, scheduler, single_section_share,
     min_time_constants, rank_level, wind_bins
@@ -746,7 +744,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     change_scan : bool
         Flag no window when the chosen model's change scan locates a change (:class:`ModelSelection`).
     **params
-        Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given).
+        Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given; a
+        ``wind_smoothing_s`` given here or in ``options`` drops the prior ``wind_smoothing_grid``).
 
     Returns
     -------
@@ -759,10 +758,11 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     from vivbench.regimes import varying_window_verdicts
 
     grid = {k: tuple(v) for k, v in (VARYING_OPTIONS if options is None else options).items() if k not in params}
-    for k, v in grid.items():
-        if not v:
-            raise InputError(f"option {k!r} has no candidate value")
-    fixed = {**{k: v for k, v in VARYING_PRIORS.items() if k not in grid}, **params, "seed": seed}
+    for k in [k for k, v in grid.items() if not v]:
+        raise InputError(f"option {k!r} has no candidate value")
+    pinned = {**grid, **params}  # a smoothing pinned or among the options leaves the models no grid of their own
+    fixed = {**{k: v for k, v in VARYING_PRIORS.items() if k not in pinned and not (
+        k == "wind_smoothing_grid" and "wind_smoothing_s" in pinned)}, **params, "seed": seed}
     names = list(grid)
     candidates = []
     for idx in itertools.product(*(range(len(grid[k])) for k in names)):

@@ -31,6 +31,7 @@ def evidence_text(ev: dict, *, note: str = "", short_threshold: float = float("n
         rank = "" if not math.isfinite(c["p_rank"]) else f", signed-rank p {c['p_rank']:.2g}"
         lines.append(f"  {c['name']:<22} {c['held_out_loss']:.4g} ({rel:.3f} x best; +{c['excess']:.3g} "
                      f"+- {c['se']:.3g}{rank}) {mark}".rstrip())
+    lines += _smoothing_lines(ev.get("wind_smoothing"))
     null = ev["null"]
     if null is not None:
         rel = null["held_out_loss"] / best if best > 0 else float("nan")
@@ -65,3 +66,14 @@ def evidence_text(ev: dict, *, note: str = "", short_threshold: float = float("n
                      f"window), so no event is known to show how an amplitude's change ends: limit regimes "
                      f"(3, 4) {verdict}")
     return "\n".join(lines)
+
+
+def _smoothing_lines(sm: dict | None) -> list[str]:
+    """The chosen model's wind smoothing and its cross-validated evidence (``evidence()["wind_smoothing"]``)."""
+    if not sm or len(sm["candidates_s"]) < 2:
+        return [] if not sm else [f"  wind smoothing {sm['chosen_s']:g} s (a stated prior)"]
+    errors = ", ".join(f"{c:g} s {e:.4g}" for c, e in zip(sm["candidates_s"], sm["cv_error"]))
+    how = ("the prior, not beaten by more than one standard error" if sm["chosen_s"] == sm["prior_s"] else
+           f"below the {sm['prior_s']:g} s prior's by more than one standard error")
+    return [f"  wind smoothing {sm['chosen_s']:g} s, chosen by the chosen model's cross-validated dA/dt error "
+            f"over folds of events ({errors}; per sample, standardised): {how}"]

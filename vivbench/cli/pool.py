@@ -217,8 +217,10 @@ def register(sub) -> None:
                         "minimum)")
     s.add_argument("--wind-smoothing", type=float, default=None,
                    help="Gaussian smoothing of the mean wind (and yaw) in time, standard deviation in s, a lower "
-                        "cut-off against the point anemometer's slow turbulence (default: 30 s with --model varying, "
-                        "a stated prior; 0 with --model pooled)")
+                        "cut-off against the point anemometer's slow turbulence (default with --model varying: the "
+                        "30 s prior, replaced by 10 or 60 s where the model's cross-validated dA/dt error over "
+                        "events is lower by more than one standard error; given here, it is pinned; 0 with "
+                        "--model pooled)")
     s.add_argument("--folds", type=int, default=5,
                    help="with --model varying: folds of whole events for the held-out choice of the options not "
                         "given here (yaw degree, penalty choice; default 5, one event per fold with fewer events)")

@@ -13,7 +13,8 @@ The steps, each on per-block sufficient statistics (:mod:`vivbench.models.varyin
    penalties (leave-one-event-out errors, :func:`vivbench.regression.confidence_set`).
 
 :func:`choose_smoothing` runs 1-3 for every candidate wind smoothing and keeps the
-one of least cross-validated error; :func:`fitted_arrays` gathers the sections'
+prior unless another's cross-validated error is lower by more than one standard error
+(:func:`smoothing_choice`); :func:`fitted_arrays` gathers the sections'
 fits into the model's fitted attributes. Steps 1-3 do not depend on the
 parameters of :data:`FINAL_PARAMS`: :func:`fit_shared` runs them once
 (:class:`SharedFit`) and :func:`fit_final` step 4 for one model, so models that
@@ -24,6 +25,7 @@ parameters and its wind inputs (``wind_inputs``, ``yaw_covariate``, ``n_inputs``
 from __future__ import annotations
 
 import copy
+import math
 import warnings
 from dataclasses import dataclass, replace
 
@@ -42,9 +44,9 @@ from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.model_set import MODEL_SET_TESTS, confidence_set
 from vivbench.regression.penalised import held_out_errors, penalised_solve, penalty_scale, quadratic_error
 
-__all__ = ["ORDER_SUBSETS", "ORDER_SET_MARGIN", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
-           "SectionFit", "equation_inputs", "valid_samples", "campaign_samples", "wind_standard_error", "cv_error", "select_orders", "select_basis",
-           "eiv_weight", "choose_smoothing", "fit_section", "fitted_arrays", "event_statistics", "WIND_INPUTS",
+__all__ = ["ORDER_SUBSETS", "ORDER_SET_MARGIN", "SMOOTHING_MIN_FOLDS", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
+           "SectionFit", "equation_inputs", "valid_samples", "campaign_samples", "wind_standard_error", "cv_error", "fold_errors", "select_orders", "select_basis",
+           "eiv_weight", "choose_smoothing", "smoothing_candidates", "smoothing_choice", "smoothing_evidence", "fit_section", "fitted_arrays", "event_statistics", "WIND_INPUTS",
            "fitted_inputs", "as_inputs", "section_statistics"]
 
 #: Values of ``wind_input`` (:class:`vivbench.models.VaryingCoefficientSINDy`): the sections' weighted mean wind, the
@@ -65,6 +67,10 @@ ORDER_SUBSETS = np.array([[o0, True, o2, o3] for o0 in (True, False) for o2 in (
 #: whatever the paired test says (``order_set_margin``): a stated prior, chosen on development draws of the
 #: generator family (docs/results/studies/order_margin).
 ORDER_SET_MARGIN = 0.005
+
+#: Folds of events below which the wind smoothing stays at its prior (:func:`smoothing_choice`): a standard
+#: error from fewer paired differences is too rough to overrule it (a stated prior).
+SMOOTHING_MIN_FOLDS = 5
 
 
 #: Parameters of the model that act only in the last step (:func:`fit_section`, or not in the fit at all):
@@ -102,7 +108,8 @@ class CampaignSamples:
 @dataclass(frozen=True)
 class BasisChoice:
     """The cross-validated choice of one section: its error per sample, M, the relative penalty, the knots
-    (m/s), the block statistics (:class:`vivbench.models.varying_stats.BlockStats`) and the penalty P (p, p)."""
+    (m/s), the block statistics (:class:`vivbench.models.varying_stats.BlockStats`), the penalty P (p, p) and
+    the error per sample of each fold held out (K,), whose sum is ``error``."""
 
     error: float
     n_basis: int
@@ -110,6 +117,7 @@ class BasisChoice:
     knots: np.ndarray
     stats: BlockStats
     P: np.ndarray
+    fold_errors: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -289,11 +297,16 @@ def campaign_samples(model, records: list[Record]) -> CampaignSamples:
         wind_se=wind_standard_error(model.wind_input, model.wind_weights_, U_raw))
 
 
-def cv_error(stats: BlockStats, fold_of_block, K, P, pen, keep) -> np.ndarray:
-    """Summed held-out squared error over the K folds, for every relative penalty ``pen``, shape (L,)."""
+def fold_errors(stats: BlockStats, fold_of_block, K, P, pen, keep) -> np.ndarray:
+    """Held-out squared error of each of the K folds, for every relative penalty ``pen``, shape (K, L)."""
     Gf, bf, yf = stats.by(fold_of_block, K)
     Gs, bs = Gf.sum(axis=0), bf.sum(axis=0)
-    return held_out_errors(Gs, bs, Gf, bf, yf, P, pen * penalty_scale(Gs, P), keep).sum(axis=0)
+    return held_out_errors(Gs, bs, Gf, bf, yf, P, pen * penalty_scale(Gs, P), keep)
+
+
+def cv_error(stats: BlockStats, fold_of_block, K, P, pen, keep) -> np.ndarray:
+    """Summed held-out squared error over the K folds, for every relative penalty ``pen``, shape (L,)."""
+    return fold_errors(stats, fold_of_block, K, P, pen, keep).sum(axis=0)
 
 
 def section_statistics(model, U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight=None) -> BlockStats:
@@ -368,12 +381,13 @@ def select_basis(model, samples: CampaignSamples, k: int, weight: np.ndarray | N
                                    None if weight is None else weight[ok])
         # Block-diagonal: the same roughness penalty on every order's, yaw power's and wind input's curve.
         P = np.kron(np.eye(4 * (J + 1) * n_fit), difference_penalty(int(M)))
-        err = cv_error(stats, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool)) / n
+        per_fold = fold_errors(stats, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool)) / n
+        err = per_fold.sum(axis=0)
         errors[a] = err
         j = int(np.argmin(err))
         if best is None or err[j] < best.error:
             best = BasisChoice(error=float(err[j]), n_basis=int(M), penalty=float(pen[j]), knots=knots, stats=stats,
-                               P=P)
+                               P=P, fold_errors=per_fold[:, j])
     return SectionSamples(n=n, n_blocks=nb, y_scale=ys, a_ref=aref, wind_range=(lo, hi), event_of_block=ev_of_block,
                           fold_of_block=fold_of_block, yaw_fallback=yaw_fallback, yaw_ref=yaw_ref, yaw_min=yaw_min,
                           yaw_max=yaw_max, cv_error=errors, best=best)
@@ -425,12 +439,14 @@ def eiv_weight(model, samples: CampaignSamples, k: int, sec: SectionSamples, ste
     return out, float(kappa * np.mean(v_wind) / np.mean(v))
 
 
-def choose_smoothing(model, records: list[Record], grid: list[float]):
-    """The wind smoothing of least cross-validated error, its samples and the sections' choices.
+def choose_smoothing(model, records: list[Record], grid: list[float], prior: int = 0):
+    """The wind smoothing chosen by the cross-validated error, its samples and the sections' choices.
 
-    The smoothing is chosen like M and lambda, by the cross-validated error over events (the target dA/dt
-    and the folds do not depend on it, so the errors compare). With ``model.eiv_weights`` each section is
-    then refitted at its choice with effective-variance weights.
+    The smoothing is chosen like M and lambda, by the cross-validated dA/dt error over events (the target
+    dA/dt and the folds do not depend on it, so the errors compare), with the prior ``grid[prior]`` kept
+    unless another candidate's error is below it by more than one standard error of the paired differences
+    over the folds (:func:`smoothing_choice`). With ``model.eiv_weights`` each section is then refitted at
+    its choice with effective-variance weights.
 
     Returns
     -------
@@ -438,15 +454,18 @@ def choose_smoothing(model, records: list[Record], grid: list[float]):
     sections : list of SectionSamples; wind_error_share : ndarray, shape (S,)
     """
     cv = np.full(len(grid), np.nan)
-    chosen = None
-    for g, sigma in enumerate(grid):
-        samples = campaign_samples(model, [smooth_wind(r, float(sigma)) for r in records])
+    folds: list = [None] * len(grid)
+    kept: dict = {}  # the prior's fit and the best candidate's so far; the others are dropped at once
+    for g in [prior] + [i for i in range(len(grid)) if i != prior]:
+        samples = campaign_samples(model, [smooth_wind(r, float(grid[g])) for r in records])
         secs = [select_basis(model, samples, k) for k in range(samples.n_sections)]
         cv[g] = float(sum(x.best.error for x in secs))
-        if chosen is None or cv[g] < chosen[0]:
-            chosen = (cv[g], float(sigma), samples, secs)
+        folds[g] = np.sum([x.best.fold_errors for x in secs], axis=0)
+        if g == prior or smoothing_choice(cv, folds, prior) == g:
+            kept = {i: v for i, v in kept.items() if i == prior}
+            kept[g] = (float(grid[g]), samples, secs)
         del samples, secs
-    _total, sigma, samples, secs = chosen
+    sigma, samples, secs = kept[smoothing_choice(cv, folds, prior)]
     share = np.zeros(samples.n_sections)
     if model.eiv_weights and samples.wind_se is not None:
         # Effective variance: refit at the chosen basis and penalty with each sample weighted by the
@@ -460,6 +479,48 @@ def choose_smoothing(model, records: list[Record], grid: list[float]):
                                            fixed=(first.best.n_basis, first.best.penalty)), cv_error=first.cv_error)
             del first
     return cv, sigma, samples, secs, share
+
+
+def smoothing_candidates(model) -> list[float]:
+    """The wind smoothings a fit scores, s: ``wind_smoothing_grid`` (with the prior ``wind_smoothing_s`` first
+    when the grid lacks it), or the prior alone."""
+    prior = float(model.wind_smoothing_s)
+    if model.wind_smoothing_grid is None:
+        return [prior]
+    grid = [float(x) for x in model.wind_smoothing_grid]
+    return grid if prior in grid else [prior] + grid
+
+
+def smoothing_evidence(model) -> dict | None:
+    """A fitted model's wind smoothing and the cross-validated evidence for it, JSON-ready: ``chosen_s`` (s),
+    ``prior_s`` (s), ``candidates_s`` (s) and ``cv_error`` (each candidate's summed error per sample of the
+    standardised target); None for a model without a smoothing of its own."""
+    cv = getattr(model, "wind_smoothing_cv_", None)
+    if cv is None or not hasattr(model, "wind_smoothing_grid"):
+        return None
+    return {"chosen_s": float(model.wind_smoothing_s_), "prior_s": float(model.wind_smoothing_s),
+            "candidates_s": smoothing_candidates(model), "cv_error": [float(x) for x in cv]}
+
+
+def smoothing_choice(cv: np.ndarray, folds: list, prior: int = 0) -> int:
+    """Index of the chosen smoothing: the prior unless a candidate's summed cross-validated error is below the
+    prior's by more than one standard error of the sum of their paired differences over the folds; then the
+    lowest of those. With fewer than :data:`SMOOTHING_MIN_FOLDS` folds (events) the prior stays.
+
+    ``cv`` (G,): each candidate's summed error (NaN: not scored yet); ``folds``: each candidate's errors by
+    fold, shape (K,), or None when not scored yet.
+    """
+    best = prior
+    for g in range(len(cv)):
+        if g == prior or folds[g] is None or not np.isfinite(cv[g]):
+            continue
+        diff = np.asarray(folds[prior]) - np.asarray(folds[g])
+        if diff.size < SMOOTHING_MIN_FOLDS or not np.all(np.isfinite(diff)):
+            continue
+        se = math.sqrt(diff.size) * float(np.std(diff, ddof=1))
+        if float(diff.sum()) > se and cv[g] < cv[best]:
+            best = g
+    return best
 
 
 @dataclass(frozen=True)
@@ -498,9 +559,8 @@ def fit_shared(model, records) -> SharedFit:
     weights = model.wind_weights if model.wind_input in ("mean", "sum") else "equal"
     # The weights come from the amplitudes, which the wind's smoothing does not touch.
     model.wind_weights_ = resolve_wind_weights(weights, np.concatenate([r.A for r in raw]))
-    grid = [float(model.wind_smoothing_s)] if model.wind_smoothing_grid is None else [
-        float(x) for x in model.wind_smoothing_grid]
-    cv, sigma, samples, sections, share = choose_smoothing(model, raw, grid)
+    grid = smoothing_candidates(model)
+    cv, sigma, samples, sections, share = choose_smoothing(model, raw, grid, grid.index(float(model.wind_smoothing_s)))
     return SharedFit(wind_weights_choice=weights if isinstance(weights, str) else "given",
                      wind_weights=model.wind_weights_, yaw_degree=int(model.yaw_degree_), wind_smoothing_cv=cv,
                      wind_smoothing_s=sigma, samples=samples, sections=sections, wind_error_share=share)
