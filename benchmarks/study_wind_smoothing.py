@@ -19,10 +19,11 @@ campaign's own held-out events: ``wind_smoothing_s`` becomes an option of the se
 scored by the output error of held-out events simulated under their measured wind. A smoothing adds
 no complexity: among the confidence set's models of one structure, the lowest held-out loss decides.
 The output error of an envelope barely sees the wind's fast changes, which the envelope's time
-constant (minutes) filters out, while dA/dt responds to them at once: the third variant (``cv``) lets
-every candidate model choose its smoothing among ``--cv-grid`` by its own cross-validated dA/dt error
-over folds of events (``wind_smoothing_grid``), keeping the 30 s prior unless another smoothing's error
-is lower by more than one standard error of the paired differences over the folds
+constant (minutes) filters out, while dA/dt responds to them at once: the third variant (``cv``)
+chooses the smoothing among ``--cv-grid`` once per campaign by the simplest candidate's cross-validated
+dA/dt error over folds of events (``wind_smoothing_grid``, :mod:`vivbench.analysis.candidates`) and
+gives it to every model, keeping the 30 s prior unless another smoothing's error is lower by more than
+one standard error of the paired differences over at least 5 folds
 (:func:`vivbench.models.varying_fit.smoothing_choice`).
 
 Every draw's campaign is generated with the caps and identified once; the selection with the prior alone

@@ -255,7 +255,10 @@ def test_the_twin_refits_with_the_field_runs_selection_settings(field):
     assert settings.selection["single_section_share"] == SINGLE_SECTION_SHARE
     assert settings.selection["min_time_constants"] == LIMIT_TIME_CONSTANTS
     assert settings.selection["rank_level"] == RANK_LEVEL
+    # The model file holds the smoothing the campaign chose, pinned; the twin chooses it again from the prior.
+    assert settings.params["wind_smoothing_s"] == 30.0 and settings.params["wind_smoothing_grid"] == [10.0, 30.0, 60.0]
     method = pool_method(settings)
+    assert {c.model.wind_smoothing_grid for c in method.candidates} == {(10.0, 30.0, 60.0)}
     assert (method.n_perturbations, method.single_section_share) == (0, SINGLE_SECTION_SHARE)
     assert method.min_time_constants == LIMIT_TIME_CONSTANTS and method.rank_level == RANK_LEVEL
 

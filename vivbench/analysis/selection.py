@@ -72,7 +72,6 @@ with a limit regime; with ``min_time_constants`` None, the events shorter than
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 from dataclasses import dataclass
@@ -85,6 +84,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.parallel import run_tasks
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
+from vivbench.analysis.candidates import settle_candidates, without_yaw
 from vivbench.analysis.held_out import (CRITERIA, RANK_LEVEL, confidence_set, dynamics_by_wind, event_folds, fit_task,
                                         held_out_task, one_se_set, shared_groups, variant_params)
 from vivbench.analysis.time_constant import envelope_time_constant, short_events, valid_span
@@ -286,6 +286,9 @@ class ModelSelection:
     def fit(self, records: Sequence[Record]) -> "ModelSelection":
         """Choose among the candidates on held-out events, then fit the choice (and its checks) to every event.
 
+        The settings that the simplest candidate settles on every event first (e.g. the varying model's wind
+        smoothing, :func:`vivbench.analysis.candidates.settle_candidates`) hold for every model of the fit.
+
         Parameters
         ----------
         records : sequence of Record, one per event (A, U, dA of shape (n, S) in m, m/s, m/s)
@@ -296,6 +299,14 @@ class ModelSelection:
         """
         self._validate()
         records = [as_record(r, k) for k, r in enumerate(records)]
+        given = self.candidates, self.null_model
+        self.candidates, self.null_model, self.settled_evidence_ = settle_candidates(*given, records)
+        try:
+            return self._fit(records)
+        finally:  # the parameters stay those given (a refit on other records settles again)
+            self.candidates, self.null_model = given
+
+    def _fit(self, records: list[Record]) -> "ModelSelection":
         C, E = len(self.candidates), len(records)
         self.names_ = [c.name for c in self.candidates]
         self.event_ids_ = [r.event_id for r in records]
@@ -667,7 +678,7 @@ class ModelSelection:
             "min_time_constants": (None if self.min_time_constants is None else float(self.min_time_constants)),
             "rank_level": (None if self.rank_level is None else float(self.rank_level)),
             "wind_bins": self.wind_bins, "dynamics_by_wind": self._local_evidence(),
-            "wind_smoothing": smoothing_evidence(self.model_),  # the chosen model's, from its own cross-validation
+            "wind_smoothing": smoothing_evidence(self.model_), **getattr(self, "settled_evidence_", {}),
         }
 
     def _local_evidence(self) -> dict | None:
@@ -713,8 +724,8 @@ STRUCTURAL_OPTIONS = ("yaw_degree",)
 
 #: Options of the varying model that stay fixed in :func:`varying_selection` unless given: stated priors.
 #: The modal section weights are the averaged truth's for a mode seen at the sections (each section's
-#: share of the mode's energy); 30 s is the wind's smoothing time scale, which each model replaces by 10 or
-#: 60 s only where its cross-validated dA/dt error demands it (:func:`vivbench.models.varying_fit.smoothing_choice`).
+#: share of the mode's energy); 30 s is the wind's smoothing time scale, replaced by 10 or 60 s for every model
+#: where the simplest candidate's cross-validated dA/dt error demands it (:mod:`vivbench.analysis.candidates`).
 VARYING_PRIORS = {"wind_weights": "modal", "wind_smoothing_s": 30.0, "wind_smoothing_grid": (10.0, 30.0, 60.0)}
 
 
@@ -786,15 +797,3 @@ def _option_label(name: str, value) -> str:
     short = {"yaw_degree": "yaw", "penalty_choice": "", "wind_weights": "", "wind_smoothing_s": "smooth"}
     return f"{short.get(name, name)}{value:g}" if isinstance(value, float) else f"{short.get(name, name)}{value}"
 
-
-def without_yaw(selection: ModelSelection) -> ModelSelection:
-    """The selection's candidates that need no yaw (``yaw_degree`` 0), for records that carry none.
-
-    Raises InputError when none is left.
-    """
-    kept = [c for c in selection.candidates if not getattr(c.model, "yaw_degree", 0)]
-    if not kept:
-        raise InputError("every candidate model needs the wind's yaw, which the records do not carry")
-    out = copy.copy(selection)
-    out.candidates = tuple(kept)
-    return out

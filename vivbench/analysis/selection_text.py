@@ -75,5 +75,5 @@ def _smoothing_lines(sm: dict | None) -> list[str]:
     errors = ", ".join(f"{c:g} s {e:.4g}" for c, e in zip(sm["candidates_s"], sm["cv_error"]))
     how = ("the prior, not beaten by more than one standard error" if sm["chosen_s"] == sm["prior_s"] else
            f"below the {sm['prior_s']:g} s prior's by more than one standard error")
-    return [f"  wind smoothing {sm['chosen_s']:g} s, chosen by the chosen model's cross-validated dA/dt error "
-            f"over folds of events ({errors}; per sample, standardised): {how}"]
+    return [f"  wind smoothing {sm['chosen_s']:g} s for every model, chosen by the simplest candidate's "
+            f"cross-validated dA/dt error over folds of events ({errors}; per sample, standardised): {how}"]

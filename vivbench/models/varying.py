@@ -91,7 +91,7 @@ from vivbench.models.varying_simulate import simulate_runs
 from vivbench.models.varying_design import design_rows, held_yaw
 from vivbench.models.varying_verdicts import varying_description, varying_summary, varying_window_verdicts
 from vivbench.models.varying_fit import (FINAL_PARAMS, ORDER_SET_MARGIN, ORDER_SUBSETS, PENALTY_CHOICES, event_statistics,
-                                         fit_final, fit_shared)
+                                         fit_final, fit_shared, settle_smoothing)
 from vivbench.models.wind_weights import weighted_section_mean
 from vivbench.preprocess.wind_smoothing import smooth_wind
 from vivbench.regression.penalised import penalised_rss
@@ -148,8 +148,7 @@ class VaryingCoefficientSINDy(ModelBase):
         The wind of equation k's curves: the mean of U over the sections
         (default), the section's own U_k, or every section's U_j (and yaw),
         a curve of each summed (module docstring; S times the coefficients, and
-        a fit several times slower),
-        or every section's U_j with one curve shared by all, weighted by the
+        a fit several times slower), or every section's U_j with one curve shared by all, weighted by the
         sections' ``wind_weights`` and summed: a_ki = sum_j w_j f_ki(U_j), the
         same deck at every section, with as many coefficients as "mean".
     yaw_degree : int, 0..3, or None
@@ -311,8 +310,7 @@ class VaryingCoefficientSINDy(ModelBase):
                  n_folds: int = 5, select_orders: bool = False, n_bootstrap: int = 100,
                  block_s: float = 300.0, agreement: float = 0.9, tau: float = DEFAULT_TAU, seed: int = 0,
                  wind_input: str = "mean", yaw_degree: int | None = None, model_set_level: float = 0.95,
-                 order_set_margin: float = ORDER_SET_MARGIN,
-                 wind_smoothing_s: float = 30.0,
+                 order_set_margin: float = ORDER_SET_MARGIN, wind_smoothing_s: float = 30.0,
                  wind_smoothing_grid: Sequence[float] | None = None, eiv_weights: bool = True,
                  model_set_test: str = "signed_rank", wind_weights: str | Sequence[float] = "modal",
                  penalty_choice: str = "cv", model_sets: bool = True):
@@ -360,15 +358,17 @@ class VaryingCoefficientSINDy(ModelBase):
     def measured_wind(self, record: Record) -> Record:
         """``record`` with its measured U and yaw smoothed as the model's were at fit (``wind_smoothing_s``).
 
-        For evaluating the model on measured data (verdicts, window regimes,
-        simulations of an identified record): the fit saw the measured wind
-        smoothed, a lower cut-off against the point anemometer's
-        errors-in-variables. The evaluation methods (:meth:`predict`,
-        :meth:`order_contributions`, ...) take a record's wind as given, so a
-        record of the wind the deck itself feels (a synthetic truth) is
+        For evaluating the model on measured data (verdicts, window regimes, simulations of an identified
+        record): the fit saw the measured wind smoothed, a lower cut-off against the point anemometer's
+        errors-in-variables. The evaluation methods (:meth:`predict`, :meth:`order_contributions`, ...) take
+        a record's wind as given, so a record of the wind the deck itself feels (a synthetic truth) is
         evaluated as it is.
         """
         return smooth_wind(as_record(record), self.fitted_wind_smoothing())
+
+    def settle(self, records: Sequence[Record]) -> tuple[dict, dict]:
+        """Settings chosen once on ``records`` for every model of a selection (:func:`settle_smoothing`)."""
+        return settle_smoothing(self, records)
 
     def fitted_wind_smoothing(self) -> float:
         """The wind smoothing of the fit, s: ``wind_smoothing_s_`` once fitted (the cross-validated

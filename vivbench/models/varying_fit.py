@@ -46,7 +46,7 @@ from vivbench.regression.penalised import held_out_errors, penalised_solve, pena
 
 __all__ = ["ORDER_SUBSETS", "ORDER_SET_MARGIN", "SMOOTHING_MIN_FOLDS", "PENALTY_CHOICES", "FINAL_PARAMS", "SharedFit", "fit_shared", "fit_final", "check_parameters", "CampaignSamples", "BasisChoice", "SectionSamples",
            "SectionFit", "equation_inputs", "valid_samples", "campaign_samples", "wind_standard_error", "cv_error", "fold_errors", "select_orders", "select_basis",
-           "eiv_weight", "choose_smoothing", "smoothing_candidates", "smoothing_choice", "smoothing_evidence", "fit_section", "fitted_arrays", "event_statistics", "WIND_INPUTS",
+           "eiv_weight", "choose_smoothing", "smoothing_candidates", "smoothing_choice", "smoothing_evidence", "settle_smoothing", "fit_section", "fitted_arrays", "event_statistics", "WIND_INPUTS",
            "fitted_inputs", "as_inputs", "section_statistics"]
 
 #: Values of ``wind_input`` (:class:`vivbench.models.VaryingCoefficientSINDy`): the sections' weighted mean wind, the
@@ -500,6 +500,24 @@ def smoothing_evidence(model) -> dict | None:
         return None
     return {"chosen_s": float(model.wind_smoothing_s_), "prior_s": float(model.wind_smoothing_s),
             "candidates_s": smoothing_candidates(model), "cv_error": [float(x) for x in cv]}
+
+
+def settle_smoothing(model, records) -> tuple[dict, dict]:
+    """The wind smoothing chosen once on ``records`` (every event) for every model of a selection.
+
+    Returns
+    -------
+    params : dict, ``{"wind_smoothing_s": s, "wind_smoothing_grid": None}``: ``model``'s choice among its
+        ``wind_smoothing_grid`` (:func:`choose_smoothing`), pinned; ``{}`` without a grid
+    evidence : dict, ``{"wind_smoothing": ...}`` (:func:`smoothing_evidence`); ``{}`` without a grid
+    """
+    if model.wind_smoothing_grid is None:
+        return {}, {}
+    probe = copy.deepcopy(model)
+    shared = fit_shared(probe, records)
+    probe.wind_smoothing_cv_, probe.wind_smoothing_s_ = shared.wind_smoothing_cv, shared.wind_smoothing_s
+    return ({"wind_smoothing_s": float(shared.wind_smoothing_s), "wind_smoothing_grid": None},
+            {"wind_smoothing": smoothing_evidence(probe)})
 
 
 def smoothing_choice(cv: np.ndarray, folds: list, prior: int = 0) -> int:

@@ -90,6 +90,9 @@ def pool_settings(model_dir) -> PoolSettings:
     params = json.loads(attrs.get("pooled_config_json", "{}") or "{}")
     evidence = json.loads(attrs["selection_json"]) if attrs.get("selection_json") else None
     if evidence is not None:
+        chosen = evidence.get("wind_smoothing") or {}
+        if len(chosen.get("candidates_s", [])) > 1:  # chosen on the campaign (the model file holds it pinned)
+            params = {**params, "wind_smoothing_s": chosen["prior_s"], "wind_smoothing_grid": chosen["candidates_s"]}
         options: dict[str, list] = {}
         for cand in evidence["candidates"]:
             for k, v in (cand.get("options") or {}).items():

@@ -1,0 +1,64 @@
+"""A selection's candidates adapted to the records before the held-out choice.
+
+Two adaptations, both from the records alone:
+
+- :func:`without_yaw`: the candidates that need no wind yaw, for records that carry none;
+- :func:`settle_candidates`: the settings that the simplest candidate settles once on every event
+  (its ``settle(records)``, e.g. the varying model's wind smoothing chosen by its own cross-validation,
+  :func:`vivbench.models.varying_fit.settle_smoothing`) given to every model of the selection that has
+  them, so that the held-out fits compare the candidates on one input and the costly choice is made
+  once instead of in every fold of every candidate.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from typing import Any, Sequence
+
+from vivbench.core.errors import InputError
+
+__all__ = ["settle_candidates", "without_yaw"]
+
+
+def without_yaw(selection):
+    """The selection's candidates that need no yaw (``yaw_degree`` 0), for records that carry none.
+
+    Raises InputError when none is left.
+    """
+    kept = [c for c in selection.candidates if not getattr(c.model, "yaw_degree", 0)]
+    if not kept:
+        raise InputError("every candidate model needs the wind's yaw, which the records do not carry")
+    out = copy.copy(selection)
+    out.candidates = tuple(kept)
+    return out
+
+
+def settle_candidates(candidates: Sequence, null_model, records) -> tuple[tuple, Any, dict]:
+    """The candidates and null model with the settings the simplest candidate settles on ``records``.
+
+    Parameters
+    ----------
+    candidates : sequence of Candidate (the first of the lowest complexity is the simplest)
+    null_model : an unfitted model or None
+    records : sequence of Record, every event
+
+    Returns
+    -------
+    candidates : tuple of Candidate, each model given the settled parameters it has (``get_params``)
+    null_model : the same for the null model (None stays None)
+    evidence : dict, the simplest candidate's evidence for its settlement (JSON-ready; {} without one)
+    """
+    simplest = min(candidates, key=lambda c: c.complexity)
+    settle = getattr(simplest.model, "settle", None)
+    params, evidence = settle(records) if callable(settle) else ({}, {})
+    if not params:
+        return tuple(candidates), null_model, dict(evidence)
+
+    def given(model):
+        own = model.get_params() if callable(getattr(model, "get_params", None)) else {}
+        mine = {k: v for k, v in params.items() if k in own}
+        return type(model)(**{**own, **mine}) if mine else model
+
+    settled = tuple(dataclasses.replace(c, model=given(c.model)) for c in candidates)
+    return settled, (None if null_model is None else given(null_model)), dict(evidence)
