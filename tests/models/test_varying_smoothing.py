@@ -67,5 +67,5 @@ def test_the_evidence_says_which_smoothing_and_why():
     (line,) = _smoothing_lines({**prior, "chosen_s": 10.0, "cv_error": [0.4, 0.5, 0.51]})
     assert "wind smoothing 10 s" in line and "below the 30 s prior's" in line
     assert _smoothing_lines({**prior, "candidates_s": [30.0], "cv_error": [0.5]}) == [
-        "  wind smoothing 30 s (a stated prior)"]
+        "  wind smoothing 30 s (given or the prior; not chosen here)"]
     assert _smoothing_lines(None) == []

@@ -71,7 +71,7 @@ def evidence_text(ev: dict, *, note: str = "", short_threshold: float = float("n
 def _smoothing_lines(sm: dict | None) -> list[str]:
     """The chosen model's wind smoothing and its cross-validated evidence (``evidence()["wind_smoothing"]``)."""
     if not sm or len(sm["candidates_s"]) < 2:
-        return [] if not sm else [f"  wind smoothing {sm['chosen_s']:g} s (a stated prior)"]
+        return [] if not sm else [f"  wind smoothing {sm['chosen_s']:g} s (given or the prior; not chosen here)"]
     errors = ", ".join(f"{c:g} s {e:.4g}" for c, e in zip(sm["candidates_s"], sm["cv_error"]))
     how = ("the prior, not beaten by more than one standard error" if sm["chosen_s"] == sm["prior_s"] else
            f"below the {sm['prior_s']:g} s prior's by more than one standard error")

@@ -166,15 +166,15 @@ class VaryingCoefficientSINDy(ModelBase):
         point anemometer's errors-in-variables. Evaluate measured records
         through :meth:`measured_wind` (as ``vivbench pool`` and the method
         API's ``"varying"`` do); records of the deck's own wind (a synthetic
-        truth) as they are; fit such records with 0. Default 30 s.
-        Ignored when ``wind_smoothing_grid`` is given.
+        truth) as they are; fit such records with 0. Default 30 s; with
+        ``wind_smoothing_grid``, the prior that the grid's candidates must beat.
     wind_smoothing_grid : sequence of float, s, or None
         Candidate smoothings, chosen per campaign (fitted ``wind_smoothing_s_``)
-        by the same 5-fold cross-validated error over events as M and lambda,
-        summed over the equations (the target and the folds do not depend on
-        the smoothing, so the errors compare); e.g. ``WIND_SMOOTHING_GRID``.
-        None (default): ``wind_smoothing_s`` as given. The fit costs about one
-        fit per candidate.
+        by the same cross-validated dA/dt error over folds of events as M and
+        lambda: ``wind_smoothing_s`` unless a candidate's is lower by more than
+        one standard error (``varying_fit.smoothing_choice``). None (default):
+        ``wind_smoothing_s`` as given. :meth:`settle` makes the choice once for
+        a selection's models; each fit costs about one fit per candidate.
     model_set_level : float, [0.5, 1)
         Level of the confidence set of order subsets: the models without some
         of the orders 0, 2, 3 (``ORDER_SUBSETS``) whose leave-one-event-out
