@@ -28,8 +28,9 @@ one standard error of the paired differences over at least 5 folds
 
 Every draw's campaign is generated with the caps and identified once; the selection with the prior alone
 (``stated``: 30 s), the selection with the smoothing among its options (``chosen``: ``--grid``) and
-the selection whose models choose it by their cross-validation (``cv``: ``--cv-grid``; with the
-default grid, ``vivbench pool``'s default) are fitted on the same records (those ``vivbench pool`` fits) and scored against the truth: the
+the selection whose models choose it by their cross-validation (``cv``: ``--cv-grid``, as
+``vivbench pool --wind-smoothing-grid``) are fitted on the same records (those ``vivbench pool`` fits)
+and scored against the truth: the
 energy-weighted relative dA/dt error on the truth's own (A, U), the curve error, the flagged
 window-equations and how many carry the truth's regime, the self-excited flags on forced-only draws,
 the model chosen and the fit's wall time. The summary gives per variant the median, 90th percentile
@@ -85,7 +86,7 @@ def score_draw(task: dict) -> dict:
                point_timescale_s=float(labels["point_timescale_s"] or math.nan))
     records, truths, windows = draw_inputs(task)
     row["n_events"] = len(records)
-    methods = {"stated": CampaignMethod("varying", wind_smoothing_grid=None),  # the prior alone
+    methods = {"stated": CampaignMethod("varying"),  # the prior alone
                "chosen": CampaignMethod("varying", options=_options(tuple(task["grid"]))),
                "cv": CampaignMethod("varying", wind_smoothing_grid=tuple(task["cv_grid"]))}
     for name in task["variants"]:

@@ -205,12 +205,12 @@ def test_the_yaw_enters_only_where_the_campaign_demands_it(in_truth, chosen_yaw)
 
 
 @pytest.mark.parametrize("pinned, smoothing, grid", [
-    ({}, {30.0}, (10.0, 30.0, 60.0)), ({"wind_smoothing_s": 15.0}, {15.0}, None),
+    ({}, {30.0}, None), ({"wind_smoothing_s": 15.0}, {15.0}, None),
     ({"options": {"wind_smoothing_s": (15.0, 60.0)}}, {15.0, 60.0}, None),
     ({"wind_smoothing_grid": (20.0, 30.0)}, {30.0}, (20.0, 30.0))])
 def test_the_wind_smoothing_is_the_stated_prior_unless_given_or_among_the_options(pinned, smoothing, grid):
-    # The prior's models choose among the grid by their own cross-validation; a smoothing pinned or among the
-    # selection's options leaves them none.
+    # A grid given lets the campaign's cross-validation replace the prior; a smoothing pinned or among the
+    # selection's options leaves the models none of their own.
     sel = varying_selection(**pinned)
     assert {c.model.wind_smoothing_s for c in sel.candidates} == smoothing
     assert {c.model.get_params()["wind_smoothing_grid"] for c in sel.candidates} == {grid}

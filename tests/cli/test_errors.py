@@ -82,6 +82,13 @@ def test_bad_min_time_constants_exit_2_in_one_line(tmp_path, capsys, bad):
     assert len(lines) == 1 and "--min-time-constants must be" in lines[0], lines
 
 
+@pytest.mark.parametrize("bad", ["", "10,x", "10,-5", "nan"])
+def test_bad_wind_smoothing_grid_exits_2_in_one_line(tmp_path, capsys, bad):
+    assert main(["pool", str(tmp_path), "--wind-smoothing-grid", bad]) == EXIT_INPUT
+    lines = _stderr_lines(capsys)
+    assert len(lines) == 1 and "--wind-smoothing-grid must be" in lines[0], lines
+
+
 def test_bad_wind_bins_exit_2_in_one_line(tmp_path, capsys):
     assert main(["pool", str(tmp_path), "--wind-bins", "-2"]) == EXIT_INPUT
     lines = _stderr_lines(capsys)

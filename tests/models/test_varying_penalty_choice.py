@@ -140,9 +140,15 @@ def test_pool_passes_the_choice_to_the_model(small_results, tmp_path):
     res = tmp_path / "res"
     shutil.copytree(res_dir, res)
     assert main(["pool", str(res), "--model", "varying", "--bootstrap", "4", "--block", "20",
-                 "--wind-weights", "modal", "--penalty-choice", "least"]) == 0
+                 "--wind-weights", "modal", "--penalty-choice", "least", "--wind-smoothing-grid", "10,30"]) == 0
     model = load_campaign_model(res)
     assert model.penalty_choice == "least" and model.wind_weights == "modal"
+    # The grid's choice is recorded beside the prior, and the model holds the chosen smoothing.
+    from vivbench.io.campaign_model import read_campaign_regimes, regimes_file
+
+    chosen = json.loads(read_campaign_regimes(regimes_file(res)).attrs["selection_json"])["wind_smoothing"]
+    assert (chosen["candidates_s"], chosen["prior_s"]) == ([10.0, 30.0], 30.0)
+    assert model.fitted_wind_smoothing() == chosen["chosen_s"]
     assert np.all(model.penalty_ <= model.penalty_cv_)
     pen = np.asarray(model.penalties)
     for k in range(model.n_sections_):

@@ -255,10 +255,8 @@ def test_the_twin_refits_with_the_field_runs_selection_settings(field):
     assert settings.selection["single_section_share"] == SINGLE_SECTION_SHARE
     assert settings.selection["min_time_constants"] == LIMIT_TIME_CONSTANTS
     assert settings.selection["rank_level"] == RANK_LEVEL
-    # The model file holds the smoothing the campaign chose, pinned; the twin chooses it again from the prior.
-    assert settings.params["wind_smoothing_s"] == 30.0 and settings.params["wind_smoothing_grid"] == [10.0, 30.0, 60.0]
+    assert settings.params.get("wind_smoothing_grid") is None  # the prior alone: nothing to choose again
     method = pool_method(settings)
-    assert {c.model.wind_smoothing_grid for c in method.candidates} == {(10.0, 30.0, 60.0)}
     assert (method.n_perturbations, method.single_section_share) == (0, SINGLE_SECTION_SHARE)
     assert method.min_time_constants == LIMIT_TIME_CONSTANTS and method.rank_level == RANK_LEVEL
 
@@ -319,3 +317,17 @@ def test_the_trust_section_bounds_the_chance_of_a_broken_promise(one_draw, tmp_p
     summary["draws"][0]["scores"]["flagged_right_share"] = 0.5
     (twin / "twin.json").write_text(json.dumps(summary))
     assert "the 95 % promise broke on 1 of the 3 twins" in "\n".join(twin_section(twin))
+
+
+def test_the_twin_chooses_the_wind_smoothing_again_where_the_field_run_chose_it(field, tmp_path):
+    """The model file holds the smoothing the campaign chose, pinned; the twin starts again from the prior and grid."""
+    from vivbench.validate.twin_chain import pool_method, pool_settings
+
+    root, _, results = field
+    model = varying_selection(n_bootstrap=10, n_perturbations=0, wind_smoothing_grid=(10.0, 30.0))
+    write_campaign_regimes(pool_results(results, model), tmp_path)
+    model.save(tmp_path / MODEL_NAME)
+    assert model.model_.get_params()["wind_smoothing_grid"] is None  # the chosen model holds its smoothing pinned
+    settings = pool_settings(tmp_path)
+    assert settings.params["wind_smoothing_s"] == 30.0 and settings.params["wind_smoothing_grid"] == [10.0, 30.0]
+    assert {c.model.wind_smoothing_grid for c in pool_method(settings).candidates} == {(10.0, 30.0)}

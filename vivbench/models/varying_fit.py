@@ -381,8 +381,8 @@ def select_basis(model, samples: CampaignSamples, k: int, weight: np.ndarray | N
                                    None if weight is None else weight[ok])
         # Block-diagonal: the same roughness penalty on every order's, yaw power's and wind input's curve.
         P = np.kron(np.eye(4 * (J + 1) * n_fit), difference_penalty(int(M)))
-        per_fold = fold_errors(stats, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool)) / n
-        err = per_fold.sum(axis=0)
+        folds = fold_errors(stats, fold_of_block, K, P, pen, np.ones(P.shape[0], dtype=bool))
+        err, per_fold = folds.sum(axis=0) / n, folds / n  # the sum first: the same error as cv_error's
         errors[a] = err
         j = int(np.argmin(err))
         if best is None or err[j] < best.error:
