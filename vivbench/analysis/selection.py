@@ -93,7 +93,6 @@ from vivbench.analysis.wind_error import SINGLE_SECTION_SHARE, perturbed_wind, w
 from vivbench.analysis.wind_local import WIND_BINS, window_wind, wind_bin_edges, wind_bins_of
 from vivbench.models.model_input import measured_input
 from vivbench.models.protocol import as_record, model_change_inputs, model_summary
-from vivbench.models.varying_fit import smoothing_evidence
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
@@ -678,7 +677,7 @@ class ModelSelection:
             "min_time_constants": (None if self.min_time_constants is None else float(self.min_time_constants)),
             "rank_level": (None if self.rank_level is None else float(self.rank_level)),
             "wind_bins": self.wind_bins, "dynamics_by_wind": self._local_evidence(),
-            "wind_smoothing": smoothing_evidence(self.model_), **getattr(self, "settled_evidence_", {}),
+            **getattr(self, "settled_evidence_", {}),  # e.g. "wind_smoothing", where the records settled it
         }
 
     def _local_evidence(self) -> dict | None:

@@ -69,7 +69,8 @@ def evidence_text(ev: dict, *, note: str = "", short_threshold: float = float("n
 
 
 def _smoothing_lines(sm: dict | None) -> list[str]:
-    """The chosen model's wind smoothing and its cross-validated evidence (``evidence()["wind_smoothing"]``)."""
+    """The wind smoothing the records settled and its cross-validated evidence (``evidence()["wind_smoothing"]``;
+    None: not settled from the records, the models' own)."""
     if not sm or len(sm["candidates_s"]) < 2:
         return [] if not sm else [f"  wind smoothing {sm['chosen_s']:g} s (given or the prior; not chosen here)"]
     errors = ", ".join(f"{c:g} s {e:.4g}" for c, e in zip(sm["candidates_s"], sm["cv_error"]))
