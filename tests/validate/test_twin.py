@@ -168,8 +168,7 @@ def test_bridge_mode_shape_must_match_the_sections(field):
         mirror_structure(mirror, TwinBridge(mass=2e4, depth=3.0, damping_ratio=0.005, mode_shape=(1.0, 0.5)))
 
 
-@pytest.mark.parametrize("kwargs", [{"n_draws": 0}, {"seed": -1}, {"knot_step": 1.0}, {"max_events": 0},
-                                    {"correct_bias": 1}])
+@pytest.mark.parametrize("kwargs", [{"n_draws": 0}, {"seed": -1}, {"knot_step": 1.0}, {"max_events": 0}])
 def test_twin_config_refuses_bad_values(kwargs):
     with pytest.raises(InputError):
         TwinConfig(**kwargs)
@@ -332,56 +331,3 @@ def test_the_twin_chooses_the_wind_smoothing_again_where_the_field_run_chose_it(
     settings = pool_settings(tmp_path)
     assert settings.params["wind_smoothing_s"] == 30.0 and settings.params["wind_smoothing_grid"] == [10.0, 30.0]
     assert {c.model.wind_smoothing_grid for c in pool_method(settings).candidates} == {(10.0, 30.0)}
-
-
-class _CurvesOnly:
-    """A stand-in fitted model whose curves are given (m^(1-i)/s), to test the bias against a known truth."""
-
-    def __init__(self, curves, wind):
-        self._curves, self._wind = curves, wind
-
-    def curves(self, wind):
-        import xarray as xr
-
-        assert np.array_equal(wind, self._wind)
-        return xr.Dataset({"curves": (("equation", "order", "wind"), self._curves)}, coords={"wind": wind})
-
-
-def test_the_identification_bias_is_the_fitted_curves_minus_the_truths():
-    from vivbench.synth.config import StructureConfig
-    from vivbench.validate.twin_aero import aero_curves, identification_bias
-
-    structure, aero, wind = StructureConfig(), AeroConfig(), np.linspace(5.0, 12.0, 15)
-    truth = aero_curves(aero, structure, wind)
-    assert truth.shape == (len(structure.mode_shape), 4, wind.size)
-    shift = np.zeros_like(truth)
-    shift[:, 1, :] = 1e-3  # a linear coefficient read 1e-3 1/s too high
-    identified = truth + shift
-    identified[0, 2, :3] = np.nan  # where the model gives no value, no correction
-    bias = identification_bias(_CurvesOnly(identified, wind), aero, structure, wind)
-    expected = shift.copy()
-    expected[0, 2, :3] = 0.0
-    assert_close(bias, expected, atol=1e-15, reason="a difference of equal float64 curves")
-    with pytest.raises(InputError, match="curves"):
-        identification_bias(object(), aero, structure, wind)
-
-
-def test_a_bias_corrected_twin_keeps_its_pilot_which_is_the_plain_twin(field, one_draw, tmp_path):
-    root, _, _ = field
-    out = tmp_path / "corrected"
-    result = run_twin(root / "campaign", root / "identify", BRIDGE, out, config=TwinConfig(n_draws=1, correct_bias=True))
-    assert result.computed == (0,) and not result.failures
-    summary, plain = read_twin(out), read_twin(one_draw)
-    (row,), (plain_row,) = summary["draws"], plain["draws"]
-    # the pilot is the twin drawn without the correction: the same aerodynamics, nuisances and figures
-    assert row["pilot_aero"] == plain_row["aero"] and row["nuisances"] == plain_row["nuisances"]
-    assert row["pilot_scores"] == plain_row["scores"]
-    assert row["bias_share"] in (0.0, 0.5, 1.0)
-    assert (row["aero"] != row["pilot_aero"]) == (row["bias_share"] > 0)
-    assert summary["config"]["correct_bias"] is True and "correct_bias" not in plain["config"]
-    assert summary["expected_pilot"]["coverage"]["n"] == 1 and "promise_pilot" in summary
-    assert "The pilots' figures" in (out / "twin.md").read_text()
-    with pytest.raises(InputError, match="twin of another"):  # a corrected twin never resumes a plain one
-        run_twin(root / "campaign", root / "identify", BRIDGE, tmp_path / "p", config=TwinConfig(n_draws=1))
-        run_twin(root / "campaign", root / "identify", BRIDGE, tmp_path / "p",
-                 config=TwinConfig(n_draws=1, correct_bias=True))

@@ -14,7 +14,7 @@ def run(args) -> int:
 
     bridge = read_bridge(args.bridge)  # a bad or missing file is reported before anything runs
     config = TwinConfig(n_draws=args.draws, seed=args.seed, knot_step=args.knot_step, max_events=args.max_events,
-                        correct_bias=args.correct_bias, **({"priors": None} if args.fixed_nuisances else {}))
+                        **({"priors": None} if args.fixed_nuisances else {}))
     saved = f"the finished draws are saved in {Path(args.out) / 'twin.jsonl'}"
     result = run_resumable("twin", config.n_draws, "draw", saved,
                            lambda advance: run_twin(args.campaign, args.results, bridge, args.out, config=config,
@@ -34,7 +34,7 @@ def run_check(args) -> int:
     from vivbench.validate.twin_check import TwinCheckConfig, run_twin_check
 
     config = TwinCheckConfig(split=args.split, draws=parse_draws(args.draws), n_twins=args.twins,
-                             max_events=args.max_events, bootstrap=args.bootstrap, correct_bias=args.correct_bias,
+                             max_events=args.max_events, bootstrap=args.bootstrap,
                              max_duration=None if args.max_duration is None else args.max_duration * 60.0)
     saved = f"the finished draws are saved in {Path(args.out)}"
     outcome = run_resumable("twin-check", len(config.draws), "draw", saved,
@@ -47,11 +47,6 @@ def run_check(args) -> int:
         print(f"vivbench twin-check: draw {draw}: {message}", file=sys.stderr)
     print(f"twin-check: summary {path}; page {page}")
     return 1 if failures else 0
-
-
-_CORRECT_BIAS = ("each twin draw first identifies a pilot twin and subtracts that identification's error from the "
-                 "curves its truth is fitted to, so that the twin is identified about where the field campaign's "
-                 "model is (twice the cost; the pilots' figures are kept beside)")
 
 
 def register(sub) -> None:
@@ -75,7 +70,6 @@ def register(sub) -> None:
                    help="fix what the records cannot tell at the generator's defaults (tributary-averaged felt wind, "
                         "buffeting, no yaw effect) instead of drawing it per twin from the family's priors; the "
                         "twin's range then leaves it out")
-    s.add_argument("--correct-bias", action="store_true", help=_CORRECT_BIAS)
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                    help="local worker processes, one twin draw each (results do not depend on it)")
     s.set_defaults(func=run)
@@ -90,8 +84,6 @@ def register(sub) -> None:
     c.add_argument("--max-events", type=int, default=None, help="cap each family campaign at this many events")
     c.add_argument("--max-duration", type=float, default=None, metavar="MINUTES",
                    help="cap each event at this many minutes")
-    c.add_argument("--correct-bias", action="store_true", help="twins with the bias correction of vivbench twin "
-                                                               "--correct-bias (their pilots are checked too)")
     c.add_argument("--out", required=True, help="output directory; rerunning with the same options resumes")
     c.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                    help="local worker processes, one family draw each")

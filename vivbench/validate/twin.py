@@ -48,7 +48,7 @@ from vivbench.synth.event import generate_event
 from vivbench.validate.journal import check_record, counting_progress, run_journalled, task_directory
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.study_report import PROMISE_MIN_FLAGS, PROMISE_SHARE
-from vivbench.validate.twin_aero import aero_target, fit_aero, identification_bias
+from vivbench.validate.twin_aero import draw_aero
 from vivbench.validate.twin_chain import (TWIN_METRICS, PoolSettings, chain_scores, identify_config_from_json,
                                           pool_method, pool_settings, run_chain)
 from vivbench.validate.twin_mirror import (CampaignMirror, TwinBridge, measure_campaign, mirror_generator,
@@ -87,9 +87,6 @@ class TwinConfig:
     priors : NuisancePriors of what the records cannot tell (the generator family's by default), or None
         to fix them at the generator's defaults (tributary-averaged felt wind, buffeting_w 0.6,
         buffeting_u 0, no yaw effect)
-    correct_bias : each draw first identifies a pilot twin and subtracts that identification's error from
-        the curves its truth is fitted to (:mod:`vivbench.validate.twin_aero`); twice the cost. The pilots'
-        figures are kept (``pilot_scores``) and summarised as ``expected_pilot``
     """
 
     n_draws: int = 5
@@ -97,7 +94,6 @@ class TwinConfig:
     knot_step: float = 120.0
     max_events: int | None = None
     priors: NuisancePriors | None = NuisancePriors()
-    correct_bias: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.n_draws, bool) or not isinstance(self.n_draws, int) or not 1 <= self.n_draws <= 1000:
@@ -110,8 +106,6 @@ class TwinConfig:
             raise InputError(f"max_events must be an integer >= 1 or None; got {self.max_events!r}")
         if self.priors is not None and not isinstance(self.priors, NuisancePriors):
             raise InputError(f"priors must be a NuisancePriors or None; got {type(self.priors).__name__}")
-        if not isinstance(self.correct_bias, bool):
-            raise InputError(f"correct_bias must be True or False; got {self.correct_bias!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -126,7 +120,6 @@ class TwinTask:
     wind_range: tuple[float, float]
     priors: NuisancePriors | None = None
     work_root: str | None = None
-    correct_bias: bool = False
 
 
 @dataclass(frozen=True)
@@ -161,94 +154,53 @@ def twin_inputs(campaign_dir, results_dir, *, max_events: int | None = None) -> 
 #: in some event (a large nonlinear term where Y1 < 0) cannot be generated and is redrawn.
 AERO_TRIES = 5
 
-#: Shares of the pilot's identification error subtracted, tried in turn while the corrected truth cannot be
-#: generated (it grows without bound in some event); when none can, the pilot itself is the draw (share 0).
-BIAS_SHARES = (1.0, 0.5)
-
-
-def _generate(task: TwinTask, structure, aero, nuisances, seeds, directory: Path) -> list[Path]:
-    """The twin's event files with ``aero`` and ``nuisances`` (InputError, nothing left, when one cannot be made)."""
-    generator = mirror_generator(task.mirror, structure, aero)
-    if nuisances is not None:
-        generator = apply_nuisances(generator, nuisances)
-    try:
-        return [write_event(generate_event(spec, generator, seed, campaign_seed=task.seed),
-                            directory / f"{spec.event_id}.nc")
-                for spec, seed in zip(mirror_specs(task.mirror), seeds)]
-    except InputError:
-        shutil.rmtree(directory, ignore_errors=True)
-        raise
-
 
 def _twin_campaign(task: TwinTask, model, structure, children, root: Path):
     """The twin's aerodynamics, nuisances and event files: redrawn (from their streams) while an event cannot be
     generated."""
     rng, nuisance_rng = np.random.default_rng(children[0]), np.random.default_rng(children[-1])
     yaws = np.concatenate([e.yaws for e in task.mirror.events])
+    specs = mirror_specs(task.mirror)
     for attempt in range(1, AERO_TRIES + 1):
-        drawn = aero_target(model, structure, task.wind_range, rng)
-        aero, misfit = fit_aero(drawn[1], drawn[2], structure, drawn[0])
-        nuisances = None if task.priors is None else draw_nuisances(task.priors, yaws, nuisance_rng)
+        aero, misfit = draw_aero(model, structure, task.wind_range, rng)
+        generator = mirror_generator(task.mirror, structure, aero)
+        nuisances = None
+        if task.priors is not None:
+            nuisances = draw_nuisances(task.priors, yaws, nuisance_rng)
+            generator = apply_nuisances(generator, nuisances)
         try:
-            files = _generate(task, structure, aero, nuisances, children[1:-1], root / "campaign")
-            return aero, misfit, nuisances, attempt, files, drawn
+            files = [write_event(generate_event(spec, generator, seed, campaign_seed=task.seed),
+                                 root / "campaign" / f"{spec.event_id}.nc")
+                     for spec, seed in zip(specs, children[1:len(specs) + 1])]
+            return aero, misfit, nuisances, attempt, files
         except InputError:
+            shutil.rmtree(root / "campaign", ignore_errors=True)
             if attempt == AERO_TRIES:
                 raise
-
-
-def _corrected_campaign(task: TwinTask, structure, pilot, aero, nuisances, drawn, seeds, root: Path):
-    """The bias-corrected twin's aerodynamics and event files, or None when no share of the correction can be
-    generated."""
-    wind, target, weight = drawn
-    bias = identification_bias(pilot, aero, structure, wind)
-    for share in BIAS_SHARES:
-        corrected, misfit = fit_aero(target - share * bias, weight, structure, wind)
-        try:
-            return corrected, misfit, share, _generate(task, structure, corrected, nuisances, seeds, root)
-        except InputError:
-            continue
-    return None
-
-
-def _aero_dict(aero) -> dict:
-    return {"Y1": dataclasses.asdict(aero.Y1), "C_L": dataclasses.asdict(aero.C_L),
-            "e1": dataclasses.asdict(aero.e1), "e2": dataclasses.asdict(aero.e2)}
 
 
 def run_twin_task(task: TwinTask) -> dict[str, Any]:
     """Generate one twin campaign, run the chain on it and score it; runs in a worker."""
     root_seed = np.random.SeedSequence(task.seed, spawn_key=(task.draw,))
-    n_events = len(task.mirror.events)
-    children = root_seed.spawn(n_events + 2)
+    children = root_seed.spawn(len(task.mirror.events) + 2)
     model = load_campaign_model(task.pool.model_path)
     structure = mirror_structure(task.mirror, task.bridge)
     root = task_directory(task.work_root, f"twin{task.draw:04d}-")
-    identify = identify_config_from_json(task.mirror.identify_json)
     try:
-        aero, misfit, nuisances, tries, files, drawn = _twin_campaign(task, model, structure, children, root)
-        chain = run_chain(files, root / "identify", identify, pool_method(task.pool),
-                          wind_smoothing_s=task.pool.wind_smoothing_s)
-        scores = chain_scores(*chain, tau=identify.tau)
-        row = {}
-        if task.correct_bias:
-            row["pilot_scores"], row["pilot_aero"] = scores, _aero_dict(aero)
-            seeds = root_seed.spawn(n_events)  # the corrected twin's events: fresh streams after the pilot's
-            made = _corrected_campaign(task, structure, chain[0], aero, nuisances, drawn, seeds, root / "corrected")
-            share = 0.0
-            if made is not None:
-                aero, misfit, share, files = made
-                chain = run_chain(files, root / "corrected_identify", identify, pool_method(task.pool),
-                                  wind_smoothing_s=task.pool.wind_smoothing_s)
-                scores = chain_scores(*chain, tau=identify.tau)
-            row["bias_share"] = share
-        n_scored = len(chain[1])
+        aero, misfit, nuisances, tries, files = _twin_campaign(task, model, structure, children, root)
+        identify = identify_config_from_json(task.mirror.identify_json)
+        fitted, records, truths, windows = run_chain(files, root / "identify", identify, pool_method(task.pool),
+                                                     wind_smoothing_s=task.pool.wind_smoothing_s)
+        scores = chain_scores(fitted, records, truths, windows, tau=identify.tau)
+        n_events = len(records)
     except Exception as exc:
         raise RuntimeError(error_line(exc).replace(str(root), "<draw>")) from None
     finally:
         shutil.rmtree(root, ignore_errors=True)
-    return {"draw": task.draw, "scores": scores, "n_events": n_scored, "aero_misfit": misfit, "aero_tries": tries,
-            "aero": _aero_dict(aero), "nuisances": None if nuisances is None else nuisances.to_dict(), **row}
+    return {"draw": task.draw, "scores": scores, "n_events": n_events, "aero_misfit": misfit, "aero_tries": tries,
+            "aero": {"Y1": dataclasses.asdict(aero.Y1), "C_L": dataclasses.asdict(aero.C_L),
+                     "e1": dataclasses.asdict(aero.e1), "e2": dataclasses.asdict(aero.e2)},
+            "nuisances": None if nuisances is None else nuisances.to_dict()}
 
 
 def _spread(values: Sequence[float], bounds: tuple[float, float], log: bool) -> dict[str, float]:
@@ -311,16 +263,9 @@ def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], fa
     """The content of ``twin.json``: the inputs, each draw's scores, the failed draws' errors and the expected
     recovery."""
     draws = [rows[d] for d in sorted(rows)]
-
-    def expect(key):
-        return {m: _spread([r[key][m] for r in draws if key in r], _BOUNDS.get(m, (0.0, math.inf)),
-                           log=m not in _BOUNDS) for m in TWIN_METRICS}
-
-    pilots = {} if not any("pilot_scores" in r for r in draws) else {
-        "expected_pilot": expect("pilot_scores"),
-        "promise_pilot": twin_promise([r["pilot_scores"] for r in draws if "pilot_scores" in r])}
-    expected = expect("scores")
-    return {**pilots,
+    expected = {m: _spread([r["scores"][m] for r in draws], _BOUNDS.get(m, (0.0, math.inf)), log=m not in _BOUNDS)
+                for m in TWIN_METRICS}
+    return {
         "format": "vivbench-twin", "format_version": 1, "config": config,
         "mirror": {"sections": list(mirror.sections), "n_events": len(mirror.events),
                    "durations_s": [e.duration for e in mirror.events], "wind_rate_hz": mirror.wind_rate,
@@ -361,14 +306,6 @@ def twin_markdown(summary: dict) -> str:
     for key, s in summary["expected"].items():
         lines.append(f"| {METRIC_NAMES[key]} | {_fmt(s['median'])} | {_fmt(s['predict_low'])} - "
                      f"{_fmt(s['predict_high'])} | {_fmt(s['low'])} - {_fmt(s['high'])} | {s['n']} |")
-    if "expected_pilot" in summary:
-        lines += ["", "With the bias correction: each draw's truth was refitted after identifying a pilot twin drawn "
-                  "without it (its identification's error on the curves subtracted). The pilots' figures:", "",
-                  "| figure | median | 90 % range of a campaign | 5th-95th percentile of draws | draws |",
-                  "|---|---|---|---|---|"]
-        for key, s in summary["expected_pilot"].items():
-            lines.append(f"| {METRIC_NAMES[key]} | {_fmt(s['median'])} | {_fmt(s['predict_low'])} - "
-                         f"{_fmt(s['predict_high'])} | {_fmt(s['low'])} - {_fmt(s['high'])} | {s['n']} |")
     p = summary.get("promise")
     if p is not None:
         lines += ["", (f"The verdict's promise (at least {PROMISE_SHARE * 100:.0f} % of at least {PROMISE_MIN_FLAGS} "
@@ -452,10 +389,9 @@ def run_twin(campaign_dir, results_dir, bridge, out_dir, *, config: TwinConfig =
     speeds = np.concatenate([e.speeds for e in mirror.events])
     wind_range = (float(max(np.min(speeds), 0.5)), float(max(np.max(speeds), np.min(speeds) + 1.0)))
     cfg = {"n_draws": config.n_draws, "seed": config.seed, "knot_step": config.knot_step,
-           "max_events": config.max_events, "priors": None if config.priors is None else config.priors.to_dict(),
-           "bridge": {k: v for k, v in dataclasses.asdict(bridge).items() if k != "source"},
-           "pool": settings.to_dict(), "identify": json.loads(mirror.identify_json), "wind_range": list(wind_range),
-           **({"correct_bias": True} if config.correct_bias else {})}  # absent when off: older outputs resume
+           "max_events": config.max_events, "priors": None if config.priors is None else config.priors.to_dict(), "bridge": {k: v for k, v in dataclasses.asdict(bridge).items()
+                                                       if k != "source"},
+           "pool": settings.to_dict(), "identify": json.loads(mirror.identify_json), "wind_range": list(wind_range)}
     fingerprint = hashlib.sha256(json.dumps({"cfg": {k: v for k, v in cfg.items() if k != "n_draws"},
                                              "mirror": mirror.to_dict()}, sort_keys=True).encode()).hexdigest()
     out = Path(out_dir)
@@ -471,8 +407,7 @@ def run_twin(campaign_dir, results_dir, bridge, out_dir, *, config: TwinConfig =
         work = out / ".work"
         shutil.rmtree(work, ignore_errors=True)
         pending = [TwinTask(draw=d, seed=config.seed, mirror=mirror, bridge=bridge, pool=settings,
-                            wind_range=wind_range, priors=config.priors, work_root=str(work),
-                            correct_bias=config.correct_bias)
+                            wind_range=wind_range, priors=config.priors, work_root=str(work))
                    for d in range(config.n_draws) if d not in done]
         if progress is not None:
             progress(len(resumed), config.n_draws)

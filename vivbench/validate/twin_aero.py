@@ -17,15 +17,6 @@ A draw of the twin's aerodynamics:
    limit the amplitude, as in the generator family, whose values stay below 50 and 700; a negative
    one, or a large one where Y1 < 0, can make the truth grow without bound), no yaw factor.
 
-With the bias correction (:class:`vivbench.validate.TwinConfig` ``correct_bias``), the curves a
-campaign model identifies are taken for what the identification makes of the truth, not for the
-truth: a pilot twin is generated from the fitted shapes and identified with the field run's
-settings, and its identification's error on the wind grid (:func:`identification_bias`, the
-pilot model's curves minus the pilot truth's) is subtracted from the perturbed curves before the
-shapes are fitted again (one step of iterated bias correction, as in indirect inference). A
-twin so drawn is identified, through the same kind of errors in the wind, about where the field
-campaign's model is: its truth is sharper where the identification blurs.
-
 The twin's truth thus lies in the generator's class, outside the identification's, and within the
 field model's uncertainty where the data constrain it; outside the data's winds it follows the
 fitted shapes.
@@ -44,8 +35,7 @@ from vivbench.synth.aero import amplitude_coefficients
 from vivbench.synth.config import AeroConfig, StructureConfig
 from vivbench.synth.curves import GaussianBell, LogisticStep
 
-__all__ = ["aero_curves", "aero_target", "band_curves", "identification_bias", "perturbed_curves", "fit_aero",
-           "draw_aero"]
+__all__ = ["band_curves", "perturbed_curves", "fit_aero", "draw_aero"]
 
 _E_WIDTH = 1.5
 #        Y1: peak centre width baseline | e1: start end | e2: start end | C_L: peak centre width baseline
@@ -91,16 +81,11 @@ def _aero(theta: np.ndarray) -> AeroConfig:
                       C_L=GaussianBell(peak=c_peak, center=c_c, width=c_w, baseline=c_b), yaw=None)
 
 
-def aero_curves(aero: AeroConfig, structure: StructureConfig, wind: np.ndarray) -> np.ndarray:
-    """The averaged truth's coefficient curves a_ki(U) of ``aero`` (no yaw), shape (S, 4, n_wind), m^(1-i)/s."""
-    phi = np.array(structure.mode_shape)
-    U = np.repeat(np.asarray(wind, dtype=float)[:, None], phi.size, axis=1)
-    p = amplitude_coefficients(U, structure, aero)  # (n_wind, 4)
-    return phi[:, None, None] ** (1 - np.arange(4))[None, :, None] * p.T[None, :, :]
-
-
 def _model_curves(theta: np.ndarray, structure: StructureConfig, wind: np.ndarray) -> np.ndarray:
-    return aero_curves(_aero(theta), structure, wind)
+    phi = np.array(structure.mode_shape)
+    U = np.repeat(wind[:, None], phi.size, axis=1)
+    p = amplitude_coefficients(U, structure, _aero(theta))  # (n_wind, 4)
+    return phi[:, None, None] ** (1 - np.arange(4))[None, :, None] * p.T[None, :, :]
 
 
 def _start(target: np.ndarray, structure: StructureConfig, wind: np.ndarray) -> np.ndarray:
@@ -143,9 +128,9 @@ def fit_aero(target: np.ndarray, weight: np.ndarray, structure: StructureConfig,
     return _aero(fit.x), float(np.sqrt(np.mean(fit.fun**2)))
 
 
-def aero_target(model, structure: StructureConfig, wind_range: tuple[float, float], rng: np.random.Generator,
-                n_wind: int = 40) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Step 1 of the module docstring: the wind grid, the perturbed curves and the weights of their fit.
+def draw_aero(model, structure: StructureConfig, wind_range: tuple[float, float], rng: np.random.Generator,
+              n_wind: int = 40) -> tuple[AeroConfig, float]:
+    """One draw of the twin's aerodynamics from a fitted campaign model (module docstring).
 
     Parameters
     ----------
@@ -156,8 +141,7 @@ def aero_target(model, structure: StructureConfig, wind_range: tuple[float, floa
 
     Returns
     -------
-    wind : ndarray, shape (n_wind,), m/s
-    target, weight : ndarray, shape (S, 4, n_wind), m^(1-i)/s; the arguments of :func:`fit_aero`
+    aero : AeroConfig; misfit : rms scaled residual of the shapes' fit
     """
     lo, hi = (float(x) for x in wind_range)
     if not (0 < lo < hi and math.isfinite(hi)):
@@ -168,44 +152,5 @@ def aero_target(model, structure: StructureConfig, wind_range: tuple[float, floa
         raise InputError(f"the campaign model has {curves.shape[0]} equations for {structure.n_sections} sections")
     target = perturbed_curves(curves, half, wind, rng)
     floor = 0.05 * np.max(np.abs(curves), axis=2, keepdims=True) + 1e-12
-    return wind, target, np.maximum(half / 1.96, floor)
-
-
-def draw_aero(model, structure: StructureConfig, wind_range: tuple[float, float], rng: np.random.Generator,
-              n_wind: int = 40) -> tuple[AeroConfig, float]:
-    """One draw of the twin's aerodynamics from a fitted campaign model (steps 1 and 2 of the module docstring).
-
-    Parameters
-    ----------
-    model, structure, wind_range, rng, n_wind
-        Those of :func:`aero_target`.
-
-    Returns
-    -------
-    aero : AeroConfig; misfit : rms scaled residual of the shapes' fit
-    """
-    wind, target, weight = aero_target(model, structure, wind_range, rng, n_wind)
+    weight = np.maximum(half / 1.96, floor)
     return fit_aero(target, weight, structure, wind)
-
-
-def identification_bias(fitted, aero: AeroConfig, structure: StructureConfig, wind: np.ndarray) -> np.ndarray:
-    """What an identification made of a twin's truth: the fitted model's curves minus the truth's.
-
-    Parameters
-    ----------
-    fitted : campaign model of the protocol fitted to a twin campaign generated with ``aero``
-    aero, structure : that twin's aerodynamics and structure
-    wind : ndarray, shape (n_wind,), m/s
-
-    Returns
-    -------
-    ndarray, shape (S, 4, n_wind), m^(1-i)/s; 0 where the fitted model gives no curve value
-    """
-    ds = model_curves(fitted, wind)
-    if ds is None:
-        raise InputError("the campaign model gives no coefficient curves: the twin's bias correction needs them")
-    identified = np.asarray(ds["curves"].values, dtype=float)
-    truth = aero_curves(aero, structure, wind)
-    if identified.shape != truth.shape:
-        raise InputError(f"the pilot's model has curves of shape {identified.shape} for a truth of {truth.shape}")
-    return np.where(np.isfinite(identified), identified - truth, 0.0)

@@ -65,8 +65,6 @@ class TwinCheckConfig:
     n_twins : twin draws per family draw
     max_events, max_duration : caps on each family campaign (events; s), None: the draw's own
     bootstrap : block-bootstrap replicates of ``pool``'s campaign model (its default is 100)
-    correct_bias : twins with the bias correction (:class:`vivbench.validate.TwinConfig`); their pilots are then
-        checked too, from the same runs (``inside_pilot``, ``share_inside_pilot``)
     """
 
     split: str = "evaluation"
@@ -75,13 +73,12 @@ class TwinCheckConfig:
     max_events: int | None = None
     max_duration: float | None = None
     bootstrap: int = 100
-    correct_bias: bool = False
 
     def __post_init__(self) -> None:
         if self.split not in SPLITS:
             raise InputError(f"split must be one of {', '.join(SPLITS)}; got {self.split!r}")
         object.__setattr__(self, "draws", check_draws(self.draws))
-        TwinConfig(n_draws=self.n_twins, correct_bias=self.correct_bias)
+        TwinConfig(n_draws=self.n_twins)
         if not (isinstance(self.bootstrap, int) and self.bootstrap >= 2):
             raise InputError(f"bootstrap must be an integer >= 2; got {self.bootstrap!r}")
 
@@ -95,7 +92,6 @@ class _Task:
     max_duration: float | None
     bootstrap: int
     work_root: str | None = None
-    correct_bias: bool = False
 
 
 def run_twin_check_task(task: _Task) -> dict[str, Any]:
@@ -123,29 +119,22 @@ def run_twin_check_task(task: _Task) -> dict[str, Any]:
                             frequency=s.frequency, mode_shape=s.mode_shape, tributary_lengths=s.tributary_lengths,
                             span_length=s.span_length)
         run_twin(root / "campaign", root / "identify", bridge, root / "twin",
-                 config=TwinConfig(n_draws=task.n_twins, seed=task.draw, correct_bias=task.correct_bias))
+                 config=TwinConfig(n_draws=task.n_twins, seed=task.draw))
         twin = read_twin(root / "twin")
+        expected = twin["expected"]
         twin_values = {m: [d["scores"][m] for d in twin["draws"]] for m in CHECKED_METRICS}
     except Exception as exc:
         raise RuntimeError(error_line(exc).replace(str(root), "<draw>")) from None
     finally:
         shutil.rmtree(root, ignore_errors=True)
-    row = {"draw": task.draw, "n_events": campaign.n_events, "labels": draw.labels, "actual": actual,
-           "twin_values": twin_values, "twin_errors": twin.get("errors", {}),
-           "twin_nuisances": [d.get("nuisances") for d in twin["draws"]]}
-    for suffix in ("", "_pilot") if "expected_pilot" in twin else ("",):
-        expected = twin["expected" + suffix]
-        row["expected" + suffix] = {m: expected[m] for m in CHECKED_METRICS}
-        row["inside" + suffix] = {m: _inside(expected[m], actual[m]) for m in CHECKED_METRICS}
-        row["twin_promise" + suffix] = twin.get("promise" + suffix)
-    if "expected_pilot" in twin:
-        row["bias_shares"] = [d.get("bias_share") for d in twin["draws"]]
-    return row
-
-
-def _inside(expected: dict, actual: float) -> bool | None:
-    lo, hi = expected["predict_low"], expected["predict_high"]
-    return None if not all(math.isfinite(x) for x in (lo, hi, actual)) else bool(lo <= actual <= hi)
+    inside = {}
+    for m in CHECKED_METRICS:
+        lo, hi, a = expected[m]["predict_low"], expected[m]["predict_high"], actual[m]
+        inside[m] = None if not all(math.isfinite(x) for x in (lo, hi, a)) else bool(lo <= a <= hi)
+    return {"draw": task.draw, "n_events": campaign.n_events, "labels": draw.labels, "actual": actual,
+            "expected": {m: expected[m] for m in CHECKED_METRICS}, "twin_values": twin_values,
+            "twin_errors": twin.get("errors", {}), "inside": inside, "twin_promise": twin.get("promise"),
+            "twin_nuisances": [d.get("nuisances") for d in twin["draws"]]}
 
 
 #: Figures that are shares: their range's width is high - low; the errors' is the factor high / low.
@@ -161,25 +150,18 @@ def _median_width(metric: str, ranges: list[dict]) -> float:
     return float(np.median(widths)) if widths else math.nan
 
 
-def _shares_inside(rows: list[dict], suffix: str = "") -> dict:
-    inside, expected = "inside" + suffix, "expected" + suffix
+def _summary(config: TwinCheckConfig, done: dict[int, dict], failed) -> dict:
+    rows = [done[d] for d in config.draws if d in done]
     shares = {}
     for m in CHECKED_METRICS:
-        assessed = [r for r in rows if r[inside][m] is not None]
-        flags = [r[inside][m] for r in assessed]
-        above = sum(1 for r in assessed if not r[inside][m] and r["actual"][m] > r[expected][m]["predict_high"])
+        assessed = [r for r in rows if r["inside"][m] is not None]
+        flags = [r["inside"][m] for r in assessed]
+        above = sum(1 for r in assessed if not r["inside"][m] and r["actual"][m] > r["expected"][m]["predict_high"])
         shares[m] = {"inside": int(sum(flags)), "assessed": len(flags), "above": above,
                      "below": len(flags) - int(sum(flags)) - above,
                      "share": (sum(flags) / len(flags)) if flags else math.nan,
-                     "median_width": _median_width(m, [r[expected][m] for r in assessed])}
-    return shares
-
-
-def _summary(config: TwinCheckConfig, done: dict[int, dict], failed) -> dict:
-    rows = [done[d] for d in config.draws if d in done]
-    pilots = [r for r in rows if "inside_pilot" in r]
-    return {"config": asdict(config), "draws": rows, "failed": sorted(failed), "share_inside": _shares_inside(rows),
-            **({"share_inside_pilot": _shares_inside(pilots, "_pilot")} if pilots else {}),
+                     "median_width": _median_width(m, [r["expected"][m] for r in assessed])}
+    return {"config": asdict(config), "draws": rows, "failed": sorted(failed), "share_inside": shares,
             "promise": _promise_rows(rows),
             "aim": "the actual figure within the twin's 90 % range on at least 80 % of the draws"}
 
@@ -192,24 +174,11 @@ def _promise_rows(rows: list[dict]) -> list[dict]:
         flags, share = r["actual"].get("n_flagged", 0), r["actual"].get("flagged_right_share", math.nan)
         if not (flags >= PROMISE_MIN_FLAGS and math.isfinite(share)) or not r.get("twin_promise"):
             continue
-        t, pilot = r["twin_promise"], r.get("twin_promise_pilot")
+        t = r["twin_promise"]
         out.append({"draw": r["draw"], "flags": int(flags), "share_right": float(share),
                     "broken": bool(share < PROMISE_SHARE), "twins_tested": t["tested"], "twins_broken": t["broken"],
-                    "broken_upper": t["broken_upper"],
-                    **({"pilots_tested": pilot["tested"], "pilots_broken": pilot["broken"]} if pilot else {})})
+                    "broken_upper": t["broken_upper"]})
     return out
-
-
-def _shares_table(shares: dict) -> list[str]:
-    lines = ["| figure | actual within the twin's 90 % range | above the range | below it | median width of the range |",
-             "|---|---|---|---|---|"]
-    for m, s in shares.items():
-        share = "n/a" if not math.isfinite(s["share"]) else f"{s['share']:.0%}"
-        width = s.get("median_width", math.nan)
-        width = "n/a" if not math.isfinite(width) else (f"{width:.2f}" if m in _SHARES else f"factor {width:.3g}")
-        lines.append(f"| {METRIC_NAMES[m]} | {s['inside']} of {s['assessed']} ({share}) | {s.get('above', 'n/a')} | "
-                     f"{s.get('below', 'n/a')} | {width} |")
-    return lines
 
 
 def twin_check_markdown(summary: dict) -> str:
@@ -219,18 +188,20 @@ def twin_check_markdown(summary: dict) -> str:
     drawn = (" Each twin draws what a field user cannot measure (the errors in the wind, buffeting, a yaw effect) "
              "from the generator family's priors; the values drawn are in the summary's `twin_nuisances`."
              if any(n for r in summary["draws"] for n in r.get("twin_nuisances", [])) else "")
-    corrected = " with the bias correction (each twin's truth refitted after a pilot twin's identification error)"
     lines = ["# Does the twin predict?", "",
              f"{len(summary['draws'])} {c['split']} draws of the generator family treated as field campaigns "
-             f"({', '.join(map(str, c['draws']))}), {c['n_twins']} twin draws each"
-             + (corrected if c.get("correct_bias") else "") + f", pool bootstrap {c['bootstrap']}"
-             + (f"; capped campaigns ({caps})" if caps else "") + "." + drawn, ""]
-    lines += _shares_table(summary["share_inside"])
-    if "share_inside_pilot" in summary:
-        lines += ["", "The same check of the pilot twins (no bias correction; the same draws of the aerodynamics and "
-                  "nuisances, identified in the same runs):", ""] + _shares_table(summary["share_inside_pilot"])
+             f"({', '.join(map(str, c['draws']))}), {c['n_twins']} twin draws each, pool bootstrap {c['bootstrap']}"
+             + (f"; capped campaigns ({caps})" if caps else "") + "." + drawn, "",
+             "| figure | actual within the twin's 90 % range | above the range | below it "
+             "| median width of the range |", "|---|---|---|---|---|"]
+    for m, s in summary["share_inside"].items():
+        share = "n/a" if not math.isfinite(s["share"]) else f"{s['share']:.0%}"
+        width = s.get("median_width", math.nan)
+        width = "n/a" if not math.isfinite(width) else (f"{width:.2f}" if m in _SHARES else f"factor {width:.3g}")
+        lines.append(f"| {METRIC_NAMES[m]} | {s['inside']} of {s['assessed']} ({share}) | {s.get('above', 'n/a')} | "
+                     f"{s.get('below', 'n/a')} | {width} |")
     lines += ["", "| draw | figure | actual | twin's 90 % range | inside |", "|---|---|---|---|---|"]
-    for r in summary["draws"]:  # the checked twins' ranges (the pilots' are in the summary)
+    for r in summary["draws"]:
         for m in CHECKED_METRICS:
             e, a = r["expected"][m], r["actual"][m]
             lines.append(f"| {r['draw']} | {m} | {a:.3g} | {e['predict_low']:.3g} - {e['predict_high']:.3g} | "
@@ -239,20 +210,17 @@ def twin_check_markdown(summary: dict) -> str:
     if promise:
         broken = [p for p in promise if p["broken"]]
         seen = [p for p in broken if p["twins_broken"] > 0]
-        pilots = all("pilots_tested" in p for p in promise)
         lines += ["", f"The verdict's promise (at least {PROMISE_SHARE * 100:.0f} % of at least {PROMISE_MIN_FLAGS} "
                   "flags right): "
                   f"{len(promise)} campaigns flagged enough windows to test it, {len(broken)} broke it, and the twins "
                   f"of {len(seen)} of those saw it broken at least once. The bound is the twin's one-sided 95 % upper "
                   "bound of the chance that a campaign like this one breaks the promise.", "",
-                  "| draw | flags | share right | broken | twin draws tested | broken in the twins | bound |"
-                  + (" pilots tested | broken in the pilots |" if pilots else ""),
-                  "|---|---|---|---|---|---|---|" + ("---|---|" if pilots else "")]
+                  "| draw | flags | share right | broken | twin draws tested | broken in the twins | bound |",
+                  "|---|---|---|---|---|---|---|"]
         for p in promise:
             bound = "n/a" if not math.isfinite(p["broken_upper"]) else f"{p['broken_upper'] * 100:.0f} %"
             lines.append(f"| {p['draw']} | {p['flags']} | {p['share_right']:.3f} | {'yes' if p['broken'] else 'no'} | "
-                         f"{p['twins_tested']} | {p['twins_broken']} | {bound} |"
-                         + (f" {p['pilots_tested']} | {p['pilots_broken']} |" if pilots else ""))
+                         f"{p['twins_tested']} | {p['twins_broken']} | {bound} |")
     failed_twins = [f"draw {r['draw']}: {len(r.get('twin_errors', {}))} of {c['n_twins']}" for r in summary["draws"]
                     if r.get("twin_errors")]
     if failed_twins:
@@ -271,7 +239,7 @@ def run_twin_check(config: TwinCheckConfig, out_dir, *, workers: int = 1,
     """Run (or resume) the check; returns the paths of ``twin_check.json`` and ``twin_check.md`` and the failures."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    data = {k: v for k, v in asdict(config).items() if k != "draws" and not (k == "correct_bias" and not v)}
+    data = {k: v for k, v in asdict(config).items() if k != "draws"}
     fingerprint = hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
     with exclusive_directory(out, ".twin_check.lock", "twin check"):
         check_record(out / "twin_check_config.json", fingerprint, data,
@@ -281,8 +249,7 @@ def run_twin_check(config: TwinCheckConfig, out_dir, *, workers: int = 1,
         work = out / ".work"
         shutil.rmtree(work, ignore_errors=True)
         pending = [_Task(split=config.split, draw=d, n_twins=config.n_twins, max_events=config.max_events,
-                         max_duration=config.max_duration, bootstrap=config.bootstrap, work_root=str(work),
-                         correct_bias=config.correct_bias)
+                         max_duration=config.max_duration, bootstrap=config.bootstrap, work_root=str(work))
                    for d in config.draws if d not in done]
         if progress is not None:
             progress(len(config.draws) - len(pending), len(config.draws))
