@@ -754,8 +754,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     change_scan : bool
         Flag no window when the chosen model's change scan locates a change (:class:`ModelSelection`).
     **params
-        Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given; a
-        ``wind_smoothing_s`` given here or in ``options`` drops the prior ``wind_smoothing_grid``).
+        Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given).
 
     Returns
     -------
@@ -770,9 +769,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     grid = {k: tuple(v) for k, v in (VARYING_OPTIONS if options is None else options).items() if k not in params}
     for k in [k for k, v in grid.items() if not v]:
         raise InputError(f"option {k!r} has no candidate value")
-    pinned = {**grid, **params}  # a smoothing pinned or among the options leaves the models no grid of their own
-    fixed = {**{k: v for k, v in VARYING_PRIORS.items() if k not in pinned and not (
-        k == "wind_smoothing_grid" and "wind_smoothing_s" in pinned)}, **params, "seed": seed}
+    fixed = {**{k: v for k, v in VARYING_PRIORS.items() if k not in grid}, **params, "seed": seed}
     names = list(grid)
     candidates = []
     for idx in itertools.product(*(range(len(grid[k])) for k in names)):
