@@ -18,7 +18,13 @@ on campaigns that differ from the draw's in one thing each, all with the draw's 
   turbulent field the anemometers sample (``felt_wind = "tributary"``) instead of a smooth wind while the
   anemometers record point turbulence it does not feel (on a draw whose deck already feels the
   tributary average it does not apply: no flags, NaN errors);
-- ``no_buffeting``: the same campaign seed without buffeting.
+- ``no_buffeting``: the same campaign seed without buffeting;
+- ``truth_wind``: the draw's own campaign fitted on the wind the truth's dynamics sees
+  (:func:`vivbench.validate.record_with_truth_wind`) instead of the measured one: the errors in the wind removed,
+  all else (the campaign, its identification, the buffeting) the same.
+
+Each row also gives the bridge's envelope time constant, 1 / (2 pi f zeta) (``envelope_time_constant_s``):
+the time over which the envelope follows a change of the wind it feels.
 
 Each variant is scored against its own truth: flags, those right, the energy-weighted relative dA/dt
 error on the truth's own (A, U) and the energy-weighted curve error. The study directory ``--out``
@@ -35,7 +41,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 #: Seed offsets of the other campaigns of the same bridge.
 OTHER_CAMPAIGNS = {"second_campaign": 1, "third_campaign": 2, "fourth_campaign": 3}
 #: The variants of a draw's campaign.
-VARIANTS = ("campaign", *OTHER_CAMPAIGNS, "tributary_wind", "no_buffeting")
+VARIANTS = ("campaign", *OTHER_CAMPAIGNS, "tributary_wind", "no_buffeting", "truth_wind")
 
 
 def variant_config(campaign, name: str):
@@ -67,6 +73,11 @@ def _variant_inputs(task: dict, name: str):
 
     if name == "campaign":
         return capped_draw(task)  # the draw directory itself, as the other family studies keep it
+    if name == "truth_wind":
+        from vivbench.validate import record_with_truth_wind
+
+        records, truths, windows = capped_draw(task)
+        return [record_with_truth_wind(r, t) for r, t in zip(records, truths)], truths, windows
     campaign = draw_bridge(task["split"], task["draw"]).campaign_config(max_events=task["max_events"],
                                                                         max_duration=task["max_duration_s"])
     return identified_campaign(draw_dir(task) / name, variant_config(campaign, name))
@@ -82,12 +93,15 @@ def score_draw(task: dict) -> dict:
     from benchmarks._family_args import fit_and_score, labelled_row, store_row, stored_variants
 
     row, missing = stored_variants(task, VARIANTS)
-    if not missing:
+    if not missing and "envelope_time_constant_s" in row:
         return row
+    labels, new = labelled_row(task)
     if row is None:
-        labels, row = labelled_row(task)
+        row = new
         row.update(bell=str(labels["bell"]), e_mix=str(labels["e_mix"]), buffeting_w=float(labels["buffeting_w"]),
                    point_intensity=labels["point_intensity"], point_timescale_s=labels["point_timescale_s"])
+    row["envelope_time_constant_s"] = 1.0 / (2.0 * math.pi * float(labels["frequency_hz"])
+                                             * float(labels["damping_ratio"]))
     for name in missing:
         if name == "tributary_wind" and row["eiv"] == "tributary":
             row.update({f"{k}_{name}": v for k, v in (("flags", 0), ("right", 0), ("error", math.nan),
@@ -115,7 +129,8 @@ def summarise(rows: list[dict]) -> list[dict]:
                         "promise": ("untested" if flags < PROMISE_MIN_FLAGS else
                                     "kept" if share >= PROMISE_SHARE else "broken"),
                         "error": r[f"error_{name}"], "curve_error": r[f"curve_error_{name}"],
-                        "chosen": r[f"chosen_{name}"]})
+                        "chosen": r[f"chosen_{name}"], "envelope_time_constant_s": r["envelope_time_constant_s"],
+                        "point_timescale_s": r["point_timescale_s"]})
     return out
 
 
@@ -123,9 +138,13 @@ def findings(summary: list[dict]) -> list[str]:
     """Sentences generated from the figures."""
     lines = []
     for draw in sorted({s["draw"] for s in summary}):
+        of_draw = [s for s in summary if s["draw"] == draw]
         parts = [f"{s['variant']} {s['right']} of {s['flags']} right ({s['promise']}, dA/dt error {s['error']:.3f})"
-                 for s in summary if s["draw"] == draw]
-        lines.append(f"Draw {draw}: " + "; ".join(parts) + ".")
+                 for s in of_draw]
+        point = of_draw[0]["point_timescale_s"]
+        scales = (f"envelope time constant {of_draw[0]['envelope_time_constant_s']:.0f} s"
+                  + ("" if point is None else f", the anemometers' point turbulence on a time scale of {point:.0f} s"))
+        lines.append(f"Draw {draw} ({scales}): " + "; ".join(parts) + ".")
     counts = []
     for name in VARIANTS:
         tested = [s for s in summary if s["variant"] == name and s["promise"] != "untested"]

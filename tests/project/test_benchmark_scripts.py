@@ -363,16 +363,46 @@ def test_broken_promise_study_changes_one_thing_per_variant(scripts, monkeypatch
         assert dataclasses.replace(calm.generator, aero=g.aero) == g
     with pytest.raises(ValueError, match="unknown variant"):
         study.variant_config(base, "calm")
-    row = {"draw": 18}
-    for name, flags, right in zip(study.VARIANTS, (100, 100, 100, 100, 10, 0), (40, 99, 94, 95, 10, 0)):
+    row = {"draw": 18, "envelope_time_constant_s": 34.2, "point_timescale_s": 9.3}
+    for name, flags, right in zip(study.VARIANTS, (100, 100, 100, 100, 10, 0, 100), (40, 99, 94, 95, 10, 0, 96),
+                                  strict=True):
         row.update({f"flags_{name}": flags, f"right_{name}": right, f"error_{name}": 0.2, f"curve_error_{name}": 0.1,
                     f"chosen_{name}": "yaw0-cv"})
     summary = study.summarise([row])
-    assert [s["promise"] for s in summary] == ["broken", "kept", "broken", "kept", "untested", "untested"]
-    assert study.findings(summary)[0].startswith("Draw 18: campaign 40 of 100 right (broken")
+    assert [s["promise"] for s in summary] == ["broken", "kept", "broken", "kept", "untested", "untested", "kept"]
+    assert study.findings(summary)[0].startswith("Draw 18 (envelope time constant 34 s, the anemometers' point "
+                                                 "turbulence on a time scale of 9 s): campaign 40 of 100 right (broken")
     assert study.findings(summary)[1] == ("Broken, of the campaigns with at least 20 flags: campaign 1 of 1; "
                                           "second_campaign 0 of 1; third_campaign 1 of 1; fourth_campaign 0 of 1; "
-                                          "tributary_wind 0 of 0; no_buffeting 0 of 0.")
+                                          "tributary_wind 0 of 0; no_buffeting 0 of 0; truth_wind 0 of 1.")
+    row["point_timescale_s"] = None  # a deck that feels the turbulence the anemometers sample
+    assert study.findings(study.summarise([row]))[0].startswith("Draw 18 (envelope time constant 34 s): campaign")
+
+
+def test_broken_promise_study_truth_wind_refits_the_campaign_on_the_truths_wind(scripts, monkeypatch):
+    """The variant truth_wind is the draw's own records with the wind the truth's dynamics sees, nothing else."""
+    import xarray as xr
+
+    import benchmarks._family_args as family
+    from vivbench.core.record import Record
+    from vivbench.validate import record_with_truth_wind
+
+    study = _load(BENCH / "study_broken_promise.py", monkeypatch)
+    t = np.arange(40) * 0.5
+    records = [Record(event_id=f"E00{k}", t=t, A=np.full((t.size, 2), 0.01 * k), U=np.full((t.size, 2), 7.0 + k),
+                      dA=np.zeros((t.size, 2))) for k in (1, 2)]
+    tt = np.arange(0.0, 25.0, 1.0)
+    truths = [xr.Dataset({"U": (("time", "section"), np.column_stack([5.0 + k + 0.1 * tt, 6.0 + k - 0.1 * tt]))},
+                         coords={"time": tt}) for k in (1, 2)]
+    windows = [(np.array([0.0]), np.array([10.0]))] * 2
+    inputs = records, truths, windows
+    monkeypatch.setattr(family, "capped_draw", lambda task: inputs)
+    got, got_truths, got_windows = study._variant_inputs({"draw": 18}, "truth_wind")
+    assert got_truths is truths and got_windows is windows
+    for rec, truth, new in zip(records, truths, got, strict=True):
+        expected = record_with_truth_wind(rec, truth)
+        assert np.array_equal(new.U, expected.U) and np.array_equal(new.A, rec.A)
+        assert not np.array_equal(new.U, rec.U)
 
 
 def test_broken_promise_study_adds_only_the_variants_a_stored_row_lacks(scripts, monkeypatch, tmp_path):
@@ -392,10 +422,11 @@ def test_broken_promise_study_adds_only_the_variants_a_stored_row_lacks(scripts,
                                        ("chosen", "yaw0-least"))}}
     family.store_row(task, old)
     row = study.score_draw(task)
-    assert fitted == ["third_campaign", "fourth_campaign"]
+    assert fitted == ["third_campaign", "fourth_campaign", "truth_wind"]
     assert row["flags_campaign"] == 50 and row["flags_third_campaign"] == 30 and row["n_events_fourth_campaign"] == 1
     assert json.loads((tmp_path / "d018" / "row.json").read_text()) == row
-    assert study.score_draw(task) == row and len(fitted) == 2  # complete: read, not refitted
+    assert row["envelope_time_constant_s"] > 0
+    assert study.score_draw(task) == row and len(fitted) == 3  # complete: read, not refitted
     tributary = {**task, "draw": 109}  # the deck already feels the tributary average: the variant does not apply
     fresh = study.score_draw(tributary)
     assert "tributary_wind" not in fitted[2:] and fresh["flags_tributary_wind"] == 0
