@@ -101,3 +101,19 @@ def test_window_wind_is_the_mean_over_each_window():
         m = (t >= start[w]) & (t < end[w])
         want = [np.nanmean(U[m, k]) if np.isfinite(U[m, k]).any() else np.nan for k in range(2)]
         assert_close(got[w], np.array(want))
+
+
+def test_the_output_error_simulates_each_side_of_a_gap_in_time_from_its_own_start():
+    """A record whose samples stop for a while without NaN (a gap between a result's segments) is two runs: its
+    held-out output error is that of its two pieces, each simulated from its own first amplitude."""
+    recs = _mixed_records()
+    model = _Poly(2).fit(recs[::2])
+    rec = recs[0]
+    t = np.where(rec.t < 150.0, rec.t, rec.t + 200.0)  # 200 s of samples missing after t = 149 s
+    gapped = Record(event_id="E", t=t, A=rec.A, U=rec.U, dA=rec.dA)
+    first, second = (Record(event_id="E", t=t[sl], A=rec.A[sl], U=rec.U[sl], dA=rec.dA[sl])
+                     for sl in (slice(0, 150), slice(150, None)))
+    whole = held_out_losses(model, [gapped], "output")[0]
+    assert whole > 0
+    assert_close(whole, held_out_losses(model, [first, second], "output").sum(), rtol=1e-12,
+                 reason="the same runs simulated in another batch")

@@ -407,3 +407,29 @@ def test_mask_runs_are_the_maximal_runs_of_true(mask):
             expected.append((start, i))
             start = None
     assert [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool))] == expected
+
+
+@given(mask=st.lists(st.booleans(), min_size=2, max_size=60), gaps=st.sets(st.integers(0, 58), max_size=4))
+@settings(max_examples=80, deadline=None)
+def test_mask_runs_end_at_time_gaps(mask, gaps):
+    """With the sample times, a run also ends where samples are missing without NaN (a step of more than 1.5
+    times the median step), and the runs are the maximal ones of the mask within each gap-free stretch."""
+    from vivbench.preprocess import mask_runs
+
+    n = len(mask)
+    gaps = {g for g in gaps if g < n - 1}
+    steps = np.full(n - 1, 0.25)
+    steps[sorted(gaps)] = 188.25 if len(gaps) < (n - 1) / 2 else 0.25  # a minority of gaps keeps the median step
+    t = np.concatenate([[0.0], np.cumsum(steps)])
+    jumps = {i for i in range(n - 1) if steps[i] > 0.25}
+    expected, start = [], None
+    for i, v in enumerate(mask + [False]):  # a plain loop over the samples, for reference
+        if start is not None and (not v or i - 1 in jumps):  # a run ends at a False or at a gap before sample i
+            expected.append((start, i))
+            start = None
+        if v and start is None:
+            start = i
+    got = [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool), t)]
+    assert got == expected
+    assert [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool), np.arange(n) * 0.25)] == \
+        [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool))]  # no gap: the mask's runs

@@ -272,3 +272,25 @@ def test_builtin_verdicts_refuse_windows_below_the_noise_floor(small_results):
     assert not fitted.identifiable(loud, start, end).any()
     with pytest.raises(ValueError, match="noise_std"):
         dataclasses.replace(rec, noise_std=np.ones(rec.n_sections + 1))
+
+
+def test_windows_and_the_window_method_stop_at_a_gap_in_time(small_results):
+    """Samples missing without NaN (a result's segments, a logger's outage) end a run: no window spans the gap,
+    and the window method differentiates each side on its own uniform grid instead of refusing the record."""
+    import dataclasses
+
+    from vivbench.analysis import records_from_results
+
+    _campaign, _dir, files = small_results
+    rec = records_from_results(files)[0]
+    keep = np.ones(rec.n_samples, dtype=bool)
+    mid = rec.n_samples // 2
+    keep[mid:mid + 600] = False  # 150 s of samples missing at the 0.25 s step
+    fields = {name: getattr(rec, name)[keep] for name in ("t", "A", "U", "dA")}
+    gapped = dataclasses.replace(rec, **fields, yaw=None if rec.yaw is None else rec.yaw[keep])
+    before, after = rec.t[mid - 1], rec.t[mid + 600]
+    start, end = default_windows(gapped)
+    assert start.size > 0 and not np.any((start <= before) & (end > after))
+    fitted = resolve_method("windows").fit([gapped])
+    s, e = fitted.model.window_start_, fitted.model.window_end_
+    assert s.size > 0 and not np.any((s <= before) & (e > after))

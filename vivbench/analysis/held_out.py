@@ -124,7 +124,7 @@ def held_out_losses(model, records: Sequence[Record], criterion: str = "output",
         rec = _decimated(rec, step_s)
         ok = np.isfinite(rec.A).all(axis=1) & np.isfinite(rec.U).all(axis=1)
         peak = float(np.nanmax(np.abs(rec.A))) if np.isfinite(rec.A).any() else 0.0
-        for run in mask_runs(ok):
+        for run in mask_runs(ok, rec.t):
             if run.stop - run.start >= min_samples:
                 runs.append((rec, float(rec.t[run.start]), float(rec.t[run.stop - 1]), None))
                 owners.append((e, peak, rec))

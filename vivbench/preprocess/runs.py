@@ -37,9 +37,19 @@ def _run_bounds(mask: np.ndarray, breaks: np.ndarray | None = None) -> tuple[np.
     return np.flatnonzero(start), np.flatnonzero(end) + 1
 
 
-def mask_runs(mask) -> list[slice]:
-    """The runs of True in a boolean mask, shape (n,), as slices in order (none for an all-False mask)."""
-    starts, ends = _run_bounds(mask)
+def mask_runs(mask, t=None) -> list[slice]:
+    """The runs of True in a boolean mask, shape (n,), as slices in order (none for an all-False mask).
+
+    With the sample times ``t``, shape (n,), s, a run also ends where the step to the next sample exceeds
+    1.5 times the median step: a gap in the record (samples missing without NaN, as between the segments
+    of an identification result), which no derivative, window or simulation may span.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    breaks = None
+    if t is not None and mask.size > 1:
+        dt = np.diff(np.asarray(t, dtype=float))
+        breaks = dt > _TIME_JUMP_FACTOR * np.median(dt)
+    starts, ends = _run_bounds(mask, breaks)
     return [slice(int(a), int(b)) for a, b in zip(starts, ends)]
 
 

@@ -373,7 +373,7 @@ class WindowMethod:
         for k, rec in enumerate(records):
             ids.append(rec.event_id)
             reg_e, ok_e, s_e, e_e = [], [], [], []
-            for run in mask_runs(rec.valid(need_dA=True)):
+            for run in mask_runs(rec.valid(need_dA=True), rec.t):
                 t = rec.t[run]
                 if t.size < 2 or t[-1] - t[0] < cfg.window:
                     continue
@@ -492,7 +492,7 @@ def default_windows(record: Record, window: float = 50.0, step: float = 25.0) ->
 
     ok = record.valid(need_dA=record.dA is not None)
     starts, ends = [], []
-    for run in mask_runs(ok):
+    for run in mask_runs(ok, record.t):
         t = record.t[run]
         if t.size < 2 or t[-1] - t[0] < window:
             continue
@@ -515,7 +515,7 @@ class _SumPredict:
 
 
 def _longest_run(record: Record) -> slice | None:
-    runs = mask_runs(record.valid())
+    runs = mask_runs(record.valid(), record.t)
     if not runs:
         return None
     return max(runs, key=lambda s: s.stop - s.start)
