@@ -33,6 +33,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from vivbench.preprocess.runs import mask_runs
+
 __all__ = ["ShootingGrid", "shooting_grid", "StepFunctions", "propagate", "rk4_step_function"]
 
 
@@ -86,12 +88,6 @@ class ShootingGrid:
         return int(self.A.shape[1] - 1)
 
 
-def _runs(ok: np.ndarray) -> list[tuple[int, int]]:
-    """(start, stop) of the runs of True in a boolean vector."""
-    edges = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
-
-
 def shooting_grid(records, *, dt: float, n_steps: int, min_points: int = 10) -> ShootingGrid:
     """Cut records into runs on a grid of step ``dt`` and the runs into intervals of ``n_steps``.
 
@@ -127,7 +123,8 @@ def shooting_grid(records, *, dt: float, n_steps: int, min_points: int = 10) -> 
         ok = np.isfinite(A).all(axis=1) & np.isfinite(U).all(axis=1) & (U > 0).all(axis=1)
         # a gap in time (samples missing from the record) also ends a run
         ok[1:] &= np.abs(np.diff(ts) - stride * step) < 0.5 * step
-        for a, b in _runs(ok):
+        for run in mask_runs(ok):
+            a, b = run.start, run.stop
             if b - a < min_points:
                 continue
             n_pts = b - a

@@ -60,6 +60,7 @@ from vivbench.models.campaign import amplitude_ratios
 from vivbench.models.integrate import StopRule, rk4
 from vivbench.models.protocol import ModelBase, fit_records, section_names
 from vivbench.models.window_model import nearest_window
+from vivbench.preprocess.runs import mask_runs
 from vivbench.preprocess.windows import window_bounds
 
 __all__ = ["PySINDyWindows", "PySINDyCampaign", "PySINDyCP", "term_orders", "OTHER_TERMS"]
@@ -124,10 +125,9 @@ def term_a_exponents(feature_names: Sequence[str], state_names: Sequence[str],
 
 
 def _finite_runs(t: np.ndarray, ok: np.ndarray, min_samples: int) -> list[slice]:
-    """Maximal runs of consecutive samples where ``ok`` holds, with at least ``min_samples`` samples."""
-    edges = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return [slice(a, b) for a, b in zip(starts, stops) if b - a >= min_samples]
+    """Maximal runs of consecutive samples where ``ok`` holds, ending at gaps in time
+    (:func:`vivbench.preprocess.mask_runs`), with at least ``min_samples`` samples."""
+    return [run for run in mask_runs(ok, t) if run.stop - run.start >= min_samples]
 
 
 def _default_sindy():

@@ -27,6 +27,7 @@ import xarray as xr
 from vivbench.core.errors import InputError
 
 from vivbench.core.terms import reference_section
+from vivbench.preprocess.runs import mask_runs
 
 __all__ = ["Plateau", "clearest_plateau", "measured_plateau", "truth_plateau"]
 
@@ -60,15 +61,10 @@ class Plateau:
         return self.end - self.start
 
 
-def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First and last index of each run of True."""
-    m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
-    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
-    return edges[0::2], edges[1::2] - 1
-
-
 def _best_run(t, mask, amp, event_id, source, window):
-    first, last = _runs(mask)
+    runs = mask_runs(mask)
+    first = np.array([r.start for r in runs], dtype=int)
+    last = np.array([r.stop - 1 for r in runs], dtype=int)
     if first.size == 0:
         return None
     dur = t[last] - t[first]
