@@ -24,10 +24,15 @@ def _record(A, t=None):
     return Record(event_id="E000", t=t, A=A, U=np.full(A.shape, 8.0))
 
 
-def test_valid_span_counts_from_the_first_to_the_last_finite_amplitude():
+def test_valid_span_is_the_longest_stretch_of_finite_amplitudes_without_a_gap():
     A = np.array([np.nan, 0.1, 0.2, 0.3, np.nan])
     assert valid_span(_record(A)) == 2.0
     assert valid_span(_record([np.nan, 0.1])) == 0.0
+    assert valid_span(_record([np.nan, np.nan])) == 0.0
+    # a NaN block or samples missing from the time axis split the event: its longest piece counts
+    assert valid_span(_record([0.1, 0.1, 0.1, np.nan, 0.2, 0.2, 0.2, 0.2, 0.2])) == 4.0
+    t = np.array([0.0, 1.0, 2.0, 3.0, 100.0, 101.0])
+    assert valid_span(_record(np.full(6, 0.1), t)) == 3.0
 
 
 def test_amplitude_slope_is_the_derivative_of_the_models_dA_dt_in_A():

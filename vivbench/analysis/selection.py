@@ -226,7 +226,7 @@ class ModelSelection:
     event_ids_ : list of str
     time_constant_s_ : float, s, the envelope's time constant (NaN: the chosen model flags no regime-1
         window, or gives no dA/dt)
-    event_duration_s_ : ndarray, shape (E,), s, each event's span of valid samples
+    event_duration_s_ : ndarray, shape (E,), s, each event's longest stretch of valid samples (:func:`valid_span`)
     """
 
     def __init__(self, *, candidates: Sequence[Candidate], n_folds: int = 5, criterion: str = "output",

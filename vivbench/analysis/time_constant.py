@@ -17,6 +17,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from vivbench.core.record import Record
+from vivbench.preprocess.runs import mask_runs
 
 __all__ = ["WINDOW_S", "STEP_S", "amplitude_slope", "envelope_time_constant", "short_events", "valid_span"]
 
@@ -25,9 +26,11 @@ WINDOW_S, STEP_S = 50.0, 25.0
 
 
 def valid_span(record: Record) -> float:
-    """Seconds from the first to the last sample with a finite A at any section (0 with fewer than two)."""
-    ok = np.isfinite(record.A).any(axis=1)
-    return float(record.t[ok][-1] - record.t[ok][0]) if ok.sum() > 1 else 0.0
+    """Seconds of the record's longest stretch of samples with a finite A at any section and no gap in time
+    (:func:`vivbench.preprocess.mask_runs`): a dropout splits an event, as it splits its held-out runs (0 with
+    fewer than two such samples)."""
+    runs = mask_runs(np.isfinite(record.A).any(axis=1), record.t)
+    return max((float(record.t[r.stop - 1] - record.t[r.start]) for r in runs), default=0.0)
 
 
 def amplitude_slope(model, record: Record, rel: float = 1e-3) -> np.ndarray | None:
