@@ -42,7 +42,8 @@ def mask_runs(mask, t=None) -> list[slice]:
 
     With the sample times ``t``, shape (n,), s, a run also ends where the step to the next sample exceeds
     1.5 times the median step: a gap in the record (samples missing without NaN, as between the segments
-    of an identification result), which no derivative, window or simulation may span.
+    of an identification result), so that a derivative, a window or a held-out simulation over a run never
+    spans it.
     """
     mask = np.asarray(mask, dtype=bool)
     breaks = None
