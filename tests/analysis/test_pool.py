@@ -140,3 +140,36 @@ def test_pool_writes_the_selections_own_change_scan_instead_of_a_second(small_re
         assert np.array_equal(recorded["scan"][key], fresh[key], equal_nan=True)
     assert np.array_equal(ds["event_misfit"].values, fresh["misfit"], equal_nan=True)
     assert np.array_equal(ds["event_model_split_gain"].values, fresh["split_gain"], equal_nan=True)
+
+
+def test_pool_with_the_pooled_class_alone_writes_a_pooled_model_that_sees_the_smoothed_wind(small_results, tmp_path,
+                                                                                          capsys):
+    """``--model-classes pooled``: the selection's choice is a PooledSINDy, written, loaded and evaluated on the
+    measured wind smoothed as at fit (30 s, the selection's prior)."""
+    from vivbench.analysis import load_campaign_model
+    from vivbench.cli import main
+    from vivbench.io.campaign_model import REGIMES_NAME, read_campaign_regimes
+    from vivbench.io.result import read_result, result_record
+    from vivbench.models.campaign import PooledSINDy
+    from vivbench.preprocess.wind_smoothing import smooth_wind
+    from vivbench.regimes import model_window_regimes
+
+    _, res_dir, _ = small_results
+    res = tmp_path / "res"
+    shutil.copytree(res_dir, res)
+    assert main(["pool", str(res), "--model-classes", "pooled", "--bootstrap", "4", "--block", "20"]) == 0
+    out = capsys.readouterr().out
+    assert "chose pooled from the campaign's own evidence" in out and "PooledSINDy, terms per equation" in out
+    model = load_campaign_model(res)
+    assert type(model) is PooledSINDy and model.wind_smoothing_s == 30.0
+    pooled = read_campaign_regimes(res / REGIMES_NAME)
+    assert json.loads(pooled.attrs["selection_json"])["chosen"] == "pooled"
+    result = read_result(sorted(res.glob("*.identify.nc"))[0])
+    start, end = result["window_start"].values, result["window_end"].values
+    rec = smooth_wind(result_record(result), 30.0)
+    sel = pooled["event_id"].values.astype(str) == result.attrs["event_id"]
+    assert np.array_equal(model_window_regimes(model, rec, start, end, tau=model.tau)["regime"],
+                          pooled["regime"].values[sel])
+    with pytest.raises(SystemExit):
+        main(["pool", str(res), "--model-classes", "pooled,greybox"])
+    assert "--model-classes: must be distinct names among varying,pooled" in capsys.readouterr().err

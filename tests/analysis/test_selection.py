@@ -212,18 +212,20 @@ def test_the_wind_smoothing_is_the_stated_prior_unless_given_or_among_the_option
     # A grid given lets the campaign's cross-validation replace the prior; a smoothing pinned or among the
     # selection's options leaves the models none of their own.
     sel = varying_selection(**pinned)
-    assert {c.model.wind_smoothing_s for c in sel.candidates} == smoothing
-    assert {c.model.get_params()["wind_smoothing_grid"] for c in sel.candidates} == {grid}
+    varying = [c for c in sel.candidates if c.options["model_class"] == "varying"]
+    assert {c.model.wind_smoothing_s for c in sel.candidates} == smoothing  # the pooled candidates' too
+    assert {c.model.wind_smoothing_s for c in sel.candidates if c.options["model_class"] == "pooled"} == smoothing
+    assert {c.model.get_params()["wind_smoothing_grid"] for c in varying} == {grid}
     assert sel.null_model.wind_smoothing_s == (15.0 if "wind_smoothing_s" in pinned else 30.0)
 
 
 def test_without_yaw_keeps_the_yaw_free_candidates():
     sel = varying_selection(options={"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")})
-    assert len(sel.candidates) == 4
-    assert [c.name for c in without_yaw(sel).candidates] == ["yaw0-cv", "yaw0-least"]
-    assert len(sel.candidates) == 4  # the original is left as it was
+    assert len(sel.candidates) == 5
+    assert [c.name for c in without_yaw(sel).candidates] == ["yaw0-cv", "yaw0-least", "pooled"]
+    assert len(sel.candidates) == 5  # the original is left as it was
     with pytest.raises(InputError, match="needs the wind's yaw"):
-        without_yaw(varying_selection(yaw_degree=1, options={"yaw_degree": (1,)}))
+        without_yaw(varying_selection(yaw_degree=1, options={"yaw_degree": (1,)}, model_classes=("varying",)))
 
 
 def test_two_events_give_no_held_out_choice_and_say_so():
@@ -347,8 +349,8 @@ def test_candidates_that_differ_only_in_final_parameters_share_a_group():
 
     sel = varying_selection(options={"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")})
     models = [c.model for c in sel.candidates] + [QuasiSteadyAmplitude(), _Poly(1), _Poly(1)]
-    assert [c.name for c in sel.candidates] == ["yaw0-cv", "yaw0-least", "yaw1-cv", "yaw1-least"]
-    assert shared_groups(models) == [[0, 1], [2, 3], [4], [5], [6]]
+    assert [c.name for c in sel.candidates] == ["yaw0-cv", "yaw0-least", "yaw1-cv", "yaw1-least", "pooled"]
+    assert shared_groups(models) == [[0, 1], [2, 3], [4], [5], [6], [7]]
 
 
 def test_grouped_held_out_fits_give_each_candidates_own_losses_and_final_fits():
@@ -437,3 +439,35 @@ def test_without_regime_1_windows_the_time_constant_is_unknown_and_no_limit_regi
     assert np.isnan(sel.time_constant_s_) and sel.short_events() == sel.event_ids_
     assert "time constant is not identified" in sel.evidence_text()
     assert not sel.identifiable(recs[0], np.array([0.0]), np.array([50.0])).any()
+
+
+def test_the_model_class_is_chosen_by_held_out_loss_among_the_simplest_and_its_own_verdict_is_used():
+    """PooledSINDy is scored on the same folds as the yaw-free varying candidates (complexity 0): the lower held-out
+    loss decides between the classes, and the chosen model's verdict is its own through the protocol."""
+    from vivbench.models.campaign import PooledSINDy
+    from vivbench.models.model_input import measured_input
+    from vivbench.regimes import model_verdicts
+
+    recs = _yaw_records(False)
+    sel = varying_selection(criterion="derivative", options={"yaw_degree": (0,), "penalty_choice": ("cv", "least")},
+                            n_perturbations=0, n_basis=(8,), n_bootstrap=10, wind_smoothing_s=0.0, null=False,
+                            change_scan=False).fit(recs)
+    assert sel.names_ == ["yaw0-cv", "yaw0-least", "pooled"] and sel.scored_.all()
+    total = sel.losses_.sum(axis=1)
+    members = np.flatnonzero(sel.in_set_)
+    assert sel.chosen_index_ == members[np.argmin(total[members])]
+    ev = {c["name"]: c for c in sel.evidence()["candidates"]}
+    assert ev["pooled"]["options"] == {"model_class": "pooled", "wind_smoothing_s": 0.0}
+    # The pooled class alone: chosen, and its windows get PooledSINDy's own regimes and, narrowed, its verdicts.
+    alone = varying_selection(criterion="derivative", model_classes=("pooled",), n_perturbations=0,
+                              n_bootstrap=10, block_s=100.0, wind_smoothing_s=0.0, null=False,
+                              change_scan=False).fit(recs)
+    assert alone.chosen_ == "pooled" and type(alone.chosen_model()) is PooledSINDy
+    start, end = np.arange(0.0, 800.0, 100.0), np.arange(100.0, 900.0, 100.0)
+    own = model_verdicts(alone.model_, measured_input(alone.model_, recs[0]), start, end)
+    assert np.array_equal(alone.window_regimes(recs[0], start, end), own["regime"])
+    flags = alone.identifiable(recs[0], start, end)
+    assert not (flags & ~own["identifiable"]).any()
+    assert alone.settings_text().startswith("PooledSINDy, terms per equation")
+    with pytest.raises(InputError, match="model_classes must be distinct names"):
+        varying_selection(model_classes=("varying", "greybox"))

@@ -340,3 +340,31 @@ def test_campaign_model_differentiates_the_results_amplitudes_itself(small_resul
     pooled = pool_results(results, PooledSINDy(n_bootstrap=0))
     assert json.loads(pooled.attrs["derivative_json"])["method"] == "tv"
     assert json.loads(pool_results(results, PooledSINDy(n_bootstrap=0), derivative=None).attrs["derivative_json"]) is None
+
+
+def test_wind_smoothing_is_applied_at_fit_and_to_measured_records_and_kept_in_the_file(tmp_path):
+    """``wind_smoothing_s`` smooths the measured wind before the fit, as smoothing the records first does; the
+    model then evaluates measured records on the wind so smoothed and its file keeps the smoothing."""
+    from vivbench.core.record import Record
+    from vivbench.models.model_input import measured_input
+    from vivbench.preprocess.wind_smoothing import smooth_wind
+
+    rng = np.random.default_rng(2)
+    n = 1200
+    t = np.arange(n) * 0.5
+    A = 0.1 + 0.05 * np.abs(np.sin(t / 90.0))[:, None] + 0.01 * rng.random((n, 2))
+    U = 8.0 + 2.0 * np.sin(t / 200.0)[:, None] + 0.8 * rng.standard_normal((n, 2))
+    dA = 1e-3 * (U - 8.0) * A + 1e-4 * rng.standard_normal((n, 2))
+    rec = Record(event_id="E0", t=t, A=A, U=U, dA=dA)
+    own = PooledSINDy(n_bootstrap=0, wind_smoothing_s=20.0).fit([rec])
+    given = PooledSINDy(n_bootstrap=0).fit([smooth_wind(rec, 20.0)])
+    assert np.array_equal(own.coef_, given.coef_)
+    assert_not_close(own.coef_, PooledSINDy(n_bootstrap=0).fit([rec]).coef_, rtol=1e-3,
+                     reason="the 0.8 m/s white wind noise moves the fit unless smoothed")
+    assert np.array_equal(measured_input(own, rec).U, smooth_wind(rec, 20.0).U)
+    assert getattr(given, "measured_wind", None) is None  # None: the caller's smoothing (measured_input's argument)
+    assert np.array_equal(measured_input(given, rec, wind_smoothing_s=5.0).U, smooth_wind(rec, 5.0).U)
+    back = PooledSINDy.load(own.save(tmp_path / "m.nc"))
+    assert back.wind_smoothing_s == 20.0 and np.array_equal(measured_input(back, rec).U, measured_input(own, rec).U)
+    with pytest.raises(ValueError, match="wind_smoothing_s must be None"):
+        PooledSINDy(wind_smoothing_s=-1.0).fit([rec])

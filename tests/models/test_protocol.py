@@ -174,7 +174,7 @@ def test_params_follow_scikit_learn():
     model = PooledSINDy(n_bootstrap=5)
     assert model.get_params()["n_bootstrap"] == 5
     assert set(model.get_params()) == {"thresholds", "alpha", "scaling", "n_bootstrap", "block_s", "agreement",
-                                       "confidence", "min_blocks", "tau", "seed", "chunk_size"}
+                                       "confidence", "min_blocks", "tau", "seed", "chunk_size", "wind_smoothing_s"}
     assert model.set_params(alpha=0.1) is model and model.alpha == 0.1
     assert repr(model) == "PooledSINDy(alpha=0.1, n_bootstrap=5)"
     with pytest.raises(ValueError, match="unknown parameter 'beta'"):

@@ -330,4 +330,25 @@ def test_the_twin_chooses_the_wind_smoothing_again_where_the_field_run_chose_it(
     assert model.model_.get_params()["wind_smoothing_grid"] is None  # the chosen model holds its smoothing pinned
     settings = pool_settings(tmp_path)
     assert settings.params["wind_smoothing_s"] == 30.0 and settings.params["wind_smoothing_grid"] == [10.0, 30.0]
-    assert {c.model.wind_smoothing_grid for c in pool_method(settings).candidates} == {(10.0, 30.0)}
+    rebuilt = pool_method(settings).candidates
+    assert {c.model.wind_smoothing_grid for c in rebuilt if c.options["model_class"] == "varying"} == {(10.0, 30.0)}
+    def grid(cands):
+        return sorted(json.dumps(c.options, sort_keys=True) for c in cands)
+
+    assert grid(rebuilt) == grid(model.candidates)  # the same options and model classes, the pooled one too
+
+
+def test_the_twin_refits_a_selection_whose_choice_is_the_pooled_class_with_its_parameters(field, tmp_path):
+    """A field run of the pooled class alone (its parameters given) is rebuilt as such, parameters included."""
+    from vivbench.validate.twin_chain import pool_method, pool_settings
+
+    _, _, results = field
+    model = varying_selection(n_bootstrap=6, block_s=120.0, n_perturbations=0, model_classes=("pooled",),
+                              wind_smoothing_s=15.0)
+    write_campaign_regimes(pool_results(results, model), tmp_path)
+    model.save(tmp_path / MODEL_NAME)
+    settings = pool_settings(tmp_path)
+    assert settings.selection["model_classes"] == ["pooled"]
+    (cand,) = pool_method(settings).candidates
+    assert cand.model.get_params() == model.candidates[0].model.get_params()
+    assert (cand.model.n_bootstrap, cand.model.block_s, cand.model.wind_smoothing_s) == (6, 120.0, 15.0)

@@ -1,4 +1,4 @@
-"""A selection's candidates adapted to the records before the held-out choice.
+"""A selection's candidates (:class:`Candidate`) and their adaptation to the records before the held-out choice.
 
 Two adaptations, both from the records alone:
 
@@ -14,11 +14,45 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 from vivbench.core.errors import InputError
 
-__all__ = ["settle_candidates", "without_yaw"]
+__all__ = ["Candidate", "settle_candidates", "without_yaw"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Candidate:
+    """One candidate campaign model of a selection.
+
+    Attributes
+    ----------
+    name : str
+        Short label, e.g. ``"yaw0-cv"``; unique within a selection.
+    model : object
+        An unfitted model of the protocol (``fit(records)`` returning the fitted model,
+        ``simulate`` for the output error or ``predict`` for the derivative criterion,
+        ``order_contributions``); fitted on copies, never in place.
+    complexity : int
+        Rank of simplicity (0 the simplest); the selection reports the simplest member of
+        the confidence set.
+    options : dict
+        The option values this candidate stands for (recorded with the choice).
+    """
+
+    name: str
+    model: Any
+    complexity: int = 0
+    options: dict | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"a candidate's name must be a non-empty string; got {self.name!r}")
+        if not callable(getattr(self.model, "fit", None)):
+            raise InputError(f"candidate {self.name!r}: its model has no fit(records) method")
+        if int(self.complexity) != self.complexity or self.complexity < 0:
+            raise InputError(f"candidate {self.name!r}: complexity must be an integer >= 0; got {self.complexity!r}")
 
 
 def without_yaw(selection):

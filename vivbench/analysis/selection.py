@@ -74,8 +74,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 import xarray as xr
@@ -84,7 +83,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.parallel import run_tasks
 from vivbench.core.record import Record
 from vivbench.core.regime import DEFAULT_TAU
-from vivbench.analysis.candidates import settle_candidates, without_yaw
+from vivbench.analysis.candidates import Candidate, settle_candidates, without_yaw
 from vivbench.analysis.held_out import (CRITERIA, RANK_LEVEL, confidence_set, dynamics_by_wind, event_folds, fit_task,
                                         held_out_task, one_se_set, shared_groups, variant_params)
 from vivbench.analysis.time_constant import envelope_time_constant, short_events, valid_span
@@ -96,7 +95,8 @@ from vivbench.models.protocol import as_record, model_change_inputs, model_summa
 from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
-__all__ = ["Candidate", "ModelSelection", "LIMIT_TIME_CONSTANTS", "MIN_EVENTS", "STRUCTURAL_OPTIONS", "UNMEASURED_Z",
+__all__ = ["Candidate", "ModelSelection", "LIMIT_TIME_CONSTANTS", "MIN_EVENTS", "MODEL_CLASSES", "STRUCTURAL_OPTIONS",
+           "UNMEASURED_Z",
            "VARYING_OPTIONS", "VARYING_PRIORS", "SINGLE_SECTION_SHARE", "perturbed_wind", "varying_selection", "wind_error_scale",
            "without_yaw"]
 
@@ -106,39 +106,6 @@ MIN_EVENTS = 3
 #: Events shorter than this many envelope time constants are listed in the evidence as too short to
 #: show how an amplitude's change ends (module docstring; a stated prior, docs/limitations.md).
 LIMIT_TIME_CONSTANTS = 5.0
-
-@dataclass(frozen=True, kw_only=True)
-class Candidate:
-    """One candidate campaign model of a selection.
-
-    Attributes
-    ----------
-    name : str
-        Short label, e.g. ``"yaw0-cv"``; unique within a selection.
-    model : object
-        An unfitted model of the protocol (``fit(records)`` returning the fitted model,
-        ``simulate`` for the output error or ``predict`` for the derivative criterion,
-        ``order_contributions``); fitted on copies, never in place.
-    complexity : int
-        Rank of simplicity (0 the simplest); the selection reports the simplest member of
-        the confidence set.
-    options : dict
-        The option values this candidate stands for (recorded with the choice).
-    """
-
-    name: str
-    model: Any
-    complexity: int = 0
-    options: dict | None = None
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name:
-            raise InputError(f"a candidate's name must be a non-empty string; got {self.name!r}")
-        if not callable(getattr(self.model, "fit", None)):
-            raise InputError(f"candidate {self.name!r}: its model has no fit(records) method")
-        if int(self.complexity) != self.complexity or self.complexity < 0:
-            raise InputError(f"candidate {self.name!r}: complexity must be an integer >= 0; got {self.complexity!r}")
-
 
 class ModelSelection:
     """A campaign model chosen among candidates by held-out prediction with whole events left out.
@@ -166,9 +133,10 @@ class ModelSelection:
     tau : float
         Regime threshold of the set and perturbation agreement.
     verdict : callable or None
-        ``verdict(model, record, window_start, window_end)`` -> dict with ``identifiable`` (W, S), the
-        chosen model's own verdict (e.g. :func:`vivbench.regimes.varying_window_verdicts`); None: the
-        model's ``identifiable`` method, or no window flagged without one.
+        ``verdict(model, record, window_start, window_end)`` -> dict with ``regime`` and ``identifiable``
+        (W, S), to replace the chosen model's own verdict; None: the model's own through the protocol
+        (:func:`vivbench.regimes.model_verdicts`: its ``window_verdicts``, else the regime rule with its
+        ``identifiable``, else no window flagged), whatever the class of the chosen candidate.
     seed : int
         Seed of the folds and of the perturbations.
     workers : int
@@ -542,12 +510,8 @@ class ModelSelection:
         rec = measured_input(self.model_, record)
         if self.verdict is not None:
             out = dict(self.verdict(self.model_, rec, start, end))
-        else:
-            regime = self._regimes(self.model_, record, start, end)
-            own = getattr(self.model_, "identifiable", None)
-            flag = (np.asarray(own(rec, start, end), dtype=bool) if callable(own)
-                    else np.zeros(regime.shape, dtype=bool))
-            out = {"regime": regime, "identifiable": flag}
+        else:  # the model's own, through the protocol (its window_verdicts, or the rule and its identifiable)
+            out = model_verdicts(self.model_, rec, start, end, tau=self.tau)
         self.__dict__["_last_verdict"] = (key, record, out)
         return out
 
@@ -652,6 +616,7 @@ class ModelSelection:
             "criterion": self.criterion, "n_folds": int(min(self.n_folds, len(self.event_ids_))), "chosen": self.chosen_,
             "candidates": [
                 {"name": c.name, "complexity": int(c.complexity), "options": c.options or {},
+                 "params": _json_params(c.model),
                  "held_out_loss": float(self.losses_[i].sum()), "excess": float(self.excess_[i]),
                  "se": float(self.se_[i]), "p_rank": float(self._p_rank()[i]), "scored": bool(self._scored()[i]),
                  "in_set": bool(self.in_set_[i])}
@@ -713,6 +678,9 @@ class ModelSelection:
 #: penalty of the leave-one-event-out confidence set, which gives rougher curves).
 VARYING_OPTIONS = {"yaw_degree": (0, 1, 2), "penalty_choice": ("cv", "least")}
 
+#: The classes of campaign model a selection of :func:`varying_selection` chooses among by default.
+MODEL_CLASSES = ("varying", "pooled")
+
 #: Errors by which winds measured elsewhere on the span are shifted in :meth:`ModelSelection.agreement` (95 %, two-sided).
 UNMEASURED_Z = 1.96
 
@@ -733,7 +701,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                       workers: int = 1, scheduler: str | None = None, null: bool = True,
                       change_scan: bool = True, single_section_share: float = SINGLE_SECTION_SHARE,
                       min_time_constants: float | None = LIMIT_TIME_CONSTANTS, rank_level: float | None = RANK_LEVEL,
-                      wind_bins: int | None = None, **params) -> ModelSelection:
+                      wind_bins: int | None = None, model_classes: Sequence[str] = MODEL_CLASSES,
+                      **params) -> ModelSelection:
     """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
 
     Parameters
@@ -753,40 +722,64 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         (with the candidates' wind smoothing) before any window is flagged.
     change_scan : bool
         Flag no window when the chosen model's change scan locates a change (:class:`ModelSelection`).
+    model_classes : sequence of {"varying", "pooled"}
+        The classes of campaign model among the candidates (default :data:`MODEL_CLASSES`): ``"varying"``
+        the grid of ``options`` of :class:`vivbench.models.VaryingCoefficientSINDy`; ``"pooled"`` one
+        :class:`vivbench.models.PooledSINDy` (the pooled library, no covariate) on the same smoothed wind,
+        of complexity 0: the yaw-free varying candidates and it are told apart by their held-out losses.
     **params
         Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given).
 
     Returns
     -------
-    ModelSelection, unfitted, whose verdict is :func:`vivbench.regimes.varying_window_verdicts`
+    ModelSelection, unfitted, whose verdict is the chosen model's own (:func:`vivbench.regimes.model_verdicts`)
     """
     import itertools
 
     from vivbench.models.quasi_steady import QuasiSteadyAmplitude
     from vivbench.models.varying import VaryingCoefficientSINDy
-    from vivbench.regimes import varying_window_verdicts
 
+    classes = tuple(model_classes) if not isinstance(model_classes, str) else (model_classes,)
+    if not classes or len(set(classes)) != len(classes) or not set(classes) <= set(MODEL_CLASSES):
+        raise InputError(f"model_classes must be distinct names among {', '.join(map(repr, MODEL_CLASSES))}; "
+                         f"got {model_classes!r}")
     grid = {k: tuple(v) for k, v in (VARYING_OPTIONS if options is None else options).items() if k not in params}
     for k in [k for k, v in grid.items() if not v]:
         raise InputError(f"option {k!r} has no candidate value")
     fixed = {**{k: v for k, v in VARYING_PRIORS.items() if k not in grid}, **params, "seed": seed}
     names = list(grid)
     candidates = []
-    for idx in itertools.product(*(range(len(grid[k])) for k in names)):
+    for idx in itertools.product(*(range(len(grid[k])) for k in names)) if "varying" in classes else ():
         chosen = {k: grid[k][i] for k, i in zip(names, idx)}
         label = "-".join(_option_label(k, v) for k, v in chosen.items()) or "varying"
         candidates.append(Candidate(name=label, model=VaryingCoefficientSINDy(**fixed, **chosen),
                                     complexity=int(sum(i for k, i in zip(names, idx) if k in STRUCTURAL_OPTIONS)),
-                                    options=chosen))
+                                    options=({"model_class": "varying"} if len(classes) > 1 else {}) | chosen))
+    if "pooled" in classes:  # after the varying candidates: the simplest of those settles the wind smoothing
+        from vivbench.models.campaign import PooledSINDy
+
+        own = PooledSINDy().get_params()
+        shared = {k: v for k, v in fixed.items() if k in own and k != "wind_smoothing_s"}
+        smoothings = grid.get("wind_smoothing_s", (fixed.get("wind_smoothing_s", VARYING_PRIORS["wind_smoothing_s"]),))
+        for sigma in smoothings:  # one pooled model per smoothing among the options
+            label = "pooled" if len(smoothings) == 1 else f"pooled-{_option_label('wind_smoothing_s', float(sigma))}"
+            candidates.append(Candidate(name=label, model=PooledSINDy(**shared, wind_smoothing_s=float(sigma)),
+                                        complexity=0, options={"model_class": "pooled", "wind_smoothing_s": float(sigma)}))
     return ModelSelection(candidates=candidates, n_folds=n_folds, criterion=criterion,
                           n_perturbations=n_perturbations, perturbation_timescale_s=perturbation_timescale_s,
-                          tau=fixed.get("tau", DEFAULT_TAU), verdict=varying_window_verdicts, seed=seed,
+                          tau=fixed.get("tau", DEFAULT_TAU), seed=seed,
                           workers=workers, scheduler=scheduler,
                           null_model=(QuasiSteadyAmplitude(wind_smoothing_s=fixed.get("wind_smoothing_s", 30.0))
                                       if null else None),
                           change_scan=change_scan, single_section_share=single_section_share,
                           min_time_constants=min_time_constants, rank_level=rank_level,
                           wind_bins=(wind_bins if null else None))
+
+
+def _json_params(model) -> dict:
+    """A candidate's parameters (``get_params``) as JSON data (tuples as lists, other objects as text)."""
+    own = model.get_params() if callable(getattr(model, "get_params", None)) else {}
+    return json.loads(json.dumps(own, sort_keys=True, default=str))
 
 
 def _option_label(name: str, value) -> str:

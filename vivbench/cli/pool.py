@@ -29,6 +29,16 @@ def _model_name(text: str) -> str:
     return text
 
 
+def _model_classes(text: str) -> tuple[str, ...]:
+    """The ``--model-classes`` value: distinct names among the selection's model classes."""
+    from vivbench.analysis.selection import MODEL_CLASSES
+
+    names = tuple(x.strip() for x in text.split(","))
+    if not names or len(set(names)) != len(names) or not set(names) <= set(MODEL_CLASSES):
+        raise argparse.ArgumentTypeError(f"must be distinct names among {','.join(MODEL_CLASSES)}; got {text!r}")
+    return names
+
+
 def run(args) -> int:
     from vivbench.io.result import list_results, select_results
 
@@ -68,6 +78,7 @@ def _pool(files, args, weights, out_dir: Path, results_dir: Path, *, label: str 
     from vivbench.analysis.selection import varying_selection
     from vivbench.analysis.pool import pool_results
     from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
+    from vivbench.models.protocol import model_settings_text
 
     campaign = Path(args.campaign) if args.campaign else None
     smoothing = 0.0
@@ -82,7 +93,8 @@ def _pool(files, args, weights, out_dir: Path, results_dir: Path, *, label: str 
         # campaign's held-out evidence (vivbench.analysis.selection).
         extra = {k: v for k, v in (("yaw_degree", args.yaw_degree), ("wind_smoothing_s", args.wind_smoothing),
                                    ("wind_smoothing_grid", args.wind_smoothing_grid), ("wind_input", args.wind_input),
-                                   ("wind_weights", weights), ("penalty_choice", args.penalty_choice))
+                                   ("wind_weights", weights), ("penalty_choice", args.penalty_choice),
+                                   ("model_classes", args.model_classes))
                  if v is not None}
         if args.min_time_constants is not None:
             extra["min_time_constants"] = args.min_time_constants or None  # 0: no restriction
@@ -112,13 +124,7 @@ def _pool(files, args, weights, out_dir: Path, results_dir: Path, *, label: str 
         print(f"vivbench pool: {ds.attrs['note']}", file=sys.stderr)
     if args.model == "varying":
         print(f"vivbench pool: chose {model.chosen_} from the campaign's own evidence; " + model.evidence_text())
-        shape = (f"cubic B-splines per curve {', '.join(str(int(k)) for k in ds['n_basis'].values)} "
-                 f"({model.wind_weights_choice_} wind weights, {model.penalty_choice_} penalty, "
-                 f"yaw degree {model.yaw_degree_}, wind smoothing {model.fitted_wind_smoothing():g} s)")
-    elif args.model == "pooled":
-        shape = f"terms per equation {', '.join(str(int(k)) for k in ds['n_terms'].values)}"
-    else:
-        shape = f"model {ds.attrs.get('model', args.model)}"
+    shape = model_settings_text(model)
     chosen = "" if label is None else f" ({label})"
     print(f"wrote {out}: {len(files)} events{chosen}, {ds.sizes['window_all']} windows, {shape}, "
           f"regime coverage (identifiable) {ds.attrs['coverage']:.3f}")
@@ -200,11 +206,17 @@ def register(sub) -> None:
                         "on, each into a directory of its own under the output directory (before_<event>, "
                         "from_<event>): a model and regimes of each period")
     s.add_argument("--model", type=_model_name, default="varying", metavar="{varying,pooled,MODULE:FACTORY}",
-                   help="campaign model: varying (VaryingCoefficientSINDy, penalised spline curves in U with the "
-                        "wind's yaw; default: it follows a lock-in bell that no polynomial in U does) or "
+                   help="campaign model: varying (default: chosen from the campaign's held-out evidence among "
+                        "VaryingCoefficientSINDy's options, penalised spline curves in U with the wind's yaw that "
+                        "follow a lock-in bell no polynomial in U does, and the classes of --model-classes) or "
                         "pooled (PooledSINDy, sparse regression on the 69-term library, the paper's class), or "
                         "package.module:factory, a user's campaign model of the protocol (docs/methods.md) that "
                         "the factory returns unfitted")
+    s.add_argument("--model-classes", default=None, type=_model_classes, metavar="varying,pooled",
+                   help="with --model varying: the classes of campaign model the held-out choice is made among "
+                        "(default varying,pooled: PooledSINDy on the same smoothed wind is a candidate beside the "
+                        "varying model's options, and the lower held-out loss decides between them; varying: the "
+                        "varying model alone)")
     s.add_argument("--campaign", default=None,
                    help="directory of the results' event files, only for results identified before the result "
                         "stored the wind's yaw: their yaw is then measured from the events' anemometers")

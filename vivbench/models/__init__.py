@@ -35,6 +35,7 @@ from vivbench.models.protocol import (
     model_description,
     chosen_model,
     model_evidence,
+    model_settings_text,
     IDENTIFIABLE_LONG_NAME,
 )
 from vivbench.models.refit import (
@@ -87,7 +88,7 @@ __all__ = [
     "WindowSINDy", "nearest_window", "VaryingCoefficientSINDy", "ORDER_SET_MARGIN", "modal_wind_weights", "weighted_section_mean",
     "measured_input", "Integration", "StopRule", "rk4",
     "model_summary", "model_size", "model_for_records", "model_change_inputs", "recorded_change_scan", "simulate_many", "transforms_wind", "model_curves",
-    "model_class_path", "model_description", "chosen_model", "model_evidence", "IDENTIFIABLE_LONG_NAME", "varying_description", "campaign_window_verdicts", "gram_order_stats", "varying_summary",
+    "model_class_path", "model_description", "chosen_model", "model_evidence", "model_settings_text", "IDENTIFIABLE_LONG_NAME", "varying_description", "campaign_window_verdicts", "gram_order_stats", "varying_summary",
     "varying_window_verdicts", "window_grams", "window_order_stats",
     "OTHER_TERMS", "PySINDyCampaign", "PySINDyCP", "PySINDyWindows", "term_orders",
     "ENSEMBLE_AGGREGATES", "PySINDyEnsemble", "PySINDySBR", "PySINDyWeak", "sbr_available",

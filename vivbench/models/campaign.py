@@ -40,7 +40,8 @@ import numpy as np
 import xarray as xr
 
 import vivbench
-from vivbench.io.campaign_model import read_campaign_model, write_campaign_model
+from vivbench.io.campaign_model import (CAMPAIGN_MODEL_FORMAT, CAMPAIGN_MODEL_VERSION, read_campaign_model,
+                                       write_campaign_model)
 from vivbench.regression.bootstrap import block_counts
 from vivbench.regression.settings import DEFAULT_THRESHOLDS, StlsqSettings
 from vivbench.regression.stlsq import aicc, stlsq_path
@@ -60,6 +61,7 @@ from vivbench.models.protocol import (
 )
 from vivbench.models.campaign_verdicts import campaign_window_verdicts
 from vivbench.models.simulate import Simulation
+from vivbench.preprocess.wind_smoothing import smooth_wind
 
 __all__ = ["PooledSINDy", "amplitude_ratios", "RATIO_LEVEL"]
 
@@ -246,6 +248,12 @@ class PooledSINDy(ModelBase):
         Seed of the bootstrap.
     chunk_size : int
         Replicates solved together (memory: chunk_size x n_blocks x 69^2 floats).
+    wind_smoothing_s : float or None, s, >= 0
+        Gaussian smoothing of the measured U and yaw before the fit, applied again by
+        :meth:`measured_wind` when the model is evaluated on measured records (as
+        :class:`vivbench.models.VaryingCoefficientSINDy` does; a candidate of a model selection
+        then sees the wind as the others do). None: the model takes a record's wind as given and
+        has no ``measured_wind`` (the caller smooths, e.g. ``vivbench pool --wind-smoothing``).
 
     Attributes
     ----------
@@ -268,8 +276,9 @@ class PooledSINDy(ModelBase):
     def __init__(self, *, thresholds: Sequence[float] = DEFAULT_THRESHOLDS, alpha: float = 0.05,
                  scaling: str = "scaled", n_bootstrap: int = 100, block_s: float = 300.0,
                  agreement: float = 0.9, confidence: float = 0.95, min_blocks: int = 20, tau: float = DEFAULT_TAU, seed: int = 0,
-                 chunk_size: int = 16):
+                 chunk_size: int = 16, wind_smoothing_s: float | None = None):
         self.thresholds = thresholds
+        self.wind_smoothing_s = wind_smoothing_s
         self.alpha = alpha
         self.scaling = scaling
         self.n_bootstrap = n_bootstrap
@@ -302,6 +311,10 @@ class PooledSINDy(ModelBase):
             raise InputError(f"tau must lie strictly between 0 and 1; got {self.tau!r}")
         if isinstance(self.chunk_size, bool) or not isinstance(self.chunk_size, (int, np.integer)) or self.chunk_size < 1:
             raise InputError(f"chunk_size must be an integer >= 1; got {self.chunk_size!r}")
+        w = self.wind_smoothing_s
+        if w is not None and not (isinstance(w, (int, float, np.floating)) and not isinstance(w, bool)
+                                  and np.isfinite(w) and w >= 0):
+            raise InputError(f"wind_smoothing_s must be None (the wind as given) or a number of seconds >= 0; got {w!r}")
 
     def fit(self, records: Sequence[Record | tuple]) -> "PooledSINDy":
         """Fit the campaign model.
@@ -319,6 +332,8 @@ class PooledSINDy(ModelBase):
         self._validate()
         settings = StlsqSettings(thresholds=tuple(self.thresholds), alpha=self.alpha)
         records = [as_record(r, k) for k, r in enumerate(records)]
+        if self.wind_smoothing_s is not None:
+            records = [smooth_wind(r, float(self.wind_smoothing_s)) for r in records]
         As, Us, dAs, blocks = [], [], [], []
         offset = 0
         for rec in records:
@@ -383,6 +398,19 @@ class PooledSINDy(ModelBase):
         return self
 
     # -- the model protocol -------------------------------------------------------------------------
+
+    @property
+    def measured_wind(self):
+        """``measured_wind(record)``: the record with its U and yaw smoothed as at fit (``wind_smoothing_s``);
+        AttributeError when ``wind_smoothing_s`` is None (the model takes a record's wind as given)."""
+        if self.wind_smoothing_s is None:
+            raise AttributeError("measured_wind: this PooledSINDy takes a record's wind as given (wind_smoothing_s None)")
+        sigma = float(self.wind_smoothing_s)
+        return lambda record: smooth_wind(as_record(record), sigma)
+
+    def fitted_wind_smoothing(self) -> float:
+        """The smoothing of the measured wind at fit, s (0 when ``wind_smoothing_s`` is None)."""
+        return 0.0 if self.wind_smoothing_s is None else float(self.wind_smoothing_s)
 
     def order_contributions(self, record: Record) -> np.ndarray:
         """Contributions of the orders of A to dA/dt.
@@ -514,6 +542,12 @@ class PooledSINDy(ModelBase):
         self._check_fitted()
         return [int(k) for k in self.n_terms_]
 
+    def settings_text(self) -> str:
+        """One line on the fitted settings (:func:`vivbench.models.model_settings_text`)."""
+        self._check_fitted()
+        return (f"PooledSINDy, terms per equation {', '.join(str(int(k)) for k in self.n_terms_)} "
+                f"(wind smoothing {self.fitted_wind_smoothing():g} s)")
+
     def campaign_summary(self) -> dict:
         """What ``vivbench pool`` writes of this model into ``campaign.regimes.nc`` (:func:`vivbench.models.model_summary`).
 
@@ -565,7 +599,7 @@ class PooledSINDy(ModelBase):
         return format_equations(self.coef_, self.feature_names_, lhs, precision)
 
     def to_dataset(self) -> xr.Dataset:
-        """The fitted model as the Dataset of a campaign model file (``vivbench.io.campaign_model``)."""
+        """The fitted model as the Dataset of a campaign model file (``vivbench.io.campaign_model``), with its format."""
         self._check_fitted()
         S = self.n_sections_
         eq, feat, boot = ("equation",), ("equation", "feature"), ("bootstrap", "equation", "feature")
@@ -584,7 +618,8 @@ class PooledSINDy(ModelBase):
                   "bootstrap": np.arange(self.coef_bootstrap_.shape[0])}
         attrs = {"model": type(self).__name__, "params_json": self.to_json(), "n_samples": self.n_samples_,
                  "n_blocks": self.n_blocks_, "enough_data": int(self.enough_data_), "cond": self.cond_,
-                 "events": json.dumps(self.event_ids_), "vivbench_version": vivbench.__version__}
+                 "events": json.dumps(self.event_ids_), "vivbench_version": vivbench.__version__,
+                 "format": CAMPAIGN_MODEL_FORMAT, "format_version": CAMPAIGN_MODEL_VERSION}
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
     def save(self, path):

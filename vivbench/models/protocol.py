@@ -28,6 +28,7 @@ method                            helper                              default
 ``report_description(regimes)``   :func:`model_description`           the class's name and its coverage
 ``chosen_model()``                :func:`chosen_model`                the model itself (not a wrapper)
 ``evidence()``                    :func:`model_evidence`              None (no held-out evidence)
+``settings_text()``               :func:`model_settings_text`         the class's name and its size per equation
 ================================  ==================================  =====================================
 
 The protocols are :func:`typing.runtime_checkable`: ``isinstance(m, FittedModel)``
@@ -60,7 +61,7 @@ __all__ = [
     "ModelBase", "NotFittedError", "as_record", "fit_records", "coef_order_contributions", "format_equations",
     "section_names", "simulate_windows", "model_summary", "model_size", "model_for_records", "model_change_inputs",
     "recorded_change_scan", "simulate_many", "transforms_wind", "model_curves", "model_class_path", "model_description", "chosen_model",
-    "model_evidence", "IDENTIFIABLE_LONG_NAME",
+    "model_evidence", "model_settings_text", "IDENTIFIABLE_LONG_NAME",
 ]
 
 
@@ -535,3 +536,13 @@ def model_evidence(fitted) -> dict | None:
     """The held-out evidence of a model chosen from the campaign's data (``evidence()``, JSON-ready), or None."""
     own = getattr(fitted, "evidence", None)
     return own() if callable(own) else None
+
+
+def model_settings_text(fitted) -> str:
+    """One line on a fitted campaign model's settings for the command line (``settings_text()``), or by default
+    its class's name and :func:`model_size` (e.g. ``"PooledSINDy, size per equation 3, 4"``)."""
+    own = getattr(fitted, "settings_text", None)
+    if callable(own):
+        return str(own())
+    size = model_size(fitted)
+    return type(fitted).__name__ + (f", size per equation {', '.join(map(str, size))}" if size else "")

@@ -34,31 +34,24 @@ Only own-section amplitudes are used: in the averaged truth the mode shape makes
 the other sections' amplitudes proportional to A_k, so their terms are
 collinear with A_k's.
 
-The wind of the curves (``wind_input``): the truth sums the aerodynamic forces
-of every section j, each a function of that section's own felt wind U_j and yaw
-psi_j, so with a wind that differs along the span dA_k/dt = sum_i sum_j
-a_kij(U_j, psi_j) A_k^i, which no curve of one wind (the weighted mean over
-the sections, ``"mean"``, or the section's own, ``"section"``) represents when
-the curves are not linear. ``"additive"`` fits that sum: every column repeated
-for each section's wind and yaw (p = 4 M (J + 1) S, the same penalty on every
-section's curve; only the sum is identifiable, the penalty keeps the split
-smooth). The coefficient curve at wind U is then the model at the uniform wind
-U_j = U, the sum over the sections.
-``"sum"`` ties those curves to one shape weighted by the sections' weights,
-a_kij = w_j f_ki (the same deck cross-section at every section, the truth's form
-with modal weights): p = 4 M (J + 1) as with the mean wind, fitted from the
-additive statistics contracted by the weights
-(:func:`vivbench.models.varying_design.tie_stats`).
+The wind of the curves (``wind_input``): the truth sums the aerodynamic forces of every section j, each a
+function of that section's own felt wind U_j and yaw psi_j, so with a wind that differs along the span dA_k/dt =
+sum_i sum_j a_kij(U_j, psi_j) A_k^i, which no curve of one wind (the weighted mean over the sections,
+``"mean"``, or the section's own, ``"section"``) represents when the curves are not linear. ``"additive"`` fits
+that sum: every column repeated for each section's wind and yaw (p = 4 M (J + 1) S, the same penalty on every
+section's curve; only the sum is identifiable, the penalty keeps the split smooth). The coefficient curve at
+wind U is then the model at the uniform wind U_j = U, the sum over the sections. ``"sum"`` ties those curves to
+one shape weighted by the sections' weights, a_kij = w_j f_ki (the same deck cross-section at every section, the
+truth's form with modal weights): p = 4 M (J + 1) as with the mean wind, fitted from the additive statistics
+contracted by the weights (:func:`vivbench.models.varying_design.tie_stats`).
 
-With the wind's yaw (``yaw_degree`` > 0; by default whenever the records carry
-it) its yaw psi (its angle to the span's normal, which U does not carry) is a
-second covariate: every column above is repeated times sin^2j(psi), j = 1..J,
-with the same penalty (p = 4 M (J + 1)); beyond the fitted range of sin^2(psi) it is held at
-its ends, as U is. After the fit the same statistics
-give the models of every subset of the orders 0, 2, 3 (order 1 always kept)
-and their leave-one-event-out prediction errors: the confidence set of
-``model_set_level`` (:func:`vivbench.regression.confidence_set`) used by the
-window verdicts (:func:`vivbench.regimes.varying_window_verdicts`).
+With the wind's yaw (``yaw_degree`` > 0; by default whenever the records carry it) its yaw psi (its angle to the
+span's normal, which U does not carry) is a second covariate: every column above is repeated times sin^2j(psi),
+j = 1..J, with the same penalty (p = 4 M (J + 1)); beyond the fitted range of sin^2(psi) it is held at its ends,
+as U is. After the fit the same statistics give the models of every subset of the orders 0, 2, 3 (order 1 always
+kept) and their leave-one-event-out prediction errors: the confidence set of ``model_set_level``
+(:func:`vivbench.regression.confidence_set`) used by the window verdicts
+(:func:`vivbench.regimes.varying_window_verdicts`).
 
 What this model does not fix: errors in the measured U (a point anemometer
 against the tributary-averaged wind the deck feels) smear the bell along U
@@ -89,7 +82,8 @@ from vivbench.models.protocol import ModelBase, as_record, section_names
 from vivbench.models.simulate import Simulation
 from vivbench.models.varying_simulate import simulate_runs
 from vivbench.models.varying_design import design_rows, held_yaw
-from vivbench.models.varying_verdicts import varying_description, varying_summary, varying_window_verdicts
+from vivbench.models.varying_verdicts import (varying_description, varying_settings_text, varying_summary,
+                                              varying_window_verdicts)
 from vivbench.models.varying_fit import (FINAL_PARAMS, ORDER_SET_MARGIN, ORDER_SUBSETS, PENALTY_CHOICES, event_statistics,
                                          fit_final, fit_shared, settle_smoothing)
 from vivbench.models.wind_weights import weighted_section_mean
@@ -520,6 +514,10 @@ class VaryingCoefficientSINDy(ModelBase):
     def terms_per_equation(self) -> list[int]:
         """Cubic B-splines per curve of each equation (``n_basis_``)."""
         return [int(k) for k in self.n_basis_]
+
+    def settings_text(self) -> str:
+        """One line on the fitted settings (:func:`vivbench.models.model_settings_text`)."""
+        return varying_settings_text(self)
 
     def coefficient_values(self, U: np.ndarray, coef: np.ndarray | None = None, yaw=None,
                            coef_yaw: np.ndarray | None = None) -> np.ndarray:

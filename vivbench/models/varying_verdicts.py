@@ -37,7 +37,7 @@ from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
 from vivbench.library.splines import DEGREE
 
-__all__ = ["gram_order_stats", "varying_description", "varying_summary", "varying_window_verdicts", "window_grams", "window_order_stats"]
+__all__ = ["gram_order_stats", "varying_description", "varying_settings_text", "varying_summary", "varying_window_verdicts", "window_grams", "window_order_stats"]
 
 
 def window_order_stats(r: np.ndarray, A: np.ndarray, t: np.ndarray, window_start, window_end):
@@ -349,3 +349,10 @@ def varying_description(regimes) -> dict:
             f"{int(regimes.attrs['n_samples'])} samples in {int(regimes.attrs['n_blocks'])} blocks; "
             f"coverage {float(regimes.attrs['coverage']):.3f}.")
     return {"text": text, "pool_options": " --model varying"}
+
+
+def varying_settings_text(model) -> str:
+    """One line on a fitted :class:`vivbench.models.VaryingCoefficientSINDy`'s settings (its ``settings_text``)."""
+    return (f"VaryingCoefficientSINDy, cubic B-splines per curve {', '.join(str(int(k)) for k in model.n_basis_)} "
+            f"({model.wind_weights_choice_} wind weights, {model.penalty_choice_} penalty, "
+            f"yaw degree {model.yaw_degree_}, wind smoothing {model.fitted_wind_smoothing():g} s)")

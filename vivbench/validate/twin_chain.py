@@ -59,7 +59,8 @@ class PoolSettings:
     ----------
     selection : dict or None; the held-out selection (``options`` grid, ``n_folds``, ``criterion``,
         ``n_perturbations``, ``perturbation_timescale_s``, ``null``), None without one
-    params : the campaign model's parameters (``pooled_config_json``, or its ``get_params()``)
+    params : the campaign model's parameters: with a selection, its varying candidates' (the pooled one's where it
+        had none; files of earlier versions: the chosen model's ``model_config_json``), else ``get_params()``
     model_path : the campaign model's directory or file (for a model without a selection)
     wind_smoothing_s : s; the smoothing ``pool`` applied to the records itself (0 when the model smooths)
     """
@@ -87,19 +88,31 @@ def pool_settings(model_dir) -> PoolSettings:
         raise InputError(f"{directory}: no campaign regimes file of vivbench pool (campaign.regimes.nc); run vivbench pool")
     with xr.open_dataset(path) as ds:
         attrs = dict(ds.attrs)
-    params = json.loads(attrs.get("pooled_config_json", "{}") or "{}")
+    # the chosen model's parameters (files of earlier versions: pooled_config_json)
+    params = json.loads(attrs.get("model_config_json") or attrs.get("pooled_config_json") or "{}")
     evidence = json.loads(attrs["selection_json"]) if attrs.get("selection_json") else None
     if evidence is not None:
-        chosen = evidence.get("wind_smoothing") or {}
-        if len(chosen.get("candidates_s", [])) > 1:  # chosen on the campaign (the model file holds it pinned)
-            params = {**params, "wind_smoothing_s": chosen["prior_s"], "wind_smoothing_grid": chosen["candidates_s"]}
         options: dict[str, list] = {}
+        classes: list[str] = []
         for cand in evidence["candidates"]:
-            for k, v in (cand.get("options") or {}).items():
+            opts = dict(cand.get("options") or {})
+            kind = opts.pop("model_class", "varying")  # files of earlier versions: varying candidates alone
+            classes += [] if kind in classes else [kind]
+            if kind != "varying":  # the pooled candidates follow the varying ones' options and parameters
+                continue
+            if "params" in cand and not options:  # the varying models' parameters, whichever class was chosen
+                params = {k: v for k, v in cand["params"].items() if k not in opts}
+            for k, v in opts.items():
                 options.setdefault(k, [])
                 if v not in options[k]:
                     options[k].append(v)
-        selection = {"options": options, "n_folds": int(evidence["n_folds"]), "criterion": evidence["criterion"],
+        if "varying" not in classes and evidence["candidates"] and "params" in evidence["candidates"][0]:
+            params = dict(evidence["candidates"][0]["params"])
+        chosen = evidence.get("wind_smoothing") or {}
+        if len(chosen.get("candidates_s", [])) > 1:  # chosen on the campaign (the model file holds it pinned)
+            params = {**params, "wind_smoothing_s": chosen["prior_s"], "wind_smoothing_grid": chosen["candidates_s"]}
+        selection = {"options": options, "model_classes": classes, "n_folds": int(evidence["n_folds"]),
+                     "criterion": evidence["criterion"],
                      "n_perturbations": int(evidence["n_perturbations"]),
                      "perturbation_timescale_s": float(evidence["perturbation_timescale_s"]),
                      "single_section_share": float(evidence.get("single_section_share", SINGLE_SECTION_SHARE)),
@@ -131,7 +144,7 @@ def pool_method(settings: PoolSettings, *, workers: int = 1):
                                  perturbation_timescale_s=sel["perturbation_timescale_s"],
                                  single_section_share=sel.get("single_section_share", SINGLE_SECTION_SHARE),
                                  min_time_constants=sel.get("min_time_constants"), rank_level=sel.get("rank_level"),
-                                 wind_bins=sel.get("wind_bins"),
+                                 wind_bins=sel.get("wind_bins"), model_classes=tuple(sel.get("model_classes", ("varying",))),
                                  seed=int(settings.params.get("seed", 0)), workers=workers, null=sel["null"], **fixed)
     model = load_campaign_model(settings.model_path)
     return type(model)(**model.get_params())
