@@ -254,3 +254,28 @@ def run_cli(*argv):
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else 1
     return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
+
+
+def with_gap(record, start: int, length: int):
+    """``record`` without its samples start..start + length - 1 (missing without NaN: a gap in its time), and the
+    times just before and after the gap, s."""
+    import dataclasses
+
+    keep = np.ones(record.n_samples, dtype=bool)
+    keep[start:start + length] = False
+    fields = {name: getattr(record, name)[keep] for name in ("t", "A", "U", "dA") if getattr(record, name) is not None}
+    yaw = None if record.yaw is None else record.yaw[keep]
+    return dataclasses.replace(record, **fields, yaw=yaw), float(record.t[start - 1]), float(record.t[start + length])
+
+
+def assert_stops_at_the_gap(model, record, start: int = 300, length: int = 200):
+    """A simulation over a record with a gap stops at its far side, saying so, and matches the run that ends before
+    it: no model integrates across samples it has no wind for."""
+    gapped, before, after = with_gap(record, start, length)
+    sim = model.simulate(gapped)
+    assert sim.stopped_at == after and "a gap" in sim.reason, (sim.stopped_at, sim.reason)
+    alone = model.simulate(gapped, gapped.t[0], before)
+    n = alone.t.size
+    assert np.array_equal(sim.A_sim[:n], alone.A_sim, equal_nan=True)
+    assert np.isnan(sim.A_sim[n:]).all()
+    assert sim.covered < 1.0

@@ -532,3 +532,10 @@ def test_event_bootstrap_is_seeded_converged_and_stored(tmp_path):
     np.testing.assert_array_equal(back.cov_, covs["bootstrap"])
     with pytest.raises(InputError, match="n_boot"):
         GreyBoxRefit(**kw, wind_draws=0, band="bootstrap_bias", n_boot=5).fit(records)
+
+
+def test_a_simulation_stops_at_a_gap_in_the_record(fitted):
+    from tests.helpers import assert_stops_at_the_gap
+
+    model, records = fitted
+    assert_stops_at_the_gap(model, records[0], start=1500, length=400)

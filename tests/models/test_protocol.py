@@ -309,3 +309,10 @@ def test_records_from_results_feed_the_protocol_and_the_pooled_file_reads(tmp_pa
     assert np.array_equal(pooled["coef"].values, model.coef_)
     with pytest.raises(ModelFileError, match=r"E0\.identify\.nc: not a campaign regimes"):
         read_campaign_regimes(paths[0])
+
+
+def test_a_pooled_simulation_stops_at_a_gap_in_the_record(campaign_fit):
+    from tests.helpers import assert_stops_at_the_gap
+
+    _, _, recs, model = campaign_fit
+    assert_stops_at_the_gap(model, recs[0])

@@ -303,3 +303,9 @@ def test_a_fit_without_model_sets_predicts_the_same_and_gives_no_verdict(choice)
         varying_window_verdicts(bare, recs[0], ws, we)
     with pytest.raises(InputError, match="model_sets must be True or False"):
         VaryingCoefficientSINDy(model_sets="no").fit(recs)
+
+
+def test_a_simulation_stops_at_a_gap_in_the_record(fitted):
+    from tests.helpers import assert_stops_at_the_gap
+
+    assert_stops_at_the_gap(fitted, _records(1, seed=5)[0])

@@ -431,5 +431,9 @@ def test_mask_runs_end_at_time_gaps(mask, gaps):
             start = i
     got = [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool), t)]
     assert got == expected
+    from vivbench.preprocess import first_gap
+
+    for lo in range(n):  # the first gap step of a span [lo, n): the simulations stop at its far side
+        assert first_gap(t, lo) == min((j for j in jumps if j >= lo), default=None)
     assert [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool), np.arange(n) * 0.25)] == \
         [(r.start, r.stop) for r in mask_runs(np.array(mask, dtype=bool))]  # no gap: the mask's runs

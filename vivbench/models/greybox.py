@@ -9,16 +9,13 @@ The model is the amplitude equation of docs/concepts.md (the truth) for the moda
             - sum_k beta_k phi_k c_k (1 / 8) (e2 phi_k^2 / D^2) Q^3,
     c_k = rho U_k D Y1(U_k) / m,
 
-with Y1, e1, e2 and C_L evaluated at each section's own wind U_k, and Y1 and
-C_L multiplied by a yaw factor (below). They are
-unknown smooth functions of the reduced velocity Ur = U / (f D), each a cubic
-B-spline (P-spline: uniform knots over the data's range of Ur, a
-second-difference roughness penalty), not the generator's parametric shapes,
-so the refit commits no inverse crime. The bridge's properties (modal mass per
-length m, deck depth D, frequency f, air density rho, structural damping
-ratio zeta, mode shape phi and tributary lengths L, beta_k = L_k phi_k / sum_l
-L_l phi_l^2) are the user's (:class:`BridgeProperties`); without a mode shape
-|phi| is taken from the median amplitude ratios of the data (largest 1).
+with Y1, e1, e2 and C_L evaluated at each section's own wind U_k, and Y1 and C_L multiplied by a yaw factor
+(below). They are unknown smooth functions of the reduced velocity Ur = U / (f D), each a cubic B-spline
+(P-spline: uniform knots over the data's range of Ur, a second-difference roughness penalty), not the
+generator's parametric shapes, so the refit commits no inverse crime. The bridge's properties (modal mass per
+length m, deck depth D, frequency f, air density rho, structural damping ratio zeta, mode shape phi and
+tributary lengths L, beta_k = L_k phi_k / sum_l L_l phi_l^2) are the user's (:class:`BridgeProperties`); without
+a mode shape |phi| is taken from the median amplitude ratios of the data (largest 1).
 
 Structural damping is given, not fitted (:mod:`vivbench.models.greybox_physics`).
 
@@ -30,30 +27,24 @@ NMSE), Gauss-Newton/Levenberg-Marquardt on the exact Jacobian from CasADi
 (:mod:`vivbench.models.greybox_solve`). Bounds: e1, e2, C_L >= 0 (the
 limiting terms damp, the locked force feeds energy).
 
-Yaw. Vortex shedding weakens as the mean wind turns away from the span's
-normal, and U = V |cos yaw| does not carry that angle. When the records carry
-the measured yaw psi_k(t) (``Record.yaw``, degrees), Y1 and C_L at section k
-are multiplied by w_k = 1 - c sin^2(psi_k), one coefficient c >= 0 fitted
-jointly with the splines (a low-order even function of sin psi, not the
-generator's Gaussian in psi). Every term of the amplitude equation holds Y1
-or C_L exactly once, so w_k scales all of section k's factors. Records
-without a yaw get w = 1; when none carries one, c is not fitted and the fit
-says so (``fit_info_["yaw"]``): Y1 and C_L are then averages over the
-events' yaw angles. The curves (docs/concepts.md (coefficient curves)) and the physical functions are
+Yaw. Vortex shedding weakens as the mean wind turns away from the span's normal, and U = V |cos yaw| does not
+carry that angle. When the records carry the measured yaw psi_k(t) (``Record.yaw``, degrees), Y1 and C_L at
+section k are multiplied by w_k = 1 - c sin^2(psi_k), one coefficient c >= 0 fitted jointly with the splines (a
+low-order even function of sin psi, not the generator's Gaussian in psi). Every term of the amplitude equation
+holds Y1 or C_L exactly once, so w_k scales all of section k's factors. Records without a yaw get w = 1; when
+none carries one, c is not fitted and the fit says so (``fit_info_["yaw"]``): Y1 and C_L are then averages over
+the events' yaw angles. The curves (docs/concepts.md (coefficient curves)) and the physical functions are
 reported at yaw 0 (w = 1), as the truth's are.
 
 Starts: a multi-start (:mod:`vivbench.models.greybox_starts`), the penalty
 scaled once at the first start so every start minimises one objective; the
 draws come from ``seed``: the same data and seed give the same fit.
 
-Penalty (``penalty_grid``): the fit at ``penalty`` is continued at every
-other value of the grid, and the fit with the least generalised
-cross-validation score, GCV = n_eff RSS / (n_eff - edf)^2, is kept: edf the
-trace of the influence matrix of the fit's Gauss-Newton linearisation, n_eff
-= n / kappa the effective sample size of the correlated residuals (kappa of
-the fit at ``penalty``, below; :func:`vivbench.models.greybox_solve.gcv_score`).
-The scores and the chosen value are in ``fit_info_["penalty_selection"]``
-and ``fit_info_["penalty"]``.
+Penalty (``penalty_grid``): the fit at ``penalty`` is continued at every other value of the grid, and the fit
+with the least generalised cross-validation score, GCV = n_eff RSS / (n_eff - edf)^2, is kept: edf the trace of
+the influence matrix of the fit's Gauss-Newton linearisation, n_eff = n / kappa the effective sample size of the
+correlated residuals (kappa of the fit at ``penalty``, below; :func:`vivbench.models.greybox_solve.gcv_score`).
+The scores and the chosen value are in ``fit_info_["penalty_selection"]`` and ``fit_info_["penalty"]``.
 
 Uncertainty (``band``), covariances of the spline coefficients
 (:mod:`vivbench.models.greybox_solve`), bands by the delta method at ``level``:
@@ -124,7 +115,8 @@ from vivbench.models.greybox_wind import (
     wind_second_moment,
 )
 from vivbench.models.protocol import ModelBase, as_record, section_names
-from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.simulate import Simulation, gap_reason, nmse
+from vivbench.preprocess.runs import first_gap
 
 __all__ = ["BridgeProperties", "GreyBoxRefit", "FUNCTIONS", "BANDS", "curves_to_functions"]
 
@@ -671,7 +663,8 @@ class GreyBoxRefit(GreyBoxCurves, ModelBase):
         """Integrate Q by RK4 on the record's grid from A0 (default the measured A at t0) with its wind.
 
         The run covers the record's samples from t0 to t1 while U is finite;
-        it stops at the first missing wind sample or a non-finite amplitude.
+        it stops at the first missing wind sample, at the far side of a gap in the record's time
+        (:func:`vivbench.preprocess.first_gap`) or at a non-finite amplitude.
         """
         record = self._check_record(record)
         t = record.t
@@ -684,6 +677,9 @@ class GreyBoxRefit(GreyBoxCurves, ModelBase):
         ts, U = t[i0:i1 + 1], record.U[i0:i1 + 1]
         badU = ~np.isfinite(U).all(axis=1)
         stop_at = int(np.argmax(badU)) if badU.any() else ts.size
+        gap = first_gap(t, i0, i1 + 1)
+        gap = None if gap is None or gap - i0 + 1 >= stop_at else gap - i0  # no wind across a gap
+        stop_at = stop_at if gap is None else gap + 1
         n = max(stop_at - 1, 0)
         Q = np.full(ts.size, np.nan)
         Q[0] = Q0
@@ -705,7 +701,8 @@ class GreyBoxRefit(GreyBoxCurves, ModelBase):
             k = int(np.argmax(bad))
             Q[k:] = np.nan
             stopped_at = float(ts[k])
-            reason = "missing wind" if k >= stop_at else "non-finite amplitude"
+            reason = ("non-finite amplitude" if k < stop_at else gap_reason(ts, gap) if gap is not None
+                      else "missing wind")
         A_sim = Q[:, None] * amp[None, :]
         A_meas = record.A[i0:i1 + 1]
         covered = 1.0 if stopped_at is None else float((stopped_at - ts[0]) / max(ts[-1] - ts[0], 1e-300))

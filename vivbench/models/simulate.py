@@ -78,8 +78,9 @@ from scipy.interpolate import make_interp_spline
 from vivbench.core.terms import feature_exponents, section_exponents
 from vivbench.core.errors import InputError
 from vivbench.models.integrate import ABOVE, NON_FINITE, StopRule, rk4
+from vivbench.preprocess.runs import first_gap
 
-__all__ = ["CLIP_MODES", "Simulation", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
+__all__ = ["CLIP_MODES", "Simulation", "gap_reason", "model_jacobian", "simulate_identified", "window_ranges", "forecast", "forecast_coefficients", "forecast_table", "nmse",
            "window_in_force"]
 
 _METHODS = ("rk4",)
@@ -307,14 +308,21 @@ def _grid(result: xr.Dataset, t0: float, t1: float):
     return i0, i1 + 1
 
 
-def _stage_U(t: np.ndarray, U: np.ndarray, u_interp: str) -> tuple[np.ndarray, int]:
+def gap_reason(t: np.ndarray, i: int) -> str:
+    """Why a simulation stopped at the gap in the record from sample i to i + 1 of ``t`` (s): its wind is unknown."""
+    return f"the record has no samples between t = {t[i]:.2f} and {t[i + 1]:.2f} s (a gap: no wind to integrate on)"
+
+
+def _stage_U(t: np.ndarray, U: np.ndarray, u_interp: str, gap: int | None = None) -> tuple[np.ndarray, int]:
     """U at t_k, t_k + h/2, t_k + h for every step: (n - 1, 3 stages, S), and the usable steps.
 
-    The spline is built on the samples before the first non-finite U; steps
-    past it are reported as unusable so that the run stops there.
+    The spline is built on the samples before the first non-finite U, or up to sample ``gap`` where the
+    step from it is a gap in the record; steps past it are reported as unusable so that the run stops there.
     """
     bad = ~np.all(np.isfinite(U), axis=1)
     n_ok = int(np.argmax(bad)) if bad.any() else t.size
+    if gap is not None:
+        n_ok = min(n_ok, gap + 1)
     n_steps = max(n_ok - 1, 0)
     out = np.full((t.size - 1, 3, U.shape[1]), np.nan)
     if n_steps == 0:
@@ -393,9 +401,13 @@ def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_to
     t = np.asarray(result["time"].values, dtype=float)[i0:i1]
     A_meas = A_all[i0:i1]
     U = np.asarray(result["U"].values, dtype=float)[i0:i1]
-    U_stage, n_ok = _stage_U(t, U, u_interp)
+    gap = first_gap(result["time"].values, i0, i1)
+    gap = None if gap is None else gap - i0
+    U_stage, n_ok = _stage_U(t, U, u_interp, gap)
     A_sim, stop, reason = _integrate(t, A_meas[0], U_stage, n_ok, P, widx, bound_factor * a_max,
                                      negative_tolerance * a_max, lims=lims, clip=clip)
+    if gap is not None and stop == gap + 1 and reason.startswith("measured U is missing"):
+        reason = gap_reason(t, gap)
     if stop is None:
         stopped_at, covered = None, 1.0
     else:

@@ -16,7 +16,8 @@ import numpy as np
 
 from vivbench.core.record import Record
 from vivbench.models.integrate import StopRule, rk4
-from vivbench.models.simulate import Simulation, nmse
+from vivbench.models.simulate import Simulation, gap_reason, nmse
+from vivbench.preprocess.runs import first_gap
 
 __all__ = ["simulate_runs"]
 
@@ -39,7 +40,12 @@ def _run_inputs(model, record: Record, t0, t1, A0, bound_factor: float) -> dict:
     if x.shape != (S,):
         raise ValueError(f"A0 must have shape ({S},) (one amplitude per section, m); got {x.shape}")
     top = bound_factor * np.nanmax(np.abs(record.A)) if np.isfinite(record.A).any() else np.inf
-    return {"t": tt, "a": a, "am": am, "A_meas": record.A[i0:i1], "x0": x, "top": top}
+    gap = first_gap(t, i0, i1)  # no wind across a gap in the record: the run stops at its far side
+    gap = None if gap is None else gap - i0
+    if gap is not None:
+        am = am.copy()
+        am[gap:] = np.nan
+    return {"t": tt, "a": a, "am": am, "A_meas": record.A[i0:i1], "x0": x, "top": top, "gap": gap}
 
 
 def simulate_runs(model, runs: Sequence[tuple], bound_factor: float = 10.0) -> list[Simulation]:
@@ -84,7 +90,9 @@ def simulate_runs(model, runs: Sequence[tuple], bound_factor: float = 10.0) -> l
         tt, n = r["t"], r["t"].size
         stop = int(run.stop[b])
         stopped = None if stop < 0 or stop >= n else float(tt[stop])  # past its grid's end: not stopped
-        reason = None if stopped is None else "non-finite or out-of-bounds amplitude"
+        at_gap = r["gap"] is not None and stop == r["gap"] + 1
+        reason = None if stopped is None else (gap_reason(tt, r["gap"]) if at_gap
+                                                else "non-finite or out-of-bounds amplitude")
         covered = 1.0 if stopped is None else float((stopped - tt[0]) / max(tt[-1] - tt[0], 1e-12))
         x = run.x[:n, b]
         out.append(Simulation(t=tt, A_sim=x, A_meas=r["A_meas"], stopped_at=stopped, reason=reason,

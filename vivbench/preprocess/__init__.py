@@ -18,6 +18,8 @@ from vivbench.preprocess.runs import (
     run_rate,
     valid_runs,
     mask_runs,
+    gap_steps,
+    first_gap,
     trusted_intervals,
     intersect_intervals,
     segments,
@@ -44,7 +46,7 @@ from vivbench.preprocess.event_log import CATALOGUE_COLUMNS, EventCatalogue, cut
 __all__ = [
     "band_gain", "Preprocessed", "preprocess_arrays", "PreprocessConfig", "DERIVATIVE_METHODS", "Derivative",
     "TVDerivativeResult", "estimate_noise_std", "tv_derivative", "band_noise_std", "window_amplitude_snr",
-    "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "mask_runs", "trusted_intervals",
+    "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "mask_runs", "gap_steps", "first_gap", "trusted_intervals",
     "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid", "welch_psd",
     "spectral_peak", "modal_frequency", "displacement", "envelope", "wind_speed_direction",
     "perpendicular_speed", "mean_wind", "perpendicular_wind", "mean_wind_runs", "window_bounds", "mean_yaw",

@@ -8,7 +8,7 @@ import numpy as np
 
 from vivbench.core.errors import InputError
 
-__all__ = ["mask_runs", "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "trusted_intervals", "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid"]
+__all__ = ["mask_runs", "gap_steps", "first_gap", "check_positive", "check_time", "as_2d", "run_rate", "valid_runs", "trusted_intervals", "intersect_intervals", "segments", "common_grid", "grid_of_intervals", "to_grid"]
 
 
 # A step between time stamps larger than this multiple of the nominal step is a
@@ -37,6 +37,25 @@ def _run_bounds(mask: np.ndarray, breaks: np.ndarray | None = None) -> tuple[np.
     return np.flatnonzero(start), np.flatnonzero(end) + 1
 
 
+def gap_steps(t) -> np.ndarray:
+    """Which steps of the sample times ``t``, shape (n,), s, are gaps in the record: shape (n - 1,), True where the
+    step exceeds 1.5 times the median step (samples missing without NaN, as between the segments of an
+    identification result, whose wind is unknown)."""
+    dt = np.diff(np.asarray(t, dtype=float))
+    if dt.size == 0:
+        return np.zeros(0, dtype=bool)
+    return dt > _TIME_JUMP_FACTOR * np.median(dt)
+
+
+def first_gap(t, start: int = 0, stop: int | None = None) -> int | None:
+    """Index i of the first gap step (:func:`gap_steps` of the whole ``t``) from sample i to i + 1 with
+    start <= i and i + 1 < stop (default: the last sample), or None when the span has none."""
+    steps = gap_steps(t)
+    end = steps.size if stop is None else max(min(int(stop) - 1, steps.size), int(start))
+    hit = np.flatnonzero(steps[int(start):end])
+    return None if hit.size == 0 else int(start) + int(hit[0])
+
+
 def mask_runs(mask, t=None) -> list[slice]:
     """The runs of True in a boolean mask, shape (n,), as slices in order (none for an all-False mask).
 
@@ -48,8 +67,7 @@ def mask_runs(mask, t=None) -> list[slice]:
     mask = np.asarray(mask, dtype=bool)
     breaks = None
     if t is not None and mask.size > 1:
-        dt = np.diff(np.asarray(t, dtype=float))
-        breaks = dt > _TIME_JUMP_FACTOR * np.median(dt)
+        breaks = gap_steps(t)
     starts, ends = _run_bounds(mask, breaks)
     return [slice(int(a), int(b)) for a, b in zip(starts, ends)]
 
