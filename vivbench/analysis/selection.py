@@ -96,9 +96,8 @@ from vivbench.preprocess.unmeasured_wind import shifted_unmeasured_wind
 from vivbench.regimes.model import model_verdicts, model_window_regimes
 
 __all__ = ["Candidate", "ModelSelection", "LIMIT_TIME_CONSTANTS", "MIN_EVENTS", "MODEL_CLASSES", "STRUCTURAL_OPTIONS",
-           "UNMEASURED_Z",
-           "VARYING_OPTIONS", "VARYING_PRIORS", "SINGLE_SECTION_SHARE", "perturbed_wind", "varying_selection", "wind_error_scale",
-           "without_yaw"]
+           "UNMEASURED_Z", "VARYING_OPTIONS", "VARYING_PRIORS", "SINGLE_SECTION_SHARE", "perturbed_wind",
+           "varying_selection", "wind_error_scale", "without_yaw"]
 
 #: Fewest events for a held-out choice among several candidates (every training set keeps two events).
 MIN_EVENTS = 3
@@ -703,7 +702,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
                       min_time_constants: float | None = LIMIT_TIME_CONSTANTS, rank_level: float | None = RANK_LEVEL,
                       wind_bins: int | None = None, model_classes: Sequence[str] = MODEL_CLASSES,
                       **params) -> ModelSelection:
-    """A :class:`ModelSelection` among varying-coefficient models over a grid of options.
+    """A :class:`ModelSelection` among campaign models: varying-coefficient models over a grid of options and,
+    of ``model_classes``, the pooled library.
 
     Parameters
     ----------
