@@ -764,7 +764,8 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         for sigma in smoothings:  # one pooled model per smoothing among the options
             label = "pooled" if len(smoothings) == 1 else f"pooled-{_option_label('wind_smoothing_s', float(sigma))}"
             candidates.append(Candidate(name=label, model=PooledSINDy(**shared, wind_smoothing_s=float(sigma)),
-                                        complexity=0, options={"model_class": "pooled", "wind_smoothing_s": float(sigma)}))
+                                        complexity=0,
+                                        options={"model_class": "pooled", "wind_smoothing_s": float(sigma)}))
     return ModelSelection(candidates=candidates, n_folds=n_folds, criterion=criterion,
                           n_perturbations=n_perturbations, perturbation_timescale_s=perturbation_timescale_s,
                           tau=fixed.get("tau", DEFAULT_TAU), seed=seed,

@@ -314,7 +314,8 @@ class PooledSINDy(ModelBase):
         w = self.wind_smoothing_s
         if w is not None and not (isinstance(w, (int, float, np.floating)) and not isinstance(w, bool)
                                   and np.isfinite(w) and w >= 0):
-            raise InputError(f"wind_smoothing_s must be None (the wind as given) or a number of seconds >= 0; got {w!r}")
+            raise InputError("wind_smoothing_s must be None (the wind as given) or a number of seconds >= 0; "
+                             f"got {w!r}")
 
     def fit(self, records: Sequence[Record | tuple]) -> "PooledSINDy":
         """Fit the campaign model.
@@ -404,7 +405,8 @@ class PooledSINDy(ModelBase):
         """``measured_wind(record)``: the record with its U and yaw smoothed as at fit (``wind_smoothing_s``);
         AttributeError when ``wind_smoothing_s`` is None (the model takes a record's wind as given)."""
         if self.wind_smoothing_s is None:
-            raise AttributeError("measured_wind: this PooledSINDy takes a record's wind as given (wind_smoothing_s None)")
+            raise AttributeError("measured_wind: this PooledSINDy takes a record's wind as given "
+                                 "(wind_smoothing_s None)")
         sigma = float(self.wind_smoothing_s)
         return lambda record: smooth_wind(as_record(record), sigma)
 
@@ -599,7 +601,7 @@ class PooledSINDy(ModelBase):
         return format_equations(self.coef_, self.feature_names_, lhs, precision)
 
     def to_dataset(self) -> xr.Dataset:
-        """The fitted model as the Dataset of a campaign model file (``vivbench.io.campaign_model``), with its format."""
+        """The fitted model as the Dataset of a campaign model file (``vivbench.io.campaign_model``), format included."""
         self._check_fitted()
         S = self.n_sections_
         eq, feat, boot = ("equation",), ("equation", "feature"), ("bootstrap", "equation", "feature")
