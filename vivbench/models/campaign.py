@@ -601,7 +601,7 @@ class PooledSINDy(ModelBase):
         return format_equations(self.coef_, self.feature_names_, lhs, precision)
 
     def to_dataset(self) -> xr.Dataset:
-        """The fitted model as the Dataset of a campaign model file (``vivbench.io.campaign_model``), format included."""
+        """The fitted model as the Dataset of a campaign model file (``vivbench.io.campaign_model``) with its format."""
         self._check_fitted()
         S = self.n_sections_
         eq, feat, boot = ("equation",), ("equation", "feature"), ("bootstrap", "equation", "feature")
