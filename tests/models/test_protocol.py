@@ -316,3 +316,22 @@ def test_a_pooled_simulation_stops_at_a_gap_in_the_record(campaign_fit):
 
     _, _, recs, model = campaign_fit
     assert_stops_at_the_gap(model, recs[0])
+
+
+def test_settings_text_is_the_models_own_or_its_class_and_size(campaign_fit):
+    """``model_settings_text``: the model's ``settings_text()``, else its class's name and ``terms_per_equation()``."""
+    from vivbench.models import model_settings_text
+
+    _, _, _, pooled = campaign_fit
+    assert model_settings_text(pooled) == pooled.settings_text()
+    assert model_settings_text(pooled).startswith("PooledSINDy, terms per equation ")
+
+    class Sized:
+        def terms_per_equation(self):
+            return [3, 5]
+
+    class Bare:
+        pass
+
+    assert model_settings_text(Sized()) == "Sized, size per equation 3, 5"
+    assert model_settings_text(Bare()) == "Bare"
