@@ -406,7 +406,7 @@ def _run(result, i0, i1, P, widx, *, method, u_interp, bound_factor, negative_to
     U_stage, n_ok = _stage_U(t, U, u_interp, gap)
     A_sim, stop, reason = _integrate(t, A_meas[0], U_stage, n_ok, P, widx, bound_factor * a_max,
                                      negative_tolerance * a_max, lims=lims, clip=clip)
-    if gap is not None and stop == gap + 1 and reason.startswith("measured U is missing"):
+    if gap is not None and n_ok == gap and stop == gap + 1:  # the steps ended at the gap, not at a missing U
         reason = gap_reason(t, gap)
     if stop is None:
         stopped_at, covered = None, 1.0

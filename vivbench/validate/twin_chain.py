@@ -92,22 +92,21 @@ def pool_settings(model_dir) -> PoolSettings:
     params = json.loads(attrs.get("model_config_json") or attrs.get("pooled_config_json") or "{}")
     evidence = json.loads(attrs["selection_json"]) if attrs.get("selection_json") else None
     if evidence is not None:
+        cands = evidence["candidates"]
+        # files of earlier versions: varying candidates alone, without their parameters
+        kinds = [(c.get("options") or {}).get("model_class", "varying") for c in cands]
+        classes = list(dict.fromkeys(kinds))
         options: dict[str, list] = {}
-        classes: list[str] = []
-        for cand in evidence["candidates"]:
-            opts = dict(cand.get("options") or {})
-            kind = opts.pop("model_class", "varying")  # files of earlier versions: varying candidates alone
-            classes += [] if kind in classes else [kind]
+        for cand, kind in zip(cands, kinds):
             if kind != "varying":  # the pooled candidates follow the varying ones' options and parameters
                 continue
-            if "params" in cand and not options:  # the varying models' parameters, whichever class was chosen
-                params = {k: v for k, v in cand["params"].items() if k not in opts}
-            for k, v in opts.items():
-                options.setdefault(k, [])
-                if v not in options[k]:
+            for k, v in (cand.get("options") or {}).items():
+                if k != "model_class" and v not in options.setdefault(k, []):
                     options[k].append(v)
-        if "varying" not in classes and evidence["candidates"] and "params" in evidence["candidates"][0]:
-            params = dict(evidence["candidates"][0]["params"])
+        # the varying models' parameters whichever class was chosen (the pooled one's where there was none);
+        # pool_method leaves out those among the options
+        source = next((c for c, kind in zip(cands, kinds) if kind == "varying"), cands[0] if cands else {})
+        params = dict(source["params"]) if "params" in source else params
         chosen = evidence.get("wind_smoothing") or {}
         if len(chosen.get("candidates_s", [])) > 1:  # chosen on the campaign (the model file holds it pinned)
             params = {**params, "wind_smoothing_s": chosen["prior_s"], "wind_smoothing_grid": chosen["candidates_s"]}
