@@ -219,6 +219,19 @@ def test_the_wind_smoothing_is_the_stated_prior_unless_given_or_among_the_option
     assert sel.null_model.wind_smoothing_s == (15.0 if "wind_smoothing_s" in pinned else 30.0)
 
 
+def test_the_yaw_free_counterpart_has_the_same_options_without_the_yaw():
+    from vivbench.analysis import yaw_free_counterpart
+
+    sel = varying_selection()
+    assert yaw_free_counterpart(sel.candidates, "yaw2-least").name == "yaw0-least"
+    assert yaw_free_counterpart(sel.candidates, "yaw1-cv").name == "yaw0-cv"
+    assert yaw_free_counterpart(sel.candidates, "yaw0-cv") is None  # takes no yaw
+    assert yaw_free_counterpart(sel.candidates, "pooled") is None  # no yaw option at all
+    assert yaw_free_counterpart([c for c in sel.candidates if c.name != "yaw0-cv"], "yaw1-cv") is None
+    with pytest.raises(InputError, match="no candidate is named 'yaw3-cv'"):
+        yaw_free_counterpart(sel.candidates, "yaw3-cv")
+
+
 def test_without_yaw_keeps_the_yaw_free_candidates():
     sel = varying_selection(options={"yaw_degree": (0, 1), "penalty_choice": ("cv", "least")})
     assert len(sel.candidates) == 5

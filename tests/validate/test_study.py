@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -74,8 +75,10 @@ def test_tiny_study_writes_a_row_per_draw_and_method(tiny_study):
             assert 0 <= int(r["self_excited_flags"]) and 0 <= int(r["n_flagged"]) <= int(r["n_scored"])
         if r["method"] == "varying":  # the candidate chosen from the campaign's evidence, a member of its set
             assert r["chosen"].startswith("yaw") and r["chosen"] in r["confidence_set"].split(";")
+            if r["chosen"].startswith("yaw0"):  # its own curves are the yaw-free model's
+                assert r["curve_error_energy_yaw_free"] == r["curve_error_energy"]
         else:
-            assert r["chosen"] == "" and r["change_index"] == "-1"
+            assert r["chosen"] == "" and r["change_index"] == "-1" and r["curve_error_energy_yaw_free"] == "nan"
     summary = json.loads((out / "summary.json").read_text())
     assert summary["capped"] and summary["draws_scored"] == [0, 1]
     block = summary["methods"]["varying"]["all"]
@@ -107,6 +110,37 @@ def test_another_study_in_the_same_directory_is_refused(tiny_study):
     _config, out, _ = tiny_study
     with pytest.raises(InputError, match="another split, methods"):
         run_study(StudyConfig(split="development", draws=(0,), methods=("varying",), **CAPS), out)
+
+
+def test_the_yaw_free_counterpart_of_a_yaw_choice_is_fitted_on_every_event_and_scored(monkeypatch):
+    from vivbench.analysis.candidates import Candidate
+    from vivbench.validate import study
+
+    class Fake:
+        def __init__(self, label):
+            self.label, self.fitted_on = label, None
+
+        def fit(self, records):
+            self.fitted_on = list(records)
+            return self
+
+    scored = []
+    monkeypatch.setattr(study, "score_fitted", lambda model, records, truths, **kw: (
+        scored.append((model.label, model.fitted_on, truths)) or {"curve_error_energy": 0.25}))
+    candidates = [Candidate(name=f"yaw{d}-{p}", model=Fake(f"{d}{p}"), options={"yaw_degree": d, "penalty_choice": p})
+                  for d in (0, 1) for p in ("cv", "least")]
+    records, truths = ["r1", "r2"], ["t1", "t2"]
+
+    def error(chosen, own=0.5):
+        selection = SimpleNamespace(chosen_=chosen, candidates=candidates)
+        return study._yaw_free_curve_error(SimpleNamespace(model=selection), records, truths, None, 0.2, own)
+
+    assert error("yaw1-least") == 0.25 and scored == [("0least", records, truths)]  # same penalty, no yaw
+    assert candidates[1].model.fitted_on is None  # fitted on a copy
+    assert error("yaw0-cv") == 0.5 and len(scored) == 1  # the choice takes no yaw: its own curves
+    assert math.isnan(study._yaw_free_curve_error(object(), records, truths, None, 0.2, 0.5))  # no selection
+    only = SimpleNamespace(chosen_="yaw1-cv", candidates=[candidates[2]])
+    assert math.isnan(study._yaw_free_curve_error(SimpleNamespace(model=only), records, truths, None, 0.2, 0.5))
 
 
 def test_parse_draws_and_config_checks():
@@ -175,27 +209,33 @@ def test_summary_counts_wins_choices_and_change_alarms():
                 yaw_factor_range=0.5, confidence_set="yaw0-cv;yaw1-least"),  # the yaw matters, is not chosen, in the set
             row(0, "b", 0.2),
             row(1, "a", 0.3, chosen="yaw1-least", change_p_value=0.01, change_detected=1, change_index=1,
-                yaw_effect="gaussian", yaw_course="per_event", yaw_factor_range=0.19),  # chosen where it barely matters
+                yaw_effect="gaussian", yaw_course="per_event", yaw_factor_range=0.19, curve_error_energy=0.3,
+                curve_error_energy_yaw_free=0.25),  # chosen where it barely matters, curves worse by 20 %
             row(1, "b", 0.2),
             row(2, "a", 0.1, chosen="yaw0-cv", change="damping_step", step_event=4, change_p_value=0.02,
-                change_detected=1, change_index=2),     # first changed event E004: index 3, found at 2
+                change_detected=1, change_index=2, yaw_factor_range=0.0, curve_error_energy=0.1,
+                curve_error_energy_yaw_free=0.1),     # first changed event E004: index 3, found at 2
             row(2, "b", "nan"),
-            row(3, "a", 0.1, chosen="yaw1-cv", change="damping_step", step_event=2, change_p_value=0.4)]
+            row(3, "a", 0.1, chosen="yaw1-cv", change="damping_step", step_event=2, change_p_value=0.4,
+                yaw_factor_range=0.0, curve_error_energy=0.2, curve_error_energy_yaw_free=0.19)]  # within 10 %
     summary = study_summary({"split": "development", "draws": [0, 1, 2, 3], "methods": ["a", "b"]}, rows)
     assert summary["versus"]["a vs b"] == {"draws": 2, "lower": 1, "share_lower": 0.5}
     a = summary["methods"]["a"]
     assert a["yaw_present"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 1, "per_event_yaw_chosen": 1,
                                            "shared_draws": 1, "shared_yaw_chosen": 0, "matters_draws": 1,
-                                           "matters_yaw_chosen": 0, "matters_yaw_in_set": 1}
+                                           "matters_yaw_chosen": 0, "matters_yaw_in_set": 1, "minor_draws": 1,
+                                           "minor_yaw_chosen": 1, "minor_curves_compared": 1, "minor_curves_within": 0}
     assert a["yaw_absent"]["choices"] == {"draws": 2, "yaw_chosen": 1, "per_event_draws": 0, "per_event_yaw_chosen": 0,
                                           "shared_draws": 0, "shared_yaw_chosen": 0, "matters_draws": 0,
-                                          "matters_yaw_chosen": 0, "matters_yaw_in_set": 0}
+                                          "matters_yaw_chosen": 0, "matters_yaw_in_set": 0, "minor_draws": 2,
+                                          "minor_yaw_chosen": 1, "minor_curves_compared": 2, "minor_curves_within": 2}
     assert a["all"]["changes"] == {"draws_without_change": 2, "false_alarms": 1, "draws_with_step": 2,
                                    "detected": 1, "located_within_one_event": 1}
     assert summary["methods"]["b"]["all"]["changes"]["draws_without_change"] == 0  # never scanned
     page = study_markdown(summary)
     assert "| a vs b | 2 | 1 | 0.500 |" in page and "## Changes the wind does not carry" in page
-    assert "| 1, 1 | 1, 0 | 1, 0, 1 |" in page  # per-event, shared, and where the yaw matters
+    assert "| 1, 1 | 1, 0 | 1, 0, 1 | 1, 1, 0 of 1 |" in page  # per-event, shared, where the yaw matters, and not
+    assert "| 0, 0 | 0, 0 | 0, 0, 0 | 2, 1, 2 of 2 |" in page
 
 
 def test_summary_splits_the_draws_by_what_their_own_evidence_let_the_verdict_do():

@@ -2,7 +2,8 @@
 
 Two adaptations, both from the records alone:
 
-- :func:`without_yaw`: the candidates that need no wind yaw, for records that carry none;
+- :func:`without_yaw`: the candidates that need no wind yaw, for records that carry none
+  (and :func:`yaw_free_counterpart`, one candidate's yaw-free version, to compare with it);
 - :func:`settle_candidates`: the settings that the simplest candidate settles once on every event
   (its ``settle(records)``, e.g. the varying model's wind smoothing chosen by its own cross-validation,
   :func:`vivbench.models.varying_fit.settle_smoothing`) given to every model of the selection that has
@@ -19,7 +20,7 @@ from typing import Any, Sequence
 
 from vivbench.core.errors import InputError
 
-__all__ = ["Candidate", "settle_candidates", "without_yaw"]
+__all__ = ["Candidate", "settle_candidates", "without_yaw", "yaw_free_counterpart"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,6 +67,30 @@ def without_yaw(selection):
     out = copy.copy(selection)
     out.candidates = tuple(kept)
     return out
+
+
+def yaw_free_counterpart(candidates: Sequence[Candidate], name: str) -> Candidate | None:
+    """The candidate of the same options as candidate ``name`` but without the yaw covariate.
+
+    Parameters
+    ----------
+    candidates : sequence of Candidate (a selection's)
+    name : str, one of their names
+
+    Returns
+    -------
+    Candidate whose ``options`` are those of ``name`` with ``yaw_degree`` 0, or None when ``name`` takes no
+    yaw (its ``yaw_degree`` is 0 or absent) or no such candidate is among ``candidates``.
+    Raises InputError when ``name`` is not a candidate's.
+    """
+    by_name = {c.name: c for c in candidates}
+    if name not in by_name:
+        raise InputError(f"no candidate is named {name!r}; the names are {', '.join(map(repr, by_name))}")
+    options = dict(by_name[name].options or {})
+    if not options.get("yaw_degree"):
+        return None
+    wanted = {**options, "yaw_degree": 0}
+    return next((c for c in candidates if dict(c.options or {}) == wanted), None)
 
 
 def settle_candidates(candidates: Sequence, null_model, records) -> tuple[tuple, Any, dict]:

@@ -37,6 +37,7 @@ in the wind rather than from its model class.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import hashlib
 import json
@@ -82,7 +83,7 @@ DRAW_METHODS = ("greybox",)
 WIND_SOURCES = ("measured", "truth")
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
 _FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set", "dynamics_shown", "stationary",
-                 "change_p_value", "change_detected", "change_index")
+                 "curve_error_energy_yaw_free", "change_p_value", "change_detected", "change_index")
 _SCORES = tuple(k for k in SCORE_KEYS if k != "fit_time_s")
 #: Columns of ``study.csv``: one row per draw and method.
 STUDY_COLUMNS = ("split", "draw", "method", "campaign_seed", "n_events", "events_failed", *LABEL_COLUMNS,
@@ -315,6 +316,8 @@ def _score(method, records, truths, windows, tau: float) -> tuple[dict[str, Any]
     row.update(n_flagged=n_flagged, flagged_right_share=scores["accuracy_identifiable"],
                self_excited_flags=seen.self_excited_flags(), error="", fit_time_s=seconds,
                **_choice(fitted), **_change_scan(fitted, records))
+    row["curve_error_energy_yaw_free"] = _yaw_free_curve_error(fitted, records, truths, windows, tau,
+                                                               scores["curve_error_energy"])
     reference_seconds = getattr(fitted, "reference_seconds", None)
     if reference_seconds is not None:  # the grey-box's own fit of its reference (NaN: reused)
         row["reference_fit_time_s"] = float(reference_seconds)
@@ -330,6 +333,26 @@ def _choice(fitted) -> dict[str, Any]:
             "confidence_set": ";".join(c["name"] for c in ev["candidates"] if c["in_set"]),
             "dynamics_shown": int(bool(ev.get("dynamics_shown", True))),
             "stationary": int(bool(ev.get("stationary", True)))}
+
+
+def _yaw_free_curve_error(fitted, records, truths, windows, tau: float, own: float) -> float:
+    """The energy-weighted curve error of the chosen candidate's yaw-free counterpart (the same options with
+    ``yaw_degree`` 0, :func:`vivbench.analysis.yaw_free_counterpart`) fitted to every event; ``own`` where the
+    choice takes no yaw; NaN for a model that chose no candidate (no selection) or has no yaw-free counterpart."""
+    from vivbench.analysis.candidates import yaw_free_counterpart
+
+    selection = getattr(fitted, "model", None)
+    name, candidates = getattr(selection, "chosen_", None), getattr(selection, "candidates", None)
+    if name is None or candidates is None:
+        return math.nan
+    chosen = next(c for c in candidates if c.name == name)
+    if not (chosen.options or {}).get("yaw_degree"):
+        return float(own)
+    twin = yaw_free_counterpart(candidates, name)
+    if twin is None:
+        return math.nan
+    model = copy.deepcopy(twin.model).fit(records)
+    return float(score_fitted(model, records, truths, windows=windows, tau=tau, simulate=False)["curve_error_energy"])
 
 
 def yaw_factor_range(records, truths) -> float:

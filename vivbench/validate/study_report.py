@@ -26,6 +26,9 @@ LABEL_COLUMNS = ("forced_only", "yaw_effect", "yaw_course", "eiv", "bell", "e_mi
 #: A yaw effect "matters" on a campaign when the truth's factor on Y1 ranges by at least this much over the
 #: campaign's measured yaws (5th-95th percentile; :func:`vivbench.validate.study.yaw_factor_range`): a reporting cut.
 YAW_MATTERS = 0.2
+#: Where the yaw does not matter, the chosen model's curves count as good as its yaw-free counterpart's when their
+#: energy-weighted error is at most this factor times the counterpart's (issue's cut: within 10 %).
+YAW_FREE_MARGIN = 1.1
 #: The verdict's promise: at least this share of flagged window-equations right ...
 PROMISE_SHARE = 0.95
 #: ... on every draw with at least this many flagged window-equations.
@@ -116,6 +119,14 @@ def _choices(rows: Sequence[dict]) -> dict[str, Any]:
     # ... and where a yaw model is at least in the confidence set (not significantly worse than the best)
     out["matters_yaw_in_set"] = sum(1 for r in matters if any(
         m.startswith("yaw") and not m.startswith("yaw0") for m in str(r.get("confidence_set") or "").split(";")))
+    # Where it does not matter: the chosen model's curves against those of the same options without the yaw.
+    minor = [r for r in chosen if _number(r.get("yaw_factor_range")) < YAW_MATTERS]
+    out["minor_draws"] = len(minor)
+    out["minor_yaw_chosen"] = sum(1 for r in minor if not str(r["chosen"]).startswith("yaw0"))
+    pairs = [(_number(r.get("curve_error_energy")), _number(r.get("curve_error_energy_yaw_free"))) for r in minor]
+    pairs = [(own, free) for own, free in pairs if math.isfinite(own) and math.isfinite(free)]
+    out["minor_curves_compared"] = len(pairs)
+    out["minor_curves_within"] = sum(1 for own, free in pairs if own <= YAW_FREE_MARGIN * free)
     return out
 
 
@@ -362,10 +373,14 @@ def study_markdown(summary: dict[str, Any]) -> str:
               "(shared), where the yaw is confounded with the time within an event and cannot be told from it; "
               f"and on the draws where the yaw matters: the truth's factor on Y1 ranges by {YAW_MATTERS:g} or more "
               "over the campaign's measured yaws (5th to 95th percentile); there also the draws whose confidence "
-              "set holds a yaw model (the evidence does not exclude it).", "",
+              "set holds a yaw model (the evidence does not exclude it); on the draws where it does not matter, "
+              "those whose chosen model's energy-weighted curve error is within "
+              f"{round(100 * (YAW_FREE_MARGIN - 1)):d} % of that of the same options without the yaw, fitted "
+              "to every event (of the draws with both curves).", "",
               "| method | draws | draws with a choice | yaw chosen | per-event course: draws, yaw chosen "
-              "| shared course: draws, yaw chosen | yaw matters: draws, yaw chosen, yaw in the set |",
-              "|---|---|---|---|---|---|---|"]
+              "| shared course: draws, yaw chosen | yaw matters: draws, yaw chosen, yaw in the set "
+              "| yaw does not matter: draws, yaw chosen, curves within the margin of the yaw-free model's |",
+              "|---|---|---|---|---|---|---|---|"]
     for name, blocks in summary["methods"].items():
         for subset, block in blocks.items():
             c = block["choices"]
@@ -374,7 +389,9 @@ def study_markdown(summary: dict[str, Any]) -> str:
                              f"| {c.get('per_event_draws', 0)}, {c.get('per_event_yaw_chosen', 0)} "
                              f"| {c.get('shared_draws', 0)}, {c.get('shared_yaw_chosen', 0)} "
                              f"| {c.get('matters_draws', 0)}, {c.get('matters_yaw_chosen', 0)}, "
-                             f"{c.get('matters_yaw_in_set', 0)} |")
+                             f"{c.get('matters_yaw_in_set', 0)} "
+                             f"| {c.get('minor_draws', 0)}, {c.get('minor_yaw_chosen', 0)}, "
+                             f"{c.get('minor_curves_within', 0)} of {c.get('minor_curves_compared', 0)} |")
     lines += ["", "## Changes the wind does not carry", "",
               "The model's change scan (refits before and after every split of the events, permutation p-value "
               "below 0.05): alarms on draws without a change, and damping steps detected and located within one "
