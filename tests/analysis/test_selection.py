@@ -9,8 +9,9 @@ from hypothesis import strategies as st
 
 from tests.helpers import assert_close, bell_records
 from vivbench.analysis.held_out import event_folds, held_out_loss, one_se_set, shared_groups
-from vivbench.analysis.selection import (LIMIT_TIME_CONSTANTS, SINGLE_SECTION_SHARE, Candidate, ModelSelection, perturbed_wind,
-                                         varying_selection, wind_error_scale, without_yaw)
+from vivbench.analysis.selection import (LIMIT_TIME_CONSTANTS, POOLED_COMPLEXITY, SINGLE_SECTION_SHARE, Candidate,
+                                         ModelSelection, perturbed_wind, varying_selection, wind_error_scale,
+                                         without_yaw)
 from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.simulate import Simulation
@@ -454,9 +455,10 @@ def test_without_regime_1_windows_the_time_constant_is_unknown_and_no_limit_regi
     assert not sel.identifiable(recs[0], np.array([0.0]), np.array([50.0])).any()
 
 
-def test_the_model_class_is_chosen_by_held_out_loss_among_the_simplest_and_its_own_verdict_is_used():
-    """PooledSINDy is scored on the same folds as the yaw-free varying candidates (complexity 0): the lower held-out
-    loss decides between the classes, and the chosen model's verdict is its own through the protocol."""
+def test_the_model_class_is_chosen_by_held_out_loss_as_a_structure_and_its_own_verdict_is_used():
+    """PooledSINDy is scored on the same folds as the yaw-free varying candidates, with the complexity of one
+    covariate: it is chosen only where no yaw-free varying candidate is in the confidence set, and the chosen
+    model's verdict is its own through the protocol."""
     from vivbench.models.campaign import PooledSINDy
     from vivbench.models.model_input import measured_input
     from vivbench.regimes import model_verdicts
@@ -466,9 +468,11 @@ def test_the_model_class_is_chosen_by_held_out_loss_among_the_simplest_and_its_o
                             n_perturbations=0, n_basis=(8,), n_bootstrap=10, wind_smoothing_s=0.0, null=False,
                             change_scan=False).fit(recs)
     assert sel.names_ == ["yaw0-cv", "yaw0-least", "pooled"] and sel.scored_.all()
+    assert [c.complexity for c in sel.candidates] == [0, 0, POOLED_COMPLEXITY] and POOLED_COMPLEXITY > 0
     total = sel.losses_.sum(axis=1)
     members = np.flatnonzero(sel.in_set_)
-    assert sel.chosen_index_ == members[np.argmin(total[members])]
+    simplest = [i for i in members if i < 2] or list(members)  # a yaw-free varying member first
+    assert sel.chosen_index_ == min(simplest, key=lambda i: total[i])
     ev = {c["name"]: c for c in sel.evidence()["candidates"]}
     assert ev["pooled"]["options"] == {"model_class": "pooled", "wind_smoothing_s": 0.0}
     # The pooled class alone: chosen, and its windows get PooledSINDy's own regimes and, narrowed, its verdicts.

@@ -49,6 +49,7 @@ from vivbench.analysis.candidates import settle_candidates, yaw_free_counterpart
 from vivbench.analysis.selection import (
     VARYING_OPTIONS,
     MODEL_CLASSES,
+    POOLED_COMPLEXITY,
     VARYING_PRIORS,
     Candidate,
     LIMIT_TIME_CONSTANTS,
@@ -72,7 +73,7 @@ __all__ = [
     "campaign_windows", "cluster_scores", "cluster_windows", "standardized_coefficients",
     "summarize_clusters", "CAMPAIGN_DERIVATIVE", "pool_results", "records_from_results",
     "with_campaign_model", "campaign_model_file", "load_campaign_model", "campaign_wind_smoothing", "event_yaw", "smooth_wind", "with_yaw",
-    "CRITERIA", "VARYING_OPTIONS", "MODEL_CLASSES", "VARYING_PRIORS", "Candidate", "LIMIT_TIME_CONSTANTS", "ModelSelection", "SINGLE_SECTION_SHARE", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss", "held_out_losses",
+    "CRITERIA", "VARYING_OPTIONS", "MODEL_CLASSES", "POOLED_COMPLEXITY", "VARYING_PRIORS", "Candidate", "LIMIT_TIME_CONSTANTS", "ModelSelection", "SINGLE_SECTION_SHARE", "STRUCTURAL_OPTIONS", "event_folds", "held_out_loss", "held_out_losses",
     "RANK_LEVEL", "confidence_set", "one_se_set", "rank_p_values", "perturbed_wind", "shared_groups", "variant_params", "fit_group", "held_out_task", "fit_task",
     "varying_selection", "wind_error_scale", "without_yaw", "yaw_free_counterpart", "settle_candidates",
     "amplitude_slope", "envelope_time_constant", "short_events", "valid_span",

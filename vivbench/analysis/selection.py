@@ -680,6 +680,12 @@ VARYING_OPTIONS = {"yaw_degree": (0, 1, 2), "penalty_choice": ("cv", "least")}
 #: The classes of campaign model a selection of :func:`varying_selection` chooses among by default.
 MODEL_CLASSES = ("varying", "pooled")
 
+#: Complexity of the pooled library among the selection's candidates: that of one covariate, so that the
+#: one-standard-error rule keeps a yaw-free varying model of the confidence set (a polynomial library in U
+#: fitted to few events can predict held-out envelopes as well and extrapolate far worse; development draws,
+#: docs/model_selection.md).
+POOLED_COMPLEXITY = 1
+
 #: Errors by which winds measured elsewhere on the span are shifted in :meth:`ModelSelection.agreement` (95 %, two-sided).
 UNMEASURED_Z = 1.96
 
@@ -725,8 +731,9 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
     model_classes : sequence of {"varying", "pooled"}
         The classes of campaign model among the candidates (default :data:`MODEL_CLASSES`): ``"varying"``
         the grid of ``options`` of :class:`vivbench.models.VaryingCoefficientSINDy`; ``"pooled"`` one
-        :class:`vivbench.models.PooledSINDy` (the pooled library, no covariate) on the same smoothed wind,
-        of complexity 0: the yaw-free varying candidates and it are told apart by their held-out losses.
+        :class:`vivbench.models.PooledSINDy` (the pooled library, no covariate) on the same smoothed wind, of
+        complexity :data:`POOLED_COMPLEXITY`: a structure other than the default's, chosen over a yaw-free
+        varying candidate only where that one is significantly worse held out.
     **params
         Fixed parameters of every candidate (default :data:`VARYING_PRIORS` where not given).
 
@@ -764,7 +771,7 @@ def varying_selection(*, options: dict | None = None, n_folds: int = 5, criterio
         for sigma in smoothings:  # one pooled model per smoothing among the options
             label = "pooled" if len(smoothings) == 1 else f"pooled-{_option_label('wind_smoothing_s', float(sigma))}"
             candidates.append(Candidate(name=label, model=PooledSINDy(**shared, wind_smoothing_s=float(sigma)),
-                                        complexity=0,
+                                        complexity=POOLED_COMPLEXITY,
                                         options={"model_class": "pooled", "wind_smoothing_s": float(sigma)}))
     return ModelSelection(candidates=candidates, n_folds=n_folds, criterion=criterion,
                           n_perturbations=n_perturbations, perturbation_timescale_s=perturbation_timescale_s,
