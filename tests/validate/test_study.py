@@ -236,6 +236,8 @@ def test_summary_counts_wins_choices_and_change_alarms():
     assert "| a vs b | 2 | 1 | 0.500 |" in page and "## Changes the wind does not carry" in page
     assert "| 1, 1 | 1, 0 | 1, 0, 1 | 1, 1, 0 of 1 |" in page  # per-event, shared, where the yaw matters, and not
     assert "| 0, 0 | 0, 0 | 0, 0, 0 | 2, 1, 2 of 2 |" in page
+    assert study_markdown(study_summary({"split": "development", "draws": [1], "methods": ["a"]},
+                                        [{**rows[2], "curve_error_energy_yaw_free": "nan"}])).count("| 1, 1, n/a |") == 2
 
 
 def test_summary_splits_the_draws_by_what_their_own_evidence_let_the_verdict_do():

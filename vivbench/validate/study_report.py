@@ -130,6 +130,12 @@ def _choices(rows: Sequence[dict]) -> dict[str, Any]:
     return out
 
 
+def _within(choices: dict) -> str:
+    """"k of n" draws whose curves are within the margin of the yaw-free model's; "n/a" when none was compared."""
+    n = choices.get("minor_curves_compared", 0)
+    return f"{choices.get('minor_curves_within', 0)} of {n}" if n else "n/a"
+
+
 def _recorded(row: dict, key: str) -> bool:
     """Whether a method recorded ``key`` for the draw (an evidence column left empty by methods without one)."""
     return str(row.get(key, "")).strip() not in ("", "nan")
@@ -390,8 +396,7 @@ def study_markdown(summary: dict[str, Any]) -> str:
                              f"| {c.get('shared_draws', 0)}, {c.get('shared_yaw_chosen', 0)} "
                              f"| {c.get('matters_draws', 0)}, {c.get('matters_yaw_chosen', 0)}, "
                              f"{c.get('matters_yaw_in_set', 0)} "
-                             f"| {c.get('minor_draws', 0)}, {c.get('minor_yaw_chosen', 0)}, "
-                             f"{c.get('minor_curves_within', 0)} of {c.get('minor_curves_compared', 0)} |")
+                             f"| {c.get('minor_draws', 0)}, {c.get('minor_yaw_chosen', 0)}, {_within(c)} |")
     lines += ["", "## Changes the wind does not carry", "",
               "The model's change scan (refits before and after every split of the events, permutation p-value "
               "below 0.05): alarms on draws without a change, and damping steps detected and located within one "
