@@ -131,16 +131,18 @@ def test_the_yaw_free_counterpart_of_a_yaw_choice_is_fitted_on_every_event_and_s
                   for d in (0, 1) for p in ("cv", "least")]
     records, truths = ["r1", "r2"], ["t1", "t2"]
 
+    def fitted(chosen, among=candidates):  # a selection as a method: its evidence names the choice
+        return SimpleNamespace(model=SimpleNamespace(candidates=among), evidence=lambda: {"chosen": chosen})
+
     def error(chosen, own=0.5):
-        selection = SimpleNamespace(chosen_=chosen, candidates=candidates)
-        return study._yaw_free_curve_error(SimpleNamespace(model=selection), records, truths, None, 0.2, own)
+        return study._yaw_free_curve_error(fitted(chosen), records, truths, None, 0.2, own)
 
     assert error("yaw1-least") == 0.25 and scored == [("0least", records, truths)]  # same penalty, no yaw
     assert candidates[1].model.fitted_on is None  # fitted on a copy
     assert error("yaw0-cv") == 0.5 and len(scored) == 1  # the choice takes no yaw: its own curves
     assert math.isnan(study._yaw_free_curve_error(object(), records, truths, None, 0.2, 0.5))  # no selection
-    only = SimpleNamespace(chosen_="yaw1-cv", candidates=[candidates[2]])
-    assert math.isnan(study._yaw_free_curve_error(SimpleNamespace(model=only), records, truths, None, 0.2, 0.5))
+    only = fitted("yaw1-cv", [candidates[2]])  # no yaw-free candidate of the same penalty
+    assert math.isnan(study._yaw_free_curve_error(only, records, truths, None, 0.2, 0.5))
 
 
 def test_parse_draws_and_config_checks():

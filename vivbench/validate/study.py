@@ -338,17 +338,17 @@ def _choice(fitted) -> dict[str, Any]:
 def _yaw_free_curve_error(fitted, records, truths, windows, tau: float, own: float) -> float:
     """The energy-weighted curve error of the chosen candidate's yaw-free counterpart (the same options with
     ``yaw_degree`` 0, :func:`vivbench.analysis.yaw_free_counterpart`) fitted to every event; ``own`` where the
-    choice takes no yaw; NaN for a model that chose no candidate (no selection) or has no yaw-free counterpart."""
+    choice takes no yaw; NaN for a model without held-out evidence or candidates, or without such a counterpart."""
     from vivbench.analysis.candidates import yaw_free_counterpart
 
-    selection = getattr(fitted, "model", None)
-    name, candidates = getattr(selection, "chosen_", None), getattr(selection, "candidates", None)
-    if name is None or candidates is None:
+    ev = model_evidence(fitted)
+    candidates = getattr(getattr(fitted, "model", None), "candidates", None)
+    if ev is None or candidates is None:
         return math.nan
-    chosen = next(c for c in candidates if c.name == name)
+    chosen = next(c for c in candidates if c.name == ev["chosen"])
     if not (chosen.options or {}).get("yaw_degree"):
         return float(own)
-    twin = yaw_free_counterpart(candidates, name)
+    twin = yaw_free_counterpart(candidates, chosen.name)
     if twin is None:
         return math.nan
     model = copy.deepcopy(twin.model).fit(records)
