@@ -125,8 +125,8 @@ def test_the_yaw_free_counterpart_of_a_yaw_choice_is_fitted_on_every_event_and_s
             return self
 
     scored = []
-    monkeypatch.setattr(study, "score_fitted", lambda model, records, truths, **kw: (
-        scored.append((model.label, model.fitted_on, truths)) or {"curve_error_energy": 0.25}))
+    monkeypatch.setattr(study, "curve_scores", lambda model, records, truths: (
+        scored.append((model.label, model.fitted_on, truths)) or (0.1, 0.2, 0.25)))
     candidates = [Candidate(name=f"yaw{d}-{p}", model=Fake(f"{d}{p}"), options={"yaw_degree": d, "penalty_choice": p})
                   for d in (0, 1) for p in ("cv", "least")]
     records, truths = ["r1", "r2"], ["t1", "t2"]
@@ -135,14 +135,14 @@ def test_the_yaw_free_counterpart_of_a_yaw_choice_is_fitted_on_every_event_and_s
         return SimpleNamespace(model=SimpleNamespace(candidates=among), evidence=lambda: {"chosen": chosen})
 
     def error(chosen, own=0.5):
-        return study._yaw_free_curve_error(fitted(chosen), records, truths, None, 0.2, own)
+        return study._yaw_free_curve_error(fitted(chosen), records, truths, own)
 
     assert error("yaw1-least") == 0.25 and scored == [("0least", records, truths)]  # same penalty, no yaw
     assert candidates[1].model.fitted_on is None  # fitted on a copy
     assert error("yaw0-cv") == 0.5 and len(scored) == 1  # the choice takes no yaw: its own curves
-    assert math.isnan(study._yaw_free_curve_error(object(), records, truths, None, 0.2, 0.5))  # no selection
+    assert math.isnan(study._yaw_free_curve_error(object(), records, truths, 0.5))  # no selection
     only = fitted("yaw1-cv", [candidates[2]])  # no yaw-free candidate of the same penalty
-    assert math.isnan(study._yaw_free_curve_error(only, records, truths, None, 0.2, 0.5))
+    assert math.isnan(study._yaw_free_curve_error(only, records, truths, 0.5))
 
 
 def test_parse_draws_and_config_checks():

@@ -101,7 +101,7 @@ from vivbench.validate.metrics import curve_energy_error, curve_errors, curves_r
 from vivbench.validate.recovery import (finite_median, model_window_rhs_errors, model_window_rhs_true_AU,
                                        record_yaw_on, regime_scores)
 
-__all__ = ["BUILTIN_METHODS", "RENAMED_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted",
+__all__ = ["BUILTIN_METHODS", "RENAMED_METHODS", "SCORE_KEYS", "resolve_method", "check_method_spec", "fit_method", "score_fitted", "curve_scores",
            "score_method", "scoring_inputs", "default_windows", "simulation_nmse", "above_noise_floor", "WindowMethod",
            "CampaignMethod", "SelectedVerdictModel",
            "FittedWindows", "VerdictModel", "MeasuredWindVerdictModel"]
@@ -549,7 +549,7 @@ def simulation_nmse(fitted, records: Sequence[Record]) -> tuple[float, float]:
     return finite_median(np.concatenate(values)), finite_median(np.array(covered))
 
 
-def _curve_scores(fitted, records, truths) -> tuple[float, float, float]:
+def curve_scores(fitted, records, truths) -> tuple[float, float, float]:
     """Curve errors of a fitted model: reference section's linear and total, and the energy-weighted one.
 
     The curves are evaluated on :func:`vivbench.analysis.curve_wind_grid` of the records' wind
@@ -558,6 +558,17 @@ def _curve_scores(fitted, records, truths) -> tuple[float, float, float]:
     (:func:`vivbench.validate.metrics.curve_energy_error`) compares the dA/dt the model's
     curves give at the truth's (A, U) of every sample with the truth's curves' there. All
     three are NaN when the truth has no single curve.
+
+    Parameters
+    ----------
+    fitted : a fitted model (``curves(wind)`` of the protocol; NaNs without it)
+    records : sequence of Record, the data it was fitted on
+    truths : sequence of xarray.Dataset, each record's event ``/truth``, same order
+
+    Returns
+    -------
+    (linear, total, energy) : floats, relative errors (``curve_error_linear``, ``curve_error_total`` and
+    ``curve_error_energy`` of :func:`score_fitted`)
     """
     if not callable(getattr(fitted, "curves", None)):
         return math.nan, math.nan, math.nan
@@ -723,8 +734,8 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
     out["rhs_error_true_AU_energy"] = energy_relative_error(np.concatenate(fm_all), np.concatenate(ft_all))
     out["rhs_median_rel_error"] = finite_median(np.concatenate(em)) if em else math.nan
     out["rhs_median_rel_error_active"] = finite_median(np.concatenate(em_act)) if em else math.nan
-    out["curve_error_linear"], out["curve_error_total"], out["curve_error_energy"] = _curve_scores(fitted, records,
-                                                                                                    truths)
+    out["curve_error_linear"], out["curve_error_total"], out["curve_error_energy"] = curve_scores(fitted, records,
+                                                                                                   truths)
     out["simulation_nmse"], out["simulation_covered"] = (simulation_nmse(fitted, records) if simulate
                                                          else (math.nan, math.nan))
     out["fit_time_s"] = float(fit_time_s)

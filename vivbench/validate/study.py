@@ -67,7 +67,7 @@ from vivbench.validate.journal import format_value
 from vivbench.validate.journal import counting_progress, run_journalled, task_directory
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_spec, fit_method, resolve_method
-from vivbench.validate.methods import score_fitted, scoring_inputs
+from vivbench.validate.methods import curve_scores, score_fitted, scoring_inputs
 from vivbench.validate.recovery import record_with_truth_wind
 from vivbench.validate.study_report import LABEL_COLUMNS, study_markdown, study_summary
 
@@ -316,8 +316,7 @@ def _score(method, records, truths, windows, tau: float) -> tuple[dict[str, Any]
     row.update(n_flagged=n_flagged, flagged_right_share=scores["accuracy_identifiable"],
                self_excited_flags=seen.self_excited_flags(), error="", fit_time_s=seconds,
                **_choice(fitted), **_change_scan(fitted, records))
-    row["curve_error_energy_yaw_free"] = _yaw_free_curve_error(fitted, records, truths, windows, tau,
-                                                               scores["curve_error_energy"])
+    row["curve_error_energy_yaw_free"] = _yaw_free_curve_error(fitted, records, truths, scores["curve_error_energy"])
     reference_seconds = getattr(fitted, "reference_seconds", None)
     if reference_seconds is not None:  # the grey-box's own fit of its reference (NaN: reused)
         row["reference_fit_time_s"] = float(reference_seconds)
@@ -335,7 +334,7 @@ def _choice(fitted) -> dict[str, Any]:
             "stationary": int(bool(ev.get("stationary", True)))}
 
 
-def _yaw_free_curve_error(fitted, records, truths, windows, tau: float, own: float) -> float:
+def _yaw_free_curve_error(fitted, records, truths, own: float) -> float:
     """The energy-weighted curve error of the chosen candidate's yaw-free counterpart (the same options with
     ``yaw_degree`` 0, :func:`vivbench.analysis.yaw_free_counterpart`) fitted to every event; ``own`` where the
     choice takes no yaw; NaN for a model without held-out evidence or candidates, or without such a counterpart."""
@@ -345,14 +344,10 @@ def _yaw_free_curve_error(fitted, records, truths, windows, tau: float, own: flo
     candidates = getattr(getattr(fitted, "model", None), "candidates", None)
     if ev is None or candidates is None:
         return math.nan
-    chosen = next(c for c in candidates if c.name == ev["chosen"])
-    if not (chosen.options or {}).get("yaw_degree"):
+    if not next((c.options or {}) for c in candidates if c.name == ev["chosen"]).get("yaw_degree"):
         return float(own)
-    twin = yaw_free_counterpart(candidates, chosen.name)
-    if twin is None:
-        return math.nan
-    model = copy.deepcopy(twin.model).fit(records)
-    return float(score_fitted(model, records, truths, windows=windows, tau=tau, simulate=False)["curve_error_energy"])
+    twin = yaw_free_counterpart(candidates, ev["chosen"])
+    return math.nan if twin is None else curve_scores(copy.deepcopy(twin.model).fit(records), records, truths)[2]
 
 
 def yaw_factor_range(records, truths) -> float:
