@@ -16,6 +16,7 @@ from vivbench.cli import main
 from vivbench.core.errors import InputError
 from vivbench.io.campaign_model import MODEL_NAME, write_campaign_regimes
 from vivbench.io.event import read_event, write_event
+from vivbench.io.result import read_result
 from vivbench.report import twin_section
 from vivbench.synth import AeroConfig, CampaignConfig, generate_campaign, generate_event
 from vivbench.validate.twin import TwinConfig, read_twin, run_twin, twin_promise
@@ -72,6 +73,10 @@ def test_mirror_reproduces_the_campaign_layout(field, tmp_path):
     assert_close(again.noise_density, mirror.noise_density, rtol=0.1, reason="noise floor from a finite spectrum")
     assert_close(np.array(again.mode_shape), np.array(structure.mode_shape), atol=0.02,
                  reason="amplitude ratios of noisy envelopes")
+    # the amplitude where the nonlinear damping acts: each section's 99th percentile over the events' samples
+    A = np.concatenate([read_result(r, ["A"])["A"].values for r in results], axis=0)
+    assert_close(np.array(mirror.amplitude_scale), np.nanpercentile(np.where(A > 0, A, np.nan), 99.0, axis=0))
+    assert len(again.amplitude_scale) == len(mirror.sections) and min(again.amplitude_scale) > 0
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,8 @@ from vivbench.synth.wind import anemometer_layout
 from vivbench.validate.twin import TwinConfig
 from vivbench.validate.twin_mirror import (CampaignMirror, EventMirror, TwinBridge, anemometer_fractions,
                                            mirror_generator, mirror_specs, mirror_structure)
-from vivbench.validate.twin_nuisance import (MIN_MEAN_YAW_FACTOR, NuisancePriors, apply_nuisances, draw_nuisances)
+from vivbench.validate.twin_nuisance import (E_MIXES, MIN_MEAN_YAW_FACTOR, NuisancePriors, apply_nuisances,
+                                             draw_nuisances)
 
 YAWS = np.linspace(-25.0, 25.0, 41)
 
@@ -55,6 +56,7 @@ def test_drawn_nuisances_lie_within_their_priors(seed, lo, width, bw, share):
     assert priors.buffeting_w[0] <= n.buffeting_w <= priors.buffeting_w[1]
     assert 0.1 <= n.buffeting_u <= 0.2
     assert n.yaw_shape in ("absent", *YAW_SHAPES)
+    assert n.e_mix in E_MIXES
     if n.yaw is None:
         assert n.yaw_shape == "absent" and n.yaw_mean_factor == 1.0
     else:
@@ -68,10 +70,19 @@ def test_the_default_priors_are_the_family_priors_in_proportion():
     draws = [draw_nuisances(NuisancePriors(), np.zeros(5), rng) for _ in range(400)]
     smooth = np.mean([d.felt_wind == "smooth" for d in draws])
     absent = np.mean([d.yaw is None for d in draws])
+    mixes = {m: np.mean([d.e_mix == m for d in draws]) for m in E_MIXES}
     # binomial spread of 400 draws: sd about 0.025
     assert abs(smooth - 0.5) < 0.1 and abs(absent - 0.4) < 0.1
+    assert abs(mixes["both"] - 0.5) < 0.1 and abs(mixes["e1_only"] - 0.25) < 0.1 and abs(mixes["e2_only"] - 0.25) < 0.1
     assert {d.yaw_shape for d in draws} == {"absent", *YAW_SHAPES}
     assert max(d.buffeting_w for d in draws) > 1.0 and max(d.buffeting_u for d in draws) > 0.3
+
+
+def test_the_models_own_split_when_the_priors_say_so():
+    priors = NuisancePriors(e_mix_shares=(1.0, 0.0, 0.0))
+    assert {draw_nuisances(priors, YAWS, np.random.default_rng(s)).e_mix for s in range(20)} == {"both"}
+    assert draw_nuisances(priors, YAWS, np.random.default_rng(0)).to_dict()["e_mix"] == "both"
+    assert priors.to_dict()["e_mix_shares"] == [1.0, 0.0, 0.0]
 
 
 def test_no_yaw_effect_when_the_priors_leave_it_out():
@@ -120,6 +131,10 @@ def test_applied_nuisances_keep_what_is_measured():
     ({"buffeting_u": (-0.1, 0.4)}, "buffeting_u must be \\(low, high\\) with 0 <= low"),
     ({"buffeting_u": (0.0, float("nan"))}, "buffeting_u"),
     ({"yaw_effect": "yes"}, "yaw_effect must be true or false"),
+    ({"e_mix_shares": (0.5, 0.5)}, "e_mix_shares must be 3 probabilities \\(both, e1_only, e2_only\\) summing to 1"),
+    ({"e_mix_shares": (0.5, 0.25, 0.3)}, "e_mix_shares must be 3 probabilities"),
+    ({"e_mix_shares": (1.5, -0.25, -0.25)}, "e_mix_shares"),
+    ({"e_mix_shares": "both"}, "e_mix_shares"),
 ])
 def test_priors_are_validated_with_clear_messages(kwargs, message):
     with pytest.raises(InputError, match=message):

@@ -156,7 +156,7 @@ from vivbench.validate.twin import (
     twin_promise,
     twin_summary,
 )
-from vivbench.validate.twin_aero import band_curves, draw_aero, fit_aero, perturbed_curves
+from vivbench.validate.twin_aero import band_curves, draw_aero, fit_aero, limiter_curves, perturbed_curves
 from vivbench.validate.twin_chain import (
     TWIN_METRICS,
     PoolSettings,
@@ -186,6 +186,7 @@ from vivbench.validate.twin_mirror import (
     read_bridge,
 )
 from vivbench.validate.twin_nuisance import (
+    E_MIXES,
     MIN_MEAN_YAW_FACTOR,
     YAW_TRIES,
     NuisancePriors,
@@ -197,12 +198,13 @@ from vivbench.validate.twin_nuisance import (
 __all__ = [
     "BoundaryScore", "boundary_f1",
     "AERO_TRIES", "METRIC_NAMES", "TWIN_FILE", "TwinConfig", "TwinResult", "TwinTask", "read_twin", "run_twin", "run_twin_task",
-    "twin_inputs", "twin_markdown", "twin_promise", "twin_summary", "band_curves", "draw_aero", "fit_aero", "perturbed_curves",
+    "twin_inputs", "twin_markdown", "twin_promise", "twin_summary", "band_curves", "draw_aero", "fit_aero", "limiter_curves",
+    "perturbed_curves",
     "TWIN_METRICS", "PoolSettings", "chain_scores", "identify_config_from_json", "pool_method", "pool_settings",
     "run_chain", "CHECKED_METRICS", "TwinCheckConfig", "run_twin_check", "run_twin_check_task", "twin_check_markdown",
     "BRIDGE_KEYS", "CampaignMirror", "EventMirror", "TwinBridge", "measure_campaign", "mirror_generator",
     "mirror_specs", "mirror_structure", "read_bridge", "anemometer_fractions",
-    "MIN_MEAN_YAW_FACTOR", "YAW_TRIES", "NuisancePriors", "Nuisances", "apply_nuisances", "draw_nuisances",
+    "E_MIXES", "MIN_MEAN_YAW_FACTOR", "YAW_TRIES", "NuisancePriors", "Nuisances", "apply_nuisances", "draw_nuisances",
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
     "STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",

@@ -162,11 +162,13 @@ def _twin_campaign(task: TwinTask, model, structure, children, root: Path):
     yaws = np.concatenate([e.yaws for e in task.mirror.events])
     specs = mirror_specs(task.mirror)
     for attempt in range(1, AERO_TRIES + 1):
-        aero, misfit = draw_aero(model, structure, task.wind_range, rng)
+        nuisances = None if task.priors is None else draw_nuisances(task.priors, yaws, nuisance_rng)
+        e_mix = "both" if nuisances is None or not task.mirror.amplitude_scale else nuisances.e_mix
+        aero, misfit = draw_aero(model, structure, task.wind_range, rng, e_mix=e_mix,
+                                 amplitude=task.mirror.amplitude_scale)
         generator = mirror_generator(task.mirror, structure, aero)
-        nuisances = None
-        if task.priors is not None:
-            nuisances = draw_nuisances(task.priors, yaws, nuisance_rng)
+        if nuisances is not None:
+            nuisances = dataclasses.replace(nuisances, e_mix=e_mix)
             generator = apply_nuisances(generator, nuisances)
         try:
             files = [write_event(generate_event(spec, generator, seed, campaign_seed=task.seed),
@@ -274,7 +276,7 @@ def twin_summary(config: dict, mirror: CampaignMirror, rows: dict[int, dict], fa
                    "anemometer_offset_m": mirror.anemometer_offset, "frequency_hz": mirror.frequency,
                    "mode_shape_measured": list(mirror.mode_shape),
                    "anemometer_positions_m": list(mirror.anemometer_positions), "span_length_m": mirror.span_length,
-                   "wind_rule": mirror.wind_rule},
+                   "wind_rule": mirror.wind_rule, "amplitude_scale_m": list(mirror.amplitude_scale)},
         "draws": draws, "failed": sorted(int(d) for d in failed),
         "errors": {str(d): failed[d] for d in sorted(failed)}, "expected": expected,
         "promise": twin_promise([r["scores"] for r in draws]),
@@ -329,7 +331,8 @@ def twin_markdown(summary: dict) -> str:
                  f"{priors['buffeting_w'][1]:g}), buffeting_u U({priors['buffeting_u'][0]:g}, "
                  f"{priors['buffeting_u'][1]:g}), "
                  + ("a yaw effect on Y1 and C_L (absent, or one of four shapes) along the measured yaws, Y1 and C_L "
-                    "divided by its mean over them." if priors["yaw_effect"] else "no yaw effect."))
+                    "divided by its mean over them" if priors["yaw_effect"] else "no yaw effect")
+                 + _e_mix_text(priors.get("e_mix_shares", (1.0, 0.0, 0.0))))
     lines += ["", "Mirrored: sections, rates, events (number, start times, durations), each event's measured mean "
               "wind and yaw (knots every " f"{cfg['knot_step']:g} s), turbulence intensity, sections' wind spread, "
               f"noise floor, {layout}, the identification's and the campaign model's settings. Assumed: the bridge "
@@ -338,18 +341,31 @@ def twin_markdown(summary: dict) -> str:
               "anemometers' own errors. " + drawn, ""]
     rows = [r for r in summary["draws"] if r.get("nuisances")]
     if rows:
-        lines += ["| draw | felt wind | point time scale, s | buffeting_w | buffeting_u | yaw effect | mean yaw factor |",
-                  "|---|---|---|---|---|---|---|"]
+        lines += ["| draw | felt wind | point time scale, s | buffeting_w | buffeting_u | yaw effect | mean yaw factor "
+                  "| amplitude limited by |", "|---|---|---|---|---|---|---|---|"]
         for r in rows:
             n_ = r["nuisances"]
             lines.append(f"| {r['draw']} | {n_['felt_wind']} | {_fmt(n_['point_timescale_s'])} | "
                          f"{_fmt(n_['buffeting_w'])} | {_fmt(n_['buffeting_u'])} | {n_['yaw_shape']} | "
-                         f"{_fmt(n_['yaw_mean_factor'])} |")
+                         f"{_fmt(n_['yaw_mean_factor'])} | {_E_MIX_NAMES[n_.get('e_mix', 'both')]} |")
         lines.append("")
     lines += ["The 90 % range of a campaign is where one more campaign's figure falls with 90 % probability if the "
               "draws' figures (the logarithms of the errors) are normal (mean +- t s sqrt(1 + 1/K)); with few draws "
               "it is wide, as it should be.", ""]
     return "\n".join(lines)
+
+
+#: How the twin's page names each ``e_mix``.
+_E_MIX_NAMES = {"both": "as the model splits it", "e1_only": "A^2 alone", "e2_only": "A^3 alone"}
+
+
+def _e_mix_text(shares) -> str:
+    both, e1, e2 = (float(x) for x in shares)
+    if both == 1.0:
+        return "; the nonlinear damping split between A^2 and A^3 as the campaign model splits it."
+    return (f"; the nonlinear damping split between A^2 and A^3 as the campaign model splits it with probability "
+            f"{both:g}, else carried by A^2 alone ({e1:g}) or A^3 alone ({e2:g}), equal to the model's at each "
+            "section's 99th percentile of the measured amplitude.")
 
 
 def read_twin(directory) -> dict:

@@ -170,6 +170,8 @@ class CampaignMirror:
         (else empty: one anemometer per section)
     span_length : m; the span length the import recorded with them (None without)
     wind_rule : the import's rule for the wind at a section ("nearest" or "interpolation")
+    amplitude_scale : m; each section's 99th percentile of the identified amplitude over the events (where
+        the nonlinear damping acts; empty when none is finite)
     """
 
     sections: tuple[str, ...]
@@ -188,6 +190,7 @@ class CampaignMirror:
     anemometer_positions: tuple[float, ...] = ()
     span_length: float | None = None
     wind_rule: str = "nearest"
+    amplitude_scale: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""
@@ -280,6 +283,7 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
         res = read_result(path, ["U", "A"], optional=["yaw"])
         by_id[str(res.attrs["event_id"])] = (Path(path), res)
     events, wind_rates, accel_rates, ti, noise, offsets, energy, freqs, distances = [], [], [], [], [], [], [], [], []
+    amplitudes = []
     sections, azimuth, identify_json, positions, layout = None, None, None, (), {}
     for path in sorted((Path(p) for p in event_files), key=lambda p: p.name):
         tree = read_event(path, truth=False)
@@ -315,6 +319,7 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
         if np.all(np.isfinite(means)) and np.nanmean(means) > 0:
             offsets += list(means / np.mean(means) - 1.0)
         energy.append(np.nansum(res["A"].values ** 2, axis=0))
+        amplitudes.append(np.asarray(res["A"].values, dtype=float))
         try:
             times, speeds = _knots(tw, np.nanmean(U, axis=1), duration, knot_step)
             _, yaws = _knots(tw, np.nanmean(yaw, axis=1), duration, knot_step)
@@ -328,7 +333,7 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
     if not events:
         raise InputError("no event file has an identification result: nothing to mirror")
     e = np.sqrt(np.sum(energy, axis=0))
-    return CampaignMirror(
+    return CampaignMirror(amplitude_scale=_amplitude_scale(amplitudes),
         sections=sections, wind_rate=round(float(np.median(wind_rates)), 6),
         accel_rate=round(float(np.median(accel_rates)), 6),
         span_azimuth_deg=azimuth, turbulence_intensity=float(np.median(ti)) if ti else 0.08,
@@ -337,6 +342,17 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
         anemometer_offset=float(np.mean(distances)) if distances else 0.0, positions=positions,
         frequency=float(np.median(freqs)) if freqs else math.nan,
         mode_shape=tuple(float(x) for x in e / e.max()), identify_json=identify_json, events=tuple(events), **layout)
+
+
+def _amplitude_scale(amplitudes: list[np.ndarray]) -> tuple[float, ...]:
+    """Each section's 99th percentile of the amplitude over the events' samples, m (empty when a section has no
+    positive one)."""
+    A = np.concatenate(amplitudes, axis=0)
+    with np.errstate(invalid="ignore"):
+        A = np.where(A > 0, A, np.nan)
+    if not np.all(np.isfinite(A).any(axis=0)):
+        return ()
+    return tuple(float(x) for x in np.nanpercentile(A, 99.0, axis=0))
 
 
 _ANEMOMETER_PREFIX = "import_anemometer_position_m_"

@@ -12,6 +12,12 @@ leave their effect out of its spread; each twin draw therefore draws them from t
   feels a smooth mean wind while each anemometer records point turbulence of the measured intensity
   with an integral time scale drawn log-uniform in ``point_timescale_s`` (``felt_wind="smooth"``);
 - the buffeting coefficients, uniform in ``buffeting_w`` and ``buffeting_u``;
+- which orders of the amplitude limit it (``e_mix``, as the family's): both, A^2 alone (e1) or A^3
+  alone (e2), with the family's probabilities. The campaign model's split of the nonlinear damping
+  between A^2 and A^3 is what its regimes 3 and 4 rest on, and errors in the wind can bend it alike
+  in every bootstrap replicate; twins that all took the model's own split would share its bias and
+  could not see the flags it makes wrong (:func:`vivbench.validate.twin_aero.draw_aero` keeps the
+  model's limiting at the measured amplitudes whichever orders carry it);
 - a yaw effect on Y1 and C_L (:func:`vivbench.synth.draw_yaw_effect`: absent with probability
   2/5, else one of four shapes), applied along the measured yaw histories. The campaign model's
   curves already average the bridge's aerodynamics over the yaws it met, so Y1 and C_L are divided
@@ -36,12 +42,15 @@ from vivbench.synth.config import GeneratorConfig
 from vivbench.synth.curves import YawFactor, scaled_bell
 from vivbench.synth.family import draw_yaw_effect
 
-__all__ = ["NuisancePriors", "Nuisances", "draw_nuisances", "apply_nuisances", "MIN_MEAN_YAW_FACTOR", "YAW_TRIES"]
+__all__ = ["E_MIXES", "NuisancePriors", "Nuisances", "draw_nuisances", "apply_nuisances", "MIN_MEAN_YAW_FACTOR",
+           "YAW_TRIES"]
 
 #: Smallest mean yaw factor over the measured yaws that a drawn yaw effect may have.
 MIN_MEAN_YAW_FACTOR = 0.25
 #: Draws of a yaw effect before it is left absent.
 YAW_TRIES = 20
+#: The orders that limit the amplitude, as the family's ``e_mix``: both, A^2 alone (e1), A^3 alone (e2).
+E_MIXES = ("both", "e1_only", "e2_only")
 
 
 def _interval(name: str, value, lo: float, hi: float, unit: str) -> tuple[float, float]:
@@ -68,6 +77,8 @@ class NuisancePriors:
         integral time scale
     buffeting_w, buffeting_u : (low, high), within [0, 5]; uniform priors of the buffeting coefficients
     yaw_effect : draw a yaw effect on Y1 and C_L from the family's prior (False: never)
+    e_mix_shares : probabilities of the orders that limit the amplitude, in the order of :data:`E_MIXES`
+        (each in [0, 1], summing to 1; ``(1, 0, 0)``: always the campaign model's own split)
     """
 
     smooth_share: float = 0.5
@@ -75,6 +86,7 @@ class NuisancePriors:
     buffeting_w: tuple[float, float] = (0.0, 1.2)
     buffeting_u: tuple[float, float] = (0.0, 0.4)
     yaw_effect: bool = True
+    e_mix_shares: tuple[float, float, float] = (0.5, 0.25, 0.25)
 
     def __post_init__(self) -> None:
         share = self.smooth_share
@@ -87,12 +99,21 @@ class NuisancePriors:
             object.__setattr__(self, name, _interval(name, getattr(self, name), 0.0, 5.0, ""))
         if not isinstance(self.yaw_effect, bool):
             raise InputError(f"yaw_effect must be true or false; got {self.yaw_effect!r}")
+        shares = self.e_mix_shares
+        bad = (f"e_mix_shares must be {len(E_MIXES)} probabilities ({', '.join(E_MIXES)}) summing to 1; "
+               f"got {shares!r}")
+        if not (isinstance(shares, (list, tuple)) and len(shares) == len(E_MIXES)) or not all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and 0.0 <= x <= 1.0 for x in shares):
+            raise InputError(bad)
+        if abs(sum(shares) - 1.0) > 1e-9:
+            raise InputError(bad)
+        object.__setattr__(self, "e_mix_shares", tuple(float(x) for x in shares))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready)."""
         return {"smooth_share": self.smooth_share, "point_timescale_s": list(self.point_timescale_s),
                 "buffeting_w": list(self.buffeting_w), "buffeting_u": list(self.buffeting_u),
-                "yaw_effect": self.yaw_effect}
+                "yaw_effect": self.yaw_effect, "e_mix_shares": list(self.e_mix_shares)}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -108,6 +129,7 @@ class Nuisances:
     yaw_shape : "absent" or the yaw factor's shape
     yaw_mean_factor : the yaw factor's mean over the measured yaws (1 when absent); Y1 and C_L are
         divided by it
+    e_mix : one of :data:`E_MIXES`; the orders that limit the amplitude in the twin's aerodynamics
     """
 
     felt_wind: str
@@ -117,6 +139,7 @@ class Nuisances:
     yaw: YawFactor | None
     yaw_shape: str
     yaw_mean_factor: float
+    e_mix: str = "both"
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (JSON-ready): the values and the yaw factor's parameters of its shape."""
@@ -127,7 +150,7 @@ class Nuisances:
             yaw = {"shape": self.yaw.shape, **{k: getattr(self.yaw, k) for k in keys}}
         return {"felt_wind": self.felt_wind, "point_timescale_s": self.point_timescale_s,
                 "buffeting_w": self.buffeting_w, "buffeting_u": self.buffeting_u, "yaw": yaw,
-                "yaw_shape": self.yaw_shape, "yaw_mean_factor": self.yaw_mean_factor}
+                "yaw_shape": self.yaw_shape, "yaw_mean_factor": self.yaw_mean_factor, "e_mix": self.e_mix}
 
 
 def draw_nuisances(priors: NuisancePriors, yaws, rng: np.random.Generator) -> Nuisances:
@@ -161,8 +184,9 @@ def draw_nuisances(priors: NuisancePriors, yaws, rng: np.random.Generator) -> Nu
                 break
         else:
             yaw, shape, mean = None, "absent", 1.0
+    e_mix = E_MIXES[int(rng.choice(len(E_MIXES), p=np.asarray(priors.e_mix_shares)))]
     return Nuisances(felt_wind="smooth" if smooth else "tributary", point_timescale_s=timescale, buffeting_w=b_w,
-                     buffeting_u=b_u, yaw=yaw, yaw_shape=shape, yaw_mean_factor=mean)
+                     buffeting_u=b_u, yaw=yaw, yaw_shape=shape, yaw_mean_factor=mean, e_mix=e_mix)
 
 
 def apply_nuisances(generator: GeneratorConfig, nuisances: Nuisances) -> GeneratorConfig:
