@@ -357,3 +357,15 @@ def test_the_twin_refits_a_selection_whose_choice_is_the_pooled_class_with_its_p
     (cand,) = pool_method(settings).candidates
     assert cand.model.get_params() == model.candidates[0].model.get_params()
     assert (cand.model.n_bootstrap, cand.model.block_s, cand.model.wind_smoothing_s) == (6, 120.0, 15.0)
+
+
+def test_a_twin_event_beyond_a_decks_accelerations_is_refused_so_that_the_draw_is_redrawn(field):
+    from vivbench.validate.twin import _plausible
+
+    _, events, _ = field
+    event = read_event(events[0])
+    assert _plausible(event) is event
+    acc = event["accel"]["acc"]
+    event["accel"]["acc"] = acc.copy(data=acc.values * 1e4)  # a runaway amplitude: tens of m/s^2
+    with pytest.raises(InputError, match="twin event S1: .* is implausible for a bridge deck"):
+        _plausible(event)

@@ -17,7 +17,8 @@ many draws with enough flags it was tested and broken, and the one-sided 95 % up
 
 Seeds: draw d uses ``SeedSequence(seed, spawn_key=(d,))``; its first child draws the aerodynamics,
 the last the nuisances (both redrawn from their streams, up to :data:`AERO_TRIES` times, while an
-event's averaged truth grows without bound and cannot be generated), the others the events. One
+event's averaged truth grows without bound and cannot be generated, or drives the deck beyond the
+accelerations the identification accepts), the others the events. One
 task is one draw; finished draws are journalled (``OUT/twin.jsonl``), so a run stopped part-way
 keeps them and the next run resumes; ``OUT/twin.json`` and ``OUT/twin.md`` are rewritten
 atomically from the journal alone (no wall times), so the same inputs and seed give the same bytes
@@ -42,6 +43,7 @@ from vivbench.core.errors import InputError, error_line
 from vivbench.core.lock import exclusive_directory
 from vivbench.io.event import list_events, write_event
 from vivbench.io.netcdf import atomic_path
+from vivbench.io.quality import check_acc_magnitude
 from vivbench.io.result import list_results
 from vivbench.models.campaign_files import load_campaign_model
 from vivbench.synth.event import generate_event
@@ -151,8 +153,18 @@ def twin_inputs(campaign_dir, results_dir, *, max_events: int | None = None) -> 
 
 
 #: Draws of the aerodynamics tried per twin draw before it fails: a draw whose averaged truth grows without bound
-#: in some event (a large nonlinear term where Y1 < 0) cannot be generated and is redrawn.
+#: in some event (a large nonlinear term where Y1 < 0) cannot be generated and is redrawn, as is one whose deck
+#: accelerates beyond what the identification accepts.
 AERO_TRIES = 5
+
+
+def _plausible(event):
+    """The generated event, or InputError (the draw is redrawn) when its deck accelerates more than any deck does:
+    the identification refuses such records (:func:`vivbench.io.quality.check_acc_magnitude`), and a bridge whose
+    aerodynamics drive it there could not have given the measured campaign."""
+    check_acc_magnitude(event["accel"]["acc"].values, where="twin event",
+                        labels=[str(s) for s in event["accel"]["section"].values])
+    return event
 
 
 def _twin_campaign(task: TwinTask, model, structure, children, root: Path):
@@ -171,7 +183,7 @@ def _twin_campaign(task: TwinTask, model, structure, children, root: Path):
             nuisances = dataclasses.replace(nuisances, e_mix=e_mix)
             generator = apply_nuisances(generator, nuisances)
         try:
-            files = [write_event(generate_event(spec, generator, seed, campaign_seed=task.seed),
+            files = [write_event(_plausible(generate_event(spec, generator, seed, campaign_seed=task.seed)),
                                  root / "campaign" / f"{spec.event_id}.nc")
                      for spec, seed in zip(specs, children[1:len(specs) + 1])]
             return aero, misfit, nuisances, attempt, files
