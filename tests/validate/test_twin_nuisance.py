@@ -16,8 +16,8 @@ from vivbench.synth.wind import anemometer_layout
 from vivbench.validate.twin import TwinConfig
 from vivbench.validate.twin_mirror import (CampaignMirror, EventMirror, TwinBridge, anemometer_fractions,
                                            mirror_generator, mirror_specs, mirror_structure)
-from vivbench.validate.twin_nuisance import (E_MIXES, MIN_MEAN_YAW_FACTOR, NuisancePriors, apply_nuisances,
-                                             draw_nuisances)
+from vivbench.synth import E_MIXES
+from vivbench.validate.twin_nuisance import MIN_MEAN_YAW_FACTOR, NuisancePriors, apply_nuisances, draw_nuisances
 
 YAWS = np.linspace(-25.0, 25.0, 41)
 

@@ -40,6 +40,8 @@ from vivbench.synth.curves import (
 )
 from vivbench.synth.draw import draw_aero
 from vivbench.synth.family import (
+    E_MIX_SHARES,
+    E_MIXES,
     FAMILY_ENTROPY,
     FAMILY_FILE,
     FAMILY_VERSION,
@@ -64,7 +66,7 @@ __all__ = [
     "mean_wind", "modal_coefficients", "order_contributions", "simulate_event", "simulate_turbulence",
     "AERO_MODES", "AsymmetricBell", "CURVE_KINDS", "YAW_SHAPES", "Constant", "GaussianBell", "LogisticStep", "LorentzianBell", "YawFactor", "scaled_bell",
     "aero_functions", "curve_from_data", "draw_aero", "reduced_velocity", "truth_curves",
-    "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "draw_yaw_effect", "family_seed",
+    "E_MIXES", "E_MIX_SHARES", "FAMILY_ENTROPY", "FAMILY_FILE", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "draw_yaw_effect", "family_seed",
     "generate_family_campaign", "ContinuousLog", "ContinuousLogConfig", "generate_continuous_log",
     "write_continuous_log",
 ]

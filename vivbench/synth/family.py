@@ -82,8 +82,8 @@ from vivbench.synth.curves import AsymmetricBell, Constant, GaussianBell, Lorent
 from vivbench.synth.draw import draw_aero
 from vivbench.synth.turbulence import TurbulenceConfig
 
-__all__ = ["FAMILY_ENTROPY", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge", "draw_yaw_effect", "family_seed",
-           "generate_family_campaign", "FAMILY_FILE"]
+__all__ = ["E_MIXES", "E_MIX_SHARES", "FAMILY_ENTROPY", "FAMILY_VERSION", "SPLITS", "FamilyDraw", "draw_bridge",
+           "draw_yaw_effect", "family_seed", "generate_family_campaign", "FAMILY_FILE"]
 
 #: Fixed entropy of the family's seeds (any 128-bit number; changing it makes a new family).
 FAMILY_ENTROPY = 0x5A1F_2C4E_9B07_D3E6_8F11_60AD_C2B5_7E93
@@ -94,6 +94,10 @@ SPLITS = ("development", "evaluation")
 FAMILY_VERSION = 1
 #: Name of the file that describes a draw beside its campaign.
 FAMILY_FILE = "family.json"
+#: Which orders of the amplitude limit it (``e_mix``): both e1 (A^2) and e2 (A^3), e1 alone, e2 alone,
+#: and the prior probability of each.
+E_MIXES = ("both", "e1_only", "e2_only")
+E_MIX_SHARES = (0.5, 0.25, 0.25)
 
 _RHO = 1.225
 _MAX_TRIES = 500
@@ -288,7 +292,7 @@ def draw_bridge(split: str, index: int) -> FamilyDraw:
     else:  # pragma: no cover - the priors make a reachable lock-in likely on every try
         raise InputError(f"family draw {split} {index}: no bridge with a reachable lock-in in {_MAX_TRIES} tries")
     mix = float(rng.random())
-    e_mix = "both" if mix < 0.5 else ("e1_only" if mix < 0.75 else "e2_only")
+    e_mix = E_MIXES[int(np.searchsorted(np.cumsum(E_MIX_SHARES), mix, side="right"))]
     yaw, yaw_kind = draw_yaw_effect(rng)
     aero_over = {"Y1": Y1, "yaw": yaw, "buffeting_w": float(rng.uniform(0.0, 1.2)),
                  "buffeting_u": float(rng.uniform(0.0, 0.4))}

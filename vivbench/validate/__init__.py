@@ -186,7 +186,6 @@ from vivbench.validate.twin_mirror import (
     read_bridge,
 )
 from vivbench.validate.twin_nuisance import (
-    E_MIXES,
     MIN_MEAN_YAW_FACTOR,
     YAW_TRIES,
     NuisancePriors,
@@ -204,7 +203,7 @@ __all__ = [
     "run_chain", "CHECKED_METRICS", "TwinCheckConfig", "run_twin_check", "run_twin_check_task", "twin_check_markdown",
     "BRIDGE_KEYS", "CampaignMirror", "EventMirror", "TwinBridge", "measure_campaign", "mirror_generator",
     "mirror_specs", "mirror_structure", "read_bridge", "anemometer_fractions",
-    "E_MIXES", "MIN_MEAN_YAW_FACTOR", "YAW_TRIES", "NuisancePriors", "Nuisances", "apply_nuisances", "draw_nuisances",
+    "MIN_MEAN_YAW_FACTOR", "YAW_TRIES", "NuisancePriors", "Nuisances", "apply_nuisances", "draw_nuisances",
     "greybox_recovery", "truth_y1", "truth_yaw_factor",
     "STRUCTURAL_FIELDS", "GreyBoxMethod", "GreyBoxVerdictModel", "structural_properties",
     "LEADERBOARD_COLUMNS", "SCORE_LABELS", "SCORES", "VALUES", "LeaderboardResult", "format_score", "leaderboard_markdown",

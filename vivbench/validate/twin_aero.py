@@ -40,7 +40,7 @@ from vivbench.models.protocol import model_curves
 from vivbench.synth.aero import amplitude_coefficients
 from vivbench.synth.config import AeroConfig, StructureConfig
 from vivbench.synth.curves import GaussianBell, LogisticStep
-from vivbench.validate.twin_nuisance import E_MIXES
+from vivbench.synth.family import E_MIXES
 
 __all__ = ["band_curves", "perturbed_curves", "limiter_curves", "fit_aero", "draw_aero"]
 

@@ -333,7 +333,7 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
     if not events:
         raise InputError("no event file has an identification result: nothing to mirror")
     e = np.sqrt(np.sum(energy, axis=0))
-    return CampaignMirror(amplitude_scale=_amplitude_scale(amplitudes),
+    return CampaignMirror(
         sections=sections, wind_rate=round(float(np.median(wind_rates)), 6),
         accel_rate=round(float(np.median(accel_rates)), 6),
         span_azimuth_deg=azimuth, turbulence_intensity=float(np.median(ti)) if ti else 0.08,
@@ -341,7 +341,8 @@ def measure_campaign(event_files: Sequence, result_files: Sequence, *, knot_step
         noise_density=float(np.median(noise)) if noise else 30.0,
         anemometer_offset=float(np.mean(distances)) if distances else 0.0, positions=positions,
         frequency=float(np.median(freqs)) if freqs else math.nan,
-        mode_shape=tuple(float(x) for x in e / e.max()), identify_json=identify_json, events=tuple(events), **layout)
+        mode_shape=tuple(float(x) for x in e / e.max()), identify_json=identify_json, events=tuple(events),
+        amplitude_scale=_amplitude_scale(amplitudes), **layout)
 
 
 def _amplitude_scale(amplitudes: list[np.ndarray]) -> tuple[float, ...]:

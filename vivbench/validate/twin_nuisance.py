@@ -40,17 +40,15 @@ import numpy as np
 from vivbench.core.errors import InputError
 from vivbench.synth.config import GeneratorConfig
 from vivbench.synth.curves import YawFactor, scaled_bell
-from vivbench.synth.family import draw_yaw_effect
+from vivbench.synth.family import E_MIX_SHARES, E_MIXES, draw_yaw_effect
 
-__all__ = ["E_MIXES", "NuisancePriors", "Nuisances", "draw_nuisances", "apply_nuisances", "MIN_MEAN_YAW_FACTOR",
+__all__ = ["NuisancePriors", "Nuisances", "draw_nuisances", "apply_nuisances", "MIN_MEAN_YAW_FACTOR",
            "YAW_TRIES"]
 
 #: Smallest mean yaw factor over the measured yaws that a drawn yaw effect may have.
 MIN_MEAN_YAW_FACTOR = 0.25
 #: Draws of a yaw effect before it is left absent.
 YAW_TRIES = 20
-#: The orders that limit the amplitude, as the family's ``e_mix``: both, A^2 alone (e1), A^3 alone (e2).
-E_MIXES = ("both", "e1_only", "e2_only")
 
 
 def _interval(name: str, value, lo: float, hi: float, unit: str) -> tuple[float, float]:
@@ -77,7 +75,7 @@ class NuisancePriors:
         integral time scale
     buffeting_w, buffeting_u : (low, high), within [0, 5]; uniform priors of the buffeting coefficients
     yaw_effect : draw a yaw effect on Y1 and C_L from the family's prior (False: never)
-    e_mix_shares : probabilities of the orders that limit the amplitude, in the order of :data:`E_MIXES`
+    e_mix_shares : probabilities of the orders that limit the amplitude, in the order of :data:`vivbench.synth.E_MIXES`
         (each in [0, 1], summing to 1; ``(1, 0, 0)``: always the campaign model's own split)
     """
 
@@ -86,7 +84,7 @@ class NuisancePriors:
     buffeting_w: tuple[float, float] = (0.0, 1.2)
     buffeting_u: tuple[float, float] = (0.0, 0.4)
     yaw_effect: bool = True
-    e_mix_shares: tuple[float, float, float] = (0.5, 0.25, 0.25)
+    e_mix_shares: tuple[float, float, float] = E_MIX_SHARES
 
     def __post_init__(self) -> None:
         share = self.smooth_share
@@ -129,7 +127,7 @@ class Nuisances:
     yaw_shape : "absent" or the yaw factor's shape
     yaw_mean_factor : the yaw factor's mean over the measured yaws (1 when absent); Y1 and C_L are
         divided by it
-    e_mix : one of :data:`E_MIXES`; the orders that limit the amplitude in the twin's aerodynamics
+    e_mix : one of :data:`vivbench.synth.E_MIXES`; the orders that limit the amplitude in the twin's aerodynamics
     """
 
     felt_wind: str
