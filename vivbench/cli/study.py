@@ -16,7 +16,7 @@ def run(args) -> int:
                          max_events=args.max_events,
                          max_duration=None if args.max_duration is None else args.max_duration * 60.0,
                          anemometer_span=_fractions(args.anemometers), wind_rule=args.wind_rule,
-                         wind_source=args.wind_source)
+                         wind_source=args.wind_source, amplitude_source=args.amplitude_source)
     result = run_resumable("study", len(config.draws), "draw",
                            f"the finished draws are saved in {Path(args.out) / 'study.jsonl'}",
                            lambda advance: run_study(config, args.out, workers=args.workers, scheduler=args.scheduler,
@@ -72,6 +72,9 @@ def register(sub) -> None:
     s.add_argument("--wind-source", default="measured", choices=("measured", "truth"),
                    help="what the methods are fitted on: the measured wind (default) or, as an oracle, the wind "
                         "the truth's dynamics sees (how much of the error comes from the errors in the wind)")
+    s.add_argument("--amplitude-source", default="measured", choices=("measured", "truth"),
+                   help="what the methods' amplitude and dA/dt are: the identified envelopes (default) or, as an "
+                        "oracle, the truth's averaged ones (with --wind-source truth: the model class's own error)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                    help="local worker processes, one draw each (results do not depend on it)")
     s.add_argument("--scheduler", default=None,

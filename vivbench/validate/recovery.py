@@ -33,7 +33,8 @@ __all__ = ["recovery_by_event", "model_rhs_true_AU", "model_window_rhs_true_AU",
            "window_relative_errors", "rhs_relative_error", "window_rhs_errors", "model_window_rhs_errors",
            "regime_scores",
            "campaign_recovery", "truth_record", "model_window_rhs_errors_true_AU", "window_rhs_errors_true_AU",
-           "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on", "record_with_truth_wind"]
+           "truth_window_activity", "truth_rhs_errors", "finite_median", "record_yaw_on", "record_with_truth_wind",
+           "record_with_truth_amplitude"]
 
 
 def rhs_relative_error(coef_identified: np.ndarray, coef_true: np.ndarray, A: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -247,6 +248,42 @@ def record_with_truth_wind(record: Record, truth: xr.Dataset) -> Record:
     U = np.column_stack([np.interp(record.t, tt, Ut[:, min(k, Ut.shape[1] - 1)]) for k in range(S)])
     U[~np.isfinite(record.U)] = np.nan
     return dataclasses.replace(record, U=U, wind_distance=None)
+
+
+def record_with_truth_amplitude(record: Record, truth: xr.Dataset) -> Record:
+    """The record with its measured amplitude and dA/dt replaced by the truth's averaged ones.
+
+    An oracle for studies: with :func:`record_with_truth_wind` as well, a method's errors are
+    those of its model class alone, free of the errors in the measured envelope (buffeting, the
+    noise floor, the envelope's and the derivative's estimation) and in the wind.
+
+    Parameters
+    ----------
+    record : Record
+        A measured record (``A`` in m, shape (n, S)).
+    truth : xarray.Dataset
+        Its event's ``/truth`` group: ``time`` (n_t,) s, ``A`` (n_t, S) m and ``r`` (n_t, S, 4) m/s.
+
+    Returns
+    -------
+    Record
+        ``A`` and ``dA`` (the sum of ``r`` over the orders) of the truth interpolated linearly to
+        ``record.t`` (NaN where the measured ``A`` is NaN: no sample there); every other field,
+        the measured yaw included (the truth stores none), is the record's.
+    """
+    tt = np.asarray(truth["time"].values, dtype=float)
+    At = np.asarray(truth["A"].values, dtype=float)
+    dAt = np.asarray(truth["r"].values, dtype=float).sum(axis=-1)
+    At, dAt = (At[:, None], dAt[:, None]) if At.ndim == 1 else (At, dAt)
+    S = record.n_sections
+    if At.shape[1] != S:
+        raise ValueError(f"the truth's amplitude has {At.shape[1]} sections and the record {record.event_id} has {S}")
+    A = np.column_stack([np.interp(record.t, tt, At[:, k]) for k in range(S)])
+    dA = np.column_stack([np.interp(record.t, tt, dAt[:, k]) for k in range(S)])
+    missing = ~np.isfinite(record.A)
+    A[missing] = np.nan
+    dA[missing] = np.nan
+    return dataclasses.replace(record, A=A, dA=dA)
 
 
 def window_relative_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start, end, scale: np.ndarray,

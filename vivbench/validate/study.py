@@ -32,7 +32,9 @@ used (the methods are fitted in an order that puts ``varying`` first).
 study's outputs say so on their first lines. ``wind_source="truth"`` fits every method on
 records whose wind is the truth's own (an oracle): run beside the same study on the measured
 wind, it tells how much of a method's error and of its verdict's failures comes from the errors
-in the wind rather than from its model class.
+in the wind rather than from its model class. ``amplitude_source="truth"`` also replaces each
+record's amplitude and dA/dt by the truth's averaged ones; with both, what is left is the error of
+the method's model class alone.
 """
 
 from __future__ import annotations
@@ -68,10 +70,10 @@ from vivbench.validate.journal import counting_progress, run_journalled, task_di
 from vivbench.validate.journal import load as journal_load
 from vivbench.validate.methods import BUILTIN_METHODS, SCORE_KEYS, check_method_spec, fit_method, resolve_method
 from vivbench.validate.methods import curve_scores, score_fitted, scoring_inputs
-from vivbench.validate.recovery import record_with_truth_wind
+from vivbench.validate.recovery import record_with_truth_amplitude, record_with_truth_wind
 from vivbench.validate.study_report import LABEL_COLUMNS, study_markdown, study_summary
 
-__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "WIND_SOURCES", "StudyConfig", "StudyTask", "StudyResult",
+__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "WIND_SOURCES", "AMPLITUDE_SOURCES", "StudyConfig", "StudyTask", "StudyResult",
            "check_draws",
            "method_spec", "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks"]
 
@@ -81,6 +83,8 @@ METHOD_ALIASES: dict[str, str] = {}
 DRAW_METHODS = ("greybox",)
 #: What a study's methods are fitted on: the measured wind, or the truth's (an oracle).
 WIND_SOURCES = ("measured", "truth")
+#: What the methods' amplitude and dA/dt are (StudyConfig.amplitude_source).
+AMPLITUDE_SOURCES = ("measured", "truth")
 #: Per-method columns beside the standard scores (fit time left out: it changes from run to run).
 _FLAG_COLUMNS = ("n_flagged", "flagged_right_share", "self_excited_flags", "chosen", "confidence_set", "dynamics_shown", "stationary",
                  "curve_error_energy_yaw_free", "change_p_value", "change_detected", "change_index")
@@ -160,10 +164,14 @@ class StudyConfig:
     anemometer_span: tuple[float, ...] | None = None
     wind_rule: str = "nearest"
     wind_source: str = "measured"
+    amplitude_source: str = "measured"
 
     def __post_init__(self) -> None:
         if self.wind_source not in WIND_SOURCES:
             raise InputError(f"wind_source must be one of {', '.join(WIND_SOURCES)}; got {self.wind_source!r}")
+        if self.amplitude_source not in AMPLITUDE_SOURCES:
+            raise InputError(f"amplitude_source must be one of {', '.join(AMPLITUDE_SOURCES)}; "
+                             f"got {self.amplitude_source!r}")
         if self.anemometer_span is not None or self.wind_rule != "nearest":
             # the generator's own checks (a felt wind that allows fewer anemometers is the family's)
             layout = WindConfig(anemometer_span=self.anemometer_span, wind_rule=self.wind_rule)
@@ -197,6 +205,8 @@ class StudyConfig:
             data.update(anemometer_span=list(self.anemometer_span), wind_rule=self.wind_rule)
         if self.wind_source != "measured":
             data.update(wind_source=self.wind_source)
+        if self.amplitude_source != "measured":
+            data.update(amplitude_source=self.amplitude_source)
         return data
 
     def fingerprint(self) -> str:
@@ -221,6 +231,7 @@ class StudyTask:
     anemometer_span: tuple[float, ...] | None = None
     wind_rule: str = "nearest"
     wind_source: str = "measured"
+    amplitude_source: str = "measured"
 
     def campaign(self, draw):
         """The draw's (capped) campaign, with this task's anemometers when it places them."""
@@ -237,7 +248,7 @@ def study_tasks(config: StudyConfig) -> list[StudyTask]:
     return [StudyTask(split=config.split, draw=d, methods=config.methods, max_events=config.max_events,
                       max_duration=config.max_duration, identify=config.identify, tau=config.tau,
                       anemometer_span=config.anemometer_span, wind_rule=config.wind_rule,
-                      wind_source=config.wind_source)
+                      wind_source=config.wind_source, amplitude_source=config.amplitude_source)
             for d in config.draws]
 
 
@@ -425,6 +436,8 @@ def run_study_task(task: StudyTask) -> dict[str, Any]:
         records, truths, windows = scoring_inputs(events, results)
         if task.wind_source == "truth":
             records = [record_with_truth_wind(r, t) for r, t in zip(records, truths)]
+        if task.amplitude_source == "truth":
+            records = [record_with_truth_amplitude(r, t) for r, t in zip(records, truths)]
         methods, fitted = {}, {}
         for name in _fit_order(task.methods):
             try:

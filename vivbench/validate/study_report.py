@@ -56,6 +56,11 @@ _TRUTH_WIND_NOTE = ("- **Oracle wind (`--wind-source truth`)**: every method was
                     "figures bound what the methods reach without errors in the wind; compare them with the "
                     "same draws on the measured wind.")
 
+_TRUTH_AMPLITUDE_NOTE = ("- **Oracle amplitude (`--amplitude-source truth`)**: every method was fitted, and its verdict "
+                         "read, on records whose amplitude and dA/dt are the truth's averaged ones, not the measured "
+                         "envelopes. No user has them: with the oracle wind as well, the figures are those of the "
+                         "methods' model classes alone.")
+
 
 #: Campaigns with fewer events than this are summarised apart on the page (a reporting split, not a setting).
 SMALL_CAMPAIGN_EVENTS = 10
@@ -301,6 +306,7 @@ def study_markdown(summary: dict[str, Any]) -> str:
                  f"the wind at each section taken from them by the {cfg['wind_rule']} rule (`--anemometers`); the "
                  "deck feels its own section's wind."] if cfg.get("anemometer_span") is not None else []),
               *([_TRUTH_WIND_NOTE] if cfg.get("wind_source") == "truth" else []),
+              *([_TRUTH_AMPLITUDE_NOTE] if cfg.get("amplitude_source") == "truth" else []),
               *([_GREYBOX_NOTE] if "greybox" in cfg["methods"] else []),
               "- Errors are relative: the energy-weighted one is sqrt(sum of squared errors / sum of squared true "
               "dA/dt) over every sample of a campaign, on the truth's own (A, U).",
