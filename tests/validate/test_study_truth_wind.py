@@ -1,4 +1,4 @@
-"""Studies on the truth's own wind and amplitude (StudyConfig.wind_source, amplitude_source): oracles without errors in them."""
+"""Studies on the truth's own wind and amplitude (StudyConfig.wind_source, amplitude_source): oracles."""
 
 from __future__ import annotations
 

@@ -34,7 +34,7 @@ records whose wind is the truth's own (an oracle): run beside the same study on 
 wind, it tells how much of a method's error and of its verdict's failures comes from the errors
 in the wind rather than from its model class. ``amplitude_source="truth"`` also replaces each
 record's amplitude and dA/dt by the truth's averaged ones; with both, what is left is the error of
-the method's model class alone.
+the method's model class alone, but for that of the measured yaw (the truth stores none).
 """
 
 from __future__ import annotations
@@ -73,8 +73,8 @@ from vivbench.validate.methods import curve_scores, score_fitted, scoring_inputs
 from vivbench.validate.recovery import record_with_truth_amplitude, record_with_truth_wind
 from vivbench.validate.study_report import LABEL_COLUMNS, study_markdown, study_summary
 
-__all__ = ["DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "WIND_SOURCES", "AMPLITUDE_SOURCES", "StudyConfig", "StudyTask", "StudyResult",
-           "check_draws",
+__all__ = ["AMPLITUDE_SOURCES", "DRAW_METHODS", "METHOD_ALIASES", "STUDY_COLUMNS", "WIND_SOURCES", "StudyConfig",
+           "StudyTask", "StudyResult", "check_draws",
            "method_spec", "parse_draws", "run_study", "run_study_task", "study_method", "study_tasks"]
 
 #: Short names of the study's methods that are not :func:`resolve_method` names.
@@ -152,6 +152,10 @@ class StudyConfig:
         "truth" (an oracle: each record's wind replaced by the wind the truth's dynamics sees,
         :func:`~vivbench.validate.recovery.record_with_truth_wind`; the scores are then those of the
         method with the errors in the wind removed)
+    amplitude_source : "measured" (the identified envelopes and the campaign's dA/dt) or "truth" (an
+        oracle: each record's amplitude and dA/dt replaced by the truth's averaged ones,
+        :func:`~vivbench.validate.recovery.record_with_truth_amplitude`; with ``wind_source="truth"``
+        the scores are those of the method's model class alone, but for the measured yaw, which stays)
     """
 
     split: str
