@@ -248,7 +248,8 @@ def event_arrays(tree: xr.DataTree, *, truth: bool = True) -> dict:
         ``r`` (n_t, n_sec, 4) m/s; ``regime`` (n_t, n_sec) int; plus ``coef``
         (n_sec, n_features) and ``feature`` (tuple of str) when stored, the
         slow changes ``damping_ratio``, ``mass_factor`` (n_t,) and ``aero_factor``
-        (n_t, 4), dimensionless, when stored, and the coefficient curves
+        (n_t, 4), dimensionless, when stored, ``truth_yaw`` (n_t, n_sec) degrees when stored,
+        and the coefficient curves
         ``curves`` (n_sec, 4, n_wind) m^(1-i)/s with ``curve_wind`` (n_wind,)
         m/s when stored.
     """
@@ -278,6 +279,8 @@ def event_arrays(tree: xr.DataTree, *, truth: bool = True) -> dict:
         for name in CHANGE_VARIABLES:
             if name in group.data_vars:
                 out[name] = group[name].values
+        if "yaw" in group.data_vars:
+            out["truth_yaw"] = group["yaw"].values
         if "curves" in group.data_vars:
             out["curves"] = group["curves"].values
             out["curve_wind"] = group["wind"].values

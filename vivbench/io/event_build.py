@@ -10,13 +10,13 @@ import numpy as np
 import xarray as xr
 
 from vivbench.core.errors import InputError
-from vivbench.io.event_schema import (CHANGE_VARIABLES, COEF_UNITS, CURVE_UNITS, FORMAT, FORMAT_VERSION,
+from vivbench.io.event_schema import (CHANGE_VARIABLES, COEF_UNITS, CURVE_UNITS, FORMAT, FORMAT_VERSION, TRUTH_YAW_NAME,
                                       validate_event)
 
 __all__ = ["build_event"]
 
 _TRUTH_KEYS = ("time", "U", "A", "r", "regime", "config", "coef", "feature", "tau",
-               "damping_ratio", "mass_factor", "aero_factor", "curves", "wind")
+               "damping_ratio", "mass_factor", "aero_factor", "curves", "wind", "yaw")
 
 
 def build_event(
@@ -261,6 +261,11 @@ def _truth_dataset(truth: Mapping, sections: list[str]) -> xr.Dataset:
             equation=("equation", np.array(sections, dtype=str), {"long_name": "section whose dA/dt the row gives"}),
             wind=("wind", wind, {"units": "m/s", "long_name": "mean wind speed perpendicular to the span"}),
         )
+    if truth.get("yaw") is not None:
+        yaw = _as_float(truth["yaw"], "truth['yaw']", (n_t, n_sec), "(n_t, n_sections)")
+        if not np.all(np.isfinite(yaw)) or np.any(np.abs(yaw) > 90.0):
+            raise ValueError("truth['yaw'] must hold finite angles to the span's normal within [-90, 90] degrees")
+        ds["yaw"] = (("time", "section"), yaw.astype(np.float64), {"units": "degree", "long_name": TRUTH_YAW_NAME})
     given = [k for k in CHANGE_VARIABLES if truth.get(k) is not None]
     if given and len(given) != len(CHANGE_VARIABLES):
         raise ValueError(f"truth has {given} but the slow changes need all of {list(CHANGE_VARIABLES)}")

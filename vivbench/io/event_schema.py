@@ -70,7 +70,11 @@ _UNIT_SPELLINGS = {
     "s": ("s",),
     "m": ("m",),
     "1": ("1",),
+    "degree": ("degree", "degrees", "deg"),
 }
+#: long_name of the optional /truth/yaw (degree): the yaw the averaged truth's aerodynamics see.
+TRUTH_YAW_NAME = "yaw of the mean wind the averaged truth sees: signed angle to the span's normal"
+
 #: Optional /truth variables of the generator's slow changes (docs/concepts.md (no inverse crime)): name -> (dims, long_name).
 CHANGE_VARIABLES = {
     "damping_ratio": (("time",), "structural damping ratio zeta of the mode"),
@@ -350,6 +354,10 @@ def _check_truth(ds: xr.Dataset, sections: tuple) -> None:
         raise _Breach("/truth has a wind coordinate but no curves variable")
     if "equation" in ds.coords and "coef" not in ds.data_vars and "curves" not in ds.data_vars:
         raise _Breach("/truth has an equation coordinate but neither coef nor curves")
+    if "yaw" in ds.data_vars:
+        yaw = _check_variable(ds, "truth", "yaw", ("time", "section"), "degree").values
+        if not np.all(np.isfinite(yaw)) or np.any(np.abs(yaw) > 90.0):
+            raise _Breach("/truth/yaw must hold finite angles within [-90, 90] degrees")
     present = [k for k in CHANGE_VARIABLES if k in ds.data_vars]
     if present and len(present) != len(CHANGE_VARIABLES):
         raise _Breach(f"/truth has {present} but the slow changes need all of {list(CHANGE_VARIABLES)}")

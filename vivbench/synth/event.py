@@ -66,7 +66,8 @@ class SimulatedEvent:
     (n_a,) s; ``acc`` (n_a, S) m/s^2 float32; ``acc_true`` (n_a, S) m/s^2 noise-free;
     ``q``, ``qd`` (n_a,) modal displacement (m) and velocity (m/s) at the accelerometer samples; ``truth_time``
     (n_t,) s; ``U`` (n_t, S) m/s; ``Q`` (n_t,) m averaged modal amplitude; ``r``
-    (n_t, S, 4) m/s; ``regime`` (n_t, S); ``coef`` (S, 23 S) or None; ``defects`` dict.
+    (n_t, S, 4) m/s; ``regime`` (n_t, S); ``coef`` (S, 23 S) or None; ``defects`` dict; ``yaw``
+    (n_t, S) degrees, the yaw the averaged truth sees, when the aerodynamics depend on it (else None).
     With slow changes configured (else None): ``damping_ratio`` (n_t,) structural damping
     ratio, ``mass_factor`` (n_t,) mass multiplier and ``aero_factor`` (n_t, 4) multipliers of
     the aerodynamic parts of the orders 0..3, all dimensionless, on the truth grid.
@@ -91,6 +92,7 @@ class SimulatedEvent:
     damping_ratio: np.ndarray | None = None
     mass_factor: np.ndarray | None = None
     aero_factor: np.ndarray | None = None
+    yaw: np.ndarray | None = None
 
 
 _WIND_PAD = 64.0  # s
@@ -367,7 +369,7 @@ def simulate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
         wind_time=wind_time, u=u, v=v, w=w,
         accel_time=np.arange(n_acc) * accel_period, acc=acc, acc_true=acc_true, q=x[:, 0], qd=x[:, 1],
         truth_time=truth_time, U=U_truth, Q=Q, r=r, regime=regime,
-        coef=coef, defects=info, **recorded,
+        coef=coef, defects=info, yaw=yaw_truth, **recorded,
     )
 
 
@@ -396,7 +398,8 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
 
     The generator configuration, the event's script and its seed are stored as
     JSON in the ``/truth`` attribute ``config_json`` so that the file says how
-    it was made. With slow changes, ``/truth`` also records the damping ratio,
+    it was made. With a yaw factor, ``/truth/yaw`` holds the yaw the truth sees. With slow changes,
+    ``/truth`` also records the damping ratio,
     the mass factor and the aero factors on the truth grid. ``/truth/curves``
     holds the exact coefficient curves on :data:`TRUTH_CURVE_WIND`
     (:func:`event_truth_curves`; left out with a damping drift).
@@ -413,6 +416,8 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
         "time": ev.truth_time, "U": ev.U, "A": ev.Q[:, None] * np.array(config.structure.mode_shape)[None, :],
         "r": ev.r, "regime": ev.regime, "config": json.dumps(meta, sort_keys=True), "tau": config.tau,
     }
+    if ev.yaw is not None:  # signed as vivbench.preprocess.mean_yaw measures it: the wind's side flips the sign
+        truth["yaw"] = ev.yaw * float(spec.script.side)
     if ev.damping_ratio is not None:
         truth.update(damping_ratio=ev.damping_ratio, mass_factor=ev.mass_factor, aero_factor=ev.aero_factor)
     if ev.coef is not None:

@@ -323,7 +323,7 @@ def validate_campaign(campaign_dir, results_dir, *, clusters_csv=None, forecasts
                 p_errs.append(pe.ravel())
                 p_act.append(pact.ravel())
             fitted_records.append(record)
-            # The truth stores no yaw: a model using it sees the measured record's (as score_fitted does).
+            # A model using the yaw sees the truth's, or the measured record's where the truth stores none.
             pet, pact_t, fm, ft = model_window_rhs_true_AU(model, truth, start, end, event_id=event_id,
                                                            active_share=active_share,
                                                            yaw=record_yaw_on(measured, truth["time"].values))

@@ -112,7 +112,7 @@ def campaign_model_recovery(event_files, regimes_path, result_files, *, active_s
             e = np.full(act.shape, np.nan)
         errs.append(e.ravel())
         errs_active.append(np.where(act, e, np.nan).ravel())
-        # The truth stores no yaw: a model using it sees the measured record's (as score_fitted does).
+        # A model using the yaw sees the truth's, or the measured record's where the truth stores none.
         et, act_t, f_model, f_true = model_window_rhs_true_AU(model, truth, start, end, event_id=event_id,
                                                               active_share=active_share,
                                                               yaw=record_yaw_on(measured, truth["time"].values))

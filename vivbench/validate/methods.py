@@ -705,7 +705,7 @@ def score_fitted(fitted, records: Sequence[Record], truths: Sequence, *, windows
         else:
             ok = np.zeros(r.shape, dtype=bool)  # no verdict: scored on all windows, coverage 0
         flag.append(ok)
-        # The truth stores no yaw: a model using it sees the measured record's (as on field data).
+        # A model using the yaw sees the truth's, or the measured record's where the truth stores none.
         e, act, f_model, f_true = model_window_rhs_true_AU(predictor, truth, start, end, event_id=rec.event_id,
                                                            active_share=active_share,
                                                            yaw=record_yaw_on(rec, truth["time"].values))

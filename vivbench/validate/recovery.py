@@ -184,20 +184,24 @@ def truth_record(truth: xr.Dataset, event_id: str = "truth", yaw=None) -> Record
     ----------
     truth : xarray.Dataset
         An event's ``/truth`` group: ``time`` (n_t,) s, ``A``, ``U`` (n_t, S)
-        in m and m/s, ``r`` (n_t, S, 4) in m/s.
+        in m and m/s, ``r`` (n_t, S, 4) in m/s, and ``yaw`` (n_t, S) in degrees
+        where the truth's aerodynamics depend on it.
     event_id : str
         The record's event id (window models look their coefficients up by it).
     yaw : array_like, shape (n_t, S), degrees, optional
-        The mean wind's yaw on the truth's grid (the truth stores none; e.g. the
-        measured record's, :func:`record_yaw_on`), for models that use it.
+        The mean wind's yaw on the truth's grid where the truth stores none (e.g.
+        the measured record's, :func:`record_yaw_on`), for models that use it.
 
     Returns
     -------
     Record
-        ``t``, ``A``, ``U`` of the truth and ``dA`` its dA_k/dt, the sum of
-        ``r`` over the orders (m/s).
+        ``t``, ``A``, ``U`` of the truth, ``dA`` its dA_k/dt, the sum of ``r`` over
+        the orders (m/s), and ``yaw`` the truth's own where stored, else ``yaw``:
+        a model is scored at the state the truth's dynamics had.
     """
     r = np.asarray(truth["r"].values, dtype=float)
+    if "yaw" in truth.data_vars:
+        yaw = truth["yaw"].values
     return Record(event_id=str(event_id), t=truth["time"].values, A=truth["A"].values, U=truth["U"].values,
                   dA=r.sum(axis=-1), yaw=yaw)
 
@@ -223,21 +227,22 @@ def record_with_truth_wind(record: Record, truth: xr.Dataset) -> Record:
 
     An oracle for studies: fitted on such records, a method's errors are those of its model
     class and of the measured A, free of the errors in the wind (the anemometers' point
-    turbulence, their distance from the deck, the tributary averaging).
+    turbulence, their distance from the deck, the tributary averaging, the yaw's error).
 
     Parameters
     ----------
     record : Record
         A measured record (``U`` in m/s, shape (n, S)).
     truth : xarray.Dataset
-        Its event's ``/truth`` group: ``time`` (n_t,) s and ``U`` (n_t, S) or (n_t,) m/s.
+        Its event's ``/truth`` group: ``time`` (n_t,) s and ``U`` (n_t, S) or (n_t,) m/s, and
+        ``yaw`` (n_t, S) degrees where the truth's aerodynamics depend on it.
 
     Returns
     -------
     Record
         ``U`` is the truth's wind interpolated linearly to ``record.t`` (NaN where the measured
-        wind is NaN: no sample there); ``wind_distance`` is None (the wind is the deck's own);
-        every other field is the record's.
+        wind is NaN: no sample there), and so is ``yaw`` where the truth stores one;
+        ``wind_distance`` is None (the wind is the deck's own); every other field is the record's.
     """
     tt = np.asarray(truth["time"].values, dtype=float)
     Ut = np.asarray(truth["U"].values, dtype=float)
@@ -247,7 +252,12 @@ def record_with_truth_wind(record: Record, truth: xr.Dataset) -> Record:
         raise ValueError(f"the truth's wind has {Ut.shape[1]} sections and the record {record.event_id} has {S}")
     U = np.column_stack([np.interp(record.t, tt, Ut[:, min(k, Ut.shape[1] - 1)]) for k in range(S)])
     U[~np.isfinite(record.U)] = np.nan
-    return dataclasses.replace(record, U=U, wind_distance=None)
+    yaw = record.yaw
+    if "yaw" in truth.data_vars:
+        yt = np.asarray(truth["yaw"].values, dtype=float)
+        yaw = np.column_stack([np.interp(record.t, tt, yt[:, k]) for k in range(S)])
+        yaw[~np.isfinite(record.U)] = np.nan
+    return dataclasses.replace(record, U=U, yaw=yaw, wind_distance=None)
 
 
 def record_with_truth_amplitude(record: Record, truth: xr.Dataset) -> Record:
