@@ -72,8 +72,9 @@ _UNIT_SPELLINGS = {
     "1": ("1",),
     "degree": ("degree", "degrees", "deg"),
 }
-#: long_name of the optional /truth/yaw (degree): the yaw the averaged truth's aerodynamics see.
-TRUTH_YAW_NAME = "yaw of the mean wind the averaged truth sees: signed angle to the span's normal"
+#: long_name of the optional /truth/yaw (degree): the yaw the averaged truth's aerodynamics see, unsigned (they
+#: depend on its magnitude only; the measured yaw of a result is signed).
+TRUTH_YAW_NAME = "yaw of the mean wind the averaged truth sees: unsigned angle to the span's normal"
 
 #: Optional /truth variables of the generator's slow changes (docs/concepts.md (no inverse crime)): name -> (dims, long_name).
 CHANGE_VARIABLES = {

@@ -67,7 +67,8 @@ class SimulatedEvent:
     ``q``, ``qd`` (n_a,) modal displacement (m) and velocity (m/s) at the accelerometer samples; ``truth_time``
     (n_t,) s; ``U`` (n_t, S) m/s; ``Q`` (n_t,) m averaged modal amplitude; ``r``
     (n_t, S, 4) m/s; ``regime`` (n_t, S); ``coef`` (S, 23 S) or None; ``defects`` dict; ``yaw``
-    (n_t, S) degrees, the yaw the averaged truth sees, when the aerodynamics depend on it (else None).
+    (n_t, S) degrees in [0, 90], the yaw's magnitude the averaged truth sees, when the aerodynamics depend on it
+    (else None).
     With slow changes configured (else None): ``damping_ratio`` (n_t,) structural damping
     ratio, ``mass_factor`` (n_t,) mass multiplier and ``aero_factor`` (n_t, 4) multipliers of
     the aerodynamic parts of the orders 0..3, all dimensionless, on the truth grid.
@@ -416,8 +417,8 @@ def generate_event(spec: EventSpec, config: GeneratorConfig, seed: np.random.See
         "time": ev.truth_time, "U": ev.U, "A": ev.Q[:, None] * np.array(config.structure.mode_shape)[None, :],
         "r": ev.r, "regime": ev.regime, "config": json.dumps(meta, sort_keys=True), "tau": config.tau,
     }
-    if ev.yaw is not None:  # signed as vivbench.preprocess.mean_yaw measures it: the wind's side flips the sign
-        truth["yaw"] = ev.yaw * float(spec.script.side)
+    if ev.yaw is not None:  # unsigned: the aerodynamics depend on the yaw's magnitude only
+        truth["yaw"] = ev.yaw
     if ev.damping_ratio is not None:
         truth.update(damping_ratio=ev.damping_ratio, mass_factor=ev.mass_factor, aero_factor=ev.aero_factor)
     if ev.coef is not None:
