@@ -74,8 +74,7 @@ def register(sub) -> None:
                         "the truth's dynamics sees (how much of the error comes from the errors in the wind)")
     s.add_argument("--amplitude-source", default="measured", choices=("measured", "truth"),
                    help="what the methods' amplitude and dA/dt are: the identified envelopes (default) or, as an "
-                        "oracle, the truth's averaged ones (with --wind-source truth: the model class's own error; the "
-                        "yaw stays the measured one)")
+                        "oracle, the truth's averaged ones (with --wind-source truth: the model class's own error)")
     s.add_argument("--workers", type=int, default=DEFAULT_WORKERS,
                    help="local worker processes, one draw each (results do not depend on it)")
     s.add_argument("--scheduler", default=None,

@@ -278,8 +278,8 @@ def record_with_truth_amplitude(record: Record, truth: xr.Dataset) -> Record:
     -------
     Record
         ``A`` and ``dA`` (the sum of ``r`` over the orders) of the truth interpolated linearly to
-        ``record.t`` (NaN where the measured ``A`` is NaN: no sample there); every other field,
-        the measured yaw included (the truth stores none), is the record's.
+        ``record.t`` (NaN where the measured ``A`` is NaN: no sample there); every other field
+        is the record's (:func:`record_with_truth_wind` gives it the truth's wind and yaw).
     """
     tt = np.asarray(truth["time"].values, dtype=float)
     At = np.asarray(truth["A"].values, dtype=float)

@@ -34,7 +34,7 @@ records whose wind is the truth's own (an oracle): run beside the same study on 
 wind, it tells how much of a method's error and of its verdict's failures comes from the errors
 in the wind rather than from its model class. ``amplitude_source="truth"`` also replaces each
 record's amplitude and dA/dt by the truth's averaged ones; with both, what is left is the error of
-the method's model class alone, but for that of the measured yaw (the truth stores none).
+the method's model class alone.
 """
 
 from __future__ import annotations
@@ -149,13 +149,13 @@ class StudyConfig:
         ``(0.5,)``: one at mid-span), the wind at each section taken from them by ``wind_rule``
     wind_rule : "nearest" or "interpolation" (``WindConfig.wind_rule``)
     wind_source : "measured" (the methods are fitted on the identified records, as a user's are) or
-        "truth" (an oracle: each record's wind replaced by the wind the truth's dynamics sees,
+        "truth" (an oracle: each record's wind and yaw replaced by those the truth's dynamics sees,
         :func:`~vivbench.validate.recovery.record_with_truth_wind`; the scores are then those of the
         method with the errors in the wind removed)
     amplitude_source : "measured" (the identified envelopes and the campaign's dA/dt) or "truth" (an
         oracle: each record's amplitude and dA/dt replaced by the truth's averaged ones,
         :func:`~vivbench.validate.recovery.record_with_truth_amplitude`; with ``wind_source="truth"``
-        the scores are those of the method's model class alone, but for the measured yaw, which stays)
+        the scores are those of the method's model class alone)
     """
 
     split: str

@@ -52,14 +52,14 @@ _GREYBOX_NOTE = ("- greybox: the grey-box refit given each draw's structural pro
                  "30 s wind smoothing, penalty grid and verdict settings were chosen on the default campaign, not on "
                  "the family.")
 _TRUTH_WIND_NOTE = ("- **Oracle wind (`--wind-source truth`)**: every method was fitted, and its verdict read, on "
-                    "records whose wind is the truth's own, not the anemometers'. No user has this wind: the "
+                    "records whose wind (and yaw, where the truth stores it) is the truth's own, not the "
+                    "anemometers'. No user has this wind: the "
                     "figures bound what the methods reach without errors in the wind; compare them with the "
                     "same draws on the measured wind.")
 _TRUTH_AMPLITUDE_NOTE = ("- **Oracle amplitude (`--amplitude-source truth`)**: every method was fitted, and its "
                          "verdict read, on records whose amplitude and dA/dt are the truth's averaged ones, not the "
                          "measured envelopes. No user has them: with the oracle wind as well, the figures are those "
-                         "of the methods' model classes alone where the yaw does not matter; the yaw stays the "
-                         "measured one (the truth stores none), in the fits and in the scores.")
+                         "of the methods' model classes alone.")
 
 
 #: Campaigns with fewer events than this are summarised apart on the page (a reporting split, not a setting).
