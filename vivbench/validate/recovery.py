@@ -250,14 +250,19 @@ def record_with_truth_wind(record: Record, truth: xr.Dataset) -> Record:
     S = record.n_sections
     if Ut.shape[1] not in (1, S):
         raise ValueError(f"the truth's wind has {Ut.shape[1]} sections and the record {record.event_id} has {S}")
-    U = np.column_stack([np.interp(record.t, tt, Ut[:, min(k, Ut.shape[1] - 1)]) for k in range(S)])
-    U[~np.isfinite(record.U)] = np.nan
+    missing = ~np.isfinite(record.U)
+    U = _on_record_grid(record.t, tt, np.repeat(Ut, S, axis=1) if Ut.shape[1] == 1 else Ut, missing)
     yaw = record.yaw
     if "yaw" in truth.data_vars:
-        yt = np.asarray(truth["yaw"].values, dtype=float)
-        yaw = np.column_stack([np.interp(record.t, tt, yt[:, k]) for k in range(S)])
-        yaw[~np.isfinite(record.U)] = np.nan
+        yaw = _on_record_grid(record.t, tt, np.asarray(truth["yaw"].values, dtype=float), missing)
     return dataclasses.replace(record, U=U, yaw=yaw, wind_distance=None)
+
+
+def _on_record_grid(t, tt, values, missing) -> np.ndarray:
+    """Columns ``values`` (n_t, S) given at times ``tt`` interpolated linearly to ``t`` (n,), NaN where ``missing``."""
+    out = np.column_stack([np.interp(t, tt, values[:, k]) for k in range(values.shape[1])])
+    out[missing] = np.nan
+    return out
 
 
 def record_with_truth_amplitude(record: Record, truth: xr.Dataset) -> Record:
@@ -288,12 +293,9 @@ def record_with_truth_amplitude(record: Record, truth: xr.Dataset) -> Record:
     S = record.n_sections
     if At.shape[1] != S:
         raise ValueError(f"the truth's amplitude has {At.shape[1]} sections and the record {record.event_id} has {S}")
-    A = np.column_stack([np.interp(record.t, tt, At[:, k]) for k in range(S)])
-    dA = np.column_stack([np.interp(record.t, tt, dAt[:, k]) for k in range(S)])
     missing = ~np.isfinite(record.A)
-    A[missing] = np.nan
-    dA[missing] = np.nan
-    return dataclasses.replace(record, A=A, dA=dA)
+    return dataclasses.replace(record, A=_on_record_grid(record.t, tt, At, missing),
+                               dA=_on_record_grid(record.t, tt, dAt, missing))
 
 
 def window_relative_errors(f_model: np.ndarray, f_true: np.ndarray, t: np.ndarray, start, end, scale: np.ndarray,
