@@ -72,9 +72,6 @@ def test_reference_figures_are_read_from_the_committed_report():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the reference report predates /truth/yaw: it scored the campaign model at the "
-                   "measured yaw, which moves its median dA/dt error on the true (A, U); regenerate reports/default "
-                   "(vivbench demo, vivbench report, make readme) and remove this mark")
 def test_headline_figures_of_the_reference_report_are_reproduced(tmp_path):
     from vivbench.cli import main
 
