@@ -16,7 +16,12 @@ here one at a time, halved and doubled where it is a scale, on the same campaign
   (``smoothing_chosen``);
 - ``perturbation_timescale_s`` (60 s): the time scale of the wind error estimate and of the
   wind-perturbed refits a flag must survive (30 s and 120 s);
-- ``wind_weights`` (``modal``): the sections' weights in the mean wind (``equal`` instead).
+- ``wind_weights`` (``modal``): the sections' weights in the mean wind (``equal`` instead);
+- ``wind_input`` (``mean``): the curves of the sections' weighted mean wind, or chosen among the
+  selection's candidates beside the yaw degree and the penalty from the mean wind and the tied sum
+  of every section's own wind (``"sum"``: one curve shape weighted by the sections' weights, the
+  truth's form where the deck feels a wind that differs along the span) by their held-out output
+  error (``input_chosen``).
 
 ``--variants`` (comma-separated names) runs only some variants beside the stated priors.
 
@@ -59,6 +64,8 @@ VARIANTS = {
     "smoothing_chosen": ("options", {"yaw_degree": (0, 1, 2), "penalty_choice": ("cv", "least"),
                                      "wind_smoothing_s": (15.0, 30.0, 60.0)}),
     "smoothing_cv": ("wind_smoothing_grid", (15.0, 30.0, 60.0)),
+    "input_chosen": ("options", {"yaw_degree": (0, 1, 2), "penalty_choice": ("cv", "least"),
+                                 "wind_input": ("mean", "sum")}),
 }
 _PREFIX = "benchmarks.study_priors:"
 #: Fewest flags for a draw to test the promise, and the promise itself.
@@ -134,7 +141,8 @@ def findings(summary: list[dict]) -> list[str]:
                         f"{promise}.")
         else:
             what = {"smoothing_chosen": "the smoothing chosen among the selection's candidates",
-                    "smoothing_cv": "the smoothing chosen in each fit by cross-validation"}.get(
+                    "smoothing_cv": "the smoothing chosen in each fit by cross-validation",
+                    "input_chosen": "the wind input (mean or tied sum) chosen among the selection's candidates"}.get(
                         s["variant"], f"{s['prior']} = {s['value']}")
             said.append(f"{what}: median error {s['error_median']:.3f} (median ratio to the "
                         f"stated prior's {s['ratio_to_stated_median']:.2f}, within 10 % of it on "

@@ -242,6 +242,13 @@ def test_without_yaw_keeps_the_yaw_free_candidates():
         without_yaw(varying_selection(yaw_degree=1, options={"yaw_degree": (1,)}, model_classes=("varying",)))
 
 
+def test_a_wind_input_option_is_named_by_its_value():
+    sel = varying_selection(options={"yaw_degree": (0,), "wind_input": ("mean", "sum")}, model_classes=("varying",))
+    assert [c.name for c in sel.candidates] == ["yaw0-mean", "yaw0-sum"]
+    assert [c.options["wind_input"] for c in sel.candidates] == ["mean", "sum"]
+    assert [c.complexity for c in sel.candidates] == [0, 0]  # an input, not a covariate: the loss decides
+
+
 def test_two_events_give_no_held_out_choice_and_say_so():
     recs = _linear_records(2, slope=0.02)
     sel = ModelSelection(candidates=[Candidate(name="const", model=_Poly(1), complexity=0),

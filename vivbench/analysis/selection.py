@@ -791,6 +791,7 @@ def _json_params(model) -> dict:
 
 
 def _option_label(name: str, value) -> str:
-    short = {"yaw_degree": "yaw", "penalty_choice": "", "wind_weights": "", "wind_smoothing_s": "smooth"}
+    short = {"yaw_degree": "yaw", "penalty_choice": "", "wind_weights": "", "wind_input": "",
+             "wind_smoothing_s": "smooth"}
     return f"{short.get(name, name)}{value:g}" if isinstance(value, float) else f"{short.get(name, name)}{value}"
 
