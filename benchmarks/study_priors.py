@@ -21,7 +21,7 @@ here one at a time, halved and doubled where it is a scale, on the same campaign
   selection's candidates beside the yaw degree and the penalty from the mean wind and the tied sum
   of every section's own wind (``"sum"``: one curve shape weighted by the sections' weights, the
   truth's form where the deck feels a wind that differs along the span) by their held-out output
-  error (``input_chosen``).
+  error (``input_chosen``), or the tied sum on every campaign (``input_sum``).
 
 ``--variants`` (comma-separated names) runs only some variants beside the stated priors.
 
@@ -66,6 +66,7 @@ VARIANTS = {
     "smoothing_cv": ("wind_smoothing_grid", (15.0, 30.0, 60.0)),
     "input_chosen": ("options", {"yaw_degree": (0, 1, 2), "penalty_choice": ("cv", "least"),
                                  "wind_input": ("mean", "sum")}),
+    "input_sum": ("wind_input", "sum"),
 }
 _PREFIX = "benchmarks.study_priors:"
 #: Fewest flags for a draw to test the promise, and the promise itself.
@@ -142,7 +143,8 @@ def findings(summary: list[dict]) -> list[str]:
         else:
             what = {"smoothing_chosen": "the smoothing chosen among the selection's candidates",
                     "smoothing_cv": "the smoothing chosen in each fit by cross-validation",
-                    "input_chosen": "the wind input (mean or tied sum) chosen among the selection's candidates"}.get(
+                    "input_chosen": "the wind input (mean or tied sum) chosen among the selection's candidates",
+                    "input_sum": "the tied sum of every section's wind on every campaign"}.get(
                         s["variant"], f"{s['prior']} = {s['value']}")
             said.append(f"{what}: median error {s['error_median']:.3f} (median ratio to the "
                         f"stated prior's {s['ratio_to_stated_median']:.2f}, within 10 % of it on "

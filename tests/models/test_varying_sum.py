@@ -14,7 +14,8 @@ from tests.helpers import assert_close, bell_records
 from vivbench.core.errors import InputError
 from vivbench.library.splines import uniform_knots
 from vivbench.models import VaryingCoefficientSINDy
-from vivbench.models.varying_design import block_stats, spline_design, tie_stats, untie
+from vivbench.models.varying_design import spline_design, untie
+from vivbench.models.varying_stats import tied_statistics
 
 SHARE = (0.5, 0.3, 0.2)  # each section's share of the aerodynamic linear coefficient (the truth's weights)
 
@@ -34,24 +35,31 @@ def _rel_err(model, rec):
     return float(np.sqrt(np.mean((model.predict(rec) - rec.dA) ** 2) / np.mean(rec.dA**2)))
 
 
-def test_tied_statistics_are_those_of_the_dense_tied_design():
+@pytest.mark.parametrize("weighted", [False, True])
+def test_tied_statistics_are_those_of_the_dense_tied_design(weighted):
     rng = np.random.default_rng(0)
     n, S, M, J = 400, 3, 7, 1
     U = 8.0 + 2.0 * rng.random((n, S))
     A, y, z = 0.1 + rng.random(n), rng.standard_normal(n), rng.random((n, S))
     w = np.array([0.5, 0.3, 0.2])
+    weight = 0.5 + rng.random(n) if weighted else None
     knots = uniform_knots(U.min(), U.max(), M)
-    block = np.repeat(np.arange(4), n // 4)
-    G, b, _, _ = block_stats(U, A, y, block, 4, knots, 0.3, z, J)
-    Gt, bt = tie_stats(G, b, w, J, M)
+    block = rng.permutation(np.repeat(np.arange(5), n // 5))
+    block[block == 3] = 4  # an empty block
+    stats = tied_statistics(U, A, y, block, 5, knots, 0.3, w, z, J, weight, chunk=90)  # blocks over chunks
+    W = rng.random((2, 5))
+    Gt, bt, yyt = stats.sums(W)
     # the tied design by its definition: X T, with T the weights' map from the tied to the untied layout
     X = spline_design(U, A, knots, 0.3, z, J)
     T = untie(np.eye(4 * (J + 1) * M), w, J, M).T  # (p untied, q tied)
     XT = X @ T
-    for k in range(4):
-        rows = block == k
-        assert_close(Gt[k], XT[rows].T @ XT[rows], rtol=1e-9, reason="sums in another order")
-        assert_close(bt[k], XT[rows].T @ y[rows], rtol=1e-9, atol=1e-12, reason="sums in another order")
+    sw = np.ones(n) if weight is None else weight
+    for r in range(2):
+        v = W[r, block] * sw
+        assert_close(Gt[r], (XT * v[:, None]).T @ XT, rtol=1e-9, atol=1e-12, reason="sums in another order")
+        assert_close(bt[r], XT.T @ (v * y), rtol=1e-9, atol=1e-12, reason="sums in another order")
+        assert_close(yyt[r], np.sum(v * y**2), rtol=1e-12, reason="sums in another order")
+    assert stats.p == 4 * (J + 1) * M and list(stats.count) == [int(np.sum(block == k)) for k in range(5)]
 
 
 def test_one_wind_along_the_span_gives_the_mean_winds_model():

@@ -43,7 +43,7 @@ section's curve; only the sum is identifiable, the penalty keeps the split smoot
 wind U is then the model at the uniform wind U_j = U, the sum over the sections. ``"sum"`` ties those curves to
 one shape weighted by the sections' weights, a_kij = w_j f_ki (the same deck cross-section at every section, the
 truth's form with modal weights): p = 4 M (J + 1) as with the mean wind, fitted from the additive statistics
-contracted by the weights (:func:`vivbench.models.varying_design.tie_stats`).
+tied by the weights (:func:`vivbench.models.varying_stats.tied_statistics`).
 
 With the wind's yaw (``yaw_degree`` > 0; by default whenever the records carry it) its yaw psi (its angle to the
 span's normal, which U does not carry) is a second covariate: every column above is repeated times sin^2j(psi),

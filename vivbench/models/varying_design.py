@@ -11,8 +11,8 @@ statistics (X_b^T X_b, X_b^T y_b, y_b^T y_b) without building the dense rows.
 
 With ``wind_input="sum"`` every wind input shares one curve per order and yaw
 power, weighted by its section's weight w_s: the columns are sum_s w_s B_m(U_s)
-(A / a_ref)^i z_s^j, i.e. X T with the tying matrix T of :func:`tie_stats` and
-:func:`untie`, which map the statistics and coefficients between the two layouts.
+(A / a_ref)^i z_s^j, i.e. X T with the tying matrix T of :func:`untie`, which maps the
+tied coefficients to the untied layout (their statistics: :func:`vivbench.models.varying_stats.tied_statistics`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 from vivbench.library.splines import DEGREE, bspline_local, bspline_local_t, first_index
 
 __all__ = ["design_local_t", "local_columns", "spline_design", "input_contributions", "block_stats", "design_rows",
-           "held_yaw", "tie_stats", "untie"]
+           "held_yaw", "untie"]
 
 
 def held_yaw(z: np.ndarray | None, yaw_min, yaw_max, shared_inputs: bool) -> np.ndarray | None:
@@ -236,31 +236,6 @@ def design_rows(U: np.ndarray, z: np.ndarray | None, knots: np.ndarray, n_basis:
             cols[:, k, :, s_] = idx[:, None, :] + s_ * M + n_coef * np.arange(n_yaw + 1)[:, None]
             vals[:, k, :, s_] = zp[:, :, None] * picked[:, None, :]
     return cols.reshape(n, S, -1), vals.reshape(n, S, -1)
-
-
-def tie_stats(G: np.ndarray, b: np.ndarray, weights: np.ndarray, n_yaw: int, M: int) -> tuple[np.ndarray, np.ndarray]:
-    """Statistics of the tied design X T from those of X (:func:`block_stats` with one wind input per section).
-
-    T maps the tied coefficient of (i, j, m) to w_s times it at (i, j, s, m) for every input s
-    (:func:`untie`): T^T G T and b T, computed without forming T.
-
-    Parameters
-    ----------
-    G : ndarray, shape (..., p, p), p = 4 (n_yaw + 1) S M
-    b : ndarray, shape (..., p)
-    weights : ndarray, shape (S,); the sections' weights w_s
-
-    Returns
-    -------
-    G_t, b_t : ndarray, shapes (..., q, q) and (..., q), q = 4 (n_yaw + 1) M
-    """
-    w = np.asarray(weights, dtype=float)
-    S, IJ = w.size, 4 * (n_yaw + 1)
-    lead = G.shape[:-2]
-    Gr = G.reshape(lead + (IJ, S, M, IJ, S, M))
-    Gt = np.einsum("...asmbtn,s,t->...ambn", Gr, w, w, optimize=True).reshape(lead + (IJ * M, IJ * M))
-    bt = np.einsum("...asm,s->...am", b.reshape(b.shape[:-1] + (IJ, S, M)), w).reshape(b.shape[:-1] + (IJ * M,))
-    return Gt, bt
 
 
 def untie(c: np.ndarray, weights: np.ndarray, n_yaw: int, M: int) -> np.ndarray:

@@ -35,8 +35,8 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.models.protocol import as_record
 from vivbench.library.splines import DEGREE, difference_penalty, uniform_knots
-from vivbench.models.varying_design import block_stats, input_contributions, tie_stats, untie
-from vivbench.models.varying_stats import BlockStats, block_statistics
+from vivbench.models.varying_design import input_contributions, untie
+from vivbench.models.varying_stats import BlockStats, block_statistics, tied_statistics
 from vivbench.models.wind_weights import (WIND_WEIGHT_MODES, check_wind_weights, resolve_wind_weights,
                                           weighted_mean_standard_error)
 from vivbench.preprocess.wind_smoothing import smooth_wind
@@ -311,12 +311,10 @@ def cv_error(stats: BlockStats, fold_of_block, K, P, pen, keep) -> np.ndarray:
 
 def section_statistics(model, U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight=None) -> BlockStats:
     """One equation's block statistics (:func:`vivbench.models.varying_stats.block_statistics`); with
-    ``wind_input="sum"`` those of the tied design (one curve for every section's wind, :func:`tie_stats`)."""
+    ``wind_input="sum"`` those of the tied design (one curve for every section's wind, :func:`tied_statistics`)."""
     if model.wind_input != "sum":
         return block_statistics(U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight)
-    G, b, yy, cnt = block_stats(U, A, y, block, n_blocks, knots, a_ref, z, n_yaw, weight)
-    G, b = tie_stats(G, b, model.wind_weights_, n_yaw, knots.size - DEGREE - 1)
-    return BlockStats(n_blocks=n_blocks, p=G.shape[-1], yy=yy, count=cnt, dense=(G, b))
+    return tied_statistics(U, A, y, block, n_blocks, knots, a_ref, model.wind_weights_, z, n_yaw, weight)
 
 
 def select_orders(stats, fold_of_block, K, P, lam_rel, M, err_all) -> np.ndarray:

@@ -13,8 +13,10 @@ sum A^p z^q B_a B_a' (p <= 6, q <= 2 J; a, a' over the interval's DEGREE + 1 B-s
 and sum A^p z^q y B_a: a few hundred numbers per group instead of the blocks' p x p
 Grams, and one small product over its samples instead of their Q x Q one. A sum over
 blocks is a weighted sum of the groups' moments, spread into the p x p layout once
-per knot interval. Otherwise (several wind inputs) the blocks' Grams are kept as
-:func:`~vivbench.models.varying_design.block_stats` gives them.
+per knot interval. With the tied sum of every section's wind (``wind_input="sum"``,
+:func:`tied_statistics`) a row is A^i c_(j, m), c_(j, m) = sum_s w_s z_s^j B_m(U_s), and each
+block keeps the moments sum A^p c c^T (p <= 6) and sum A^i y c. Otherwise (several wind
+inputs) the blocks' Grams are kept as :func:`~vivbench.models.varying_design.block_stats` gives them.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 from vivbench.library.splines import DEGREE, first_index, uniform_cubic_local_t
 from vivbench.models.varying_design import block_stats
 
-__all__ = ["BlockStats", "block_statistics", "one_hot"]
+__all__ = ["BlockStats", "block_statistics", "one_hot", "tied_statistics"]
 
 #: Powers of the scaled amplitude in the moments of X^T X: orders i + i' of 0..3 each.
 _A_POWERS = 7
@@ -57,10 +59,11 @@ class BlockStats:
     the samples per block.
     """
 
-    def __init__(self, *, n_blocks: int, p: int, yy: np.ndarray, count: np.ndarray, dense=None, moments=None):
+    def __init__(self, *, n_blocks: int, p: int, yy: np.ndarray, count: np.ndarray, dense=None, moments=None,
+                 tied=None):
         self.n_blocks, self.p = int(n_blocks), int(p)
         self.yy, self.count = np.asarray(yy, dtype=float), np.asarray(count)
-        self._dense, self._moments = dense, moments
+        self._dense, self._moments, self._tied = dense, moments, tied
 
     def sums(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The statistics of weighted sums of the blocks.
@@ -78,6 +81,13 @@ class BlockStats:
         if self._dense is not None:
             G, b = self._dense
             return (W @ G.reshape(self.n_blocks, -1)).reshape(-1, self.p, self.p), W @ b, yy
+        if self._tied is not None:
+            mom, by = self._tied  # (n_blocks, 7, K, K), (n_blocks, 4, K)
+            K = mom.shape[-1]
+            m = (W @ mom.reshape(self.n_blocks, -1)).reshape(-1, _A_POWERS, K, K)
+            i = np.arange(4)
+            G = m[:, i[:, None] + i[None, :]].transpose(0, 1, 3, 2, 4)  # entry (i, (j, m)), (i', (j', m'))
+            return G.reshape(-1, self.p, self.p), W @ by.reshape(self.n_blocks, -1), yy
         return (*self._spread(W), yy)
 
     def by(self, labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -173,3 +183,86 @@ def block_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndar
     gblock, gint = np.divmod(ks[starts], n_int)
     return BlockStats(n_blocks=n_blocks, p=4 * (n_yaw + 1) * M, yy=yy, count=cnt,
                       moments=(mom, gblock, gint, n_yaw, M))
+
+
+def tied_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, n_blocks: int,
+                    knots: np.ndarray, a_ref: float, weights: np.ndarray, z: np.ndarray | None = None,
+                    n_yaw: int = 0, weight: np.ndarray | None = None, chunk: int = 65_536) -> BlockStats:
+    """The block statistics of the tied design (one curve for every section's wind) as a :class:`BlockStats`.
+
+    The columns, ordered (i, j, m), are (A / a_ref)^i sum_s w_s z_s^j B_m(U_s): X T, with X the design
+    of :func:`~vivbench.models.varying_design.block_stats` with every section's wind as an input and T the
+    tying of :func:`~vivbench.models.varying_design.untie`, but without the untied Grams, whose size grows
+    with the square of the number of sections.
+
+    Parameters
+    ----------
+    U : ndarray, shape (n, S), m/s (finite): every section's wind
+    A : ndarray, shape (n,), m; y : ndarray, shape (n,) (the standardised target)
+    block : ndarray of int, shape (n,), 0..n_blocks-1
+    knots : ndarray, shape (M + DEGREE + 1,), uniform (:func:`vivbench.library.splines.uniform_knots`)
+    a_ref : float, m
+    weights : ndarray, shape (S,); the sections' weights w_s
+    z : ndarray, shape (n, S), or None (the scaled yaw covariate of every section); n_yaw : int
+    weight : ndarray, shape (n,), optional (weighted least squares)
+    chunk : int
+        Samples handled at once (memory: chunk (J + 1) M rows of the tied curves' values).
+    """
+    U2 = np.asarray(U, dtype=float).reshape(np.shape(U)[0], -1)
+    n, S = U2.shape
+    M = knots.size - DEGREE - 1
+    J1 = n_yaw + 1
+    K = J1 * M
+    w_s = np.asarray(weights, dtype=float).reshape(S)
+    z2 = None if z is None else np.asarray(z, dtype=float).reshape(n, S)
+    block = np.asarray(block, dtype=np.int64)
+    yw = y if weight is None else y * weight
+    yy = np.bincount(block, weights=y * yw, minlength=n_blocks)
+    cnt = np.bincount(block, minlength=n_blocks)
+    first = np.stack([first_index(U2[:, s_], knots) for s_ in range(S)])  # (S, n)
+    lo = first.min(axis=0)
+    # Groups: the samples of a block with the same lowest first B-spline. A row's non-zero tied columns lie
+    # in lo .. max_s first_s + DEGREE of each yaw power's M: a window of a few B-splines where the sections'
+    # winds are close, so each group's product is over its window, not over every M.
+    key = block * M + lo
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    ends = np.r_[starts[1:], n]
+    mom = np.zeros((n_blocks, _A_POWERS, K, K))
+    by = np.zeros((n_blocks, 4, K))
+    a = np.asarray(A, dtype=float) / a_ref
+    g0 = 0
+    while g0 < starts.size:  # chunks of whole groups
+        g1 = max(int(np.searchsorted(starts, starts[g0] + chunk, side="right")), g0 + 1)
+        sel = order[starts[g0]:ends[g1 - 1]]
+        rows = np.arange(sel.size)
+        off = first[:, sel] - lo[sel]  # (S, samples): each section's B-splines within the window
+        span = off.max(axis=0) + DEGREE + 1  # each sample's window
+        Wc = int(span.max())
+        # the tied curves' basis values c_(j, lo + d) at each sample, summed over the sections' B-splines
+        idx = np.empty((S, J1, DEGREE + 1, sel.size), dtype=np.intp)
+        val = np.empty(idx.shape)
+        for s_ in range(S):  # a few sections
+            _f, B = uniform_cubic_local_t(U2[sel, s_], knots)
+            zp = np.ones((1, sel.size)) if z2 is None else _powers(z2[sel, s_], n_yaw)
+            idx[s_] = (rows * J1 + np.arange(J1)[:, None, None]) * Wc + off[s_] + np.arange(DEGREE + 1)[:, None]
+            val[s_] = w_s[s_] * zp[:, None, :] * B[None]
+        C = np.bincount(idx.ravel(), weights=val.ravel(), minlength=sel.size * J1 * Wc).reshape(sel.size, J1, Wc)
+        if weight is not None:
+            Cw = C * weight[sel, None, None]
+        P = _powers(a[sel], _A_POWERS - 1)  # (7, samples)
+        PT = P.T
+        base = starts[g0]
+        for g in range(g0, g1):  # one product per group (a few per block), not per sample
+            r = slice(starts[g] - base, ends[g] - base)
+            W = int(span[r].max())
+            Cg = C[r, :, :W].reshape(-1, J1 * W)
+            Cgw = Cg if weight is None else Cw[r, :, :W].reshape(-1, J1 * W)
+            PC = (PT[r, :, None] * Cgw[:, None, :]).reshape(Cg.shape[0], -1)  # (samples, 7 J1 W), contiguous
+            blk, l0 = divmod(int(ks[starts[g]]), M)
+            cols = (np.arange(J1)[:, None] * M + l0 + np.arange(W)).ravel()
+            mom[blk, :, cols[:, None], cols] += (Cg.T @ PC).reshape(J1 * W, _A_POWERS, J1 * W).transpose(0, 2, 1)
+            by[blk][:, cols] += (P[:4, r] * yw[sel[r]]) @ Cg
+        g0 = g1
+    return BlockStats(n_blocks=n_blocks, p=4 * K, yy=yy, count=cnt, tied=(mom, by))
