@@ -12,7 +12,12 @@ inputs, the yaw covariate, M = 10 B-splines: p = 240 columns, 1200-sample blocks
 - the default model's shape (one mean wind, yaw of degree 2, M = 15: p = 180): the moments of
   :func:`vivbench.models.varying_stats.block_statistics` summed by fold (what the basis choice needs)
   against ``block_stats`` summed by fold, the closed-form uniform cubic B-splines against the
-  recursion, and their largest relative differences.
+  recursion, and their largest relative differences;
+- the tied sum of every section's wind (``wind_input="sum"``; five sections whose winds differ by a
+  smooth offset and a 4 % turbulence, yaw of degree 1, M = 14: p = 112):
+  :func:`vivbench.models.varying_stats.tied_statistics` summed by fold against the untied Grams of
+  ``block_stats`` (p = 560) contracted by the weights' tying (what the fit did before), and their largest
+  relative difference.
 
 Whole ``vivbench pool`` runs (wall, CPU, peak memory) are in the closing note of the branch; this
 benchmark measures the kernels only. It asserts nothing.
@@ -105,6 +110,31 @@ def main(samples: int = 60_000) -> dict:
     out["block_statistics_one_input"] = {"p": int(G_new.shape[-1]), "grouped_by_fold_s": t_old,
                                          "moments_by_fold_s": t_new,
                                          "max_rel_diff": float(np.abs(G_new - G_old).max() / np.abs(G_old).max())}
+
+    # The tied sum: one curve shape for the three sections' winds, weighted by the sections' weights.
+    from vivbench.models.varying_stats import tied_statistics
+
+    rng = np.random.default_rng(1)
+    S, M = 5, 14
+    U5 = (U[:, :1] + np.linspace(-0.8, 0.8, S) * np.sin(np.arange(samples) / 3000.0)[:, None]
+          + rng.normal(0.0, 0.4, (samples, S)))
+    z5 = rng.uniform(0.0, 2.0, (samples, S))
+    knots14 = uniform_knots(float(U5.min()), float(U5.max()), M)
+    w = np.array([0.1, 0.2, 0.4, 0.2, 0.1])
+    T = vd.untie(np.eye(4 * 2 * M), w, 1, M).T  # (560 untied, 112 tied)
+
+    def untied_contracted():
+        G, b, _yy, _n = vd.block_stats(U5, A, y, block, nb, knots14, 0.1, z5, 1)
+        Gf = np.stack([G[fold == f].sum(axis=0) for f in range(5)])
+        return T.T @ Gf @ T
+
+    def tied_by_fold():
+        return tied_statistics(U5, A, y, block, nb, knots14, 0.1, w, z5, 1).sums(one_hot(fold, 5))[0]
+
+    t_old, G_old = best_of(untied_contracted)
+    t_new, G_new = best_of(tied_by_fold)
+    out["tied_statistics"] = {"p": int(G_new.shape[-1]), "untied_contracted_s": t_old, "tied_moments_s": t_new,
+                              "max_rel_diff": float(np.abs(G_new - G_old).max() / np.abs(G_old).max())}
     return out
 
 

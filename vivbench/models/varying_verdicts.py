@@ -244,9 +244,9 @@ def varying_window_verdicts(model: VaryingCoefficientSINDy, record: Record, wind
                   model.stacked_coefficients(model.coef_bootstrap_, model.coef_yaw_bootstrap_),
                   model.stacked_coefficients(model.subset_coef_, model.subset_coef_yaw_)]
     used = np.zeros(theta_sets[0].shape[-3:-1], dtype=bool)  # (S, P): the entries the design rows reach
-    Mmax = model.coef_.shape[1]
+    L, n_in = model.coef_.shape[1], model.n_inputs(model.n_sections_)
     for k, M in enumerate(np.asarray(model.n_basis_, dtype=int)):
-        used[k] = (np.arange(used.shape[1]) % Mmax) < M
+        used[k] = (np.arange(used.shape[1]) % L) < n_in * M  # entry j L + s M + m (basis_rows)
     if getattr(model, "penalty_coef_", None) is not None:
         theta_sets.append(model.stacked_coefficients(model.penalty_coef_, model.penalty_coef_yaw_))
     if not all(np.isfinite(th[..., used, :]).all() for th in theta_sets):
