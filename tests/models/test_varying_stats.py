@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from tests.helpers import assert_close
 from tests.models.test_varying_design import _design_inputs
-from vivbench.library.splines import bspline_local_t, uniform_cubic_local_t, uniform_knots
+from vivbench.library.splines import bspline_local_t, first_index, uniform_cubic_local_t, uniform_knots
 from vivbench.models.varying_design import spline_design
 from vivbench.models.varying_stats import block_statistics, one_hot
 
@@ -59,3 +59,5 @@ def test_the_closed_form_uniform_cubic_equals_the_recursion(lo, width, M, seed):
     f2, v2 = uniform_cubic_local_t(U, knots)
     assert np.array_equal(f1, f2)
     assert_close(v2, v1, atol=1e-13, rtol=0.0, reason="another sequence of roundings of values in [0, 1]")
+    f3, v3 = uniform_cubic_local_t(U, knots, first_index(U, knots))  # the caller's own first index
+    assert np.array_equal(f3, f2) and np.array_equal(v3, v2)

@@ -94,12 +94,14 @@ def bspline_local_t(U: np.ndarray, knots: np.ndarray, degree: int = DEGREE) -> t
     return ell - degree, h
 
 
-def uniform_cubic_local_t(U: np.ndarray, knots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def uniform_cubic_local_t(U: np.ndarray, knots: np.ndarray,
+                          first: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`bspline_local_t` of cubic B-splines on uniform knots (:func:`uniform_knots`), in closed form.
 
     With t = (x - t_l) / (t_(l+1) - t_l) in the knot interval of x, the four non-zero uniform cubic
     B-splines are (1 - t)^3 / 6, (3 t^3 - 6 t^2 + 4) / 6, (-3 t^3 + 3 t^2 + 3 t + 1) / 6 and t^3 / 6:
     the recursion's values to rounding, in a few operations per sample. Only for finite U.
+    ``first``, :func:`first_index` of U when the caller has it already, is not computed again.
 
     Returns
     -------
@@ -110,7 +112,7 @@ def uniform_cubic_local_t(U: np.ndarray, knots: np.ndarray) -> tuple[np.ndarray,
     knots = np.asarray(knots, dtype=float)
     n_b = knots.size - DEGREE - 1
     x = np.clip(U, knots[DEGREE], knots[n_b])
-    first = first_index(x, knots)
+    first = first_index(x, knots) if first is None else np.asarray(first)
     left = knots[first + DEGREE]
     t = (x - left) / (knots[first + DEGREE + 1] - left)
     t2 = t * t

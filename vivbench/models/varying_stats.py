@@ -243,11 +243,14 @@ def tied_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarr
         # the tied curves' basis values c_(j, lo + d) at each sample, summed over the sections' B-splines
         idx = np.empty((S, J1, DEGREE + 1, sel.size), dtype=np.intp)
         val = np.empty(idx.shape)
+        shift = (np.arange(J1)[:, None, None] * Wc + np.arange(DEGREE + 1)[:, None])  # (J1, 4, 1)
         for s_ in range(S):  # a few sections
-            _f, B = uniform_cubic_local_t(U2[sel, s_], knots)
-            zp = np.ones((1, sel.size)) if z2 is None else _powers(z2[sel, s_], n_yaw)
-            idx[s_] = (rows * J1 + np.arange(J1)[:, None, None]) * Wc + off[s_] + np.arange(DEGREE + 1)[:, None]
-            val[s_] = w_s[s_] * zp[:, None, :] * B[None]
+            _f, B = uniform_cubic_local_t(U2[sel, s_], knots, first[s_, sel])
+            np.add(shift, rows * (J1 * Wc) + off[s_], out=idx[s_])
+            if z2 is None:
+                np.multiply(B, w_s[s_], out=val[s_, 0])
+            else:
+                np.multiply((w_s[s_] * B)[None], _powers(z2[sel, s_], n_yaw)[:, None, :], out=val[s_])
         C = np.bincount(idx.ravel(), weights=val.ravel(), minlength=sel.size * J1 * Wc).reshape(sel.size, J1, Wc)
         if weight is not None:
             Cw = C * weight[sel, None, None]
@@ -261,8 +264,12 @@ def tied_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarr
             Cgw = Cg if weight is None else Cw[r, :, :W].reshape(-1, J1 * W)
             PC = (PT[r, :, None] * Cgw[:, None, :]).reshape(Cg.shape[0], -1)  # (samples, 7 J1 W), contiguous
             blk, l0 = divmod(int(ks[starts[g]]), M)
-            cols = (np.arange(J1)[:, None] * M + l0 + np.arange(W)).ravel()
-            mom[blk, :, cols[:, None], cols] += (Cg.T @ PC).reshape(J1 * W, _A_POWERS, J1 * W).transpose(0, 2, 1)
-            by[blk][:, cols] += (P[:4, r] * yw[sel[r]]) @ Cg
+            Rg = (Cg.T @ PC).reshape(J1, W, _A_POWERS, J1, W)
+            bg = ((P[:4, r] * yw[sel[r]]) @ Cg).reshape(4, J1, W)
+            for j in range(J1):  # the window's columns of each yaw power: contiguous
+                cj = slice(j * M + l0, j * M + l0 + W)
+                by[blk, :, cj] += bg[:, j]
+                for j2 in range(J1):
+                    mom[blk, :, cj, j2 * M + l0:j2 * M + l0 + W] += Rg[j, :, :, j2].transpose(1, 0, 2)
         g0 = g1
     return BlockStats(n_blocks=n_blocks, p=4 * K, yy=yy, count=cnt, tied=(mom, by))
