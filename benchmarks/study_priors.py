@@ -68,7 +68,8 @@ VARIANTS = {
                                  "wind_input": ("mean", "sum")}),
     "input_sum": ("wind_input", "sum"),
 }
-_PREFIX = "benchmarks.study_priors:"
+#: Study method names of the variants: this prefix and the variant's name.
+METHOD_PREFIX = "benchmarks.study_priors:"
 #: Fewest flags for a draw to test the promise, and the promise itself.
 MIN_FLAGS, PROMISE = 20, 0.95
 
@@ -163,7 +164,7 @@ def main(argv=None) -> dict:
     unknown = sorted(set(chosen) - set(VARIANTS))
     if unknown:
         parser.error(f"unknown variants {unknown}; allowed: {', '.join(VARIANTS)}")
-    methods = {"varying": "stated", **{_PREFIX + name: name for name in chosen}}
+    methods = {"varying": "stated", **{METHOD_PREFIX + name: name for name in chosen}}
     config = StudyConfig(split=args.split, draws=parse_draws(args.draws), methods=tuple(methods),
                          max_events=args.max_events,
                          max_duration=None if args.max_duration is None else args.max_duration * 60.0)
