@@ -183,7 +183,8 @@ def main(argv=None) -> dict:
     summary = summarise([r for r in rows if not r["error"]])
     return {"findings": findings(summary), "split": args.split, "draws": list(config.draws),
             "max_events": args.max_events, "max_duration_min": args.max_duration,
-            "failed_draws": sorted(result.failures), "summary": summary, "rows": rows}
+            "failed_draws": sorted(result.failures), "draws_computed": list(result.computed),
+            "draws_resumed": list(result.resumed), "summary": summary, "rows": rows}
 
 
 if __name__ == "__main__":

@@ -29,12 +29,12 @@ could tell which it is.
 
 Development draws only. ``--max-events`` and ``--max-duration`` (minutes) cap the campaigns. The
 study directory ``--out`` is that of the priors study with the same options and variants, and is
-resumable.
+resumable: the page lists the draws this run computed and those it found finished there (their
+fit times are those of the run that computed them).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -127,6 +127,10 @@ def summarise(paired: list[dict], variants: list[str]) -> list[dict]:
     return out
 
 
+def _draws(n: int) -> str:
+    return f"{n} draw" if n == 1 else f"{n} draws"
+
+
 def findings(summary: list[dict]) -> list[str]:
     """Sentences generated from the summary."""
     what = {"input_sum": "The tied sum on every campaign",
@@ -138,33 +142,35 @@ def findings(summary: list[dict]) -> list[str]:
         said.append(f"{what[s['variant']]}, {kind[s['eiv']]} ({s['draws']} draws): energy-weighted dA/dt error "
                     f"median {s['stated_median']:.3f} -> {s['variant_median']:.3f}, 90th percentile "
                     f"{s['stated_p90']:.3f} -> {s['variant_p90']:.3f}, worst {s['stated_worst']:.3f} -> "
-                    f"{s['variant_worst']:.3f}; better by more than {MARGIN:.0%} on {s['better']} draws, worse on "
-                    f"{s['worse']}; fit time {s['fit_time_ratio_median']:.1f} x the stated prior's (median; "
+                    f"{s['variant_worst']:.3f}; better by more than {MARGIN:.0%} on {_draws(s['better'])}, worse "
+                    f"on {s['worse']}; fit time {s['fit_time_ratio_median']:.1f} x the stated prior's (median; "
                     f"at most {s['fit_time_ratio_max']:.1f} x).")
     return said
 
 
 def main(argv=None) -> dict:
+    from _family_args import family_parser
+
     argv = list(sys.argv[1:] if argv is None else argv)
-    pre = argparse.ArgumentParser(add_help=False)
-    pre.add_argument("--out", type=Path)
-    pre.add_argument("--variants", default=None)
-    known, _rest = pre.parse_known_args(argv)
-    if known.variants is None:
-        argv += ["--variants", DEFAULT_VARIANTS]
-        variants = [DEFAULT_VARIANTS]
-    else:
-        variants = [v.strip() for v in known.variants.split(",") if v.strip()]
-        unknown = sorted(set(variants) - set(WIND_VARIANTS))
-        if unknown:
-            raise SystemExit(f"study_wind_input: unknown variants {unknown}; allowed: {', '.join(WIND_VARIANTS)}")
+    parser = family_parser(__doc__.splitlines()[0])
+    parser.add_argument("--variants", default=DEFAULT_VARIANTS,
+                        help=f"comma-separated variants beside the stated prior, of {', '.join(WIND_VARIANTS)} "
+                             f"(default {DEFAULT_VARIANTS})")
+    args = parser.parse_args(argv)
+    variants = [v.strip() for v in args.variants.split(",") if v.strip()]
+    unknown = sorted(set(variants) - set(WIND_VARIANTS))
+    if unknown or not variants:
+        parser.error(f"unknown variants {unknown}; allowed: {', '.join(WIND_VARIANTS)}")
+    if "--variants" not in argv:
+        argv += ["--variants", args.variants]
     figures = study_priors.main(argv)
     rows = [r for r in figures["rows"] if not r["error"]]
-    paired = paired_rows(rows, variants, _fit_times(known.out) if known.out else {})
+    paired = paired_rows(rows, variants, _fit_times(args.out))
     summary = summarise(paired, variants)
     return {"findings": findings(summary), "split": figures["split"], "draws": figures["draws"],
             "max_events": figures["max_events"], "max_duration_min": figures["max_duration_min"],
-            "failed_draws": figures["failed_draws"], "variants": variants, "summary": summary, "rows": paired}
+            "failed_draws": figures["failed_draws"], "draws_computed": figures["draws_computed"],
+            "draws_resumed": figures["draws_resumed"], "variants": variants, "summary": summary, "rows": paired}
 
 
 if __name__ == "__main__":
