@@ -229,7 +229,10 @@ def register(sub) -> None:
                         "section's own, or every section's wind and yaw with a curve each, summed like the truth's "
                         "forces (additive; its basis, penalty and yaw chosen as for the others, a fit several times "
                         "slower), or "
-                        "every section's wind with one curve shared by all, weighted by --wind-weights and summed (sum)")
+                        "every section's wind with one curve shared by all, weighted by --wind-weights and summed (sum: "
+                        "the truth's form where the sections feel different winds, e.g. along a long span; where the "
+                        "deck feels one smooth wind and each anemometer adds its own turbulence, the mean averages "
+                        "that turbulence down and fits closer; docs/limitations.md)")
     s.add_argument("--wind-weights", default=None, metavar="equal|modal|W1,W2,...",
                    help="with --model varying and the mean wind (or the sum): the sections' weights in it: modal (default, a "
                         "prior: each section's share of the mode's energy, sum of A_k^2, the weights of the averaged "
