@@ -35,7 +35,6 @@ fit times are those of the run that computed them).
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -55,23 +54,13 @@ MARGIN = 0.10
 
 def _fit_times(out: Path) -> dict[tuple[int, str], float]:
     """Each (draw, variant)'s fit time (s) from the study's journal; the stated prior is ``"stated"``."""
+    from vivbench.validate.journal import load
+
     names = {"varying": "stated", **{study_priors.METHOD_PREFIX + v: v for v in WIND_VARIANTS}}
-    times = {}
-    path = out / "study.jsonl"
-    if not path.exists():
-        return times
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            rec = json.loads(line)
-        except json.JSONDecodeError:  # a half-written line: the study's own loader drops it too
-            continue
-        if not rec.get("ok"):
-            continue
-        row = rec["row"]
-        for method, scores in row.get("methods", {}).items():
-            if method in names and scores.get("fit_time_s") is not None:
-                times[(int(row["draw"]), names[method])] = float(scores["fit_time_s"])
-    return times
+    rows, _dropped = load(out / "study.jsonl", n_tasks=2**31, columns=("task_id", "draw", "methods"))
+    return {(int(row["draw"]), names[method]): float(scores["fit_time_s"])
+            for row in rows.values() for method, scores in row["methods"].items()
+            if method in names and scores.get("fit_time_s") is not None}
 
 
 def _spread(x: np.ndarray) -> dict:

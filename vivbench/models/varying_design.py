@@ -22,7 +22,30 @@ import numpy as np
 from vivbench.library.splines import DEGREE, bspline_local, bspline_local_t, first_index
 
 __all__ = ["design_local_t", "local_columns", "spline_design", "input_contributions", "block_stats", "design_rows",
-           "held_yaw", "untie"]
+           "held_yaw", "untie", "key_groups", "group_chunks"]
+
+
+def key_groups(key: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The samples ordered by ``key`` (stable) and its runs of equal values.
+
+    Returns
+    -------
+    order : ndarray of intp, shape (n,); keys : ndarray, shape (n,), ``key[order]``;
+    starts, ends : ndarray of intp, shape (n_groups,), each run's first and past-the-end position in ``order``
+    """
+    order = np.argsort(key, kind="stable")
+    keys = key[order]
+    starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+    return order, keys, starts, np.r_[starts[1:], key.size]
+
+
+def group_chunks(starts: np.ndarray, chunk: int):
+    """Ranges (g0, g1) of whole groups of :func:`key_groups`, each about ``chunk`` samples (at least one group)."""
+    g0 = 0
+    while g0 < starts.size:
+        g1 = max(int(np.searchsorted(starts, starts[g0] + chunk, side="right")), g0 + 1)
+        yield g0, g1
+        g0 = g1
 
 
 def held_yaw(z: np.ndarray | None, yaw_min, yaw_max, shared_inputs: bool) -> np.ndarray | None:
@@ -170,15 +193,10 @@ def block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, 
     key = np.asarray(block, dtype=np.int64)
     for s_ in range(n_in):
         key = key * (M - DEGREE) + first_index(U2[:, s_], knots)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    ends = np.r_[starts[1:], n]
+    order, _keys, starts, ends = key_groups(key)
     G = np.zeros((n_blocks, p, p))
     b = np.zeros((n_blocks, p))
-    g0 = 0
-    while g0 < starts.size:  # chunks of whole groups, each a few tens of thousands of samples
-        g1 = max(int(np.searchsorted(starts, starts[g0] + chunk, side="right")), g0 + 1)
+    for g0, g1 in group_chunks(starts, chunk):  # chunks of whole groups, each a few tens of thousands of samples
         sel = order[starts[g0]:ends[g1 - 1]]
         first, vals = design_local_t(U2[sel], A[sel], knots, a_ref, None if z2 is None else z2[sel], n_yaw)
         vals = vals.reshape(-1, sel.size)  # (Q, samples of the chunk)
@@ -193,7 +211,6 @@ def block_stats(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarray, 
             V, c, j = vals[:, glo[g]:ghi[g]], gcols[g], gblock[g]
             G[j, c[:, None], c] += V @ V.T
             b[j, c] += V @ ysel[glo[g]:ghi[g]]
-        g0 = g1
     return G, b, cy[bounds[1:]] - cy[bounds[:-1]], np.diff(bounds)
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from vivbench.library.splines import DEGREE, first_index, uniform_cubic_local_t
-from vivbench.models.varying_design import block_stats
+from vivbench.models.varying_design import block_stats, group_chunks, key_groups
 
 __all__ = ["BlockStats", "block_statistics", "one_hot", "tied_statistics"]
 
@@ -153,18 +153,12 @@ def block_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndar
     yy = np.bincount(block, weights=yw2, minlength=n_blocks)
     cnt = np.bincount(block, minlength=n_blocks)
     n_int = M - DEGREE
-    key = block * n_int + first_index(u, knots)
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    ends = np.r_[starts[1:], n]
+    order, ks, starts, ends = key_groups(block * n_int + first_index(u, knots))
     n_pq, nb4, n_pairs = _A_POWERS * (2 * n_yaw + 1), DEGREE + 1, len(_PAIRS)
     # per group: sum A^p z^q B_a B_a' (a <= a'), then sum A^p z^q y B_a
     mom = np.empty((starts.size, n_pq, n_pairs + nb4))
     a = np.asarray(A, dtype=float) / a_ref
-    g0 = 0
-    while g0 < starts.size:  # chunks of whole groups
-        g1 = max(int(np.searchsorted(starts, starts[g0] + chunk, side="right")), g0 + 1)
+    for g0, g1 in group_chunks(starts, chunk):  # chunks of whole groups
         sel = order[starts[g0]:ends[g1 - 1]]
         _first, B = uniform_cubic_local_t(u[sel], knots)  # (4, m)
         P = _powers(a[sel], _A_POWERS - 1)
@@ -179,7 +173,6 @@ def block_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndar
         for g in range(g0, g1):  # one small product per group (a few per block), not per sample
             r = slice(starts[g] - off, ends[g] - off)
             mom[g] = P[:, r] @ F[:, r].T
-        g0 = g1
     gblock, gint = np.divmod(ks[starts], n_int)
     return BlockStats(n_blocks=n_blocks, p=4 * (n_yaw + 1) * M, yy=yy, count=cnt,
                       moments=(mom, gblock, gint, n_yaw, M))
@@ -224,17 +217,11 @@ def tied_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarr
     # Groups: the samples of a block with the same lowest first B-spline. A row's non-zero tied columns lie
     # in lo .. max_s first_s + DEGREE of each yaw power's M: a window of a few B-splines where the sections'
     # winds are close, so each group's product is over its window, not over every M.
-    key = block * M + lo
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    ends = np.r_[starts[1:], n]
+    order, ks, starts, ends = key_groups(block * M + lo)
     mom = np.zeros((n_blocks, _A_POWERS, K, K))
     by = np.zeros((n_blocks, 4, K))
     a = np.asarray(A, dtype=float) / a_ref
-    g0 = 0
-    while g0 < starts.size:  # chunks of whole groups
-        g1 = max(int(np.searchsorted(starts, starts[g0] + chunk, side="right")), g0 + 1)
+    for g0, g1 in group_chunks(starts, chunk):  # chunks of whole groups
         sel = order[starts[g0]:ends[g1 - 1]]
         rows = np.arange(sel.size)
         off = first[:, sel] - lo[sel]  # (S, samples): each section's B-splines within the window
@@ -271,5 +258,4 @@ def tied_statistics(U: np.ndarray, A: np.ndarray, y: np.ndarray, block: np.ndarr
                 by[blk, :, cj] += bg[:, j]
                 for j2 in range(J1):
                     mom[blk, :, cj, j2 * M + l0:j2 * M + l0 + W] += Rg[j, :, :, j2].transpose(1, 0, 2)
-        g0 = g1
     return BlockStats(n_blocks=n_blocks, p=4 * K, yy=yy, count=cnt, tied=(mom, by))

@@ -36,6 +36,7 @@ from vivbench.core.errors import InputError
 from vivbench.core.record import Record
 from vivbench.core.regime import regime_rule
 from vivbench.library.splines import DEGREE
+from vivbench.models.varying_design import key_groups
 
 __all__ = ["gram_order_stats", "varying_description", "varying_settings_text", "varying_summary", "varying_window_verdicts", "window_grams", "window_order_stats"]
 
@@ -165,10 +166,7 @@ def _window_grams(seg: np.ndarray, windows_of: list, n_windows: int, cols: np.nd
     key = seg.astype(np.int64)
     for q in range(0, cols.shape[1], DEGREE + 1):
         key = np.unique(key * P + cols[:, q], return_inverse=True)[1].ravel()
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    ends = np.r_[starts[1:], m]
+    order, _keys, starts, ends = key_groups(key)
     # A^i times the row, every order at once: (4, Q, m), samples in group order
     Y = (a[order][None, :] ** np.arange(4)[:, None])[:, None, :] * vals[order].T[None, :, :]
     cs, ss = cols[order], seg[order]
